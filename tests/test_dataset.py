@@ -1,0 +1,517 @@
+"""Dataset storage layer: balance, COG-distance matching, determinism, resume, errors, info, features.
+
+The rollout function here is a synthetic test fixture (numpy draws seeded by the chunk key),
+not physics: "beside" scenes are far apart and rarely positive, "on_top"/"inside" scenes are
+close and mostly positive, which is the regime the paper's distance matching is about.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from relaff_jax import dataset as ds
+
+TOYS = ("ball", "cube")
+OTHERS = ("plate", "cup", "box")
+
+
+class Killed(Exception):
+    pass
+
+
+def synthetic_rollout_fn(kill_after: int | None = None, all_negative: bool = False, calls: list | None = None):
+    calls = [] if calls is None else calls
+
+    def rollout_fn(key, b):
+        if kill_after is not None and len(calls) >= kill_after:
+            raise Killed("simulated kill")
+        calls.append(np.asarray(key).tolist())
+        rng = np.random.default_rng(np.asarray(key).tolist())
+        rel = rng.integers(0, 3, b)
+        dist = np.where(rel == 0, rng.uniform(0.1, 1.2, b), rng.uniform(0.03, 0.2, b))
+        p = np.where(rel == 0, 0.15, 0.8)
+        label = (rng.random(b) < p) & (not all_negative)
+        return {
+            "label": label,
+            "relation": np.asarray(ds.RELATIONS)[rel],
+            "cog_distance": dist.astype(np.float32),
+            "toy": np.asarray(TOYS)[rng.integers(0, 2, b)],
+            "other": np.asarray(OTHERS)[rng.integers(0, 3, b)],
+            "qpos": rng.normal(size=(b, 2, 7)).astype(np.float32),
+            "pair": rng.integers(0, 6, b).astype(np.int32),
+            "sample_seed": rng.integers(0, 2**31, b).astype(np.uint32),
+        }
+
+    return rollout_fn
+
+
+EXACT = ds.DatasetConfig(max_rollouts=2000, distance_bins=8, borrow_fraction=0.0)
+CFG = {"physics": {"dt": 0.002}, "lift_height": 0.05}
+
+
+def gen(path, n=40, seed=3, batch=16, fn=None, **kw):
+    kw.setdefault("dataset_config", EXACT)
+    return ds.generate_dataset(path, "lift", n, fn or synthetic_rollout_fn(), seed, batch, CFG, progress=False, **kw)
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    path = tmp_path_factory.mktemp("ds") / "lift"
+    summary = gen(path)
+    return path, summary
+
+
+def copy(built, tmp_path) -> Path:
+    dst = tmp_path / "copy"
+    shutil.copytree(built[0], dst)
+    return dst
+
+
+# ----------------------------------------------------------------------------- selection
+
+
+def test_select_balanced_hand_worked():
+    # positives at 1.0 and 2.0, 2 bins [1, 1.5) [1.5, 2]; one negative per bin, one far away
+    label = np.array([1, 1, 0, 0, 0], bool)
+    dist = np.array([1.0, 2.0, 1.1, 1.9, 5.0])
+    sel = ds.select_balanced(label, dist, 4, seed=0, bins=2)
+    assert sel.selected.tolist() == [0, 1, 2, 3]
+    assert sel.bin_edges.tolist() == [1.0, 1.5, 2.0] and sel.borrowed == 0
+    # bin 0 has no negative: its quota is filled by the nearest leftover (1.6 or 1.9, both
+    # nearer to [1, 1.5] than 0.5 is), the other one fills bin 1
+    label = np.array([1, 1, 0, 0, 0, 0], bool)
+    dist = np.array([1.0, 2.0, 1.6, 1.9, 0.5, 3.0])
+    for seed in range(5):
+        sel = ds.select_balanced(label, dist, 4, seed=seed, bins=2)
+        assert sel.selected.tolist() == [0, 1, 2, 3] and sel.borrowed == 1
+        assert sel.negative_bin_counts.tolist() == [0, 1]
+    # odd N: one more negative than positive; too few of a class: None
+    sel = ds.select_balanced(np.array([1, 1, 0, 0, 0]), np.arange(5.0), 5, seed=0, bins=2)
+    assert (sel.n_positive, sel.n_negative, len(sel.selected)) == (2, 3, 5)
+    assert ds.select_balanced(np.array([1, 0, 0]), np.arange(3.0), 4, seed=0) is None
+
+
+def test_balance_and_distance_histogram(built):
+    path, summary = built
+    d = ds.load_dataset(path)
+    assert d["label"].shape == (40,) and d["label"].dtype == bool
+    assert d["label"].sum() == 20  # exactly 50 %
+    # independent check: 8 equal-width bins over the positives' distance range (np.histogram)
+    pos, neg = d["cog_distance"][d["label"]], d["cog_distance"][~d["label"]]
+    edges = np.linspace(pos.min(), pos.max(), 9)
+    hp, _ = np.histogram(pos, edges)
+    hn, _ = np.histogram(neg, edges)
+    assert hp.tolist() == hn.tolist() and hn.sum() == 20
+    # ... whereas the unselected negatives are distributed differently (far "beside" scenes)
+    r = ds.load_rollouts(path)
+    all_neg = r["cog_distance"][~r["label"]]
+    assert np.histogram(all_neg, edges)[0].sum() < len(all_neg)
+    assert summary["rollouts"] == len(r["label"]) == summary["chunks"] * 16
+    assert summary["borrowed"] == 0
+
+
+def test_loaded_fields(built):
+    path, _ = built
+    d = ds.load_dataset(path)
+    r = ds.load_rollouts(path)
+    assert d["action"] == "lift" and r["action"] == "lift"
+    assert set(d["relation"]) <= set(ds.RELATIONS) and d["relation"].dtype.kind == "U"
+    assert set(d["toy"]) <= set(TOYS) and set(d["other"]) <= set(OTHERS)
+    assert d["qpos"].shape == (40, 2, 7) and d["qpos"].dtype == np.float32
+    assert d["sample_seed"].dtype == np.uint32 and d["pair"].dtype == np.int32
+    assert r["rollout"].tolist() == list(range(len(r["label"])))
+    assert r["selected"].sum() == 40
+    for k in ("label", "relation", "cog_distance", "toy", "other", "qpos"):
+        np.testing.assert_array_equal(d[k], r[k][r["selected"]])
+    # the stored rollouts are exactly what the rollout function returned for each chunk key
+    import jax
+
+    for k in range(2):
+        want = synthetic_rollout_fn()(jax.random.fold_in(jax.random.PRNGKey(3), k), 16)
+        sl = slice(16 * k, 16 * (k + 1))
+        for name, a in want.items():
+            np.testing.assert_array_equal(r[name][sl], a)
+
+
+def test_determinism(built, tmp_path):
+    path, _ = built
+    again = tmp_path / "again"
+    gen(again)
+    a, b = ds.load_dataset(path), ds.load_dataset(again)
+    assert a.keys() == b.keys()
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+    other = tmp_path / "other"
+    gen(other, seed=4)
+    assert not np.array_equal(ds.load_dataset(other)["cog_distance"], a["cog_distance"])
+
+
+def test_resume_after_kill_is_identical(built, tmp_path):
+    path, summary = built
+    assert summary["chunks"] > 3
+    part = tmp_path / "part"
+    with pytest.raises(Killed):
+        gen(part, fn=synthetic_rollout_fn(kill_after=2))
+    assert sorted(p.name for p in (part / "chunks").iterdir()) == ["chunk_000000", "chunk_000001"]
+    with pytest.raises(ds.DatasetError, match="not finished"):
+        ds.load_dataset(part)
+    # leftovers of a kill inside an atomic write, and a sidecar that lags one chunk behind
+    junk = part / "chunks" / ".chunk_000002.abcd.tmp"
+    (junk / "arrays").mkdir(parents=True)
+    (part / ".relaff_dataset.json.xyz.tmp").write_text("{")
+    side = json.loads((part / ds.SIDECAR).read_text())
+    side["counts"]["chunks"] = 1
+    (part / ds.SIDECAR).write_text(json.dumps(side))
+    calls: list = []
+    res = gen(part, fn=synthetic_rollout_fn(calls=calls))
+    assert res["new_chunks"] == summary["chunks"] - 2 == len(calls)
+    assert res["rollouts"] == summary["rollouts"]
+    assert not junk.exists() and not (part / ".relaff_dataset.json.xyz.tmp").exists()
+    names = sorted(p.name for p in (part / "chunks").iterdir())
+    assert names == [f"chunk_{k:06d}" for k in range(summary["chunks"])]
+    a, b = ds.load_dataset(path), ds.load_dataset(part)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+    ra, rb = ds.load_rollouts(path), ds.load_rollouts(part)
+    for k in ra:
+        np.testing.assert_array_equal(ra[k], rb[k])
+    assert len(np.unique(rb["rollout"])) == len(rb["rollout"])
+    # a finished dataset rerun with the same arguments simulates nothing
+    again = gen(part, fn=synthetic_rollout_fn(kill_after=0))
+    assert again["new_chunks"] == 0 and again["rollouts"] == summary["rollouts"]
+
+
+def test_cap_borrowing_records_and_warns(tmp_path):
+    # positives only at small distances with no negatives there: borrowing is unavoidable
+    def fn(key, b):
+        rng = np.random.default_rng(np.asarray(key).tolist())
+        dist = rng.uniform(0.0, 1.0, b)
+        return {"label": dist < 0.3, "relation": np.full(b, "on_top"), "cog_distance": dist,
+                "toy": np.full(b, "ball"), "other": np.full(b, "plate")}
+
+    cfg = ds.DatasetConfig(max_rollouts=64, distance_bins=4, borrow_fraction=0.0)
+    with pytest.warns(UserWarning, match="negatives come from outside"):
+        res = gen(tmp_path / "b", n=10, fn=fn, dataset_config=cfg)
+    assert res["rollouts"] == 64 and res["borrowed"] == 5
+    d = ds.load_dataset(tmp_path / "b")
+    assert d["label"].sum() == 5
+    # the borrowed negatives are the nearest ones to the positives' range (just above 0.3)
+    r = ds.load_rollouts(tmp_path / "b")
+    neg = np.sort(r["cog_distance"][~r["label"]])
+    np.testing.assert_array_equal(np.sort(d["cog_distance"][~d["label"]]), neg[:5])
+    assert json.loads((tmp_path / "b" / ds.SELECTION).read_text())["at_cap"] is True
+
+
+def test_cap_without_positives_errors_with_rate(tmp_path):
+    cfg = ds.DatasetConfig(max_rollouts=40, distance_bins=4, borrow_fraction=0.0)
+    p = tmp_path / "cap"
+    with pytest.raises(ds.RolloutCapError, match=r"positive rate 0\.00%.*max_rollouts"):
+        gen(p, fn=synthetic_rollout_fn(all_negative=True), dataset_config=cfg)
+    assert len(list((p / "chunks").iterdir())) == 3  # ceil(40 / 16) chunks kept for a rerun
+
+
+def test_int_codes_and_object_ids(tmp_path):
+    names = ("ball", "cube", "plate")
+
+    def fn(key, b):
+        rng = np.random.default_rng(np.asarray(key).tolist())
+        return {"label": np.arange(b) % 2, "relation": rng.integers(0, 3, b),
+                "cog_distance": np.full(b, 0.5), "toy": np.zeros(b, int), "other": np.full(b, 2),
+                "tag": np.array([b"x", b"y"] * (b // 2))}
+
+    gen(tmp_path / "i", n=4, batch=4, fn=fn, object_names=names)
+    d = ds.load_dataset(tmp_path / "i")
+    assert set(d["toy"]) == {"ball"} and set(d["other"]) == {"plate"}
+    assert d["label"].dtype == bool and set(d["tag"]) <= {"x", "y"}
+    r = ds.load_rollouts(tmp_path / "i")
+    rng = np.random.default_rng(np.asarray(__import__("jax").random.fold_in(__import__("jax").random.PRNGKey(3), 0)).tolist())
+    assert r["relation"].tolist() == np.asarray(ds.RELATIONS)[rng.integers(0, 3, 4)].tolist()
+
+
+# ----------------------------------------------------------------------------- bad input
+
+
+@pytest.mark.parametrize(
+    "kw, match",
+    [
+        ({"action": "fly"}, "unknown action 'fly'"),
+        ({"n": 1}, "n_samples must be >= 2"),
+        ({"n": 2.5}, "n_samples must be an integer"),
+        ({"batch": 0}, "batch must be >= 1"),
+        ({"seed": -1}, "seed must be in"),
+    ],
+)
+def test_bad_arguments(tmp_path, kw, match):
+    action = kw.pop("action", "lift")
+    args = dict(n=10, seed=0, batch=4) | kw
+    with pytest.raises(ds.DatasetError, match=match):
+        ds.generate_dataset(tmp_path / "x", action, args["n"], synthetic_rollout_fn(), args["seed"], args["batch"], progress=False)
+    assert not (tmp_path / "x").exists()
+
+
+def test_unwritable_and_foreign_dirs(tmp_path):
+    f = tmp_path / "file"
+    f.write_text("x")
+    with pytest.raises(ds.DatasetError, match="cannot create"):
+        gen(f / "sub")
+    with pytest.raises(ds.DatasetError, match="not a directory"):
+        gen(f)
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    with pytest.raises(ds.ForeignDirectoryError, match="not a relaff dataset"):
+        gen(foreign)
+    assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
+    with pytest.raises(ds.ForeignDirectoryError):
+        ds.load_dataset(foreign)
+    (tmp_path / "fake").mkdir()
+    (tmp_path / "fake" / ds.SIDECAR).write_text('{"format": "something else"}')
+    with pytest.raises(ds.ForeignDirectoryError):
+        ds.info(tmp_path / "fake")
+    with pytest.raises(ds.DatasetError, match="no such dataset"):
+        ds.load_dataset(tmp_path / "missing")
+    empty = tmp_path / "empty"
+    empty.mkdir()  # an existing empty directory is fine
+    gen(empty, n=4)
+    assert ds.load_dataset(empty)["label"].sum() == 2
+
+
+def test_bad_rollout_output_leaves_nothing(tmp_path):
+    def no_label(key, b):
+        out = synthetic_rollout_fn()(key, b)
+        out.pop("label")
+        return out
+
+    def bad_relation(key, b):
+        out = synthetic_rollout_fn()(key, b)
+        out["relation"][0] = "under"
+        return out
+
+    def wrong_len(key, b):
+        out = synthetic_rollout_fn()(key, b)
+        out["qpos"] = out["qpos"][:-1]
+        return out
+
+    for fn, match in [(no_label, "lacks required field"), (bad_relation, "under"), (wrong_len, "'qpos'")]:
+        with pytest.raises(ds.DatasetError, match=match):
+            gen(tmp_path / "bad", fn=fn)
+        assert not (tmp_path / "bad").exists()
+
+
+def test_schema_change_between_chunks(tmp_path):
+    calls: list = []
+
+    def fn(key, b):
+        out = synthetic_rollout_fn(calls=calls)(key, b)
+        if len(calls) > 1:
+            out["qpos"] = out["qpos"][:, :1]
+        return out
+
+    with pytest.raises(ds.DatasetError, match="'qpos'"):
+        gen(tmp_path / "s", fn=fn)
+    assert len(list((tmp_path / "s" / "chunks").iterdir())) == 1  # the good chunk is kept
+
+
+def test_resume_mismatch(built, tmp_path):
+    p = copy(built, tmp_path)
+    for kw, what in [({"seed": 4}, "seed"), ({"n": 42}, "n_samples"), ({"batch": 8}, "batch")]:
+        with pytest.raises(ds.DatasetMismatchError, match=what):
+            gen(p, **kw)
+    with pytest.raises(ds.DatasetMismatchError, match="action"):
+        ds.generate_dataset(p, "push", 40, synthetic_rollout_fn(), 3, 16, CFG, progress=False, dataset_config=EXACT)
+    with pytest.raises(ds.DatasetMismatchError, match="config"):
+        ds.generate_dataset(p, "lift", 40, synthetic_rollout_fn(), 3, 16, {"lift_height": 0.1}, progress=False, dataset_config=EXACT)
+    ds.load_dataset(p)  # untouched
+
+
+def test_concurrent_writer_refused(built, tmp_path):
+    p = copy(built, tmp_path)
+    with ds._writer_lock(p):
+        with pytest.raises(ds.DatasetError, match="another process"):
+            gen(p)
+
+
+def _damage(p: Path, how: str) -> None:
+    c = p / "chunks"
+    if how == "missing middle chunk":
+        shutil.rmtree(c / "chunk_000001")
+    elif how == "missing last chunk":
+        shutil.rmtree(sorted(c.iterdir())[-1])
+    elif how == "corrupt chunk meta":
+        (c / "chunk_000000" / "meta.json").write_text("{not json")
+    elif how == "corrupt chunk data":
+        meta = json.loads((c / "chunk_000000" / "meta.json").read_text())
+        meta["arrays"]["qpos"]["sha256"] = "0" * 64  # as if the stored bytes had changed
+        (c / "chunk_000000" / "meta.json").write_text(json.dumps(meta))
+    elif how == "damaged orbax files":
+        for f in (c / "chunk_000000" / "arrays").rglob("*"):
+            if f.is_file() and f.stat().st_size > 0:
+                f.write_bytes(b"\0" * 7)
+    elif how == "flipped byte in orbax data":
+        for f in (c / "chunk_000000" / "arrays").rglob("*"):
+            if f.is_file() and f.parent.name == "d":
+                b = bytearray(f.read_bytes())
+                b[len(b) // 2] ^= 0xFF
+                f.write_bytes(bytes(b))
+    elif how == "missing orbax dir":
+        shutil.rmtree(c / "chunk_000000" / "arrays")
+    elif how == "missing index":
+        (p / ds.SELECTION).unlink()
+    elif how == "corrupt index":
+        (p / ds.SELECTION).write_text('{"selected": [0, 1')
+    elif how == "edited index":
+        idx = json.loads((p / ds.SELECTION).read_text())
+        idx["selected"][0] = idx["selected"][1] - 1 if idx["selected"][0] + 1 < idx["selected"][1] else 10**6
+        (p / ds.SELECTION).write_text(json.dumps(idx))
+    elif how == "corrupt sidecar":
+        (p / ds.SIDECAR).write_text("{{")
+    elif how == "missing sidecar":
+        (p / ds.SIDECAR).unlink()
+    elif how == "swapped chunks":
+        (c / "chunk_000000").rename(c / "tmp")
+        (c / "chunk_000001").rename(c / "chunk_000000")
+        (c / "tmp").rename(c / "chunk_000001")
+
+
+@pytest.mark.parametrize(
+    "how, match",
+    [
+        ("missing middle chunk", r"chunk\(s\) \[1\] missing"),
+        ("missing last chunk", "sidecar records"),
+        ("corrupt chunk meta", "metadata missing or corrupt"),
+        ("corrupt chunk data", "'qpos' is corrupt"),
+        ("damaged orbax files", "chunk_000000"),
+        ("flipped byte in orbax data", "chunk_000000"),
+        ("missing orbax dir", "orbax cannot read"),
+        ("missing index", "selection.json is missing"),
+        ("corrupt index", "selection.json is corrupt"),
+        ("edited index", "does not match"),
+        ("corrupt sidecar", "sidecar relaff_dataset.json is corrupt"),
+        ("missing sidecar", "sidecar relaff_dataset.json is missing"),
+        ("swapped chunks", "rollout ids"),
+    ],
+)
+def test_truncated_or_corrupt(built, tmp_path, how, match):
+    p = copy(built, tmp_path)
+    _damage(p, how)
+    with pytest.raises(ds.CorruptDatasetError, match=match):
+        ds.load_dataset(p)
+    with pytest.raises(ds.CorruptDatasetError):
+        ds.info(p)
+    if how not in ("missing index", "corrupt index", "edited index"):
+        with pytest.raises(ds.CorruptDatasetError):  # resuming refuses too, and never deletes data
+            gen(p)
+        assert p.exists()
+
+
+# ----------------------------------------------------------------------------- info
+
+
+def test_info_values_and_cli(built, capsys):
+    path, summary = built
+    d = ds.info(path)
+    data, r = ds.load_dataset(path), ds.load_rollouts(path)
+    assert d["action"] == "lift" and d["n"] == 40 and d["positive_rate"] == 0.5
+    assert d["rollouts"] == summary["rollouts"] == len(r["label"]) and d["status"] == "complete"
+    for rel in ds.RELATIONS:
+        labs = [l for l, x in zip(data["label"], data["relation"]) if x == rel]
+        assert d["count_by_relation"][rel] == {"n": len(labs), "positives": sum(labs)}
+        assert d["positive_rate_by_relation"][rel] == (sum(labs) / len(labs) if labs else None)
+        labs = [l for l, x in zip(r["label"], r["relation"]) if x == rel]
+        assert d["rollouts_positive_rate_by_relation"][rel] == pytest.approx(sum(labs) / len(labs))
+    pairs = {f"{t}/{o}" for t, o in zip(data["toy"], data["other"])}
+    assert set(d["positive_rate_by_pair"]) == pairs
+    assert sum(c["n"] for c in d["count_by_pair"].values()) == 40
+    assert d["features"] is None and d["borrowed"] == 0
+    assert d["config"] == CFG and d["versions"]["orbax-checkpoint"]
+
+    parser = argparse.ArgumentParser()
+    ds.register_cli(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["info", str(path), "--json"])
+    assert args.func(args) == 0
+    j = json.loads(capsys.readouterr().out)
+    assert j["n"] == 40 and j["positive_rate_by_relation"] == d["positive_rate_by_relation"]
+    args = parser.parse_args(["info", str(path)])
+    assert args.func(args) == 0
+    text = capsys.readouterr().out
+    assert "on_top" in text and "features: none" in text and f"{summary['rollouts']} rollouts" in text
+
+
+def test_info_while_generating(tmp_path):
+    p = tmp_path / "g"
+    with pytest.raises(Killed):
+        gen(p, fn=synthetic_rollout_fn(kill_after=1))
+    d = ds.info(p)
+    assert d["status"] == "generating" and d["n"] == 0 and d["rollouts"] == 16
+    assert d["positive_rate"] is None and d["rollouts_positive_rate"] is not None
+    assert "generating" in ds.format_info(d)
+
+
+# ----------------------------------------------------------------------------- features
+
+
+def feature_fn(kill_after: int | None = None, sizes: list | None = None):
+    sizes = [] if sizes is None else sizes
+
+    def compute(s):
+        if kill_after is not None and len(sizes) >= kill_after:
+            raise Killed("simulated kill")
+        sizes.append(len(s["label"]))
+        d = s["cog_distance"].astype(np.float64)
+        pca = np.stack([d * (i + 1) for i in range(18)], axis=1).astype(np.float32)
+        rhf = np.tile(s["rollout"][:, None] % 7, (1, 300)).astype(np.float32)
+        unseen = np.stack([s["rollout"] % 5 == 0, s["toy"] == "cube"], axis=1)
+        return {"pca": pca, "rhf": rhf, "unseen": unseen}
+
+    return compute
+
+
+def test_add_features_round_trip_and_resume(built, tmp_path):
+    p = copy(built, tmp_path)
+    with pytest.raises(Killed):
+        ds.add_features(p, feature_fn(kill_after=2), batch=12, progress=False, config_dict={"voxel": 0.0125})
+    assert "pca" not in ds.load_dataset(p)  # unfinished features are not served
+    assert ds.info(p)["features"]["status"] == "generating"
+    sizes: list = []
+    res = ds.add_features(p, feature_fn(sizes=sizes), batch=12, progress=False, config_dict={"voxel": 0.0125})
+    assert sizes == [12, 12] and res["new_chunks"] == 2 and res["chunks"] == 4  # 40 = 12+12+12+4 (padded)
+    d = ds.load_dataset(p)
+    want = feature_fn()({k: v for k, v in d.items() if k not in ("pca", "rhf", "unseen", "action")})
+    assert d["pca"].shape == (40, 18) and d["rhf"].shape == (40, 300) and d["unseen"].shape == (40, 2)
+    for k in ("pca", "rhf", "unseen"):
+        np.testing.assert_array_equal(d[k], want[k])
+    f = ds.info(p)["features"]
+    assert f["arrays"]["pca"]["shape"] == [40, 18] and f["arrays"]["unseen"]["dtype"] == "bool"
+    assert f["unseen_samples"] == int(want["unseen"].any(axis=1).sum())
+    assert f["unseen_by_column"] == want["unseen"].sum(axis=0).tolist()
+    # finished: rerun is a no-op; other config is refused unless overwrite
+    assert ds.add_features(p, feature_fn(kill_after=0), batch=12, progress=False, config_dict={"voxel": 0.0125})["new_chunks"] == 0
+    with pytest.raises(ds.DatasetMismatchError, match="voxel"):
+        ds.add_features(p, feature_fn(), batch=12, progress=False, config_dict={"voxel": 0.02})
+    res = ds.add_features(p, feature_fn(), batch=40, progress=False, config_dict={"voxel": 0.02}, overwrite=True)
+    assert res["chunks"] == 1
+    np.testing.assert_array_equal(ds.load_dataset(p)["pca"], want["pca"])
+    # a lost feature chunk is detected
+    shutil.rmtree(p / "features" / "chunk_000000")
+    with pytest.raises(ds.CorruptDatasetError, match="truncated features"):
+        ds.load_dataset(p)
+
+
+def test_add_features_bad_input(built, tmp_path):
+    p = copy(built, tmp_path)
+    with pytest.raises(ds.DatasetError, match="collides"):
+        ds.add_features(p, lambda s: {"label": s["label"]}, batch=8, progress=False)
+    with pytest.raises(ds.DatasetError, match="'unseen' must be bool"):
+        ds.add_features(p, lambda s: {"unseen": np.zeros((len(s["label"]), 2))}, batch=8, progress=False)
+    with pytest.raises(ds.DatasetError, match="leading axis 8"):
+        ds.add_features(p, lambda s: {"pca": np.zeros((3, 18))}, batch=8, progress=False)
+    with pytest.raises(ds.DatasetError, match="batch must be >= 1"):
+        ds.add_features(p, feature_fn(), batch=0, progress=False)
+    assert not list((p / "features").glob("chunk_*"))
+    with pytest.raises(ds.ForeignDirectoryError):
+        ds.add_features(tmp_path, feature_fn(), batch=8, progress=False)
