@@ -14,7 +14,7 @@ import sys
 # Stage modules that contribute subcommands, in pipeline order.
 COMMAND_MODULES = (
     "relaff_jax.objects",
-    "relaff_jax.scenes_cli",
+    "relaff_jax.scenes",
 )
 
 
