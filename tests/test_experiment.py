@@ -1,0 +1,288 @@
+"""Protocol, bootstrap factors, Table II, resumable sweeps and the CLI (relaff_jax.experiment)."""
+import argparse
+import csv
+import shutil
+
+import numpy as np
+import pytest
+
+from relaff_jax import experiment as E
+from relaff_jax import learning as L
+from relaff_jax.config import override
+
+# Small forests keep the sweep tests fast; the paper's forest settings are tested in test_learning.
+TINY = {
+    "sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 1, "test_size": 60, "source_size": 60,
+    "corr_scenes": 20, "forest.base_trees": 6, "forest.max_trees": 6, "sizes_per_block": 2,
+}
+ACTS3 = ("lift", "pull", "take")
+
+
+def tiny_cfg(**kw):
+    return override(E.preset("quick"), dict(TINY, **kw))
+
+
+@pytest.fixture(scope="module")
+def data3():
+    return L.synthetic_datasets(200, seed=3, actions=ACTS3)
+
+
+# --------------------------------------------------------------------- bootstrap factor
+
+
+def test_bootstrap_factor_hand_worked():
+    # paper III-D: a jump from 76.7 % to 90 % is a bootstrap factor of 1.5
+    assert E.bootstrap_factor(0.9, 0.5 + 0.4 / 1.5) == pytest.approx(1.5)
+    assert E.bootstrap_factor(0.75, 0.75) == pytest.approx(1.0)
+    assert E.bootstrap_factor(0.55, 0.6) == pytest.approx(0.5)
+    assert E.bootstrap_factor(0.7, 0.6, chance=0.4) == pytest.approx(1.5)
+    bf = E.bootstrap_factor(np.array([0.8, 0.8, 0.8]), np.array([0.5, 0.45, 0.65]))
+    assert np.isnan(bf[0]) and np.isnan(bf[1]) and bf[2] == pytest.approx(2.0)  # undefined at/below chance
+
+
+def test_average_bf_over_4_to_25_hand_worked():
+    sizes = [2, 3, 4, 10, 25, 26, 100]
+    bf = np.array([[9.0, 9.0, 2.0, 3.0, 4.0, 50.0, 100.0], [0, 0, 1.0, np.nan, 2.0, 0, 0]])
+    np.testing.assert_allclose(E.average_bf(bf, sizes, 4, 25), [3.0, 1.5])
+
+
+def test_selection_hand_worked():
+    sizes = [2, 10, 50, 100]
+    p = np.array([[0.6, 0.70, 0.80, 0.90],   # best at 10 (0.70 > 0.69)
+                  [0.6, 0.69, 0.90, 0.95],   # best mean over 2..100
+                  [np.nan] * 4])            # not run: never chosen
+    assert E.select_best(p, sizes, 2, 100) == 1
+    assert E.select_at(p, sizes, 10) == 0
+    assert E.select_best(p, sizes, 2, 10) == 0  # over 2..10 only
+
+
+def test_table2_from_hand_built_accuracies():
+    # three targets, conditions of a 3-action layout; constant-in-rep accuracies
+    acts = list(ACTS3)
+    cfg = override(E.ExperimentConfig(), {"sizes": (2, 4, 10, 25)})
+    lay = E.layout(3, 3)
+    acc = np.full((3, lay["n"], 4, 2), np.nan)
+    nb = np.array([0.55, 0.6, 0.7, 0.8])
+    acc[:, 0] = nb[:, None]
+    # target 0: DB1 from 1 is good (bf 2 at n=4,10,25 -> P = 0.5 + 2*(P_sl-0.5)), from 2 is neutral
+    acc[0, lay["DB1"][1]] = (0.5 + 2 * (nb - 0.5))[:, None]
+    acc[0, lay["DB1"][2]] = nb[:, None]
+    for t in (1, 2):  # targets 1, 2: every DB1 source gives bf 1.5
+        for s in range(3):
+            if s != t:
+                acc[t, lay["DB1"][s]] = (0.5 + 1.5 * (nb - 0.5))[:, None]
+    acc[:, lay["DBn"]] = nb[:, None]
+    k_allowed = E.category_allowed(acts, cfg)  # categories not built from the target
+    for t in range(3):
+        for k in np.flatnonzero(k_allowed[t]):
+            acc[t, lay["CB1"][k]] = (0.5 + 3.0 * (nb - 0.5))[:, None]
+        acc[t, lay["CBn"]] = nb[:, None]
+    res = {"acc": acc, "sizes": np.array(cfg.sizes), "actions": np.array(acts),
+           "conditions": np.array(E.condition_names(acts, cfg.thresholds)),
+           "category_masks": E.category_masks(np.eye(3), acts, cfg)}
+    an = E.analyse(res, cfg)
+    t2 = dict(zip(an["table2_rows"], an["table2"]))
+    per = dict(zip(an["table2_rows"], an["table2_per_target"]))
+    np.testing.assert_allclose(t2["NB"], [1, 1, 1])
+    np.testing.assert_allclose(per["DB1 average"], [1.5, 1.5, 1.5])  # target 0: (2 + 1) / 2
+    np.testing.assert_allclose(per["DB1 best"], [2.0, 1.5, 1.5])
+    np.testing.assert_allclose(t2["DB1 best"], [5 / 3, 1.5, 2.0])
+    np.testing.assert_allclose(t2["CB1 best"], [3, 3, 3])
+    np.testing.assert_allclose(t2["CBn"], [1, 1, 1])
+    assert an["best_db1"][0] == lay["DB1"][1] and an["ten_db1"][0] == lay["DB1"][1]
+    # with no category above 0.5 (identity corr), Fig. 12's T=0.5 curve is empty, T=0 uses all
+    th = an["thresholds"]
+    assert th["count"] == [3, 0, 0]
+    assert np.allclose(th["best_curve"][0][1:], 3.0) and np.all(np.isnan(th["best_curve"][2]))
+
+
+def test_informative_source_bootstraps_and_noise_does_not():
+    """One bootstrap input is the label itself, another pure noise (paper-sized 6x repetition)."""
+    rng = np.random.default_rng(0)
+    m, test = 1600, 1500
+    X = rng.normal(size=(m, 18)).astype(np.float32)
+    y = X[:, 0] + X[:, 1] > 0
+    boot = np.stack([y.astype(np.float32), (rng.random(m) < 0.5).astype(np.float32)])
+    acts = list(ACTS3)  # target lift (0); sources pull (1) = label, take (2) = noise
+    cfg = override(E.ExperimentConfig(), {"sizes": (2, 4, 6, 10, 16, 25), "forest.base_trees": 25, "forest.max_trees": 25})
+    lay = E.layout(3, 3)
+    plan = [(0, ()), (int(lay["DB1"][1]), (0,)), (int(lay["DB1"][2]), (1,))]
+    reps = 12
+    acc = np.full((3, lay["n"], len(cfg.sizes), reps), np.nan)
+    for r in range(reps):
+        test_idx, order = E.draw_rep(m, test, max(cfg.sizes), 0, 0, r)
+        acc[0, :, :, r] = E.run_block(X, y, boot, plan, order, test_idx, cfg.sizes, 6, lay["n"], cfg.forest, (0, r))
+    res = {"acc": acc, "sizes": np.array(cfg.sizes), "actions": np.array(acts),
+           "conditions": np.array(E.condition_names(acts, cfg.thresholds)),
+           "category_masks": E.category_masks(np.eye(3), acts, cfg)}
+    an = E.analyse(res, cfg)
+    bf_label, bf_noise = an["avg_bf"][0, lay["DB1"][1]], an["avg_bf"][0, lay["DB1"][2]]
+    assert bf_label > 2.0, bf_label
+    assert 0.6 < bf_noise < 1.3, bf_noise
+    assert an["best_db1"][0] == lay["DB1"][1]
+    assert an["ten_db1"][0] == lay["DB1"][1]
+    assert an["mean"][0, lay["DB1"][1], -1] > 0.97  # the label input is learnt almost perfectly
+
+
+# -------------------------------------------------------------------------- protocol
+
+
+def test_condition_plan_counts_for_nine_actions():
+    cfg = E.ExperimentConfig()
+    corr = np.full((9, 9), 0.3)
+    plan = E.condition_plan(L.ACTIONS, 0, corr, cfg, "pca")
+    fams = [E.condition_names(L.ACTIONS, cfg.thresholds)[c].split(":")[0] for c, _ in plan]
+    assert fams.count("NB") == 1 and fams.count("DB1") == 8 and fams.count("DBn") == 1
+    assert fams.count("CB1") == 28 and fams.count("CBn") == 3  # C(8, 2): categories without the target
+    dbn = dict(plan)[int(E.layout(9, 3)["DBn"])]
+    assert dbn == tuple(range(1, 9))
+    cbn = {c: rows for c, rows in plan if c in E.layout(9, 3)["CBn"]}
+    assert [len(v) for v in cbn.values()] == [28, 28, 0]  # corr 0.3: all at T=0, 0.125; none at 0.5
+    with_t = override(cfg, {"categories_with_target": True})
+    assert sum(c in E.layout(9, 3)["CB1"] for c, _ in E.condition_plan(L.ACTIONS, 0, corr, with_t, "pca")) == 36
+    rhf = E.condition_plan(L.ACTIONS, 0, corr, cfg, "rhf")
+    assert len(rhf) == 9  # NB + 8 DB1 (the paper shows only those in RHF)
+
+
+def test_pools_are_disjoint_and_too_small_data_is_an_error():
+    cfg = E.ExperimentConfig()
+    p = E.split_pools(10000, 2, cfg, seed=5)
+    assert len(p["source"]) == 2000 and len(p["corr"]) == 500 and len(p["target"]) == 7500
+    allidx = np.concatenate([p["source"], p["corr"], p["target"]])
+    assert len(np.unique(allidx)) == 10000
+    with pytest.raises(ValueError, match="pull: 5000 samples, but the protocol needs 6600"):
+        E.split_pools(5000, 2, cfg, seed=5)
+    q = E.split_pools(1000, 2, override(cfg, {"shrink_to_data": True}), seed=5)
+    assert len(q["source"]) == 400 and len(q["corr"]) == 100 and int(q["test_size"]) == 400
+    test, order = E.draw_rep(len(q["target"]), int(q["test_size"]), 100, 0, 2, 1)
+    assert len(np.intersect1d(test, order)) == 0 and len(order) == 100
+
+
+def test_source_outputs_are_the_source_predictor_on_target_scenes_in_its_order(data3):
+    cfg = tiny_cfg()
+    prep = E.prepare(data3, "pca", cfg, seed=9)
+    # reference: source 'take' (toy first) applied to 'lift' target scenes (base first in lift's state)
+    pools = {a: E.split_pools(200, L.ACTIONS.index(a), cfg, 9) for a in ACTS3}
+    src = pools["take"]["source"]
+    d = data3["take"]
+    f = L.fit_forest(L.state_features(d["pca"][src], None, "take", "pca"), d["label"][src],
+                     E._seed(9, 2, 0, L.ACTIONS.index("take")), cfg.forest)
+    tgt = pools["lift"]["target"]
+    np.testing.assert_array_equal(prep["target:lift"], tgt)
+    expect = L.predict_class(f, L.state_features(data3["lift"]["pca"][tgt], None, "take", "pca"))
+    np.testing.assert_array_equal(prep["boot:lift"][2], expect)
+    assert prep["boot:lift"].shape == (3 + 3, len(tgt))
+    assert prep["corr"].shape == (3, 3) and int(prep["corr_n"]) == 3 * 20
+    for a in ACTS3:  # source/corr pools never overlap the target pool
+        assert not np.intersect1d(pools[a]["target"], np.concatenate([pools[a]["source"], pools[a]["corr"]])).size
+
+
+# ----------------------------------------------------------------- sweeps and resuming
+
+
+def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monkeypatch):
+    cfg = tiny_cfg()
+    full = E.run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"]
+    a = np.load(full)
+    acc = a["acc"]
+    assert acc.shape == (3, E.layout(3, 3)["n"], 4, 2)
+    assert np.all(np.isfinite(acc[:, 0])) and np.all((acc >= 0) | np.isnan(acc)) and np.nanmax(acc) <= 1
+    lay = E.layout(3, 3)
+    for t in range(3):
+        assert np.all(np.isnan(acc[t, lay["DB1"][t]]))  # no self-bootstrapping
+
+    # interrupted run: the third block raises (like a kill), then a rerun finishes the rest
+    calls = {"n": 0}
+    real = E._block_job
+
+    def flaky(*args):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+        return real(*args)
+
+    monkeypatch.setattr(E, "_block_job", flaky)
+    with pytest.raises(KeyboardInterrupt):
+        E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
+    blocks = sorted((tmp_path / "b" / "pca" / "blocks").glob("*.npz"))
+    assert len(blocks) == 2 and not (tmp_path / "b" / "pca" / "results.npz").exists()
+    monkeypatch.setattr(E, "_block_job", real)
+    done = {p.name: p.stat().st_mtime_ns for p in blocks}
+    b = np.load(E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
+    np.testing.assert_array_equal(b["acc"], acc)
+    assert {p.name: p.stat().st_mtime_ns for p in blocks} == done  # finished blocks were not redone
+    assert int(b["new_fits"]) < int(a["new_fits"])
+
+    # a corrupt block and a deleted block are recomputed; result identical
+    bdir = tmp_path / "b" / "pca" / "blocks"
+    sorted(bdir.glob("*.npz"))[0].write_bytes(b"garbage")
+    sorted(bdir.glob("*.npz"))[-1].unlink()
+    (tmp_path / "b" / "pca" / "results.npz").unlink()
+    c = np.load(E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
+    np.testing.assert_array_equal(c["acc"], acc)
+
+    # another seed gives other draws; another config in the same folder is refused
+    other = np.load(E.run_experiment(data3, tmp_path / "c", cfg, ["pca"], seed=3, jobs=1, progress=False)["pca"])
+    assert not np.array_equal(other["acc"], acc, equal_nan=True)
+    with pytest.raises(ValueError, match=r"different \['config'\]"):
+        E.run_experiment(data3, tmp_path / "b", override(cfg, {"reps_pca": 3}), ["pca"], seed=2, jobs=1, progress=False)
+
+
+def test_two_processes_give_the_same_bits_as_one(data3, tmp_path):
+    cfg = tiny_cfg(sizes=(2, 10), reps_pca=1, reps_rhf=1)
+    one = E.run_experiment(data3, tmp_path / "one", cfg, ["pca", "rhf"], seed=4, jobs=1, progress=False)
+    two = E.run_experiment(data3, tmp_path / "two", cfg, ["pca", "rhf"], seed=4, jobs=2, progress=False)
+    for s in ("pca", "rhf"):
+        x, y = np.load(one[s]), np.load(two[s])
+        np.testing.assert_array_equal(x["acc"], y["acc"])
+        np.testing.assert_array_equal(x["corr"], y["corr"])
+    rhf = np.load(one["rhf"])["acc"]
+    assert np.all(np.isnan(rhf[:, E.layout(3, 3)["DBn"]]))  # RHF runs NB and DB1 only
+
+
+def test_bad_inputs_are_clear_errors(data3, tmp_path):
+    with pytest.raises(ValueError, match="at least two actions"):
+        E.run_experiment({"lift": data3["lift"]}, tmp_path / "x", tiny_cfg(), ["pca"])
+    bad = {a: dict(data3[a]) for a in ACTS3}
+    bad["pull"]["pca"] = bad["pull"]["pca"][:, :17]
+    with pytest.raises(ValueError, match=r"pull: pca must be \(N, 18\)"):
+        E.run_experiment(bad, tmp_path / "x", tiny_cfg(), ["pca"])
+    nofeat = {a: {k: v for k, v in data3[a].items() if k != "rhf"} for a in ACTS3}
+    with pytest.raises(ValueError, match="no 'rhf' array"):
+        E.run_experiment(nofeat, tmp_path / "x", tiny_cfg(), ["rhf"])
+    with pytest.raises(ValueError, match="select_size 10"):
+        E.check_config(tiny_cfg(sizes=(2, 4, 25)))
+    with pytest.raises(ValueError, match="unknown preset"):
+        E.preset("huge")
+
+
+# ------------------------------------------------------------------------------- CLI
+
+
+def test_cli_experiment_and_report(tmp_path):
+    parser = argparse.ArgumentParser()
+    E.register_cli(parser.add_subparsers(dest="command"))
+    sets = []
+    for k, v in dict(TINY, reps_pca=1, sizes=[2, 4, 10]).items():
+        sets += ["--set", f"{k}={list(v) if isinstance(v, tuple) else v}".replace(" ", "")]
+    args = parser.parse_args(["experiment", "--synthetic", "150", "--out", str(tmp_path / "res"), "--space", "both",
+                              "--jobs", "1", "--seed", "1", "--no-progress"] + sets)
+    assert args.func(args) == 0
+    res = E.load_results(tmp_path / "res")
+    assert res["config"].sizes == (2, 4, 10) and res["pca"]["acc"].shape == (9, 50, 3, 1)
+    args = parser.parse_args(["report", str(tmp_path / "res"), "--out", str(tmp_path / "rep")])
+    assert args.func(args) == 0
+    with open(tmp_path / "rep" / "table2.csv", newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows[0] == ["method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max"]
+    assert [r[0] for r in rows[1:]] == list(E.TABLE2_ROWS)
+    assert rows[1][1:] == ["1.0000"] * 6  # NB is 1 by definition, in the paper too
+    assert rows[3][4:] == ["2.8190", "0.9760", "3.6570"]  # paper's DB1 best
+    assert (tmp_path / "rep" / "table2_rhf.csv").exists()
+    md = (tmp_path / "rep" / "table2.md").read_text()
+    assert "| DB1 best after ten |" in md and "Categories built per threshold" in md
+    for fig in ("fig06_nb_learning", "fig07_nb_spaces", "fig08_db1_best", "fig09_db1_best_bf",
+                "fig10_average_bf", "fig11_correlation", "fig12_thresholds"):
+        assert (tmp_path / "rep" / f"{fig}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(FileNotFoundError, match="not an experiment folder"):
+        E.load_results(tmp_path / "rep")
