@@ -229,7 +229,9 @@ def test_int_codes_and_object_ids(tmp_path):
     assert set(d["toy"]) == {"ball"} and set(d["other"]) == {"plate"}
     assert d["label"].dtype == bool and set(d["tag"]) <= {"x", "y"}
     r = ds.load_rollouts(tmp_path / "i")
-    rng = np.random.default_rng(np.asarray(__import__("jax").random.fold_in(__import__("jax").random.PRNGKey(3), 0)).tolist())
+    import jax
+
+    rng = np.random.default_rng(np.asarray(jax.random.fold_in(jax.random.PRNGKey(3), 0)).tolist())
     assert r["relation"].tolist() == np.asarray(ds.RELATIONS)[rng.integers(0, 3, 4)].tolist()
 
 
@@ -515,3 +517,51 @@ def test_add_features_bad_input(built, tmp_path):
     assert not list((p / "features").glob("chunk_*"))
     with pytest.raises(ds.ForeignDirectoryError):
         ds.add_features(tmp_path, feature_fn(), batch=8, progress=False)
+
+
+def test_progress_bar_and_report(tmp_path, capsys):
+    res = ds.generate_dataset(tmp_path / "p", "take", 6, synthetic_rollout_fn(), 0, 8, {}, progress=True,
+                              dataset_config=EXACT)
+    err = capsys.readouterr().err
+    assert "take positives" in err  # the tqdm bar
+    assert f"6 samples selected from {res['rollouts']} rollouts" in err
+    sizes: list = []
+    ds.add_features(tmp_path / "p", feature_fn(sizes=sizes), batch=4, progress=True)
+    assert "features" in capsys.readouterr().err and sizes == [4, 4]
+
+
+def test_sigkill_mid_run_then_resume(built, tmp_path):
+    """A real SIGKILL of a generating process (at whatever point it is), then a rerun."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path, summary = built
+    target = tmp_path / "killed"
+    code = (
+        "import sys, time; sys.path[:0] = [%r, %r]\n"
+        "import test_dataset as t\n"
+        "fn = t.synthetic_rollout_fn()\n"
+        "def slow(key, b):\n"
+        "    time.sleep(0.05)\n"
+        "    return fn(key, b)\n"
+        "t.gen(%r, fn=slow)\n"
+    ) % (str(Path(__file__).parent), str(Path(__file__).parent.parent), str(target))
+    proc = subprocess.Popen([sys.executable, "-c", code], env=dict(os.environ, JAX_PLATFORMS="cpu"))
+    try:
+        deadline = time.time() + 60
+        while not (target / "chunks" / "chunk_000003").exists() and time.time() < deadline and proc.poll() is None:
+            time.sleep(0.01)
+        time.sleep(0.03)  # land somewhere inside a later chunk's simulation or save
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+    assert (target / "chunks" / "chunk_000003").exists()
+    res = gen(target)
+    assert res["rollouts"] == summary["rollouts"]
+    a, b = ds.load_rollouts(path), ds.load_rollouts(target)
+    for k in a:
+        np.testing.assert_array_equal(a[k], b[k])
+    assert not [p for p in (target / "chunks").iterdir() if p.name.startswith(".")]
