@@ -339,6 +339,8 @@ def _read_chunk(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         meta = rio.read_json(path / "meta.json")
     except (OSError, ValueError) as e:
         raise CorruptDatasetError(f"chunk {path}: metadata missing or corrupt ({e})") from e
+    if not (path / "arrays").is_dir():
+        raise CorruptDatasetError(f"chunk {path}: orbax cannot read it (its arrays/ checkpoint is missing)")
     try:
         tree = _checkpointer().restore(str((path / "arrays").resolve()))
     except Exception as e:  # orbax/tensorstore raise many types on damaged files
@@ -801,8 +803,9 @@ def load_dataset(path: str | os.PathLike, *, features: bool = True) -> dict[str,
 def _read_features_sidecar(path: Path) -> dict[str, Any] | None:
     side = path / FEATURES_SIDECAR
     if not side.exists():
-        if (path / FEATURES).is_dir() and _chunk_indices(path / FEATURES):
-            raise CorruptDatasetError(f"{path}: feature chunks exist but {FEATURES_SIDECAR} is missing")
+        # features.json is written before any feature chunk and removed first on overwrite, so
+        # chunks without it are leftovers of an interrupted overwrite: ignored, and removed by
+        # the next add_features.
         return None
     try:
         fmeta = rio.read_json(side)
@@ -946,7 +949,7 @@ def add_features(
 
 
 def _remove_features(path: Path) -> None:
-    """Delete old features: sidecar first (so a kill leaves no claimed-but-partial state)."""
+    """Delete old features: sidecar first, so a kill leaves only ignorable orphan chunks."""
     with contextlib.suppress(FileNotFoundError):
         (path / FEATURES_SIDECAR).unlink()
     fdir = path / FEATURES
