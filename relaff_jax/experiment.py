@@ -45,6 +45,7 @@ from relaff_jax.learning import (
     SPACES,
     ForestConfig,
     augment,
+    check_forest_config,
     categories_above,
     category_pairs,
     correlation_matrix,
@@ -113,12 +114,13 @@ class ExperimentConfig:
 
 
 def preset(name: str) -> ExperimentConfig:
-    """``paper``: the full protocol. ``quick``: 8 sizes, 2 repetitions, shrinks to small data."""
+    """``paper``: the full protocol. ``quick``: every condition at 5 sizes, 2 repetitions,
+    2000 test samples, shrunk to small datasets; ~4.5k forests, minutes on 2 cores."""
     if name == "paper":
         return ExperimentConfig()
     if name == "quick":
         return ExperimentConfig(
-            sizes=(2, 4, 6, 10, 16, 25, 40, 100), reps_pca=2, reps_rhf=2, shrink_to_data=True,
+            sizes=(2, 4, 10, 25, 50), reps_pca=2, reps_rhf=2, test_size=2000, shrink_to_data=True,
         )
     raise ValueError(f"unknown preset {name!r}; expected 'quick' or 'paper'")
 
@@ -137,6 +139,7 @@ def check_config(cfg: ExperimentConfig) -> None:
         bad = set(cfg.conditions(space)) - set(FAMILIES)
         if bad or "NB" not in cfg.conditions(space):
             raise ValueError(f"conditions_{space} must include NB and be among {FAMILIES}, got {cfg.conditions(space)}")
+    check_forest_config(cfg.forest)
     if min(cfg.reps_pca, cfg.reps_rhf, cfg.test_size, cfg.source_size, cfg.corr_scenes, cfg.sizes_per_block) < 1:
         raise ValueError("reps, test_size, source_size, corr_scenes and sizes_per_block must be >= 1")
 
@@ -329,7 +332,8 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     """Source predictors, categories and the correlation heuristic for one space.
 
     Returns a flat dict of arrays: ``boot:<t>`` (A + K, M_t) 0/1 outputs on target t's pool
-    (rows: the A source predictors, then the K categories), ``target:<t>`` (M_t,) pool
+    (rows: the A source predictors, then the K categories; NaN rows for categories a space
+    does not use, so a misuse cannot pass silently), ``target:<t>`` (M_t,) pool
     indices, ``test_size:<t>``, ``corr`` (A, A), ``corr_n`` (scenes used).
     """
     from joblib import delayed
@@ -342,10 +346,14 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     src = {a: pools[a]["source"] for a in actions}
     corr_idx = {a: pools[a]["corr"] for a in actions}
     pairs = [(actions[i], actions[j]) for i, j in category_pairs(actions)]
+    # categories are only trained when this space uses them (the paper's RHF runs NB and DB1)
+    with_cats = bool({"CB1", "CBn"} & set(cfg.conditions(space)))
     calls = [delayed(_source_job)(feats, a, labels[a], src[a], actions, targets, corr_idx, space, seed, cfg.forest) for a in actions]
-    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest) for p in pairs]
-    results = _run_parallel(calls, jobs, progress, total=len(calls), desc=f"{space} source predictors + categories", unit="forest")
-    sources, cats = results[: len(actions)], results[len(actions) :]
+    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest) for p in pairs] if with_cats else []
+    desc = f"{space} source predictors" + (" + categories" if with_cats else "")
+    results = _run_parallel(calls, jobs, progress, total=len(calls), desc=desc, unit="forest")
+    sources = results[: len(actions)]
+    cats = results[len(actions) :] if with_cats else [[np.full(len(targets[t]), np.nan, np.float32) for t in actions]] * len(pairs)
     out: dict[str, np.ndarray] = {}
     for ti, t in enumerate(actions):
         rows = [sources[s][0][ti] for s in range(len(actions))] + [c[ti] for c in cats]
@@ -410,7 +418,10 @@ def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tup
             acc[cond] = acc[first[rows]]
             continue
         first[rows] = cond
-        xc = augment(X, boot[list(rows)], repeats)
+        inputs = boot[list(rows)]
+        if not np.all(np.isfinite(inputs)):
+            raise ValueError(f"condition {cond}: bootstrap inputs {rows} were not computed for this space")
+        xc = augment(X, inputs, repeats)
         x_test, y_test = xc[test_idx], y[test_idx]
         for si, n in enumerate(sizes):
             tr = train_order[:n]

@@ -263,13 +263,13 @@ def test_cli_experiment_and_report(tmp_path):
     parser = argparse.ArgumentParser()
     E.register_cli(parser.add_subparsers(dest="command"))
     sets = []
-    for k, v in dict(TINY, reps_pca=1, sizes=[2, 4, 10]).items():
+    for k, v in dict(TINY, reps_pca=1, sizes=[2, 10]).items():
         sets += ["--set", f"{k}={list(v) if isinstance(v, tuple) else v}".replace(" ", "")]
     args = parser.parse_args(["experiment", "--synthetic", "150", "--out", str(tmp_path / "res"), "--space", "both",
                               "--jobs", "1", "--seed", "1", "--no-progress"] + sets)
     assert args.func(args) == 0
     res = E.load_results(tmp_path / "res")
-    assert res["config"].sizes == (2, 4, 10) and res["pca"]["acc"].shape == (9, 50, 3, 1)
+    assert res["config"].sizes == (2, 10) and res["pca"]["acc"].shape == (9, 50, 2, 1)
     args = parser.parse_args(["report", str(tmp_path / "res"), "--out", str(tmp_path / "rep")])
     assert args.func(args) == 0
     with open(tmp_path / "rep" / "table2.csv", newline="") as f:
