@@ -15,6 +15,7 @@ import sys
 COMMAND_MODULES = (
     "relaff_jax.objects",
     "relaff_jax.scenes",
+    "relaff_jax.dataset",
 )
 
 

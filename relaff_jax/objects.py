@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from typing import Iterable
 
 GROUPS = ("toy", "base", "obstacle", "rake")
 
@@ -277,7 +276,3 @@ def _cmd_objects(args) -> int:
     print(f"{len(rows)} objects: " + ", ".join(f"{v} {k}s" for k, v in counts.items()))
     return 0
 
-
-def names(objs: Iterable[str]) -> list[str]:
-    """Validate a list of object names (raises on the first unknown one)."""
-    return [get(n).name for n in objs]

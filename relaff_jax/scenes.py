@@ -3,8 +3,9 @@ simulated in MJX until they are at rest, then labelled with their spatial relati
 
 Takes a ``World`` (``world.py``) and a PRNG key; gives ``Scenes``, a pytree of per-scene
 arrays with a leading (B,) axis. The pieces are pure functions of (world, config, key,
-arrays); ``make_scene_fn`` closes them over the static world and config and the caller
-jits it once per batch shape (``run_scenes`` does, chunk by chunk).
+arrays); ``place`` samples placements and ``make_settle_fn`` closes the settling over the static
+world and config; the caller jits them once per batch shape (``run_scenes`` does, chunk by
+chunk, through ``jitted_scene_fns``).
 
 Placement (paper IV-C, IV-D): the other object lies in the half-disc x > 0 of radius
 ``workspace_radius`` around the robot at the origin, no closer than ``min_radius``. For
@@ -26,7 +27,7 @@ import dataclasses
 import functools
 import json
 import time
-from typing import Any, Callable
+from typing import Any
 
 import chex
 import jax
@@ -272,33 +273,26 @@ def relation_of(world: wd.World, table: PairTable, cfg: SceneConfig, pair: jax.A
     return jnp.where(inside, INSIDE, jnp.where(supported, ON_TOP, BESIDE))
 
 
-def make_scene_fn(world: wd.World, cfg: SceneConfig = SceneConfig(),
-                  on_trace: Callable[[], None] | None = None):
-    """Build ``scene_fn(key, pair) -> Scenes`` (pure; the caller jits it).
+def make_settle_fn(world: wd.World, cfg: SceneConfig = SceneConfig()):
+    """Build ``settle_fn(pair, qpos0, intended) -> Scenes`` (pure; the caller jits it).
 
     Args (of the returned function):
-      key: PRNG key for the placements.
       pair: (B,) int pair indices.
-    ``on_trace`` is called each time the function is traced (to count compilations).
+      qpos0: (B, nq) placements (e.g. from ``sample_placement`` or built by hand).
+      intended: (B,) int relation the placement aimed for (kept for diagnostics).
+    Simulates ``cfg.settle_steps`` MJX steps (``lax.scan`` over time of the vmapped step),
+    holding a rake at its start pose, then labels the settled relation.
     """
     table = pair_table(world)
-    phys = world.phys
     step = wd.batched_step(world)
     d0 = mjx.make_data(world.mj_model)
     oq, od = world.obj_qpos, world.obj_dof
-    tq, td = world.toy_qpos, world.toy_dof
+    td = world.toy_dof
     masks = contact_masks(world)
 
-    def scene_fn(key: jax.Array, pair: jax.Array) -> Scenes:
-        if on_trace is not None:
-            on_trace()
-        b = pair.shape[0]
-        keys = jax.random.split(key, b)
-        toy7, obj7, intended = jax.vmap(
-            lambda k, p: sample_placement(k, p, table, cfg, phys))(keys, pair)
-        qpos0 = jnp.tile(d0.qpos, (b, 1))
-        qpos0 = qpos0.at[:, tq:tq + 7].set(toy7).at[:, oq:oq + 7].set(obj7)
+    def settle_fn(pair: jax.Array, qpos0: jax.Array, intended: jax.Array) -> Scenes:
         held = jnp.asarray(table.pairing)[pair] == 2
+        obj7 = qpos0[:, oq:oq + 7]
         models = wd.scene_models(world, pair)
         data = jax.vmap(lambda q: d0.replace(qpos=q))(qpos0)
 
@@ -318,7 +312,24 @@ def make_scene_fn(world: wd.World, cfg: SceneConfig = SceneConfig(),
         return Scenes(pair=pair, qpos0=qpos0, qpos=data.qpos, qvel=data.qvel, relation=rel,
                       intended=intended, cog_distance=cog, at_rest=speed < cfg.rest_speed)
 
-    return scene_fn
+    return settle_fn
+
+
+def place(world: wd.World, cfg: SceneConfig, key: jax.Array, pair: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Sample placements for a batch of pairs.
+
+    Args:
+      key: PRNG key; pair: (B,) pair indices.
+    Returns:
+      qpos0: (B, nq) placements; intended: (B,) relation the sampler aimed for.
+    """
+    table = pair_table(world)
+    keys = jax.random.split(key, pair.shape[0])
+    toy7, obj7, intended = jax.vmap(
+        lambda k, p: sample_placement(k, p, table, cfg, world.phys))(keys, pair)
+    qpos0 = jnp.tile(jnp.asarray(world.mj_model.qpos0, jnp.float32), (pair.shape[0], 1))
+    tq, oq = world.toy_qpos, world.obj_qpos
+    return qpos0.at[:, tq:tq + 7].set(toy7).at[:, oq:oq + 7].set(obj7), intended
 
 
 def run_scenes(n: int, seed: int = 0, batch: int = 1024, allowed: np.ndarray | None = None,
@@ -337,7 +348,7 @@ def run_scenes(n: int, seed: int = 0, batch: int = 1024, allowed: np.ndarray | N
         raise ValueError(f"batch must be >= 1, got {batch}")
     world = world or wd.build_world()
     allowed = np.arange(world.n_pairs) if allowed is None else np.asarray(allowed)
-    fn, traces = jitted_scene_fn(world, cfg)
+    place_fn, settle_fn, traces = jitted_scene_fns(world, cfg)
     traces_before = traces[0]
     root = jax.random.PRNGKey(seed)
     chunks = []
@@ -348,7 +359,8 @@ def run_scenes(n: int, seed: int = 0, batch: int = 1024, allowed: np.ndarray | N
     for c in range(-(-n // batch)):
         kp, ks = jax.random.split(jax.random.fold_in(root, c))
         pair = sample_pairs(kp, allowed, world, batch)
-        out = jax.device_get(fn(ks, pair))
+        qpos0, intended = place_fn(ks, pair)
+        out = jax.device_get(settle_fn(pair, qpos0, intended))
         chunks.append(out)
         bar.update(min(batch, n - c * batch))
     bar.close()
@@ -358,12 +370,20 @@ def run_scenes(n: int, seed: int = 0, batch: int = 1024, allowed: np.ndarray | N
 
 
 @functools.lru_cache(maxsize=8)
-def jitted_scene_fn(world: wd.World, cfg: SceneConfig = SceneConfig()):
-    """The jitted ``make_scene_fn`` (one per world and config, reused across calls) and a
-    one-element list counting its traces, i.e. its compilations."""
+def jitted_scene_fns(world: wd.World, cfg: SceneConfig = SceneConfig()):
+    """Jitted ``place`` and ``make_settle_fn`` for one world and config, reused across calls,
+    and a one-element list counting their traces, i.e. their compilations."""
     traces = [0]
-    fn = jax.jit(make_scene_fn(world, cfg, on_trace=lambda: traces.__setitem__(0, traces[0] + 1)))
-    return fn, traces
+
+    def counted(fn):
+        def wrapper(*args):
+            traces[0] += 1  # runs only while tracing
+            return fn(*args)
+        return jax.jit(wrapper)
+
+    settle = make_settle_fn(world, cfg)
+    return (counted(lambda key, pair: place(world, cfg, key, pair)),
+            counted(settle), traces)
 
 
 def summary(world: wd.World, scenes: Scenes, stats: dict) -> dict:

@@ -46,7 +46,7 @@ class PhysicsConfig:
     ls_iterations: int = 6
     solver: str = "Newton"
     table_friction: float = 0.8
-    rolling_friction: float = 0.002  # the ball's contacts (condim 6), so it comes to rest
+    rolling_friction: float = 0.005  # the ball's contacts (condim 6), so it comes to rest
     # The rake is held by the gripper: during settling it stays at this pose (x, y, z of
     # the grip point; handle along +x), above the robot, away from any toy.
     held_rake_pos: tuple[float, float, float] = (0.20, 0.0, 0.55)

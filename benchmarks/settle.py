@@ -1,0 +1,109 @@
+"""Settled scenes per second: MJX (vmapped, jitted, CPU) against native MuJoCo C on the
+same scenes, in one run, with the ratio; optionally the MJX-vs-C cross-check.
+
+    python benchmarks/settle.py [--batches 64 256 1024 4096] [--crosscheck 300]
+
+Native reference: ``mujoco.rollout.rollout`` with one MjModel per scene (its pair's model)
+on a thread pool of ``--threads`` threads (default: all cores). The held rake is not
+pinned in the native throughput run (rollout is open loop); the cost per step is the same.
+The cross-check (``--crosscheck N``) settles N mixed scenes in MJX and with
+``native.settle_native`` (mj_step, rake pinned exactly as in MJX) and reports the relation
+agreement and position differences.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import jax
+import mujoco
+import numpy as np
+from mujoco import rollout
+
+from relaff_jax import native
+from relaff_jax import scenes as sc
+from relaff_jax import world as wd
+
+
+def mjx_rate(w, cfg, batch, reps=2):
+    place, settle, _ = sc.jitted_scene_fns(w, cfg)
+    pair = sc.sample_pairs(jax.random.PRNGKey(batch), np.arange(w.n_pairs), w, batch)
+    t0 = time.perf_counter()
+    out = settle(pair, *place(jax.random.PRNGKey(0), pair))
+    jax.block_until_ready(out)
+    compile_s = time.perf_counter() - t0
+    best = np.inf
+    for r in range(reps):
+        qpos0, intended = place(jax.random.PRNGKey(r + 1), pair)
+        jax.block_until_ready(qpos0)
+        t0 = time.perf_counter()
+        jax.block_until_ready(settle(pair, qpos0, intended))
+        best = min(best, time.perf_counter() - t0)
+    return batch / best, compile_s, np.asarray(pair), np.asarray(qpos0)
+
+
+def native_rate(w, cfg, pair, qpos0, threads):
+    models = [w.mj_models[p] for p in pair]
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    datas = [mujoco.MjData(w.mj_model) for _ in range(threads)]
+    d = mujoco.MjData(w.mj_model)
+    state = np.zeros((len(pair), mujoco.mj_stateSize(w.mj_model, spec)))
+    for i, q in enumerate(qpos0):
+        d.qpos[:] = q
+        d.qvel[:] = 0
+        mujoco.mj_getState(w.mj_model, d, state[i], spec)
+    t0 = time.perf_counter()
+    rollout.rollout(models, datas, state, nstep=cfg.settle_steps)
+    return len(pair) / (time.perf_counter() - t0)
+
+
+def crosscheck(w, cfg, n, batch=64):
+    place, settle, _ = sc.jitted_scene_fns(w, cfg)
+    rel, rel_c, err = [], [], []
+    for c in range(-(-n // batch)):
+        pair = sc.sample_pairs(jax.random.PRNGKey(1000 + c), np.arange(w.n_pairs), w, batch)
+        qpos0, intended = place(jax.random.PRNGKey(2000 + c), pair)
+        out = jax.device_get(settle(pair, qpos0, intended))
+        q_c, r_c = native.settle_native(w, np.asarray(pair), np.asarray(qpos0), cfg)
+        rel.append(out.relation)
+        rel_c.append(r_c)
+        for q in (w.toy_qpos, w.obj_qpos):
+            err.append(np.linalg.norm(out.qpos[:, q:q + 3] - q_c[:, q:q + 3], axis=-1))
+    rel, rel_c = np.concatenate(rel)[:n], np.concatenate(rel_c)[:n]
+    err = np.concatenate(err)
+    print(f"\ncross-check, {n} mixed scenes: relation agreement {100 * np.mean(rel == rel_c):.1f} %")
+    for name, k in zip(sc.RELATIONS, range(3)):
+        m = rel_c == k
+        print(f"  C says {name:7s}: {m.sum():4d} scenes, MJX agrees on {100 * np.mean(rel[m] == k):.1f} %")
+    print(f"  body position |MJX - C|: median {1000 * np.median(err):.2f} mm, "
+          f"95th pct {1000 * np.percentile(err, 95):.1f} mm, within 1 cm: {100 * np.mean(err < 0.01):.1f} %")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--batches", type=int, nargs="+", default=[64, 256, 1024, 4096])
+    ap.add_argument("--threads", type=int, default=os.cpu_count())
+    ap.add_argument("--crosscheck", type=int, default=0, help="scenes for the MJX-vs-C check")
+    ap.add_argument("--iterations", type=int, default=None, help="solver iterations override")
+    args = ap.parse_args()
+    phys = wd.PhysicsConfig() if args.iterations is None else wd.PhysicsConfig(iterations=args.iterations)
+    w = wd.build_world(phys)
+    cfg = sc.SceneConfig()
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}, "
+          f"mujoco {mujoco.__version__}; {cfg.settle_steps} steps of {phys.timestep * 1000:g} ms, "
+          f"solver {phys.solver} x{phys.iterations}")
+    print(f"{'batch':>6s} {'MJX scenes/s':>13s} {'MJX steps/s':>12s} {'compile s':>10s} "
+          f"{'C scenes/s':>11s} {'MJX/C':>6s}")
+    for b in args.batches:
+        rate, compile_s, pair, qpos0 = mjx_rate(w, cfg, b)
+        c_rate = native_rate(w, cfg, pair, qpos0, args.threads)
+        print(f"{b:6d} {rate:13.1f} {rate * cfg.settle_steps:12.0f} {compile_s:10.1f} "
+              f"{c_rate:11.1f} {rate / c_rate:6.2f}", flush=True)
+    if args.crosscheck:
+        crosscheck(w, cfg, args.crosscheck)
+
+
+if __name__ == "__main__":
+    main()
