@@ -125,7 +125,8 @@ def test_sampling_distribution_and_determinism(scene_world):
 def test_run_scenes_one_compile_and_bitwise_reproducible(scene_world):
     s1, st1 = sc.run_scenes(12, seed=5, batch=B, world=scene_world, progress=False)
     s2, st2 = sc.run_scenes(12, seed=5, batch=B, world=scene_world, progress=False)
-    assert st1["compilations"] <= 1 and st2["compilations"] == 0
+    # one placement program and one settle program per batch shape, whatever the pairs
+    assert st1["compilations"] <= 2 and st2["compilations"] == 0
     chex.assert_trees_all_equal(s1, s2)
     assert s1.pair.shape == (12,)
     assert len({scene_world.pairs[p][2] for p in s1.pair}) == 3  # a mixed batch
