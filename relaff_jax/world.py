@@ -112,7 +112,7 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
         raise ValueError(f"invalid pair ({toy!r}, {other!r}): one toy plus one object of another group")
     arm_xml = ""
     if arm:
-        arm_xml = resources.files("relaff_jax.scenes").joinpath("arm.xml").read_text()
+        arm_xml = resources.files("relaff_jax.assets").joinpath("arm.xml").read_text()
     return f"""
 <mujoco model="relaff_{toy}_{other}">
   <option timestep="{phys.timestep}" iterations="{phys.iterations}"

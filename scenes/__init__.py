@@ -1,1 +1,1 @@
-"""MJCF files of the relaff_jax world (table, arm); shipped as ``relaff_jax.scenes``."""
+"""MJCF files of the relaff_jax world (the arm); shipped as ``relaff_jax.assets``."""
