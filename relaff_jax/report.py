@@ -118,10 +118,23 @@ def _plt():
 def _grid(plt, n: int):
     cols = 3
     rows = int(np.ceil(n / cols))
-    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 3 * rows), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(rows, cols, figsize=(4 * cols, 3 * rows), squeeze=False)
     for ax in axes.flat[n:]:
         ax.set_visible(False)
+    for ax in axes.flat[:n]:
+        ax.set_xlabel("training samples n")
     return fig, axes.flat
+
+
+def _logx(ax, sizes) -> None:
+    """Log-scaled n axis with plain tick labels at round sizes."""
+    from matplotlib.ticker import FixedLocator, NullLocator, ScalarFormatter
+
+    ax.set_xscale("log")
+    ticks = [t for t in (2, 4, 10, 25, 50, 100, 250, 1000) if min(sizes) <= t <= max(sizes)]
+    ax.xaxis.set_major_locator(FixedLocator(ticks))
+    ax.xaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_minor_locator(NullLocator())
 
 
 def _curve(ax, sizes, mean, sem, label, **kw):
@@ -151,7 +164,8 @@ def figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], out: Pa
     fig, ax = plt.subplots(figsize=(7, 4.5))
     for ti, t in enumerate(a["actions"]):
         _curve(ax, a["sizes"], a["mean"][ti, 0], a["sem"][ti, 0], t)
-    ax.set(xscale="log", xlabel="training samples n", ylabel="accuracy", title=f"{s0.upper()} - non-bootstrapped (NB)")
+    ax.set(xlabel="training samples n", ylabel="accuracy", title=f"{s0.upper()} - non-bootstrapped (NB)")
+    _logx(ax, a["sizes"])
     ax.legend(fontsize=7, ncol=3)
     save(fig, "fig06_nb_learning.png")
 
@@ -162,8 +176,6 @@ def figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], out: Pa
             _curve(axes[ti], an[s]["sizes"], an[s]["mean"][ti, 0], an[s]["sem"][ti, 0], f"{s.upper()} NB")
         axes[ti].set(title=t, ylabel="accuracy")
         axes[ti].legend(fontsize=7)
-    for ax in list(axes)[-3:]:
-        ax.set_xlabel("training samples n")
     save(fig, "fig07_nb_spaces.png")
 
     # Fig. 8 and 9: best DB1 per affordance (accuracy and bootstrap factor)
@@ -187,7 +199,8 @@ def figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], out: Pa
                 ax.plot(x["sizes"], x["bf"][ti, b], label=f"{t} <- ({x['conditions'][b].split(':')[1]})")
             ax.axhline(1.0, color="k", lw=0.8)
             ax.axvspan(*cfg.bf_sizes, color="0.9", zorder=0)
-            ax.set(xscale="log", xlabel="training samples n", ylabel="bootstrap factor", title=f"{s.upper()} - DB1 best")
+            ax.set(xlabel="training samples n", ylabel="bootstrap factor", title=f"{s.upper()} - DB1 best")
+            _logx(ax, x["sizes"])
             ax.legend(fontsize=6, ncol=2)
         save(fig, "fig09_db1_best_bf.png")
 
@@ -229,7 +242,8 @@ def figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], out: Pa
             ax.plot(a["sizes"], c, label=f"best category, T = {t:g} ({n} built)")
         ax.plot(a["sizes"], th["overall_curve"], "k--", label="overall average (all categories)")
         ax.axhline(1.0, color="k", lw=0.8)
-        ax.set(xscale="log", xlabel="training samples n", ylabel="bootstrap factor", title=f"{s0.upper()} - correlation thresholds")
+        ax.set(xlabel="training samples n", ylabel="bootstrap factor", title=f"{s0.upper()} - correlation thresholds")
+        _logx(ax, a["sizes"])
         ax.legend(fontsize=7)
         save(fig, "fig12_thresholds.png")
     return written
