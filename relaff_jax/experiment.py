@@ -747,6 +747,8 @@ def _parse_set(items: Iterable[str]) -> dict[str, Any]:
 def _cmd_experiment(args: argparse.Namespace) -> int:
     cfg = override(preset(args.preset), _parse_set(args.set or []))
     spaces = list(SPACES) if args.space == "both" else [args.space]
+    if args.synthetic and args.data:
+        raise ValueError("give either --data or --synthetic, not both")
     if args.synthetic:
         datasets, desc = synthetic_datasets(args.synthetic, seed=args.seed), [f"synthetic:{args.synthetic}"]
     elif args.data:
