@@ -242,14 +242,17 @@ def check_datasets(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[s
     return [a for a in ACTIONS if a in datasets]
 
 
-def fingerprint(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[str]) -> dict[str, str]:
-    """sha256 per action of labels and the used features: a resumed sweep must see the same data."""
-    out = {}
-    for action in sorted(datasets):
-        h = hashlib.sha256()
-        for key in ("label", "pca") + (("rhf",) if "rhf" in spaces else ()):
-            h.update(np.ascontiguousarray(np.asarray(datasets[action][key], dtype=np.float32)).tobytes())
-        out[action] = h.hexdigest()
+def fingerprint(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[str]) -> dict[str, dict[str, str]]:
+    """``{space: {action: sha256}}`` of the labels and the space's features: a resumed sweep
+    must see the same data."""
+    out: dict[str, dict[str, str]] = {}
+    for space in spaces:
+        out[space] = {}
+        for action in sorted(datasets):
+            h = hashlib.sha256()
+            for key in ("label", "pca") + (("rhf",) if space == "rhf" else ()):
+                h.update(np.ascontiguousarray(np.asarray(datasets[action][key], dtype=np.float32)).tobytes())
+            out[space][action] = h.hexdigest()
     return out
 
 
@@ -482,11 +485,17 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
     }
     meta_path = out / "experiment.json"
     if meta_path.exists():
+        # same protocol, seed, actions and data; a space may be added to a finished one
         old = rio.read_json(meta_path)
         now = json.loads(json.dumps(meta, default=rio._json_default))
-        diff = [k for k in meta if old.get(k) != now[k]]
+        diff = [k for k in ("format", "config", "seed", "actions") if old.get(k) != now[k]]
+        diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
         if diff:
             raise ValueError(f"{out} holds an experiment with different {diff}; use a new --out to start another")
+        if set(spaces) - set(old["spaces"]):
+            old["spaces"] = [s for s in SPACES if s in set(old["spaces"]) | set(spaces)]
+            old["fingerprint"] = dict(old["fingerprint"], **now["fingerprint"])
+            rio.atomic_write_json(meta_path, old)
     else:
         rio.atomic_write_json(meta_path, dict(meta, data=list(map(str, data_desc)), started=time.strftime("%Y-%m-%d %H:%M:%S")))
     paths = {}
@@ -566,6 +575,18 @@ def _run_space(datasets, sdir: Path, cfg: ExperimentConfig, space: str, actions:
         new_fits=np.asarray(sum(weights)),
     )
     return res_path
+
+
+def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:
+    """Whether ``out`` holds finished results for every one of ``spaces``."""
+    out = Path(out)
+    if not (out / "experiment.json").exists():
+        return False
+    try:
+        done = rio.read_json(out / "experiment.json")["spaces"]
+    except (ValueError, KeyError):
+        return False
+    return all(s in done and (out / s / "results.npz").exists() for s in spaces)
 
 
 # ------------------------------------------------------------------------------ analysis

@@ -226,6 +226,14 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
     assert not np.array_equal(other["acc"], acc, equal_nan=True)
     with pytest.raises(ValueError, match=r"different \['config'\]"):
         E.run_experiment(data3, tmp_path / "b", override(cfg, {"reps_pca": 3}), ["pca"], seed=2, jobs=1, progress=False)
+    changed = {a: dict(data3[a]) for a in ACTS3}
+    changed["take"]["label"] = ~changed["take"]["label"]
+    with pytest.raises(ValueError, match=r"different \['pca data'\]"):
+        E.run_experiment(changed, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
+    # a finished PCA experiment can be extended by the RHF space
+    assert E.is_complete(tmp_path / "b", ["pca"]) and not E.is_complete(tmp_path / "b", ["pca", "rhf"])
+    E.run_experiment(data3, tmp_path / "b", cfg, ["rhf"], seed=2, jobs=1, progress=False)
+    assert E.is_complete(tmp_path / "b") and E.load_results(tmp_path / "b")["meta"]["spaces"] == ["pca", "rhf"]
 
 
 def test_two_processes_give_the_same_bits_as_one(data3, tmp_path):
