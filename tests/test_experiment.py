@@ -1,7 +1,6 @@
 """Protocol, bootstrap factors, Table II, resumable sweeps and the CLI (relaff_jax.experiment)."""
 import argparse
 import csv
-import shutil
 
 import numpy as np
 import pytest
