@@ -16,6 +16,7 @@ COMMAND_MODULES = (
     "relaff_jax.objects",
     "relaff_jax.scenes",
     "relaff_jax.dataset",
+    "relaff_jax.experiment",
 )
 
 
