@@ -8,6 +8,7 @@ others, and so that ``relaff --help`` stays fast.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 
@@ -36,7 +37,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _quiet_mjx_import() -> None:
+    """mujoco.mjx prints "Failed to import warp" to stdout when the optional GPU backend is
+    absent (always, on this CPU-only project); send it to stderr so --json output stays JSON."""
+    with contextlib.redirect_stdout(sys.stderr):
+        importlib.import_module("mujoco.mjx")
+
+
 def main(argv: list[str] | None = None) -> int:
+    _quiet_mjx_import()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
