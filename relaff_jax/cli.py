@@ -17,6 +17,7 @@ COMMAND_MODULES = (
     "relaff_jax.objects",
     "relaff_jax.scenes",
     "relaff_jax.dataset",
+    "relaff_jax.features",
     "relaff_jax.experiment",
 )
 

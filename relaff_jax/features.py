@@ -1,0 +1,184 @@
+"""From stored scenes to the paper's state spaces: the glue between datasets and perception.
+
+Takes a dataset's per-sample ``pair`` (int) and ``qpos_settled`` ((nq,) settled object state
+in the arm-less world layout) and gives ``pca`` (18,), ``rhf`` (300,), ``unseen`` (2,) and the
+overflow flag per sample: the scene's geoms are placed by ``mjx.kinematics`` on the pair's
+model (batched model fields, as in ``world.py``), then ``perception.features`` sees them.
+The depth-noise key of a sample is ``fold_in(PRNGKey(seed), rollout_id)``, so features do
+not depend on the batch size or on resuming.
+
+``relaff features DIR`` attaches them to a dataset (resumable, progress bar);
+``relaff show DIR --index I --out scene.png`` draws what the robot saw.
+"""
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from mujoco import mjx
+
+from . import config as rconfig
+from . import perception as pc
+from . import world as wd
+
+
+def scene_geoms(world: wd.World, pair: jax.Array, qpos: jax.Array):
+    """Geom sizes and poses of a batch of settled scenes.
+
+    Args:
+      pair: (B,) pair indices; qpos: (B, nq) settled states (arm-less layout).
+    Returns:
+      size (B, G, 3), xpos (B, G, 3), xmat (B, G, 3, 3), robot frame.
+    """
+    models = wd.scene_models(world, pair)
+    d0 = mjx.make_data(world.mj_model)
+
+    def one(m, q):
+        d = mjx.kinematics(m, d0.replace(qpos=q))
+        return m.geom_size, d.geom_xpos, d.geom_xmat
+
+    return jax.vmap(one, in_axes=(world.model_axes, 0))(models, qpos)
+
+
+@functools.lru_cache(maxsize=4)
+def _jitted_geoms(world: wd.World):
+    return jax.jit(lambda pair, qpos: scene_geoms(world, pair, qpos))
+
+
+def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionConfig(), seed: int = 0):
+    """``compute(samples) -> dict of numpy arrays`` for ``dataset.add_features``.
+
+    ``samples`` needs ``pair`` (B,), ``qpos_settled`` (B, nq) and ``rollout_id`` (B,).
+    """
+    feats = pc.make_batched_features(world.mj_model.geom_type, world.geom_seg, cfg)
+    geoms = _jitted_geoms(world)
+    root = jax.random.PRNGKey(seed)
+
+    def compute(samples: dict) -> dict:
+        missing = {"pair", "qpos_settled", "rollout_id"} - set(samples)
+        if missing:
+            raise ValueError(f"samples lack {sorted(missing)}: not a scene dataset of this version")
+        size, xpos, xmat = geoms(jnp.asarray(samples["pair"], jnp.int32),
+                                 jnp.asarray(samples["qpos_settled"], jnp.float32))
+        ids = np.asarray(samples["rollout_id"]).astype(np.uint32)
+        keys = jax.vmap(lambda i: jax.random.fold_in(root, i))(jnp.asarray(ids))
+        out = jax.device_get(feats(size, xpos, xmat, keys))
+        return {"pca": out["pca"], "rhf": out["rhf"], "unseen": out["unseen"],
+                "n_points": out["n_points"], "overflow": out["overflow"]}
+
+    return compute
+
+
+def add_features(path, batch: int = 32, seed: int = 0, overrides: dict | None = None,
+                 progress: bool = True, overwrite: bool = False) -> dict:
+    """Attach PCA and RHF features to the dataset at ``path`` (resumable)."""
+    from . import dataset
+
+    cfg = rconfig.override(pc.PerceptionConfig(), overrides or {})
+    world = wd.build_world()
+    fn = make_feature_fn(world, cfg, seed)
+    return dataset.add_features(path, fn, batch, progress,
+                                {"perception": rconfig.to_dict(cfg), "seed": seed}, overwrite=overwrite)
+
+
+def register_cli(sub) -> None:
+    p = sub.add_parser("features", help="add PCA and RHF features to a dataset (resumable)")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--batch", type=int, default=32)
+    p.add_argument("--seed", type=int, default=0, help="depth-noise seed")
+    p.add_argument("--overwrite", action="store_true", help="recompute features of another config")
+    p.set_defaults(func=_cmd_features)
+    _register_show(sub)
+
+
+def _cmd_features(args) -> int:
+    out = add_features(args.dir, args.batch, args.seed, overwrite=args.overwrite)
+    print(f"{args.dir}: features for {out['n']} samples: "
+          + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))
+    return 0
+
+
+def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, key=None,
+               cfg: pc.PerceptionConfig = pc.PerceptionConfig(), title: str = "") -> Path:
+    """Draw what the robot saw: the depth image with the segmentation, the two objects'
+    voxel clouds from above, and their PCA frames. Writes ``out`` (PNG) atomically."""
+    import io as _io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_write_bytes
+
+    key = jax.random.PRNGKey(0) if key is None else key
+    size, xpos, xmat = jax.device_get(_jitted_geoms(world)(
+        jnp.asarray([pair], jnp.int32), jnp.asarray(qpos, jnp.float32)[None]))
+    scene = pc.make_scene(world.mj_model.geom_type, world.geom_seg, size[0], xpos[0], xmat[0])
+    img = jax.device_get(jax.jit(lambda s: pc.render(s, cfg))(scene))
+    cloud = jax.device_get(jax.jit(lambda s, k: pc.point_cloud(s, k, cfg))(scene, key))["voxels"]
+    h, w = img["depth"].shape
+    seg = img["seg"].reshape(h, w)
+
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
+    ax = axes[0]
+    depth = np.where(img["depth"] > 0, img["depth"], np.nan)
+    ax.imshow(depth, cmap="gray_r")
+    overlay = np.zeros((h, w, 4))
+    overlay[seg == pc.SEG_TOY] = (1.0, 0.2, 0.1, 0.7)
+    overlay[seg == pc.SEG_OTHER] = (0.1, 0.4, 1.0, 0.7)
+    ax.imshow(overlay)
+    ax.set_title(f"depth image {w}x{h}, segmented (toy red, other blue)")
+    ax.axis("off")
+
+    ax = axes[1]
+    toy, other = world.pairs[pair][:2]
+    for o, (name, colour) in enumerate(((toy, "tab:red"), (other, "tab:blue"))):
+        m = cloud["mask"][o]
+        p = cloud["points"][o][m]
+        if len(p) == 0:
+            continue
+        ax.scatter(p[:, 0], p[:, 1], s=2, c=colour, label=f"{name} ({len(p)} voxels)")
+        mu, frame, ev = jax.device_get(pc.pca_frame(jnp.asarray(cloud["points"][o]), jnp.asarray(m)))
+        for k, c in zip(range(3), ("k", "g", "m")):
+            v = frame[:, k] * 3 * np.sqrt(max(ev[k], 1e-8))
+            ax.arrow(mu[0], mu[1], v[0], v[1], color=c, width=0.002, length_includes_head=True)
+    ax.scatter([0], [0], marker="^", c="k", s=60, label="robot")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title("voxel clouds from above, PCA axes (x black, y green, z magenta)")
+    fig.suptitle(title or f"{toy} + {other}")
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+    plt.close(fig)
+    atomic_write_bytes(out, buf.getvalue())
+    return Path(out)
+
+
+def _register_show(sub) -> None:
+    p = sub.add_parser("show", help="draw what the robot saw in one sample of a dataset")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--index", type=int, default=0)
+    p.add_argument("--out", type=Path, default=Path("scene.png"))
+    p.set_defaults(func=_cmd_show)
+
+
+def _cmd_show(args) -> int:
+    from . import dataset
+
+    ds = dataset.load_dataset(args.dir, features=False)
+    n = len(ds["label"])
+    if not 0 <= args.index < n:
+        raise ValueError(f"--index {args.index} out of range: the dataset has {n} samples")
+    i = args.index
+    title = (f"{ds['action']} sample {i}: {ds['toy'][i]} + {ds['other'][i]}, {ds['relation'][i]}, "
+             f"label {bool(ds['label'][i])}")
+    out = show_scene(wd.build_world(), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
+                     jax.random.PRNGKey(int(ds["rollout_id"][i])), title=title)
+    print(f"wrote {out}")
+    return 0

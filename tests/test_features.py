@@ -1,0 +1,85 @@
+"""The dataset -> perception glue: geoms placed by mjx.kinematics on batched models,
+`relaff features` and `relaff show` on a small dataset of settled scenes."""
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+from relaff_jax import cli, dataset, features, load_dataset
+from relaff_jax import scenes as sc
+
+B = 8
+
+
+def test_scene_geoms_match_mujoco_c(scene_world, settle):
+    w = scene_world
+    pair = sc.sample_pairs(jax.random.PRNGKey(7), np.arange(w.n_pairs), w, B)
+    qpos0, intended = sc.place(w, sc.SceneConfig(), jax.random.PRNGKey(8), pair)
+    out = jax.device_get(settle(pair, qpos0, intended))
+    size, xpos, xmat = jax.device_get(features.scene_geoms(w, jnp.asarray(pair), jnp.asarray(out.qpos)))
+    for i, p in enumerate(np.asarray(pair)):
+        m = w.mj_models[int(p)]
+        d = mujoco.MjData(m)
+        d.qpos[:] = out.qpos[i]
+        mujoco.mj_kinematics(m, d)
+        np.testing.assert_allclose(size[i], m.geom_size, atol=1e-7)
+        np.testing.assert_allclose(xpos[i], d.geom_xpos, atol=1e-5)
+        np.testing.assert_allclose(xmat[i].reshape(-1, 9), d.geom_xmat, atol=1e-5)
+
+
+def scene_rollout_fn(w, settle):
+    """Test fixture: rollouts whose label is 'the toy is on top of / inside the base'."""
+    allowed = np.array([i for i, p in enumerate(w.pairs) if p[2] == "toy+base"])
+
+    def rollout(key, batch):
+        kp, ks = jax.random.split(key)
+        pair = sc.sample_pairs(kp, allowed, w, batch)
+        out = jax.device_get(settle(pair, *sc.place(w, sc.SceneConfig(), ks, pair)))
+        bits = np.asarray(jax.random.randint(ks, (batch,), 0, 2**31 - 1))
+        return {"label": out.relation != sc.BESIDE, "relation": out.relation,
+                "cog_distance": out.cog_distance, "pair": out.pair,
+                "toy": np.array([w.pairs[p][0] for p in out.pair]),
+                "other": np.array([w.pairs[p][1] for p in out.pair]),
+                "qpos_settled": out.qpos, "rollout_id": bits.astype(np.int64)}
+
+    return rollout
+
+
+@pytest.fixture(scope="module")
+def small_dataset(tmp_path_factory, scene_world, settle):
+    path = tmp_path_factory.mktemp("ds") / "lift"
+    dataset.generate_dataset(path, "lift", 8, scene_rollout_fn(scene_world, settle), seed=1,
+                             batch=B, progress=False,
+                             dataset_config=dataset.DatasetConfig(borrow_fraction=1.0))
+    return path
+
+
+def test_features_command_and_show(small_dataset, tmp_path, capsys):
+    assert cli.main(["features", str(small_dataset), "--batch", "4"]) == 0
+    ds = load_dataset(small_dataset)
+    n = len(ds["label"])
+    assert ds["pca"].shape == (n, 18) and ds["rhf"].shape == (n, 300) and ds["unseen"].shape == (n, 2)
+    assert np.isfinite(ds["pca"]).all() and np.isfinite(ds["rhf"]).all()
+    seen = ~ds["unseen"].any(1)
+    assert seen.any()
+    np.testing.assert_allclose(ds["rhf"][seen].reshape(-1, 6, 50).sum(-1), 1.0, atol=1e-4)
+    # the toy's PCA centroid is where the settled toy is (within the object size)
+    w = features.wd.build_world()
+    toy_xy = ds["qpos_settled"][:, w.toy_qpos:w.toy_qpos + 2]
+    ok = ~ds["unseen"][:, 0]
+    assert np.all(np.linalg.norm(ds["pca"][ok, :2] - toy_xy[ok], axis=1) < 0.1)
+    # a second run finds the features complete and computes nothing
+    assert cli.main(["features", str(small_dataset), "--batch", "4"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "scene.png"
+    assert cli.main(["show", str(small_dataset), "--index", "1", "--out", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
+    assert cli.main(["show", str(small_dataset), "--index", "99", "--out", str(out)]) == 2
+    assert "out of range" in capsys.readouterr().err
+
+
+def test_missing_fields_is_a_clear_error(scene_world):
+    fn = features.make_feature_fn(scene_world)
+    with pytest.raises(ValueError, match="lack.*qpos_settled"):
+        fn({"pair": np.zeros(2, np.int32), "rollout_id": np.zeros(2)})
