@@ -25,8 +25,10 @@ Stages, each a pure single-scene function (vmap at the caller, the caller owns j
 5. ``rhf_histograms``: normals from the ray-hit geometry averaged per voxel; six histograms,
                      computed tile by tile so memory does not grow with the point count.
 
-Exact definitions (camera pose, noise formulas, voxel grid origin, angle convention, sign rule,
-RHF bins) are in docs/perception.md.
+``features`` chains them for one scene; ``make_batched_features`` builds the jitted batch
+version once; ``render_scene_png`` draws what the robot saw. Exact definitions (camera pose,
+noise formulas, voxel grid origin, angle convention, sign rule, RHF bins) are in
+docs/perception.md.
 """
 from __future__ import annotations
 
@@ -132,17 +134,23 @@ class RHFConfig:
 
     Features in order: dx, dy, dz (of b - a, metres, robot frame), |b - a| (m),
     angle(n_a, n_b), angle(n_a, b - a) (radians). Values outside a range go to its end bin.
+    Ranges are shifted off round numbers so that frequent exact values never sit on a bin
+    edge, where float rounding would pick the bin: the signed ranges by 1/3 bin (object
+    sizes are whole millimetres, so noise-free top faces give dz in whole mm, >= 1/3 mm from
+    an edge), the angle ranges by 1/6 bin (normals are exact: 0, 90 and, at voxels on box
+    edges, 45 deg are frequent; 0, 30, 45, 60, 90 deg are all >= 1/6 bin from an edge; on
+    [0, pi] 90 deg would be an edge). 180 deg clips into the last bin.
     ``chunk``: tile edge of the pairwise work (``chunk`` x ``chunk`` pairs at a time).
     """
 
     bins: int = 50
     ranges: tuple[tuple[float, float], ...] = (
-        (-0.5, 0.5),
-        (-0.5, 0.5),
-        (-0.25, 0.25),
+        (-0.5 - 0.02 / 3, 0.5 - 0.02 / 3),
+        (-0.5 - 0.02 / 3, 0.5 - 0.02 / 3),
+        (-0.25 - 0.01 / 3, 0.25 - 0.01 / 3),
         (0.0, 0.75),
-        (0.0, float(np.pi)),
-        (0.0, float(np.pi)),
+        (-float(np.pi) / 300, float(np.pi) * 299 / 300),
+        (-float(np.pi) / 300, float(np.pi) * 299 / 300),
     )
     chunk: int = 256
 
@@ -201,8 +209,6 @@ def validate_config(cfg: PerceptionConfig) -> PerceptionConfig:
         raise ValueError(f"cull.tile ({t}) must divide the image size {cam.width}x{cam.height}")
     if cfg.cull.max_tiles <= 0:
         raise ValueError(f"cull.max_tiles must be positive, got {cfg.cull.max_tiles}")
-    if any(abs(lo) > np.pi + 1e-6 or abs(hi) > np.pi + 1e-6 for lo, hi in r.ranges[4:]):
-        raise ValueError(f"angle ranges must lie in [0, pi], got {r.ranges[4:]}")
     if cfg.min_points < 3:
         raise ValueError(f"min_points must be >= 3 for a PCA frame, got {cfg.min_points}")
     return cfg
@@ -994,3 +1000,104 @@ def make_batched_features(geom_type, geom_seg, cfg: PerceptionConfig = Perceptio
 
     f.jitted = batched
     return f
+
+
+# ----------------------------------------------------------------------------- picture
+
+
+@functools.lru_cache(maxsize=8)
+def _scene_view_fn(geom_type: tuple, geom_seg: tuple, cfg: PerceptionConfig):
+    """Jitted (cached per layout and config) view of one scene for ``scene_view``."""
+
+    def view(size, xpos, xmat, key):
+        scene = SceneGeoms(geom_type, geom_seg, size, xpos, xmat)
+        k_img, k_feat = jax.random.split(key)
+        full = render(scene, cfg)
+        if cfg.noise.model != "none":
+            full = add_depth_noise(full, k_img, cfg)
+        pc = point_cloud(scene, k_feat, cfg)
+        frames = [pca_frame(pc["voxels"]["points"][o], pc["voxels"]["mask"][o]) for o in range(2)]
+        return dict(depth=full["depth"], seg=full["seg"].reshape(full["depth"].shape),
+                    voxels=pc["voxels"], frames=frames, feats=features_from_voxels(pc["voxels"], cfg))
+
+    return jax.jit(view)
+
+
+def scene_view(scene: SceneGeoms, key, cfg: PerceptionConfig = PerceptionConfig()) -> dict:
+    """Everything a picture of one (unbatched) scene needs, as numpy: depth (H, W) (noisy,
+    0 = no return), seg (H, W), voxels (``voxel_downsample`` result), frames (per object:
+    centroid, frame, eigenvalues) and feats (``features`` result for ``key``'s second half)."""
+    validate_config(cfg)
+    fn = _scene_view_fn(scene.geom_type, scene.geom_seg, cfg)
+    return jax.tree.map(np.asarray, fn(scene.size, scene.xpos, scene.xmat, key))
+
+
+def render_scene_png(scene: SceneGeoms, key, out_path, cfg: PerceptionConfig = PerceptionConfig(),
+                     title: str | None = None) -> dict:
+    """Draw what the robot saw: the depth image, the segmentation and the two objects' voxel
+    clouds with their PCA frames (axes 2 sqrt(eigenvalue) long, at least 4 cm); writes a PNG
+    atomically. Jits one view function per (layout, config), cached.
+
+    scene: one unbatched ``SceneGeoms``. Returns the ``scene_view`` dict."""
+    import io as _io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+
+    from .io import atomic_write_bytes
+
+    v = scene_view(scene, key, cfg)
+    fig = plt.figure(figsize=(15, 4.8))
+    ax0 = fig.add_subplot(1, 3, 1)
+    depth = np.ma.masked_where(v["depth"] <= 0, v["depth"])
+    im = ax0.imshow(depth, cmap="viridis")
+    fig.colorbar(im, ax=ax0, fraction=0.035, label="depth z (m)")
+    ax0.set_title("depth image (noisy)")
+    ax1 = fig.add_subplot(1, 3, 2)
+    cmap = ListedColormap(["black", "0.75", "tab:orange", "tab:purple"])
+    ax1.imshow(v["seg"] + 1, cmap=cmap, vmin=0, vmax=3, interpolation="nearest")
+    ax1.set_title("segments: table grey, toy orange, other purple")
+    for a in (ax0, ax1):
+        a.set_xticks([])
+        a.set_yticks([])
+    ax2 = fig.add_subplot(1, 3, 3, projection="3d")
+    feats = v["feats"]
+    for o, (name, colour) in enumerate((("toy", "tab:orange"), ("other", "tab:purple"))):
+        n = int(min(v["voxels"]["count"][o], cfg.voxel.max_voxels))
+        p = v["voxels"]["points"][o][:n]
+        ax2.scatter(p[:, 0], p[:, 1], p[:, 2], s=2, c=colour, label=f"{name}: {n} voxels")
+        if feats["unseen"][o]:
+            continue
+        mu, frame, ev = v["frames"][o]
+        for k, c in enumerate(("r", "g", "b")):
+            vec = frame[:, k] * max(2 * np.sqrt(max(ev[k], 0.0)), 0.04)
+            ax2.quiver(*mu, *vec, color=c, linewidth=2)
+    ax2.scatter([0], [0], [0], marker="^", c="k", s=40, label="robot base")
+    ax2.set_xlabel("x (m)")
+    ax2.set_ylabel("y (m)")
+    ax2.set_zlabel("z (m)")
+    ax2.legend(loc="upper left", fontsize=8)
+    pca = feats["pca"]
+    ax2.set_title("voxel clouds, PCA frames (x red, y green, z blue)\n"
+                  f"toy yaw {np.rad2deg(pca[5]):.0f} deg, other yaw {np.rad2deg(pca[14]):.0f} deg"
+                  + ("  [UNSEEN: " + ", ".join(n for n, u in zip(("toy", "other"), feats["unseen"]) if u) + "]"
+                     if feats["unseen"].any() else ""), fontsize=9)
+    # equal aspect around the objects
+    pts = np.concatenate([v["voxels"]["points"][o][: int(min(v["voxels"]["count"][o], cfg.voxel.max_voxels))]
+                          for o in range(2)] + [np.zeros((1, 3))])
+    centre, half = pts[1:].mean(0) if len(pts) > 1 else np.zeros(3), 0.3
+    ax2.set_xlim(centre[0] - half, centre[0] + half)
+    ax2.set_ylim(centre[1] - half, centre[1] + half)
+    ax2.set_zlim(0, 2 * half)
+    ax2.set_box_aspect((1, 1, 1))
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    atomic_write_bytes(out_path, buf.getvalue())
+    return v

@@ -511,25 +511,49 @@ def test_rhf_matches_numpy_double_loop(na_pts, nb_pts, chunk):
 
 
 def test_rhf_hand_worked_pair():
-    """One pair: a at the origin with n_a = +z; b at (0.11, 0.013, 0.072) with n_b 60 deg from +z.
+    """One pair: a at the origin with n_a = +z; b at (0.11, 0.013, 0.065) with n_b 60 deg from +z.
 
-    dx = 0.11 in [-0.5, 0.5]: 0.61 * 50 = 30.5 -> bin 30; dy = 0.013: 25.65 -> 25;
-    dz = 0.072 in [-0.25, 0.25]: 32.2 -> 32; |d| = 0.13211 in [0, 0.75]: 8.81 -> 8;
-    angle(n_a, n_b) = 60 deg: 16.67 -> 16; angle(n_a, d) = acos(0.072 / 0.13211) = 56.98 deg:
-    15.83 -> 15."""
+    dx = 0.11 in [-0.5 - 1/150, 0.5 - 1/150]: (0.11 + 0.506667) * 50 = 30.83 -> bin 30;
+    dy = 0.013: 25.98 -> 25; dz = 0.065 in [-0.25 - 1/300, 0.25 - 1/300]: 31.83 -> 31;
+    |d| = 0.128429 in [0, 0.75]: 8.56 -> 8;
+    angles in [-pi/300, 299 pi/300]: angle(n_a, n_b) = 60 deg: (1/3 + 1/300) * 50 = 16.83 -> 16;
+    angle(n_a, d) = acos(0.065 / 0.128429) = 59.60 deg: (0.33108 + 1/300) * 50 = 16.72 -> 16."""
     rcfg = P.RHFConfig(chunk=8)
     pa = np.zeros((8, 3), np.float32)
     na = np.zeros((8, 3), np.float32)
     na[0] = [0, 0, 1]
     pb = np.zeros((8, 3), np.float32)
-    pb[0] = [0.11, 0.013, 0.072]
+    pb[0] = [0.11, 0.013, 0.065]
     nb = np.zeros((8, 3), np.float32)
     nb[0] = [np.sin(np.pi / 3), 0, np.cos(np.pi / 3)]
     h = np.asarray(P.rhf_histograms(pa, na, 1, pb, nb, 1, rcfg)).reshape(6, 50)
-    assert [int(np.argmax(row)) for row in h] == [30, 25, 32, 8, 16, 15]
+    assert [int(np.argmax(row)) for row in h] == [30, 25, 31, 8, 16, 16]
     np.testing.assert_array_equal(h.sum(1), 1.0)
     empty = P.rhf_histograms(pa, na, 0, pb, nb, 1, rcfg)
     np.testing.assert_array_equal(np.asarray(empty), 0.0)
+
+
+def test_rhf_exact_common_angles_are_off_bin_edges():
+    """Top face (+z) against side faces (+x, -y), another top face and a box-edge voxel's mean
+    normal (45 deg): 90, 90, 0, 45 deg exactly, each 1/6 bin or more from an edge."""
+    rcfg = P.RHFConfig(chunk=8)
+    pa = np.zeros((8, 3), np.float32)
+    na = np.tile(np.float32([0, 0, 1]), (8, 1))
+    pb = np.zeros((8, 3), np.float32)
+    pb[:4] = [[0.2, 0.03, 0.0], [0.1, -0.2, 0.01], [0.05, 0.05, 0.0], [0.0, 0.1, 0.0]]
+    nb = np.zeros((8, 3), np.float32)
+    nb[:4] = [[1, 0, 0], [0, -1, 0], [0, 0, 1], [np.sqrt(0.5), 0, np.sqrt(0.5)]]
+    h = np.asarray(P.rhf_histograms(pa, na, 1, pb, nb, 4, rcfg)).reshape(6, 50)
+    lo, hi = rcfg.ranges[4]
+    for deg in (0, 30, 45, 60, 90):
+        x = (np.deg2rad(deg) - lo) / (hi - lo) * 50
+        assert abs(x - np.round(x)) >= 1 / 6 - 1e-9
+    for f in (0, 1, 2):  # whole-millimetre offsets stay >= 1/3 mm from a dx/dy/dz bin edge
+        lo, hi = rcfg.ranges[f]
+        edges = lo + (hi - lo) / 50 * np.arange(51)
+        mm = np.arange(-600, 601) / 1000
+        assert np.abs(mm[:, None] - edges[None, :]).min() > 0.00033
+    np.testing.assert_allclose(h[4, [0, 12, 25]], [1 / 4, 1 / 4, 2 / 4], atol=1e-6)
 
 
 # ----------------------------------------------------------------------------- whole chain
@@ -631,3 +655,14 @@ def test_bad_inputs_raise_clear_errors():
         P.make_scene([0, 6], [0, 1], np.zeros((3, 3)), np.zeros((2, 3)), np.zeros((2, 9)))
     P.validate_config(SMALL)
     P.validate_config(P.PerceptionConfig())
+
+
+def test_render_scene_png_writes_a_picture(tmp_path, random_scenes):
+    scenes, seg = random_scenes
+    m, d = scenes[0]
+    out = tmp_path / "scene.png"
+    v = P.render_scene_png(P.scene_from_mujoco(m, d, seg), jax.random.key(0), out, SMALL, title="test")
+    data = out.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+    assert v["depth"].shape == (120, 160) and v["seg"].shape == (120, 160)
+    assert set(np.unique(v["seg"])) <= {-1, 0, 1, 2}
