@@ -22,7 +22,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
-from relaff_jax import native
+from relaff_jax import config, native
 from relaff_jax import scenes as sc
 from relaff_jax import world as wd
 
@@ -87,13 +87,18 @@ def main():
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--crosscheck", type=int, default=0, help="scenes for the MJX-vs-C check")
     ap.add_argument("--iterations", type=int, default=None, help="solver iterations override")
+    ap.add_argument("--wall-table-contacts", action="store_true",
+                    help="let all container walls touch the table (A/B of that exclusion)")
     args = ap.parse_args()
-    phys = wd.PhysicsConfig() if args.iterations is None else wd.PhysicsConfig(iterations=args.iterations)
+    phys = wd.PhysicsConfig(wall_table_contacts=args.wall_table_contacts)
+    if args.iterations is not None:
+        phys = config.override(phys, {"iterations": args.iterations})
     w = wd.build_world(phys)
     cfg = sc.SceneConfig()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}, "
           f"mujoco {mujoco.__version__}; {cfg.settle_steps} steps of {phys.timestep * 1000:g} ms, "
-          f"solver {phys.solver} x{phys.iterations}")
+          f"solver {phys.solver} x{phys.iterations}, "
+          f"wall-table contacts {'on' if phys.wall_table_contacts else 'off'}")
     print(f"{'batch':>6s} {'MJX scenes/s':>13s} {'MJX steps/s':>12s} {'compile s':>10s} "
           f"{'C scenes/s':>11s} {'MJX/C':>6s}")
     for b in args.batches:

@@ -50,6 +50,9 @@ class PhysicsConfig:
     # The rake is held by the gripper: during settling it stays at this pose (x, y, z of
     # the grip point; handle along +x), above the robot, away from any toy.
     held_rake_pos: tuple[float, float, float] = (0.20, 0.0, 0.55)
+    # Let every container wall touch the table (off: they stand on the base plate's
+    # footprint and never need to; on costs 12 more contact slots, kept for A/B benchmarks).
+    wall_table_contacts: bool = False
 
 
 def _box_geom(name: str, size, pos, mass: float, rgba, extra: str = "") -> str:
@@ -91,7 +94,7 @@ def _toy_geoms(spec: lib.ObjectSpec, phys: PhysicsConfig) -> str:
 _NO_TABLE = ("wall_xn", "wall_yp", "wall_yn")
 
 
-def _other_geoms(spec: lib.ObjectSpec) -> str:
+def _other_geoms(spec: lib.ObjectSpec, phys: PhysicsConfig) -> str:
     rgba = (*spec.colour, 1.0)
     parts = dict(spec.parts)
     vol = {k: float(np.prod(b.size)) for k, b in parts.items()}
@@ -100,7 +103,7 @@ def _other_geoms(spec: lib.ObjectSpec) -> str:
     out = []
     for name in lib.OTHER_GEOMS:
         fr = f'friction="{spec.friction} 0.005 0.0001"'
-        if name in _NO_TABLE:
+        if name in _NO_TABLE and not phys.wall_table_contacts:
             # Container walls stand on the base plate's footprint, so they never need a
             # contact with the table: the plate's corners are the lowest points anyway.
             fr += ' contype="2" conaffinity="2"'
@@ -142,7 +145,7 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
     </body>
     <body name="obj">
       <freejoint name="obj_free"/>
-      {_other_geoms(o)}
+      {_other_geoms(o, phys)}
     </body>
     {arm_xml}
   </worldbody>
