@@ -994,9 +994,14 @@ def make_batched_features(geom_type, geom_seg, cfg: PerceptionConfig = Perceptio
         if xmat.shape[-1] == 9:
             xmat = xmat.reshape(xmat.shape[:-1] + (3, 3))
         size = jnp.asarray(size, jnp.float32)
-        if size.ndim != 3 or size.shape[1:] != (g, 3):
-            raise ValueError(f"size must be (B, {g}, 3), got {size.shape}")
-        return batched(size, jnp.asarray(xpos, jnp.float32), xmat, keys)
+        xpos = jnp.asarray(xpos, jnp.float32)
+        b = size.shape[0] if size.ndim == 3 else None
+        if size.shape != (b, g, 3) or xpos.shape != (b, g, 3) or xmat.shape != (b, g, 3, 3):
+            raise ValueError(f"expected size and xpos (B, {g}, 3), xmat (B, {g}, 3, 3) or (B, {g}, 9); "
+                             f"got {size.shape}, {xpos.shape}, {xmat.shape}")
+        if len(keys) != b:
+            raise ValueError(f"need one PRNG key per scene: {b} scenes, {len(keys)} keys")
+        return batched(size, xpos, xmat, keys)
 
     f.jitted = batched
     return f
@@ -1018,15 +1023,17 @@ def _scene_view_fn(geom_type: tuple, geom_seg: tuple, cfg: PerceptionConfig):
         pc = point_cloud(scene, k_feat, cfg)
         frames = [pca_frame(pc["voxels"]["points"][o], pc["voxels"]["mask"][o]) for o in range(2)]
         return dict(depth=full["depth"], seg=full["seg"].reshape(full["depth"].shape),
-                    voxels=pc["voxels"], frames=frames, feats=features_from_voxels(pc["voxels"], cfg))
+                    pixels=pc["pixels"], voxels=pc["voxels"], frames=frames,
+                    feats=features_from_voxels(pc["voxels"], cfg))
 
     return jax.jit(view)
 
 
 def scene_view(scene: SceneGeoms, key, cfg: PerceptionConfig = PerceptionConfig()) -> dict:
     """Everything a picture of one (unbatched) scene needs, as numpy: depth (H, W) (noisy,
-    0 = no return), seg (H, W), voxels (``voxel_downsample`` result), frames (per object:
-    centroid, frame, eigenvalues) and feats (``features`` result for ``key``'s second half)."""
+    0 = no return), seg (H, W), pixels (noisy ``compact_objects`` result), voxels
+    (``voxel_downsample`` result), frames (per object: centroid, frame, eigenvalues) and
+    feats (the ``features`` outputs). ``key`` is split: image noise, feature noise."""
     validate_config(cfg)
     fn = _scene_view_fn(scene.geom_type, scene.geom_seg, cfg)
     return jax.tree.map(np.asarray, fn(scene.size, scene.xpos, scene.xmat, key))

@@ -102,8 +102,7 @@ def chain(random_scenes):
     batch = stack_scenes(scenes, seg)
     keys = jax.random.split(jax.random.key(5), len(scenes))
     f = P.make_batched_features(scenes[0][0].geom_type, seg, SMALL, wrap=chex.assert_max_traces(n=1))
-    pc = jax.jit(jax.vmap(lambda s, k: P.point_cloud(s, k, SMALL)))(batch, keys)
-    return dict(f=f, batch=batch, keys=keys, pc=pc, feats=f(batch.size, batch.xpos, batch.xmat, keys))
+    return dict(f=f, batch=batch, keys=keys, feats=f(batch.size, batch.xpos, batch.xmat, keys))
 
 
 def mj_reference(m, d, cam: P.CameraConfig):
@@ -286,17 +285,19 @@ def _unambiguous(points, seg, size):
     return seg, dropped
 
 
-def test_voxels_match_open3d(random_scenes, chain):
+def test_voxels_match_open3d(random_scenes):
     scenes, seg = random_scenes
-    pc = chain["pc"]
     size = SMALL.voxel.size
     vox_fn = jax.jit(lambda p, q, s: P.voxel_downsample(p, q, s, SMALL))
     checked = dropped_total = total = 0
-    for b in range(len(scenes)):
-        pix = jax.tree.map(lambda x: np.asarray(x[b]), pc["pixels"])
+    for b, (m, d) in enumerate(scenes):
+        # Unbatched chain (scene_view, also used by the picture test: one compile).
+        view = P.scene_view(P.scene_from_mujoco(m, d, seg), jax.random.key(b), SMALL)
+        pix = view["pixels"]
         # The chain's voxels are voxel_downsample of its (noisy) object pixels.
         again = vox_fn(pix["points"], pix["normal"], pix["seg"])
-        np.testing.assert_array_equal(np.asarray(again["points"]), np.asarray(pc["voxels"]["points"][b]))
+        np.testing.assert_array_equal(np.asarray(again["points"]), view["voxels"]["points"])
+        np.testing.assert_array_equal(view["feats"]["n_points"], view["voxels"]["count"])
         seg_ok, dropped = _unambiguous(pix["points"], pix["seg"], size)
         dropped_total += dropped
         vox = jax.tree.map(np.asarray, vox_fn(pix["points"], pix["normal"], seg_ok))
@@ -582,8 +583,6 @@ def test_features_batched_no_retrace_and_sane(random_scenes, chain):
     again = f(chain["batch"].size, chain["batch"].xpos, chain["batch"].xmat, chain["keys"])
     for k in o1:
         np.testing.assert_array_equal(np.asarray(o1[k]), np.asarray(again[k]))
-    # and the chain's voxels are what features used
-    np.testing.assert_array_equal(np.asarray(chain["pc"]["voxels"]["count"]), np.asarray(o1["n_points"]))
 
 
 def _library_scene(toy, other, toy_pose, other_pose):
@@ -653,6 +652,11 @@ def test_bad_inputs_raise_clear_errors():
         P.make_scene([0, 6], [0, 3], np.zeros((2, 3)), np.zeros((2, 3)), np.zeros((2, 9)))
     with pytest.raises(ValueError, match=r"expected size/xpos"):
         P.make_scene([0, 6], [0, 1], np.zeros((3, 3)), np.zeros((2, 3)), np.zeros((2, 9)))
+    f = P.make_batched_features([0, 6], [0, 1], SMALL)
+    with pytest.raises(ValueError, match=r"expected size and xpos \(B, 2, 3\)"):
+        f(np.zeros((2, 2, 3)), np.zeros((2, 3, 3)), np.zeros((2, 2, 9)), jax.random.split(jax.random.key(0), 2))
+    with pytest.raises(ValueError, match="one PRNG key per scene"):
+        f(np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), np.zeros((2, 2, 9)), jax.random.split(jax.random.key(0), 3))
     P.validate_config(SMALL)
     P.validate_config(P.PerceptionConfig())
 
