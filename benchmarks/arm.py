@@ -47,7 +47,7 @@ def ik_table(m, arm, n, seed=0):
     c /= np.linalg.norm(c, axis=1, keepdims=True)
     sets = {
         "top-down, random yaw": jax.vmap(A.top_down_target)(jnp.asarray(pos), jnp.asarray(az)),
-        "tilted <= 60 deg": A.IKTarget(jnp.asarray(pos), jnp.asarray(a), jnp.asarray(c), jnp.ones(n)),
+        "tilted <= 60 deg": A.IKTarget(jnp.asarray(pos), jnp.asarray(a), jnp.asarray(c), jnp.ones(n), jnp.zeros(n)),
     }
     ik = jax.jit(jax.vmap(lambda t, q: A.solve_ik(arm, cfg, t, q)))
     print(f"\nIK, batch {n}, targets r in [0.25, 1.15] m, z in [0.03, 0.5] m (residuals by MuJoCo C)")

@@ -84,7 +84,7 @@ class ArmConfig:
     ik_ang_tol: float = 0.05  # rad (~2.9 deg): and the orientation residual is below
     ik_min_sigma: float = 0.03  # m/rad: and the task Jacobian's smallest singular value above
     ik_continuity: float = 1e-3  # tie-break between good seeds: prefer the one nearest q_init
-    grip_open: float = 0.12  # m, half opening (finger joint value) when open
+    grip_open: float = 0.12  # m, default half opening (finger joint value) when open; max 0.21
     grip_closed: float = 0.0  # m, command when closing (force-limited, stops at the object)
     contact_dist: float = 0.002  # m: a pad "touches" a geom if their distance is below
 
@@ -100,6 +100,8 @@ class Arm:
     parent of ``arm_link1``; per arm body ``body_pos`` (6, 3), ``body_mat`` (6, 3, 3),
     ``jnt_axis`` (6, 3), ``jnt_pos`` (6, 3) in body coordinates; ``site_pos`` (3,),
     ``site_mat`` (3, 3) of the tcp in the hand frame; joint limits ``q_lo``/``q_hi`` (6,).
+    Gripper geometry: ``finger_range`` (2,) half-opening limits, ``tip_below_tcp`` (m, the
+    fingertips' distance below the tcp along the approach), ``pad_thickness`` (m, one pad).
     """
 
     nu: int
@@ -124,6 +126,8 @@ class Arm:
     site_mat: np.ndarray
     q_lo: np.ndarray
     q_hi: np.ndarray
+    tip_below_tcp: float
+    pad_thickness: float
 
 
 def _id(model: mujoco.MjModel, objtype: mujoco.mjtObj, name: str) -> int:
@@ -171,6 +175,9 @@ def arm_from_model(model: mujoco.MjModel) -> Arm:
     parent = int(model.body_parentid[bids[0]])
     if model.body_weldid[parent] != 0:
         raise ValueError("the arm's base must be welded to the world (no joints above arm_link1)")
+    pad = _id(model, G, PAD_GEOMS[0])
+    finger_body = int(model.geom_bodyid[pad])
+    tip_z = model.body_pos[finger_body][2] + model.geom_pos[pad][2] - model.geom_size[pad][2]
     return Arm(
         nu=int(model.nu),
         qpos_arm=np.array([model.jnt_qposadr[j] for j in jids]),
@@ -194,6 +201,8 @@ def arm_from_model(model: mujoco.MjModel) -> Arm:
         site_mat=_quat_mat(model.site_quat[site]),
         q_lo=_float32_inside(model.jnt_range[jids, 0], +1),
         q_hi=_float32_inside(model.jnt_range[jids, 1], -1),
+        tip_below_tcp=float(model.site_pos[site][2] - tip_z),
+        pad_thickness=float(2 * model.geom_size[pad][1]),
     )
 
 
@@ -237,13 +246,16 @@ def fk_tcp(arm: Arm, q: jax.Array) -> tuple[jax.Array, jax.Array]:
 
 class IKTarget(NamedTuple):
     """A tcp goal. ``pos`` (3,) world position; ``approach`` (3,) unit direction the tcp z must
-    point along; ``closing`` (3,) unit direction of the finger closing axis (tcp y, sign-free
-    because the gripper is symmetric); ``closing_weight`` () 0 = free yaw about the approach."""
+    point along; ``closing`` (3,) unit direction of the finger closing axis (tcp y);
+    ``closing_weight`` () 0 = free yaw about the approach, 1 = closing axis enforced;
+    ``closing_signed`` () 0 = the closing axis is sign-free (the gripper is symmetric), 1 = the
+    tcp y must point along +closing (a tool attached to the hand is not symmetric)."""
 
     pos: jax.Array
     approach: jax.Array
     closing: jax.Array
     closing_weight: jax.Array
+    closing_signed: jax.Array
 
 
 class IKResult(NamedTuple):
@@ -267,14 +279,15 @@ def top_down_target(pos: jax.Array, yaw: jax.Array | None = None) -> IKTarget:
     else:
         closing = jnp.stack([jnp.cos(yaw), jnp.sin(yaw), jnp.zeros_like(yaw)])
         weight = jnp.asarray(1.0)
-    return IKTarget(pos, jnp.array([0.0, 0.0, -1.0]), closing, weight)
+    return IKTarget(pos, jnp.array([0.0, 0.0, -1.0]), closing, weight, jnp.asarray(0.0))
 
 
 def _residual(arm: Arm, cfg: ArmConfig, q: jax.Array, target: IKTarget) -> jax.Array:
     """(9,) residual: position (m), approach and closing axis errors scaled to metres."""
     pos, mat = fk_tcp(arm, q)
     z, y = mat[:, 2], mat[:, 1]
-    sign = jnp.where(jnp.dot(y, target.closing) >= 0, 1.0, -1.0)  # closing axis is sign-free
+    free_sign = jnp.where(jnp.dot(y, target.closing) >= 0, 1.0, -1.0)  # symmetric gripper
+    sign = jnp.where(target.closing_signed > 0, 1.0, free_sign)
     w = jnp.sqrt(target.closing_weight)
     return jnp.concatenate(
         [pos - target.pos, cfg.ik_orient_length * (z - target.approach),
@@ -286,7 +299,9 @@ def _errors(arm: Arm, q: jax.Array, target: IKTarget) -> tuple[jax.Array, jax.Ar
     pos, mat = fk_tcp(arm, q)
     pos_err = jnp.linalg.norm(pos - target.pos)
     ang_a = jnp.arccos(jnp.clip(jnp.dot(mat[:, 2], target.approach), -1.0, 1.0))
-    ang_c = jnp.arccos(jnp.clip(jnp.abs(jnp.dot(mat[:, 1], target.closing)), 0.0, 1.0))
+    dot_c = jnp.dot(mat[:, 1], target.closing)
+    dot_c = jnp.where(target.closing_signed > 0, dot_c, jnp.abs(dot_c))
+    ang_c = jnp.arccos(jnp.clip(dot_c, -1.0, 1.0))
     return pos_err, jnp.maximum(ang_a, jnp.where(target.closing_weight > 0, ang_c, 0.0))
 
 
@@ -334,10 +349,11 @@ def analytic_seed(arm: Arm, target: IKTarget, q6: jax.Array) -> jax.Array:
     j5 = jnp.arcsin(jnp.clip(ay, -1.0, 1.0))
     j4 = jnp.arctan2(-ax, -az) - j2 - j3
     q = jnp.stack([j1, j2, j3, j4, j5, jnp.zeros_like(j1)])
-    # tool yaw: turn the tcp y axis onto the closing axis (mod pi, the gripper is symmetric)
+    # tool yaw: turn the tcp y axis onto the closing axis (mod pi if the gripper is symmetric)
     _, mat = fk_tcp(arm, q)
     c = mat.T @ target.closing
-    j6 = _wrap(2.0 * jnp.arctan2(c[0], c[1])) / 2.0
+    turn = jnp.arctan2(c[0], c[1])
+    j6 = jnp.where(target.closing_signed > 0, turn, _wrap(2.0 * turn) / 2.0)
     j6 = jnp.where(target.closing_weight > 0, j6, q6)
     q = q.at[5].set(j6)
     return jnp.clip(q, arm.q_lo, arm.q_hi)
@@ -393,6 +409,56 @@ def solve_ik_path(arm: Arm, cfg: ArmConfig, targets: IKTarget, q_init: jax.Array
 
     _, res = jax.lax.scan(step, jnp.asarray(q_init, jnp.float32), targets)
     return res
+
+
+# ------------------------------------------------------------------------ held tools
+
+# Where the tcp holds a tool (the rakes, paper IV-C: "attached to the robot arm as a tool"), in
+# the tool's frame: 4 cm along the handle from its near end, on the handle's axis (the rake
+# handles are 2.5 cm thick, origin at the bottom); tcp axes in the tool frame: x along the
+# handle (+x), closing axis across it (-y), approach down (-z). With this choice the hand's yaw
+# joint sits near 0 when the tool points away from the robot.
+TOOL_GRIP_POS = np.array([0.04, 0.0, 0.0125])
+TOOL_GRIP_MAT = np.diag([1.0, -1.0, -1.0])
+
+
+def tool_relpose(arm: Arm) -> tuple[np.ndarray, np.ndarray]:
+    """Pose (pos (3,), quat (4,)) of a held tool's frame in the hand frame: the ``relpose`` of
+    the weld ``arm_hand`` -> tool (MuJoCo: body2's pose in body1's frame)."""
+    rot = arm.site_mat @ TOOL_GRIP_MAT.T  # tool axes in the hand frame
+    pos = arm.site_pos - rot @ TOOL_GRIP_POS
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, rot.reshape(-1))
+    return pos, quat
+
+
+def tool_tcp_target(tool_pos: jax.Array, tool_mat: jax.Array) -> IKTarget:
+    """The (signed) tcp target that puts a held tool's frame at ``tool_pos`` (3,), ``tool_mat``
+    (3, 3)."""
+    grip_pos, grip_mat = jnp.asarray(TOOL_GRIP_POS), jnp.asarray(TOOL_GRIP_MAT)
+    return IKTarget(tool_pos + tool_mat @ grip_pos, tool_mat @ grip_mat[:, 2], tool_mat @ grip_mat[:, 1],
+                    jnp.asarray(1.0), jnp.asarray(1.0))
+
+
+def world_mjcf(tool_body: str | None = None) -> str:
+    """The arm's MJCF sections (default, worldbody, contact, actuator) as text to insert at the
+    top level of a world's ``<mujoco>`` element (after its own sections), plus, with
+    ``tool_body``, an inactive weld ``tool_grip`` that attaches that body to the hand at the
+    grip pose (``TOOL_GRIP_*``); switch it per scene with ``mjx.Data.eq_active``."""
+    text = arm_xml_path().read_text()
+    start, end = text.index("<mujocoinclude>"), text.index("</mujocoinclude>")
+    body = text[start + len("<mujocoinclude>"):end]
+    if tool_body is None:
+        return body
+    arm = arm_from_model(mujoco.MjModel.from_xml_path(str(arm_test_xml_path())))
+    pos, quat = tool_relpose(arm)
+    rel = " ".join(f"{v:.9g}" for v in (*pos, *quat))
+    return body + f"""
+  <equality>
+    <weld name="tool_grip" body1="arm_hand" body2="{tool_body}" relpose="{rel}" active="false"
+          solref="0.01 1"/>
+  </equality>
+"""
 
 
 # ------------------------------------------------------------------ gripper and programs

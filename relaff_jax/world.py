@@ -128,7 +128,11 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
         raise ValueError(f"invalid pair ({toy!r}, {other!r}): one toy plus one object of another group")
     arm_xml = ""
     if arm:
-        arm_xml = resources.files("relaff_jax.assets").joinpath("arm.xml").read_text()
+        # The arm's sections go at the top level; the held rake is welded to the hand (an
+        # inactive weld on `obj`, switched on per scene by the action stage).
+        from .arm import world_mjcf
+
+        arm_xml = world_mjcf(tool_body="obj")
     return f"""
 <mujoco model="relaff_{toy}_{other}">
   <option timestep="{phys.timestep}" iterations="{phys.iterations}"
@@ -147,8 +151,8 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
       <freejoint name="obj_free"/>
       {_other_geoms(o, phys)}
     </body>
-    {arm_xml}
   </worldbody>
+  {arm_xml}
 </mujoco>"""
 
 

@@ -110,7 +110,7 @@ def test_ik_reaches_tilted_targets_from_fk(model, arm, ik):
     pos, mat = zip(*[c_tcp(model, arm, q) for q in qs])
     mat = np.stack(mat)
     targets = A.IKTarget(jnp.asarray(np.stack(pos)), jnp.asarray(mat[:, :, 2]),
-                         jnp.asarray(mat[:, :, 1]), jnp.ones(8))
+                         jnp.asarray(mat[:, :, 1]), jnp.ones(8), jnp.zeros(8))
     res = ik(targets, jnp.zeros((8, 6)))
     assert np.asarray(res.reachable).all(), res
     check_against_c(model, arm, res, targets)

@@ -36,7 +36,7 @@ def waypoint_targets(x, y, off):
     tilt_a = jnp.array([-np.sin(TILT), 0.0, -np.cos(TILT)])
     tilt_c = jnp.array([np.cos(TILT), 0.0, -np.sin(TILT)])
     return A.IKTarget(pos, jnp.stack([down] * 4 + [tilt_a]), jnp.stack([across] * 4 + [tilt_c]),
-                      jnp.ones(5))
+                      jnp.ones(5), jnp.zeros(5))
 
 
 @pytest.fixture(scope="module")
