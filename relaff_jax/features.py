@@ -66,6 +66,14 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
         ids = np.asarray(samples["rollout_id"]).astype(np.uint32)
         keys = jax.vmap(lambda i: jax.random.fold_in(root, i))(jnp.asarray(ids))
         out = jax.device_get(feats(size, xpos, xmat, keys))
+        if out["overflow"].any():
+            bad = np.flatnonzero(out["overflow"])
+            flags = {k: np.asarray(out[k])[bad].tolist() for k in
+                     ("tile_overflow", "pixel_overflow", "voxel_overflow", "range_overflow")}
+            raise ValueError(
+                f"perception capacity exceeded for rollout_id {ids[bad].tolist()} ({flags}); "
+                "raise the matching capacity in PerceptionConfig (docs/perception.md) rather than "
+                "truncate the point clouds")
         return {"pca": out["pca"], "rhf": out["rhf"], "unseen": out["unseen"],
                 "n_points": out["n_points"], "overflow": out["overflow"]}
 
@@ -103,60 +111,14 @@ def _cmd_features(args) -> int:
 
 def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, key=None,
                cfg: pc.PerceptionConfig = pc.PerceptionConfig(), title: str = "") -> Path:
-    """Draw what the robot saw: the depth image with the segmentation, the two objects'
-    voxel clouds from above, and their PCA frames. Writes ``out`` (PNG) atomically."""
-    import io as _io
-
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .io import atomic_write_bytes
-
+    """Draw what the robot saw in one settled scene (``perception.render_scene_png``: noisy
+    depth image, segmentation, voxel clouds with PCA frames); writes ``out`` atomically."""
     key = jax.random.PRNGKey(0) if key is None else key
     size, xpos, xmat = jax.device_get(_jitted_geoms(world)(
         jnp.asarray([pair], jnp.int32), jnp.asarray(qpos, jnp.float32)[None]))
     scene = pc.make_scene(world.mj_model.geom_type, world.geom_seg, size[0], xpos[0], xmat[0])
-    img = jax.device_get(jax.jit(lambda s: pc.render(s, cfg))(scene))
-    cloud = jax.device_get(jax.jit(lambda s, k: pc.point_cloud(s, k, cfg))(scene, key))["voxels"]
-    h, w = img["depth"].shape
-    seg = img["seg"].reshape(h, w)
-
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
-    ax = axes[0]
-    depth = np.where(img["depth"] > 0, img["depth"], np.nan)
-    ax.imshow(depth, cmap="gray_r")
-    overlay = np.zeros((h, w, 4))
-    overlay[seg == pc.SEG_TOY] = (1.0, 0.2, 0.1, 0.7)
-    overlay[seg == pc.SEG_OTHER] = (0.1, 0.4, 1.0, 0.7)
-    ax.imshow(overlay)
-    ax.set_title(f"depth image {w}x{h}, segmented (toy red, other blue)")
-    ax.axis("off")
-
-    ax = axes[1]
     toy, other = world.pairs[pair][:2]
-    for o, (name, colour) in enumerate(((toy, "tab:red"), (other, "tab:blue"))):
-        m = cloud["mask"][o]
-        p = cloud["points"][o][m]
-        if len(p) == 0:
-            continue
-        ax.scatter(p[:, 0], p[:, 1], s=2, c=colour, label=f"{name} ({len(p)} voxels)")
-        mu, frame, ev = jax.device_get(pc.pca_frame(jnp.asarray(cloud["points"][o]), jnp.asarray(m)))
-        for k, c in zip(range(3), ("k", "g", "m")):
-            v = frame[:, k] * 3 * np.sqrt(max(ev[k], 1e-8))
-            ax.arrow(mu[0], mu[1], v[0], v[1], color=c, width=0.002, length_includes_head=True)
-    ax.scatter([0], [0], marker="^", c="k", s=60, label="robot")
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title("voxel clouds from above, PCA axes (x black, y green, z magenta)")
-    fig.suptitle(title or f"{toy} + {other}")
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
-    plt.close(fig)
-    atomic_write_bytes(out, buf.getvalue())
+    pc.render_scene_png(scene, key, out, cfg, title=title or f"{toy} + {other}")
     return Path(out)
 
 
