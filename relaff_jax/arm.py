@@ -440,25 +440,32 @@ def tool_tcp_target(tool_pos: jax.Array, tool_mat: jax.Array) -> IKTarget:
                     jnp.asarray(1.0), jnp.asarray(1.0))
 
 
-def world_mjcf(tool_body: str | None = None) -> str:
+def world_mjcf(tool_body: str | None = None, grasp_bodies: Sequence[str] = ()) -> str:
     """The arm's MJCF sections (default, worldbody, contact, actuator) as text to insert at the
-    top level of a world's ``<mujoco>`` element (after its own sections), plus, with
-    ``tool_body``, an inactive weld ``tool_grip`` that attaches that body to the hand at the
-    grip pose (``TOOL_GRIP_*``); switch it per scene with ``mjx.Data.eq_active``."""
+    top level of a world's ``<mujoco>`` element (after its own sections), plus inactive welds
+    from the hand, all switched per scene with ``mjx.Data.eq_active``:
+
+    - with ``tool_body``: ``tool_grip``, attaching that body at the tool grip pose
+      (``TOOL_GRIP_*``), for a held tool;
+    - for each name in ``grasp_bodies``: ``grasp_<name>``, whose relative pose the caller sets
+      (``eq_data``) at the moment both finger pads touch that body (a grasp lock).
+    """
     text = arm_xml_path().read_text()
     start, end = text.index("<mujocoinclude>"), text.index("</mujocoinclude>")
     body = text[start + len("<mujocoinclude>"):end]
-    if tool_body is None:
-        return body
-    arm = arm_from_model(mujoco.MjModel.from_xml_path(str(arm_test_xml_path())))
-    pos, quat = tool_relpose(arm)
-    rel = " ".join(f"{v:.9g}" for v in (*pos, *quat))
-    return body + f"""
-  <equality>
-    <weld name="tool_grip" body1="arm_hand" body2="{tool_body}" relpose="{rel}" active="false"
-          solref="0.01 1"/>
-  </equality>
-"""
+    welds = []
+    if tool_body is not None:
+        arm = arm_from_model(mujoco.MjModel.from_xml_path(str(arm_test_xml_path())))
+        pos, quat = tool_relpose(arm)
+        rel = " ".join(f"{v:.9g}" for v in (*pos, *quat))
+        welds.append(f'<weld name="tool_grip" body1="arm_hand" body2="{tool_body}" relpose="{rel}" '
+                     f'active="false" solref="0.01 1"/>')
+    for name in grasp_bodies:
+        welds.append(f'<weld name="grasp_{name}" body1="arm_hand" body2="{name}" '
+                     f'relpose="0 0 0 1 0 0 0" active="false" solref="0.01 1"/>')
+    if welds:
+        body += "\n  <equality>\n    " + "\n    ".join(welds) + "\n  </equality>\n"
+    return body
 
 
 # ------------------------------------------------------------------ gripper and programs
@@ -477,27 +484,51 @@ def make_ctrl(arm: Arm, q_arm: jax.Array, grip: jax.Array, ctrl: jax.Array | Non
     return ctrl.at[arm.act_fingers].set(grip)
 
 
+def weld_relpose(xpos1: jax.Array, xquat1: jax.Array, xpos2: jax.Array, xquat2: jax.Array) -> jax.Array:
+    """(7,) pose of body 2 in body 1's frame (pos, quat): a weld's ``relpose`` that holds the
+    two bodies as they are now (``eq_data[3:10]`` of a weld)."""
+    q1 = xquat1 / jnp.linalg.norm(xquat1)
+    conj = q1 * jnp.array([1.0, -1.0, -1.0, -1.0])
+    w1, v1 = conj[0], conj[1:]
+    w2, v2 = xquat2[0], xquat2[1:]
+    quat = jnp.concatenate([jnp.array([w1 * w2 - v1 @ v2]), w1 * v2 + w2 * v1 + jnp.cross(v1, v2)])
+    rot1 = jnp.array([
+        [1 - 2 * (q1[2] ** 2 + q1[3] ** 2), 2 * (q1[1] * q1[2] - q1[0] * q1[3]), 2 * (q1[1] * q1[3] + q1[0] * q1[2])],
+        [2 * (q1[1] * q1[2] + q1[0] * q1[3]), 1 - 2 * (q1[1] ** 2 + q1[3] ** 2), 2 * (q1[2] * q1[3] - q1[0] * q1[1])],
+        [2 * (q1[1] * q1[3] - q1[0] * q1[2]), 2 * (q1[2] * q1[3] + q1[0] * q1[1]), 1 - 2 * (q1[1] ** 2 + q1[2] ** 2)],
+    ])
+    return jnp.concatenate([rot1.T @ (xpos2 - xpos1), quat / jnp.linalg.norm(quat)])
+
+
+def segment_index(seg_steps: Sequence[int] | jax.Array, t: jax.Array) -> jax.Array:
+    """Index of the program segment running at control step ``t`` (the last one after the end)."""
+    ends = jnp.cumsum(jnp.asarray(seg_steps, jnp.int32))
+    return jnp.clip(jnp.searchsorted(ends, t, side="right"), 0, ends.shape[0] - 1)
+
+
 def _smoothstep(x: jax.Array) -> jax.Array:
     return x * x * (3.0 - 2.0 * x)
 
 
 def program_ctrl(
-    arm: Arm, q_way: jax.Array, grip_way: jax.Array, seg_steps: Sequence[int], t: jax.Array
+    arm: Arm, q_way: jax.Array, grip_way: jax.Array, seg_steps: Sequence[int] | jax.Array, t: jax.Array
 ) -> jax.Array:
     """Actuator command (nu,) at control step ``t`` of a waypoint program.
 
     ``q_way`` (W, 6) joint waypoints, ``grip_way`` (W,) finger commands; segment k moves from
-    waypoint k to k + 1 in ``seg_steps[k]`` control steps (static, length W - 1) with a
+    waypoint k to k + 1 in ``seg_steps[k]`` control steps (length W - 1; a static tuple, or a
+    traced int array so one compiled program serves programs of different timing) with a
     smoothstep profile (zero velocity at the waypoints, no jerk into the contacts). After the
     last segment the command holds the last waypoint.
     """
-    seg_steps = tuple(int(s) for s in seg_steps)
-    if len(seg_steps) != q_way.shape[0] - 1 or min(seg_steps) < 1:
-        raise ValueError(f"need W - 1 = {q_way.shape[0] - 1} positive segment lengths, got {seg_steps}")
-    ends = np.cumsum(seg_steps)
-    starts = ends - np.asarray(seg_steps)
-    k = jnp.clip(jnp.searchsorted(jnp.asarray(ends), t, side="right"), 0, len(seg_steps) - 1)
-    frac = jnp.clip((t - jnp.asarray(starts)[k]) / jnp.asarray(seg_steps, jnp.float32)[k], 0.0, 1.0)
+    if isinstance(seg_steps, (tuple, list)):
+        seg_steps = tuple(int(s) for s in seg_steps)
+        if len(seg_steps) != q_way.shape[0] - 1 or min(seg_steps) < 1:
+            raise ValueError(f"need W - 1 = {q_way.shape[0] - 1} positive segment lengths, got {seg_steps}")
+    seg = jnp.asarray(seg_steps, jnp.int32)
+    ends = jnp.cumsum(seg)
+    k = segment_index(seg, t)
+    frac = jnp.clip((t - (ends[k] - seg[k])) / jnp.maximum(seg[k], 1).astype(jnp.float32), 0.0, 1.0)
     s = _smoothstep(frac)
     q = q_way[k] + s * (q_way[k + 1] - q_way[k])
     g = grip_way[k] + s * (grip_way[k + 1] - grip_way[k])
@@ -511,12 +542,14 @@ def run_program(
     q_way: jax.Array,
     grip_way: jax.Array,
     *,
-    seg_steps: Sequence[int],
+    seg_steps: Sequence[int] | jax.Array,
+    n_steps: int | None = None,
     substeps: int = 1,
     observe: Callable | None = None,
 ):
     """Execute a waypoint program on one scene: ``lax.scan`` over control steps, each holding
-    the command for ``substeps`` ``mjx.step`` calls. Total control steps = sum(seg_steps).
+    the command for ``substeps`` ``mjx.step`` calls. Control steps: ``n_steps`` if given (needed
+    when ``seg_steps`` is a traced array), else sum(seg_steps).
 
     ``mx`` mjx.Model, ``dx`` mjx.Data (one scene), ``q_way`` (W, 6), ``grip_way`` (W,).
     Returns the final ``dx`` and ``observe(dx)`` stacked over control steps (leading axis T),
@@ -525,14 +558,17 @@ def run_program(
     """
     from mujoco import mjx
 
-    total = int(sum(seg_steps))
+    if n_steps is None:
+        if not isinstance(seg_steps, (tuple, list)):
+            raise ValueError("n_steps is required when seg_steps is an array")
+        n_steps = int(sum(seg_steps))
 
     def control_step(d, t):
         d = d.replace(ctrl=program_ctrl(arm, q_way, grip_way, seg_steps, t))
         d = jax.lax.fori_loop(0, substeps, lambda _, dd: mjx.step(mx, dd), d)
         return d, (None if observe is None else observe(d))
 
-    return jax.lax.scan(control_step, dx, jnp.arange(total))
+    return jax.lax.scan(control_step, dx, jnp.arange(int(n_steps)))
 
 
 def finger_contacts(arm: Arm, cfg: ArmConfig, dx, geoms: Sequence[int] | jax.Array) -> jax.Array:
@@ -566,5 +602,6 @@ __all__ = [
     "PALM_GEOM", "Arm", "ArmConfig", "IKTarget", "IKResult", "arm_from_model", "arm_xml_path",
     "arm_test_xml_path", "fk_chain", "fk_tcp", "top_down_target", "solve_ik", "solve_ik_path",
     "task_sigma", "analytic_seed", "grip_command", "make_ctrl", "program_ctrl", "run_program",
-    "finger_contacts", "set_arm_qpos",
+    "finger_contacts", "set_arm_qpos", "weld_relpose", "segment_index", "world_mjcf",
+    "tool_relpose", "tool_tcp_target",
 ]

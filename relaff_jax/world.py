@@ -128,11 +128,11 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
         raise ValueError(f"invalid pair ({toy!r}, {other!r}): one toy plus one object of another group")
     arm_xml = ""
     if arm:
-        # The arm's sections go at the top level; the held rake is welded to the hand (an
-        # inactive weld on `obj`, switched on per scene by the action stage).
+        # The arm's sections go at the top level, with inactive hand welds switched on per
+        # scene by the action stage: the held rake, and grasp locks on `obj` / `toy`.
         from .arm import world_mjcf
 
-        arm_xml = world_mjcf(tool_body="obj")
+        arm_xml = world_mjcf(tool_body="obj", grasp_bodies=("obj", "toy"))
     return f"""
 <mujoco model="relaff_{toy}_{other}">
   <option timestep="{phys.timestep}" iterations="{phys.iterations}"
