@@ -294,3 +294,441 @@ def _finite(obj):
     if isinstance(obj, np.integer):
         return int(obj)
     return obj
+
+
+# ------------------------------------------------------------- full report (report.md / .html)
+#
+# ``write_full_report`` adds, on top of ``write_report``'s tables and figures, the reader's
+# report of a whole run: dataset statistics, example scenes, every figure, Table II beside the
+# paper's, the correlation clusters, the threshold study, best-after-ten, and a generated
+# summary of which of the paper's findings the run reproduces. The document is built once as
+# a list of blocks and rendered twice: ``report.md`` (images as relative links) and
+# ``report.html`` (one self-contained page, images base64-embedded).
+
+import base64
+import dataclasses
+import html as _html
+import re
+import time
+
+
+@dataclasses.dataclass(frozen=True)
+class FindingRules:
+    """How the generated summary decides whether a paper finding is reproduced."""
+
+    small_n: int = 10  # "small n": the training sizes up to this one
+    well_above: float = 1.25  # "well above 1": an average bootstrap factor of at least this
+    close: float = 0.9  # "close to" / "costs little": at least this fraction of the reference
+
+
+def _nanmean(x) -> float:
+    x = np.asarray(x, dtype=float)
+    return float(np.mean(x[np.isfinite(x)])) if np.any(np.isfinite(x)) else float("nan")
+
+
+def _row(a: Mapping[str, Any], name: str) -> float:
+    """Table II average (over affordances) of row ``name``."""
+    return float(a["table2"][TABLE2_ROWS.index(name), 0])
+
+
+def _verdict(ok: bool | None) -> str:
+    return {True: "reproduced", False: "not reproduced", None: "not measurable"}[ok]
+
+
+def _decide(cond, *values) -> bool | None:
+    return None if not all(np.isfinite(v) for v in values) else bool(cond)
+
+
+def findings(an: Mapping[str, Mapping[str, Any]], cfg, rules: FindingRules = FindingRules()) -> list[dict[str, Any]]:
+    """Which of the paper's findings this run reproduces, each with the numbers behind it.
+
+    ``an``: ``{space: analyse(...)}``. Returns a list of dicts ``{id, finding, paper, rule,
+    numbers, values, reproduced}`` with ``reproduced`` True, False or None (not measurable:
+    a space or condition was not run, or a number is undefined).
+    """
+    out: list[dict[str, Any]] = []
+
+    def add(fid, finding, paper, rule, numbers, values, ok):
+        out.append({"id": fid, "finding": finding, "paper": paper, "rule": rule, "numbers": numbers,
+                    "values": values, "reproduced": ok})
+
+    pca, rhf = an.get("pca"), an.get("rhf")
+    # 1. RHF learns faster than PCA at small n (paper Fig. 7)
+    rule = f"mean NB accuracy over the affordances, averaged over the sizes n <= {rules.small_n}, is higher in RHF than in PCA"
+    if pca is not None and rhf is not None:
+        small = [n for n in pca["sizes"] if n <= rules.small_n and n in rhf["sizes"]]
+        p = [_nanmean(pca["mean"][:, 0, pca["sizes"].index(n)]) for n in small]
+        r = [_nanmean(rhf["mean"][:, 0, rhf["sizes"].index(n)]) for n in small]
+        diff = _nanmean(np.subtract(r, p)) if small else float("nan")
+        numbers = (f"NB accuracy at n = {', '.join(map(str, small))}: PCA {', '.join(_fmt(v) for v in p)}; "
+                   f"RHF {', '.join(_fmt(v) for v in r)}; mean difference RHF - PCA {diff:+.3f}")
+        add("rhf_faster", "RHF learns faster than PCA at small n", "Fig. 7: RHF above PCA for the first samples",
+            rule, numbers, {"sizes": small, "pca": p, "rhf": r, "difference": diff}, _decide(diff > 0, diff))
+    else:
+        add("rhf_faster", "RHF learns faster than PCA at small n", "Fig. 7: RHF above PCA for the first samples",
+            rule, "needs both the PCA and the RHF sweep", {}, None)
+    a = pca if pca is not None else next(iter(an.values()))
+    space = "PCA" if pca is not None else next(iter(an)).upper()
+    db1, cbn, dbn = _row(a, "DB1 best"), _row(a, "CBn"), _row(a, "DBn")
+    p2 = dict(zip(("avg", "min", "max"), PAPER_TABLE2["DB1 best"])), dict(zip(("avg", "min", "max"), PAPER_TABLE2["CBn"]))
+    # 2. DB1 best and CBn well above 1
+    add("bootstrapping_helps", "DB1 best and CBn are well above 1",
+        f"Table II: DB1 best {p2[0]['avg']:.3f}, CBn {p2[1]['avg']:.3f}",
+        f"Table II ({space}) average of both rows >= {rules.well_above}",
+        f"{space} Table II average: DB1 best {_fmt(db1)}, CBn {_fmt(cbn)}",
+        {"db1_best": db1, "cbn": cbn}, _decide(db1 >= rules.well_above and cbn >= rules.well_above, db1, cbn))
+    # 3. DBn below DB1 best
+    add("dbn_below_db1", "DBn is below DB1 best", f"Table II: DBn {PAPER_TABLE2['DBn'][0]:.3f} < DB1 best {p2[0]['avg']:.3f}",
+        f"Table II ({space}) average of DBn < that of DB1 best",
+        f"{space} Table II average: DBn {_fmt(dbn)}, DB1 best {_fmt(db1)}",
+        {"dbn": dbn, "db1_best": db1}, _decide(dbn < db1, dbn, db1))
+    # 4. pruning at T = 0.5 costs little (threshold study, Fig. 12)
+    th = a["thresholds"]
+    ts = [float(t) for t in th["T"]]
+    t_lo, t_hi = min(ts), (0.5 if 0.5 in ts else max(ts))
+    avg_t = {t: _avg(c, a["sizes"], cfg) for t, c in zip(ts, th["best_curve"])}
+    cnt = dict(zip(ts, th["count"]))
+    lo, hi = avg_t[t_lo], avg_t[t_hi]
+    k = len(a["actions"]) * (len(a["actions"]) - 1) // 2
+    add("pruning_cheap", f"pruning categories at T = {t_hi:g} costs little",
+        "Fig. 12: the best category above T = 0.5 is about as good as the best of all categories",
+        f"average bf of the best category built at T = {t_hi:g} >= {rules.close} x that at T = {t_lo:g}",
+        f"best category's average bf (mean over affordances): T = {t_lo:g} {_fmt(lo)} ({cnt[t_lo]} of {k} categories built), "
+        f"T = {t_hi:g} {_fmt(hi)} ({cnt[t_hi]} built); ratio {_fmt(hi / lo if np.isfinite(lo) and lo else float('nan'), 2)}",
+        {"T": [t_lo, t_hi], "avg_bf": [lo, hi], "built": [int(cnt[t_lo]), int(cnt[t_hi])]},
+        _decide(hi >= rules.close * lo, lo, hi))
+    # 5. best after ten close to best
+    pairs = {fam: (_row(a, f"{fam} best after ten"), _row(a, f"{fam} best")) for fam in ("DB1", "CB1")}
+    ratio = {fam: (t / b if np.isfinite(b) and b else float("nan")) for fam, (t, b) in pairs.items()}
+    add("best_after_ten", "choosing the source after ten samples is close to the best choice",
+        "Table II: best after ten 2.751 vs best 2.819 (DB1), 2.802 vs 2.889 (CB1)",
+        f"Table II ({space}) average of 'best after ten' >= {rules.close} x 'best', for DB1 and CB1",
+        "; ".join(f"{fam}: after ten {_fmt(t)} vs best {_fmt(b)} (ratio {_fmt(ratio[fam], 2)})" for fam, (t, b) in pairs.items()),
+        {fam: {"after_ten": t, "best": b, "ratio": ratio[fam]} for fam, (t, b) in pairs.items()},
+        _decide(all(r >= rules.close for r in ratio.values()), *ratio.values()))
+    return out
+
+
+def correlation_clusters(corr: np.ndarray, actions, threshold: float) -> list[list[str]]:
+    """Groups of affordances linked by a chain of predictor correlations above ``threshold``
+    (connected components; the categories the heuristic builds at that threshold), largest
+    first; singletons included."""
+    corr = np.asarray(corr, dtype=float)
+    n = len(actions)
+    parent = list(range(n))
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i in range(n):
+        for j in range(i + 1, n):
+            if corr[i, j] > threshold:
+                parent[root(i)] = root(j)
+    groups: dict[int, list[str]] = {}
+    for i in range(n):
+        groups.setdefault(root(i), []).append(str(actions[i]))
+    return sorted(groups.values(), key=lambda g: (-len(g), [list(actions).index(x) for x in g]))
+
+
+# -------------------------------------------------------------------------- documents
+
+
+def _inline_html(text: str) -> str:
+    s = _html.escape(text, quote=False)
+    s = re.sub(r"`([^`]+)`", r"<code>\1</code>", s)
+    return re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", s)
+
+
+def render_markdown(blocks: list[tuple]) -> str:
+    """Markdown of a block list: ``("h", level, text)``, ``("p", text)``, ``("ul", [items])``,
+    ``("table", header, rows)``, ``("img", relative_path, caption)``."""
+    lines: list[str] = []
+    for b in blocks:
+        kind = b[0]
+        if kind == "h":
+            lines += ["#" * b[1] + " " + b[2], ""]
+        elif kind == "p":
+            lines += [b[1], ""]
+        elif kind == "ul":
+            lines += [f"- {x}" for x in b[1]] + [""]
+        elif kind == "table":
+            header, rows = b[1], b[2]
+            lines.append("| " + " | ".join(header) + " |")
+            lines.append("|" + "---|" * len(header))
+            lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+            lines.append("")
+        elif kind == "img":
+            lines += [f"![{b[2]}]({b[1]})", "", f"*{b[2]}*", ""]
+        else:
+            raise ValueError(f"unknown block kind {kind!r}")
+    return "\n".join(lines)
+
+
+_CSS = """body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1100px;margin:2em auto;
+padding:0 1em;color:#222;line-height:1.45}table{border-collapse:collapse;margin:0.6em 0 1.2em;font-size:0.9em}
+th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td:first-child,th:first-child
+{text-align:left}img{max-width:100%;border:1px solid #eee}figure{margin:1em 0}figcaption{font-size:0.85em;color:#555}
+code{background:#f4f4f4;padding:0 3px}h1,h2,h3{border-bottom:1px solid #eee;padding-bottom:0.2em}"""
+
+
+def render_html(blocks: list[tuple], base: Path, title: str) -> str:
+    """One self-contained HTML page of a block list; images under ``base`` are embedded."""
+    body: list[str] = []
+    for b in blocks:
+        kind = b[0]
+        if kind == "h":
+            body.append(f"<h{b[1]}>{_inline_html(b[2])}</h{b[1]}>")
+        elif kind == "p":
+            body.append(f"<p>{_inline_html(b[1])}</p>")
+        elif kind == "ul":
+            body.append("<ul>" + "".join(f"<li>{_inline_html(x)}</li>" for x in b[1]) + "</ul>")
+        elif kind == "table":
+            head = "".join(f"<th>{_inline_html(str(c))}</th>" for c in b[1])
+            rows = "".join("<tr>" + "".join(f"<td>{_inline_html(str(c))}</td>" for c in r) + "</tr>" for r in b[2])
+            body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
+        elif kind == "img":
+            data = base64.b64encode((base / b[1]).read_bytes()).decode("ascii")
+            body.append(f'<figure><img alt="{_html.escape(b[2])}" src="data:image/png;base64,{data}">'
+                        f"<figcaption>{_inline_html(b[2])}</figcaption></figure>")
+        else:
+            raise ValueError(f"unknown block kind {kind!r}")
+    return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>{_html.escape(title)}</title>"
+            f"<style>{_CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n")
+
+
+# ----------------------------------------------------------------------- dataset parts
+
+
+def _rate(r) -> str:
+    return "-" if r is None else f"{100 * r:.0f} %"
+
+
+def dataset_blocks(infos: Mapping[str, Mapping[str, Any]], fig: str | None) -> list[tuple]:
+    """Dataset statistics per action from ``dataset.info`` dicts."""
+    from relaff_jax.dataset import RELATIONS
+
+    blocks: list[tuple] = [("h", 2, "Datasets"), (
+        "p", "Per action: the balanced selection (half positive; negatives matched to the positives' distribution of the "
+        "distance between the objects' centres of gravity) and every rollout simulated to find it. Positive rates by "
+        "the settled spatial relation, over all rollouts (what the action does in each relation) and, with counts, "
+        "over the selected samples.")]
+    header = ["action", "samples", "rollouts", "rollout pos. rate"] + [f"rollouts {r}" for r in RELATIONS] \
+        + [f"selected {r} (n)" for r in RELATIONS] + ["borrowed", "unseen"]
+    rows = []
+    for action, d in infos.items():
+        sel = [f"{_rate(d['positive_rate_by_relation'][r])} ({d['count_by_relation'][r]['n']})" for r in RELATIONS]
+        feats = d.get("features") or {}
+        rows.append([action, d["n"], d["rollouts"], _rate(d["rollouts_positive_rate"])]
+                    + [_rate(d["rollouts_positive_rate_by_relation"][r]) for r in RELATIONS] + sel
+                    + [d.get("borrowed"), feats.get("unseen_samples", "-")])
+    blocks.append(("table", header, rows))
+    if fig:
+        blocks.append(("img", fig, "Positive rate of every rollout by spatial relation, per action"))
+    return blocks
+
+
+def dataset_figure(infos: Mapping[str, Mapping[str, Any]], out: Path) -> Path:
+    from relaff_jax.dataset import RELATIONS
+
+    plt = _plt()
+    acts = list(infos)
+    fig, ax = plt.subplots(figsize=(10, 3.8))
+    width = 0.8 / len(RELATIONS)
+    for k, r in enumerate(RELATIONS):
+        vals = [infos[a]["rollouts_positive_rate_by_relation"][r] for a in acts]
+        ax.bar(np.arange(len(acts)) + (k - 1) * width, [np.nan if v is None else v for v in vals], width, label=r)
+    ax.set_xticks(np.arange(len(acts)), acts)
+    ax.set(ylabel="positive rate (all rollouts)", ylim=(0, 1), title="What each action does in each spatial relation")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    rio.atomic_write_bytes(out, buf.getvalue())
+    return out
+
+
+def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_action: int) -> list[tuple[str, str, str]]:
+    """Draw ``per_action`` example scenes per action (positives and negatives alternating, in
+    rollout order) with ``features.show_scene``; returns ``(action, file name, caption)``.
+    Datasets without the scene fields (``pair``, ``qpos_settled``) get none."""
+    from relaff_jax.dataset import load_dataset
+
+    if per_action < 1:
+        return []
+    import jax
+
+    from relaff_jax import features as F
+    from relaff_jax import world as wd
+
+    world = None
+    shown: list[tuple[str, str, str]] = []
+    for action, d in data_dirs.items():
+        ds = load_dataset(d, features=False)
+        if not {"pair", "qpos_settled"} <= set(ds):
+            continue
+        world = world or wd.build_world()
+        label = np.asarray(ds["label"], bool)
+        pos, neg = list(np.flatnonzero(label)), list(np.flatnonzero(~label))
+        order = [x for pair in zip(pos, neg) for x in pair] + pos[len(neg):] + neg[len(pos):]
+        for i in order[:per_action]:
+            rid = int(ds["rollout_id"][i]) if "rollout_id" in ds else int(ds["rollout"][i])
+            caption = (f"{action}: {ds['toy'][i]} + {ds['other'][i]}, {ds['relation'][i]}, "
+                       f"{'positive' if label[i] else 'negative'} (sample {i})")
+            name = f"{action}_{i:05d}.png"
+            F.show_scene(world, int(ds["pair"][i]), np.asarray(ds["qpos_settled"][i]), out / name,
+                         jax.random.PRNGKey(rid % 2**31), title=caption)
+            shown.append((action, f"{out.name}/{name}", caption))
+    return shown
+
+
+# ---------------------------------------------------------------------------- the report
+
+
+def _fig_block(out: Path, name: str, caption: str) -> list[tuple]:
+    return [("img", name, caption)] if (out / name).exists() else []
+
+
+def write_full_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
+                      data_dirs: Mapping[str, str | os.PathLike] | None = None,
+                      run_info: Mapping[str, Any] | None = None, examples_per_action: int = 2,
+                      rules: FindingRules = FindingRules()) -> Path:
+    """Write ``report.md``, a self-contained ``report.html`` and ``findings.json`` (plus every
+    file of ``write_report``) for an experiment folder and, optionally, its dataset folders
+    ``{action: DIR}`` (statistics, example scenes) and a run log (``run_info``: preset, seed,
+    timings). Returns ``out_dir``."""
+    out = Path(out_dir)
+    write_report(results_dir, out)
+    res = load_results(results_dir)
+    cfg = res["config"]
+    spaces = list(res["meta"]["spaces"])
+    an = {s: analyse(res[s], cfg) for s in spaces}
+    main = "pca" if "pca" in an else spaces[0]
+    a = an[main]
+    found = findings(an, cfg, rules)
+    blocks: list[tuple] = [("h", 1, "Bootstrapping relational affordances: reproduction report")]
+    intro = (f"Generated {time.strftime('%Y-%m-%d %H:%M')} from `{Path(results_dir)}`: actions {', '.join(res['meta']['actions'])}; "
+             f"spaces {', '.join(s.upper() for s in spaces)}; seed {res['meta']['seed']}; training sizes "
+             f"{', '.join(map(str, cfg.sizes)) if len(cfg.sizes) <= 12 else f'{min(cfg.sizes)}..{max(cfg.sizes)}'}; "
+             f"repetitions PCA {cfg.reps_pca}, RHF {cfg.reps_rhf}.")
+    if run_info:
+        intro += f" Preset `{run_info.get('preset')}`."
+    blocks += [("p", intro)]
+    if data_dirs is None and "data" in res["meta"] and any(str(d).startswith("synthetic") for d in res["meta"]["data"]):
+        blocks.append(("p", "**These results come from synthetic features** (`relaff experiment --synthetic`): they test "
+                            "the pipeline and say nothing about the paper."))
+
+    # summary of findings
+    blocks += [("h", 2, "Which of the paper's findings this run reproduces"),
+               ("table", ["finding", "paper", "this run", "verdict"],
+                [[f["finding"], f["paper"], f["numbers"], f"**{_verdict(f['reproduced'])}**"] for f in found]),
+               ("p", "Rules: " + "; ".join(f"{f['finding']}: {f['rule']}" for f in found) + ".")]
+    n_ok = sum(f["reproduced"] is True for f in found)
+    blocks.append(("p", f"{n_ok} of {len(found)} findings reproduced, "
+                        f"{sum(f['reproduced'] is False for f in found)} not, {sum(f['reproduced'] is None for f in found)} not measurable."))
+
+    # datasets and example scenes
+    infos = {}
+    if data_dirs:
+        from relaff_jax.dataset import info
+
+        infos = {act: info(d) for act, d in data_dirs.items()}
+        dataset_figure(infos, out / "fig_datasets.png")
+        blocks += dataset_blocks(infos, "fig_datasets.png")
+        ex = example_scenes(data_dirs, out / "examples", examples_per_action)
+        if ex:
+            blocks += [("h", 2, "Example scenes"),
+                       ("p", "What the robot saw (`features.show_scene`): the simulated Kinect depth image, its "
+                             "colour segmentation into the toy and the other object, and the two objects' voxel clouds "
+                             "with their PCA frames.")]
+            blocks += [("img", path, cap) for _, path, cap in ex]
+
+    # learning curves
+    blocks += [("h", 2, "Learning curves")]
+    blocks += _fig_block(out, "fig06_nb_learning.png", f"Non-bootstrapped learning curves ({main.upper()}), paper Fig. 6")
+    blocks += _fig_block(out, "fig07_nb_spaces.png", "NB per affordance in PCA and RHF, paper Fig. 7")
+    blocks += _fig_block(out, "fig08_db1_best.png", "NB and the best DB1 learner per affordance, paper Fig. 8")
+    blocks += _fig_block(out, "fig09_db1_best_bf.png", "Bootstrap factor of the best DB1 learner (average over the shaded n), paper Fig. 9")
+
+    # Table II
+    for space in spaces:
+        x = an[space]
+        paper = space == "pca"
+        header = ["method", "avg", "min", "max"] + (["paper avg", "paper min", "paper max"] if paper else [])
+        rows = [[name] + [_fmt(v) for v in row] + ([_fmt(v) for v in PAPER_TABLE2[name]] if paper else [])
+                for name, row in zip(TABLE2_ROWS, x["table2"])]
+        blocks += [("h", 2, f"Table II ({space.upper()})"),
+                   ("p", f"Average bootstrap factor over n = {cfg.bf_sizes[0]}..{cfg.bf_sizes[1]}, avg / min / max over the "
+                         f"{len(x['actions'])} affordances" + (", beside the paper's Table II." if paper else
+                                                               " (the paper has no RHF table).")),
+                   ("table", header, rows)]
+        rows = [[name] + [_fmt(v, 2) for v in r] for name, r in zip(TABLE2_ROWS, x["table2_per_target"])
+                if np.any(np.isfinite(r))]
+        blocks += [("p", "Per affordance (paper Fig. 10 as numbers):"),
+                   ("table", ["method"] + list(x["actions"]), rows)]
+    blocks += _fig_block(out, "fig10_average_bf.png", "Average bootstrap factor per method and affordance, paper Fig. 10")
+
+    # best after ten
+    conds = a["conditions"]
+    lay = layout(len(a["actions"]), len(cfg.thresholds))
+    rows = []
+    for fam in ("db1", "cb1"):
+        if np.all(np.isnan(a["mean"][:, lay[fam.upper()]])):
+            continue
+        for ti, t in enumerate(a["actions"]):
+            b, k = a[f"best_{fam}"][ti], a[f"ten_{fam}"][ti]
+            rows.append([fam.upper(), t, conds[b].split(":")[1], _fmt(a["avg_bf"][ti, b]), conds[k].split(":")[1],
+                         _fmt(a["avg_bf"][ti, k]), "yes" if b == k else "no"])
+    if rows:
+        blocks += [("h", 2, "Best after ten"),
+                   ("p", f"'Best' is the source with the highest mean accuracy over n = {cfg.best_sizes[0]}..{cfg.best_sizes[1]}; "
+                         f"'after ten' is the one an agent would keep after {cfg.select_size} samples ({main.upper()})."),
+                   ("table", ["family", "target", "best source", "avg bf", "after-ten source", "avg bf", "same"], rows)]
+
+    # correlation and clusters
+    blocks += [("h", 2, "Correlation of the predictors and its clusters")]
+    for space in spaces:
+        corr = res[space]["corr"]
+        acts = an[space]["actions"]
+        cl = correlation_clusters(corr, acts, cfg.cbn_threshold)
+        groups = [g for g in cl if len(g) > 1]
+        blocks.append(("p", f"{space.upper()}: affordances linked by correlations above T = {cfg.cbn_threshold:g}: "
+                            + ("; ".join("{" + ", ".join(g) + "}" for g in groups) if groups else "none")
+                            + (f"; alone: {', '.join(g[0] for g in cl if len(g) == 1)}" if any(len(g) == 1 for g in cl) else "") + "."))
+        blocks.append(("table", [""] + [SHORT.get(x, x) for x in acts],
+                       [[SHORT.get(x, x)] + [f"{v:+.2f}" for v in corr[i]] for i, x in enumerate(acts)]))
+    blocks += _fig_block(out, "fig11_correlation.png", "Correlation of the source predictors' outputs, paper Fig. 11")
+
+    # threshold study
+    th = a["thresholds"]
+    if np.any(np.isfinite(th["overall_curve"])):
+        k = len(a["actions"]) * (len(a["actions"]) - 1) // 2
+        counts = categories_per_threshold(res[main]["corr"], cfg.thresholds)
+        rows = [[f"{t:g}", counts[f"{t:g}"]["built"], _fmt(_avg(c, a["sizes"], cfg)),
+                 _fmt(_nanmean(a["avg_bf"][:, lay["CBn"][i]]))]
+                for i, (t, c) in enumerate(zip(th["T"], th["best_curve"]))]
+        rows.append(["all categories (overall average)", k, _fmt(_avg(th["overall_curve"], a["sizes"], cfg)), "-"])
+        blocks += [("h", 2, "Threshold study"),
+                   ("p", f"Categories built at each correlation threshold T and the average bf ({main.upper()}, mean over "
+                         "affordances) of each affordance's best category among them, and of CBn (all of them together)."),
+                   ("table", ["T", f"categories built (of {k})", "best category avg bf", "CBn avg bf"], rows)]
+        blocks += _fig_block(out, "fig12_thresholds.png", "Best category above each threshold, paper Fig. 12")
+
+    # the run
+    if run_info:
+        blocks += [("h", 2, "The run")]
+        items = [f"preset `{run_info.get('preset')}`, seed {run_info.get('seed')}"]
+        for st, t in (run_info.get("timings") or {}).items():
+            items.append(f"{st}: {t:.0f} s" if isinstance(t, (int, float)) else f"{st}: {t}")
+        v = run_info.get("versions") or {}
+        if v:
+            items.append("versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val))
+        blocks.append(("ul", items))
+
+    rio.atomic_write_json(out / "findings.json", _finite({"findings": found, "rules": dataclasses.asdict(rules)}))
+    rio.atomic_write_text(out / "report.md", render_markdown(blocks))
+    rio.atomic_write_text(out / "report.html", render_html(blocks, out, "relaff_jax reproduction report"))
+    return out

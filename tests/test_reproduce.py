@@ -1,0 +1,303 @@
+"""`relaff reproduce`: stages, skip logic, --force, resume after an interruption, bad input.
+
+The simulation and the perception are replaced by numpy stand-ins (rollouts and features drawn
+from the rollout key / index), so these tests run the real dataset, experiment and report
+stages in seconds; they check the driver, not any result. The end-to-end run with the arm's
+actions is tests/test_reproduce_e2e.py.
+"""
+import argparse
+import io
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+
+from relaff_jax import dataset as D
+from relaff_jax import experiment as E
+from relaff_jax import reproduce as R
+
+# the tiny preset, smaller still: three actions, 4-tree forests, two sizes, no example scenes
+# (the stand-in rollouts have no scene to draw)
+ACTS = ("lift", "take", "pour")
+FAST = {"actions": ACTS, "experiment.forest.base_trees": 4, "experiment.forest.max_trees": 4,
+        "experiment.sizes": (4, 10), "examples_per_action": 0}
+FEATURE_CONFIG = {"kind": "numpy stand-in"}
+
+
+def rollout_factory(action, batch, stop_after=None):
+    calls = [0]
+
+    def fn(key, b):
+        calls[0] += 1
+        if stop_after is not None and calls[0] > stop_after:
+            raise KeyboardInterrupt  # what Ctrl-C does mid-stage
+        rng = np.random.default_rng(np.asarray(key).tolist() + [D.ACTIONS.index(action)])
+        rel = rng.integers(0, 3, b)
+        dist = np.where(rel == 0, rng.uniform(0.1, 1.2, b), rng.uniform(0.03, 0.2, b))
+        return {"label": rng.random(b) < np.where(rel == 0, 0.25, 0.75),
+                "relation": rel.astype(np.int32), "cog_distance": dist.astype(np.float32),
+                "toy": np.asarray(("ball", "cube"))[rng.integers(0, 2, b)],
+                "other": np.asarray(("plate", "cup"))[rng.integers(0, 2, b)]}
+
+    return fn, {"stand_in": action}, None
+
+
+def feature_factory(seed):
+    def compute(s):
+        rng = np.random.default_rng([seed, int(s["rollout"][0])])
+        n = len(s["label"])
+        pca = rng.normal(size=(n, 18)).astype(np.float32)
+        pca[:, 9] = s["cog_distance"] + 0.3 * s["label"]  # something learnable
+        return {"pca": pca, "rhf": rng.random((n, 300)).astype(np.float32), "unseen": np.zeros((n, 2), bool)}
+
+    return compute, dict(FEATURE_CONFIG, seed=seed)
+
+
+HOOKS = dict(rollout_factory=rollout_factory, feature_factory=feature_factory,
+             feature_config_fn=lambda seed: dict(FEATURE_CONFIG, seed=seed))
+
+
+def run(out, seed=3, **kw):
+    args = dict(HOOKS, overrides=FAST, jobs=1, progress=False)
+    args.update(kw)
+    return R.reproduce(out, "tiny", seed, **args)
+
+
+def statuses(log):
+    return {s: v["status"] for s, v in log["runs"][-1]["stages"].items()}
+
+
+def results_of(out):
+    res = E.load_results(out / "results")
+    return {s: res[s]["acc"] for s in res["meta"]["spaces"]}
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory):
+    """One uninterrupted run through the CLI (factories patched in), then a second one."""
+    out = tmp_path_factory.mktemp("run") / "quick"
+    mp = pytest.MonkeyPatch()
+    mp.setattr(R, "default_rollout_factory", rollout_factory)
+    mp.setattr(R, "default_feature_factory", feature_factory)
+    mp.setattr(R, "feature_config", HOOKS["feature_config_fn"])
+    parser = argparse.ArgumentParser()
+    R.register_cli(parser.add_subparsers(dest="command"))
+    sets = [x for k, v in FAST.items() for x in ("--set", f"{k}={json.dumps(v)}")]
+    argv = ["reproduce", "--preset", "tiny", "--out", str(out), "--seed", "3", "--jobs", "1", "--no-progress"] + sets
+    args = parser.parse_args(argv)
+    buf = io.StringIO()
+    mp.setattr(sys, "stdout", buf)
+    assert args.func(args) == 0
+    first = json.loads((out / R.RUN_LOG).read_text())
+    second = run(out)
+    mp.undo()
+    return out, first, second, buf.getvalue()
+
+
+def test_run_writes_every_expected_file(base):
+    out, log, _, printed = base
+    assert sorted(p.name for p in (out / "data").iterdir()) == sorted(ACTS)
+    for a in ACTS:
+        d = D.load_dataset(out / "data" / a)
+        assert len(d["label"]) == 40 and d["label"].sum() == 20 and d["pca"].shape == (40, 18)
+    res = E.load_results(out / "results")
+    assert res["meta"]["actions"] == list(ACTS) and res["meta"]["spaces"] == ["pca", "rhf"]
+    assert res["pca"]["acc"].shape == (3, E.layout(3, 3)["n"], 2, 2)
+    rep = out / "report"
+    for f in ("report.md", "report.html", "findings.json", "summary.json", "table2.csv", "table2_rhf.csv",
+              "fig_datasets.png", "fig06_nb_learning.png", "fig11_correlation.png", R.REPORT_STAMP):
+        assert (rep / f).stat().st_size > 0, f
+    assert statuses(log) == dict.fromkeys(R.STAGES, "ran")
+    assert all(line.split()[0] in R.STAGES + ("total",) for line in printed.strip().splitlines())
+
+
+def test_run_log(base):
+    out, log, _, _ = base
+    assert log["format"] == R.FORMAT and log["preset"] == "tiny" and log["seed"] == 3
+    assert log["config"]["n_samples"] == 40 and log["config"]["experiment"]["forest"]["max_trees"] == 4
+    assert R.config_from_dict(log["config"]) == R.override(R.preset("tiny"), FAST)
+    assert log["versions"]["numpy"] == np.__version__ and log["versions"]["jax"]
+    assert log["seeds"] == R.seeds(3)
+    assert len(set(log["seeds"]["datasets"].values())) == 9  # every action its own stream
+    for a in ACTS:
+        s = log["seeds"]["datasets"][a]
+        assert json.loads((out / "data" / a / D.SIDECAR).read_text())["seed"] == s
+    assert set(log["timings"]) == set(R.STAGES) and all(t > 0 for t in log["timings"].values())
+    run0 = log["runs"][0]
+    assert run0["status"] == "complete" and run0["argv"][:6] == ["relaff", "reproduce", "--preset", "tiny", "--out", str(out)] and run0["jobs"] == 1
+    assert run0["stages"]["generate"]["actions"]["lift"]["rollouts"] >= 40
+
+
+def test_second_run_skips_every_stage(base):
+    out, first, second, _ = base
+    assert statuses(second) == dict.fromkeys(R.STAGES, "skipped")
+    assert len(second["runs"]) == 2 and second["timings"] == first["timings"]
+    assert all(v["status"] == "skipped" for v in second["runs"][1]["stages"]["generate"]["actions"].values())
+
+
+def test_forced_stage_with_identical_output_keeps_the_later_ones(base):
+    out, *_ = base
+    acc = results_of(out)
+    log = run(out, force=("features",))
+    # the features are recomputed, bit for bit the same: experiment and report see the same inputs
+    assert statuses(log) == {"generate": "skipped", "features": "ran", "experiment": "skipped", "report": "skipped"}
+    assert log["runs"][-1]["force"] == ["features"]
+    for s, a in results_of(out).items():
+        np.testing.assert_array_equal(a, acc[s])
+
+
+KILL_SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, {tests!r})
+    import test_reproduce as T
+    T.run(sys.argv[1])
+""")
+
+
+def test_interrupted_and_killed_run_continues_to_the_same_results(base, tmp_path):
+    """Ctrl-C in the generate stage, then SIGKILL while the experiment writes its blocks:
+    the third attempt finishes with the results of the uninterrupted run."""
+    out0, *_ = base
+    out = tmp_path / "run"
+    mid = lambda a, b: rollout_factory(a, b, stop_after=1 if a == "take" else None)
+    with pytest.raises(KeyboardInterrupt):
+        run(out, rollout_factory=mid)
+    log = json.loads((out / R.RUN_LOG).read_text())
+    assert log["runs"][0]["status"] == "interrupted (in generate)"
+    assert D.load_dataset(out / "data" / "lift") and not (out / "data" / "take" / D.SELECTION).exists()
+
+    script = tmp_path / "go.py"
+    script.write_text(KILL_SCRIPT.format(tests=os.path.dirname(__file__)))
+    proc = subprocess.Popen([sys.executable, str(script), str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    blocks = out / "results" / "pca" / "blocks"
+    t0 = time.time()
+    while proc.poll() is None and time.time() - t0 < 240:
+        if blocks.is_dir() and len(list(blocks.glob("*.npz"))) >= 1:
+            proc.send_signal(signal.SIGKILL)
+            break
+        time.sleep(0.02)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL, "the run finished before it could be killed"
+    assert not E.is_complete(out / "results")
+    log = json.loads((out / R.RUN_LOG).read_text())
+    gen = log["runs"][1]["stages"]["generate"]["actions"]
+    assert gen["lift"]["status"] == "skipped" and gen["take"]["status"] == "ran"
+    assert log["runs"][1]["status"] == "running"  # a SIGKILL leaves no chance to write more
+
+    log = run(out)
+    assert statuses(log) == {"generate": "skipped", "features": "skipped", "experiment": "ran", "report": "ran"}
+    for a in ACTS:
+        np.testing.assert_array_equal(D.load_dataset(out / "data" / a)["pca"], D.load_dataset(out0 / "data" / a)["pca"])
+    for s, a in results_of(out).items():
+        np.testing.assert_array_equal(a, results_of(out0)[s])
+    assert json.loads((out / "report" / "findings.json").read_text()) == \
+        json.loads((out0 / "report" / "findings.json").read_text())
+
+
+def test_stale_results_are_recomputed(base, tmp_path):
+    """Results whose data fingerprint does not match the datasets are not 'complete'."""
+    out0, *_ = base
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    meta_path = out / "results" / "experiment.json"
+    meta = json.loads(meta_path.read_text())
+    meta["fingerprint"]["pca"]["lift"] = "0" * 64  # as if lift's data had changed
+    meta_path.write_text(json.dumps(meta))
+    log = run(out)
+    assert statuses(log) == {"generate": "skipped", "features": "skipped", "experiment": "ran", "report": "ran"}
+    assert log["runs"][-1]["stages"]["experiment"]["was"] == "stale"
+    for s, a in results_of(out).items():
+        np.testing.assert_array_equal(a, results_of(out0)[s])
+
+
+# ---------------------------------------------------------------------------- bad input
+
+
+def test_bad_input(tmp_path):
+    with pytest.raises(R.ReproduceError, match="unknown preset"):
+        R.reproduce(tmp_path / "a", "fast")
+    with pytest.raises(R.ReproduceError, match="--force takes a stage"):
+        run(tmp_path / "a", force=("learn",))
+    with pytest.raises(R.ReproduceError, match="jobs"):
+        run(tmp_path / "a", jobs=-1)
+    with pytest.raises(R.ReproduceError, match="seed"):
+        run(tmp_path / "a", seed=-1)
+    with pytest.raises(R.ReproduceError, match="unknown config key 'n_sample'"):
+        run(tmp_path / "a", overrides={"n_sample": 10})
+    # the experiment's pools must fit: fail before simulating anything
+    with pytest.raises(R.ReproduceError, match="cannot run on 20 samples"):
+        run(tmp_path / "a", overrides=dict(FAST, n_samples=20))
+    with pytest.raises(R.ReproduceError, match="canonical order"):
+        run(tmp_path / "a", overrides=dict(FAST, actions=("take", "lift")))
+    with pytest.raises(R.ReproduceError, match="at least two"):
+        run(tmp_path / "a", overrides=dict(FAST, actions=("lift",)))
+    with pytest.raises(R.ReproduceError, match="rollout_batch"):
+        run(tmp_path / "a", overrides=dict(FAST, rollout_batch=0))
+    assert not (tmp_path / "a").exists()
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "notes.txt").write_text("mine")
+    with pytest.raises(R.ReproduceError, match="not a relaff reproduce folder"):
+        run(foreign)
+    with pytest.raises(R.ReproduceError, match="needs feature_config_fn"):
+        R.reproduce(tmp_path / "b", "tiny", feature_factory=feature_factory)
+
+
+def test_other_seed_or_preset_in_the_same_folder_is_refused(base):
+    out, *_ = base
+    with pytest.raises(R.ReproduceError, match="another seed"):
+        run(out, seed=4)
+    with pytest.raises(R.ReproduceError, match="another config"):
+        run(out, overrides=dict(FAST, n_samples=48))
+
+
+def test_missing_actions_module_is_a_clear_error(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "relaff_jax.actions", None)  # as if the module did not exist
+    parser = argparse.ArgumentParser()
+    R.register_cli(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["reproduce", "--preset", "tiny", "--out", str(tmp_path / "r"), "--no-progress"]
+                             + [x for k, v in FAST.items() for x in ("--set", f"{k}={json.dumps(v)}")])
+    with pytest.raises(R.ReproduceError, match="needs relaff_jax.actions"):
+        args.func(args)
+    log = json.loads((tmp_path / "r" / R.RUN_LOG).read_text())
+    assert log["runs"][0]["status"].startswith("failed: ReproduceError") and "(in generate)" in log["runs"][0]["status"]
+
+
+def test_presets():
+    tiny, quick, paper = (R.preset(p) for p in R.PRESETS)
+    for p in (tiny, quick, paper):
+        R.check_config(p, 0)
+    assert paper.n_samples == 10_000 and paper.experiment == E.preset("paper")
+    assert (paper.experiment.reps_pca, paper.experiment.reps_rhf) == (50, 25)
+    assert tiny.experiment.reps_pca == 2 and 2 <= len(tiny.experiment.sizes) <= 3 and tiny.n_samples < 100
+    assert quick.experiment.conditions_pca == E.FAMILIES  # every bootstrapping condition
+    assert quick.spaces == ("pca", "rhf")
+
+
+# ----------------------------------------------------------------------------- progress
+
+
+def test_progress_line_and_eta():
+    buf = io.StringIO()
+    p = R.Progress({"generate": 100.0, "features": 50.0, "experiment": 30.0, "report": 20.0}, stream=buf, every=1e9)
+    p.begin("features", lambda: 0.25)
+    p.stage_t0 -= 20.0  # 20 s into the stage
+    p.set("pull (3/9)")
+    p.tick()
+    # 25 % done after 20 s: 60 s left in the stage, plus 30 + 20 s for the stages after it
+    assert p.eta() == pytest.approx(110.0, abs=0.5)
+    line = buf.getvalue().strip()
+    assert line.startswith("reproduce [2/4 features] pull (3/9)  25% |") and line.endswith("ETA 1:50")
+    p.tick()  # nothing changed: no new line (not a terminal)
+    assert buf.getvalue().count("\n") == 1
+    p.begin("report", None)
+    assert p.eta() == pytest.approx(20.0, abs=0.5)  # no progress yet: the cost model
+    p.message("report: done")
+    assert buf.getvalue().endswith("report: done\n")
