@@ -617,7 +617,7 @@ def write_full_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike
     if run_info:
         intro += f" Preset `{run_info.get('preset')}`."
     blocks += [("p", intro)]
-    if data_dirs is None and "data" in res["meta"] and any(str(d).startswith("synthetic") for d in res["meta"]["data"]):
+    if any(str(d).startswith("synthetic") for d in res["meta"].get("data", [])):
         blocks.append(("p", "**These results come from synthetic features** (`relaff experiment --synthetic`): they test "
                             "the pipeline and say nothing about the paper."))
 

@@ -1,0 +1,61 @@
+"""The notebooks run top to bottom (nbclient) on a small run folder, so they cannot rot.
+
+The folder is test_reproduce_report's ``scene_run``: real settled scenes with features under
+data/, and results/ from `relaff experiment --synthetic`.
+"""
+from pathlib import Path
+
+import pytest
+
+nbformat = pytest.importorskip("nbformat")
+nbclient = pytest.importorskip("nbclient")
+
+from test_reproduce_report import scene_run  # noqa: E402,F401  (session fixture, built once)
+
+NOTEBOOKS = Path(__file__).resolve().parent.parent / "notebooks"
+
+
+def execute(name: str, run_dir: Path, monkeypatch) -> nbformat.NotebookNode:
+    monkeypatch.setenv("RELAFF_RUN", str(run_dir))
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    nbclient.NotebookClient(nb, timeout=600, kernel_name="python3",
+                            resources={"metadata": {"path": str(NOTEBOOKS)}}).execute()
+    return nb
+
+
+def outputs(nb) -> str:
+    text = []
+    for cell in nb.cells:
+        for o in cell.get("outputs", []):
+            text.append(o.get("text", ""))
+            if o.get("output_type") == "error":
+                text.append("\n".join(o.get("traceback", [])))
+    return "\n".join(text)
+
+
+def images(nb) -> int:
+    return sum("image/png" in o.get("data", {}) for c in nb.cells for o in c.get("outputs", []))
+
+
+def test_notebooks_use_only_the_public_api():
+    for path in sorted(NOTEBOOKS.glob("*.ipynb")):
+        nb = nbformat.read(path, as_version=4)
+        src = "\n".join(c.source for c in nb.cells if c.cell_type == "code")
+        assert "._" not in src.replace("__", ""), f"{path.name} uses a private name"
+        assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), f"{path.name} is stored with outputs"
+
+
+def test_02_features(scene_run, monkeypatch):
+    nb = execute("02_features.ipynb", scene_run, monkeypatch)
+    text = outputs(nb)
+    assert "2 featured datasets" in text
+    for rel in ("beside", "on_top"):
+        assert f"\n{rel:<7} " in text  # an example of the relation was found and shown
+    assert images(nb) >= 4  # scenes, PCA bars, two RHF grids
+
+
+def test_03_learning_and_bootstrapping(scene_run, monkeypatch):
+    nb = execute("03_learning_and_bootstrapping.ipynb", scene_run, monkeypatch)
+    text = outputs(nb)
+    assert "Table II (PCA) -- recomputed here, equal to experiment.analyse" in text
+    assert "Table II (RHF)" in text and images(nb) >= 3

@@ -1,0 +1,194 @@
+"""The reproduction report (report.md / report.html): findings, clusters, rendering, and the
+whole report on a results folder of `relaff experiment --synthetic` plus small datasets of
+real settled scenes (labels from a test rule, not from the arm's actions)."""
+import base64
+import json
+import re
+
+import jax
+import numpy as np
+import pytest
+
+from relaff_jax import cli, dataset, features
+from relaff_jax import experiment as E
+from relaff_jax import report as R
+from relaff_jax import scenes as sc
+
+B = 8
+_CACHE = {}  # the run folder is built once per session, also when test_notebooks imports the fixture
+
+
+def scene_rollout_fn(w, settle):
+    """Rollouts of real settled toy+base scenes; label: the toy ended on top of / inside the base."""
+    allowed = np.array([i for i, p in enumerate(w.pairs) if p[2] == "toy+base"])
+
+    def rollout(key, batch):
+        kp, ks = jax.random.split(key)
+        pair = sc.sample_pairs(kp, allowed, w, batch)
+        out = jax.device_get(settle(pair, *sc.place(w, sc.SceneConfig(), ks, pair)))
+        bits = np.asarray(jax.random.randint(ks, (batch,), 0, 2**31 - 1))
+        return {"label": out.relation != sc.BESIDE, "relation": out.relation, "cog_distance": out.cog_distance,
+                "pair": out.pair, "toy": np.array([w.pairs[p][0] for p in out.pair]),
+                "other": np.array([w.pairs[p][1] for p in out.pair]), "qpos_settled": out.qpos,
+                "rollout_id": bits.astype(np.int64)}
+
+    return rollout
+
+
+@pytest.fixture(scope="session")
+def scene_run(tmp_path_factory, scene_world, settle):
+    """A run-shaped folder: data/lift and data/take (16 real scenes each, with features) and
+    results/ from `relaff experiment --synthetic` (small forests, two sizes)."""
+    if "root" not in _CACHE:
+        root = tmp_path_factory.mktemp("scene_run")
+        for seed, action in enumerate(("lift", "take")):
+            path = root / "data" / action
+            dataset.generate_dataset(path, action, 16, scene_rollout_fn(scene_world, settle), seed=seed, batch=B,
+                                     progress=False, dataset_config=dataset.DatasetConfig(borrow_fraction=1.0))
+            features.add_features(path, batch=B, progress=False)
+        argv = ["experiment", "--synthetic", "150", "--out", str(root / "results"), "--jobs", "2", "--no-progress",
+                "--set", "sizes=[4,10]", "--set", "reps_pca=1", "--set", "reps_rhf=1",
+                "--set", "forest.base_trees=4", "--set", "forest.max_trees=4"]
+        assert cli.main(argv) == 0
+        _CACHE["root"] = root
+    return _CACHE["root"]
+
+
+# ------------------------------------------------------------------- findings, by hand
+
+
+def _analysis(nb_pca, nb_rhf, rows, best_curves, counts=(36, 5, 2)):
+    """A minimal ``analyse`` output: NB means per size, Table II averages, threshold curves."""
+    sizes = [2, 4, 10, 25]
+    acts = ["lift", "move", "pull"]
+
+    def space(nb, table):
+        mean = np.full((3, 5, 4), np.nan)
+        mean[:, 0] = np.asarray(nb)[None]
+        t2 = np.ones((len(E.TABLE2_ROWS), 3))
+        for name, v in table.items():
+            t2[E.TABLE2_ROWS.index(name), 0] = v
+        th = {"T": [0.0, 0.125, 0.5], "best_curve": np.stack([np.full(4, c) for c in best_curves]),
+              "count": list(counts), "overall_curve": np.ones(4)}
+        return {"sizes": sizes, "actions": acts, "mean": mean, "table2": t2, "thresholds": th}
+
+    return {"pca": space(nb_pca, rows), "rhf": space(nb_rhf, {})}
+
+
+CFG = E.ExperimentConfig(sizes=(2, 4, 10, 25))
+GOOD = {"DB1 best": 2.0, "CBn": 1.6, "DBn": 1.5, "DB1 best after ten": 1.9, "CB1 best": 2.2, "CB1 best after ten": 2.1}
+
+
+def verdicts(an):
+    return {f["id"]: f["reproduced"] for f in R.findings(an, CFG)}
+
+
+def test_findings_hand_worked():
+    an = _analysis([0.6, 0.65, 0.7, 0.8], [0.62, 0.7, 0.71, 0.79], GOOD, [2.0, 1.95, 1.9])
+    got = R.findings(an, CFG)
+    assert [f["id"] for f in got] == ["rhf_faster", "bootstrapping_helps", "dbn_below_db1", "pruning_cheap", "best_after_ten"]
+    assert all(f["reproduced"] is True for f in got)
+    f = {x["id"]: x for x in got}
+    # n <= 10: RHF - PCA = +0.02, +0.05, +0.01 -> mean +0.0267
+    assert f["rhf_faster"]["values"]["sizes"] == [2, 4, 10]
+    assert f["rhf_faster"]["values"]["difference"] == pytest.approx(0.08 / 3)
+    assert "+0.027" in f["rhf_faster"]["numbers"]
+    assert f["pruning_cheap"]["values"]["avg_bf"] == [pytest.approx(2.0), pytest.approx(1.9)]
+    assert f["pruning_cheap"]["values"]["built"] == [36, 2] and "ratio 0.95" in f["pruning_cheap"]["numbers"]
+    assert f["best_after_ten"]["values"]["DB1"]["ratio"] == pytest.approx(0.95)
+
+    assert verdicts(_analysis([0.6] * 4, [0.59] * 4, GOOD, [2.0, 1.9, 1.9]))["rhf_faster"] is False
+    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, CBn=1.2), [2.0] * 3))["bootstrapping_helps"] is False
+    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, DBn=2.0), [2.0] * 3))["dbn_below_db1"] is False
+    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0, 2.0, 1.7]))["pruning_cheap"] is False  # 0.85 < 0.9
+    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, **{"CB1 best after ten": 1.9}), [2.0] * 3))["best_after_ten"] is False
+    # undefined numbers (no category kept at T = 0.5; no RHF sweep) are "not measurable"
+    v = verdicts(_analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0, 1.9, np.nan]))
+    assert v["pruning_cheap"] is None
+    an = _analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0] * 3)
+    del an["rhf"]
+    assert verdicts(an)["rhf_faster"] is None
+
+
+def test_correlation_clusters_hand_worked():
+    acts = ["a", "b", "c", "d", "e", "f"]
+    corr = np.eye(6) + 0.1 * (1 - np.eye(6))
+    corr[5, :5] = corr[:5, 5] = 0.0
+    for i, j, v in ((0, 1, 0.6), (1, 2, 0.7), (3, 4, 0.55), (0, 5, -0.9)):
+        corr[i, j] = corr[j, i] = v
+    assert R.correlation_clusters(corr, acts, 0.5) == [["a", "b", "c"], ["d", "e"], ["f"]]
+    assert R.correlation_clusters(corr, acts, 0.65) == [["b", "c"], ["a"], ["d"], ["e"], ["f"]]
+    assert R.correlation_clusters(corr, acts, 0.05) == [acts[:5], ["f"]]
+
+
+def test_render_markdown_and_html(tmp_path):
+    png = b"\x89PNG\r\n\x1a\n" + bytes(range(40))
+    (tmp_path / "f.png").write_bytes(png)
+    blocks = [("h", 1, "Title"), ("p", "a < b & `code` **bold**"), ("ul", ["one", "two"]),
+              ("table", ["x", "y"], [[1, "<2>"]]), ("img", "f.png", "a figure")]
+    md = R.render_markdown(blocks)
+    assert md.splitlines()[:4] == ["# Title", "", "a < b & `code` **bold**", ""]
+    assert "| x | y |\n|---|---|\n| 1 | <2> |" in md and "![a figure](f.png)" in md
+    page = R.render_html(blocks, tmp_path, "t")
+    assert "<p>a &lt; b &amp; <code>code</code> <b>bold</b></p>" in page
+    assert "<td>&lt;2&gt;</td>" in page and "<li>two</li>" in page
+    data = re.search(r'src="data:image/png;base64,([^"]+)"', page).group(1)
+    assert base64.b64decode(data) == png
+    with pytest.raises(ValueError, match="unknown block"):
+        R.render_markdown([("video", "x")])
+
+
+# ---------------------------------------------------------------------- the whole report
+
+
+def test_full_report(scene_run, tmp_path):
+    out = tmp_path / "report"
+    data_dirs = {"lift": scene_run / "data" / "lift", "take": scene_run / "data" / "take"}
+    info = {"preset": "tiny", "seed": 0, "timings": {"generate": 12.5, "report": None},
+            "versions": {"jax": jax.__version__}}
+    R.write_full_report(scene_run / "results", out, data_dirs, info, examples_per_action=2)
+    for f in ("report.md", "report.html", "findings.json", "summary.json", "table2.csv", "fig_datasets.png",
+              "fig06_nb_learning.png", "fig11_correlation.png", "fig12_thresholds.png"):
+        assert (out / f).stat().st_size > 0, f
+    md = (out / "report.md").read_text()
+    page = (out / "report.html").read_text()
+
+    # every image of the markdown exists, and the html embeds exactly those, nothing external
+    images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
+    assert all((out / p).is_file() for p in images)
+    embedded = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
+    assert len(embedded) == len(images) and 'src="http' not in page and "<link" not in page
+    assert [base64.b64decode(e) for e in embedded] == [(out / p).read_bytes() for p in images]
+
+    # example scenes: two per action, a positive and a negative, drawn by features.show_scene
+    examples = sorted((out / "examples").glob("*.png"))
+    assert len(examples) == 4 and all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in examples)
+    for action in data_dirs:
+        caps = re.findall(rf"\*({action}: [^*]+)\*", md)
+        assert len(caps) == 2 and "positive" in caps[0] and "negative" in caps[1]
+
+    # dataset statistics are dataset.info's
+    for action, d in data_dirs.items():
+        i = dataset.info(d)
+        rates = " | ".join(f"{100 * i['rollouts_positive_rate_by_relation'][r]:.0f} %"
+                           if i['rollouts_positive_rate_by_relation'][r] is not None else "-" for r in dataset.RELATIONS)
+        assert f"| {action} | {i['n']} | {i['rollouts']} | {100 * i['rollouts_positive_rate']:.0f} % | {rates} |" in md
+
+    # Table II, findings and clusters are the experiment's numbers
+    res = E.load_results(scene_run / "results")
+    an = {s: E.analyse(res[s], res["config"]) for s in ("pca", "rhf")}
+    t2 = an["pca"]["table2"]
+    row = lambda name: f"| {name} | " + " | ".join(R._fmt(v) for v in t2[E.TABLE2_ROWS.index(name)])
+    assert row("DB1 best") in md and row("CBn") in md and "| 2.819 | 0.976 | 3.657 |" in md
+    found = json.loads((out / "findings.json").read_text())["findings"]
+    assert [f["id"] for f in found] == [f["id"] for f in R.findings(an, res["config"])]
+    by_id = {f["id"]: f for f in found}
+    assert by_id["dbn_below_db1"]["values"]["dbn"] == pytest.approx(t2[E.TABLE2_ROWS.index("DBn"), 0])
+    assert by_id["dbn_below_db1"]["reproduced"] == bool(t2[E.TABLE2_ROWS.index("DBn"), 0] < t2[E.TABLE2_ROWS.index("DB1 best"), 0])
+    for f in found:
+        assert f"| {f['finding']} |" in md
+    clusters = R.correlation_clusters(res["rhf"]["corr"], an["rhf"]["actions"], res["config"].cbn_threshold)
+    groups = "; ".join("{" + ", ".join(g) + "}" for g in clusters if len(g) > 1)
+    assert f"RHF: affordances linked by correlations above T = 0.5: {groups or 'none'}" in md
+    assert "synthetic features" in md  # the results say where they came from
+    assert "preset `tiny`, seed 0" in md and "generate: 12 s" in md and "report: None" in md
