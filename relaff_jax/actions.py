@@ -59,7 +59,7 @@ class ActionConfig:
     move_distance: float = 0.35  # the closed gripper sweeps this far past the toy's side
     rake_pull: float = 0.30
     clearance: float = 0.10  # transit height of the fingertips above the highest object
-    grip_margin: float = 0.03  # pre-grasp opening beyond the object's half width, per finger
+    grip_margin: float = 0.02  # pre-grasp opening beyond the object's half width, per finger
     tip_clearance: float = 0.005  # fingertips this far above the grasped object's bottom
     rake_gap: float = 0.02  # gap between the toy and the rake head / the sweeping fingers
     # outcome thresholds
@@ -118,9 +118,11 @@ _DRAG = _LIFT[:5] + [(40, 2, True), (150, 3, True), (40, 4, True), (40, 4, False
 # sweep / pull (2), retreat (3).
 _SWEEP = [(150, 0, True), (100, 1, True), (30, 1, True), (175, 2, True), (30, 2, True),
           (60, 3, True), (30, 3, True)]
+# Rake: the same with a slower pull, so the head drags the toy instead of tipping it over.
+_RAKE_T = _SWEEP[:3] + [(250, 2, True)] + _SWEEP[4:]
 TEMPLATES = {
     "lift": _template(_LIFT), "move": _template(_SWEEP), "pull": _template(_DRAG),
-    "push": _template(_DRAG), "rake": _template(_SWEEP), "take": _template(_LIFT),
+    "push": _template(_DRAG), "rake": _template(_RAKE_T), "take": _template(_LIFT),
     "pour": _template(_TILT), "slide": _template(_TILT), "unobstruct": _template(_DRAG),
 }
 _TPL_STEPS = np.asarray([TEMPLATES[a].seg_steps for a in ACTIONS], np.int32)  # (9, S)
@@ -306,10 +308,12 @@ def _program_drag(arm, cfg, toy, oth, *, direction: jax.Array, distance: float, 
 
 
 def _program_move(arm, cfg, toy, oth) -> Program:
-    """Sweep the toy sideways (across the robot's line of sight) towards the other object."""
-    radial = _unit_xy(toy.centre)
-    side = _perp(radial)
-    d = jnp.where(jnp.dot(oth.centre - toy.centre, side) >= 0, 1.0, -1.0) * side
+    """Sweep the toy aside, towards the other object (horizontally; across the robot's line
+    of sight if the toy sits over the other's centre)."""
+    towards = oth.centre - toy.centre
+    far = jnp.linalg.norm(towards[:2]) > 0.02
+    side = _perp(_unit_xy(toy.centre))
+    d = jnp.where(far, _unit_xy(towards), side)
     reach = toy.half_width(d) + arm.pad_thickness + cfg.rake_gap
     c = toy.centre
     start = jnp.array([c[0], c[1], 0.0]) - d * reach
@@ -334,7 +338,7 @@ def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     y_t = handle_half + cfg.rake_gap + toy.half_width(side)
     c = toy.centre
     origin = jnp.array([c[0], c[1], 0.0]) - radial * x_t - side * y_t
-    low = origin + jnp.array([0.0, 0.0, 0.004])
+    low = origin + jnp.array([0.0, 0.0, 0.003])
     above = origin + jnp.array([0.0, 0.0, toy.z_range()[1] + cfg.clearance])
     pulled = low - radial * cfg.rake_pull
     raised = pulled + jnp.array([0.0, 0.0, 0.10])
@@ -735,16 +739,16 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     """Replay the planned programs of an ``action_fn`` result in native MuJoCo C (``mj_step``,
     float64), scene by scene, with the same actuator commands; label them with the same rules.
 
-    Args: pair (B,), qpos (B, 14), qvel (B, 12) settled object states; ``result`` from the
-    action fn (uses ``q_way``, ``grip_way``, ``seg_steps``, ``feasible`` and, for labels,
-    the same directions via a re-plan).
+    Args: pair (B,), qpos (B, 14), qvel (B, 12) settled object states; ``result``: the action
+    fn's output for these scenes (uses ``q_way``, ``grip_way``, ``feasible``; directions come
+    from a re-plan).
     Returns ``label``, ``com_m``, ``com_end``, ``qpos_final`` as numpy arrays.
     """
     aid = action_id(action)
     st = setup(cfg)
     arm, world = st.arm, st.world
     measure = int(_TPL_MEASURE[aid])
-    seg = jnp.asarray(result["seg_steps"])
+    seg = jnp.asarray(_TPL_STEPS[aid])
     ctrl_fn = jax.jit(jax.vmap(lambda qw, gw, t: A.program_ctrl(arm, qw, gw, seg, t), in_axes=(None, None, 0)))
     reach = jax.jit(lambda p, q: toy_reachable(arm, cfg, st.geo, p, q))
     init = jax.jit(lambda q, v: _initial_data(st, cfg, jnp.int32(aid), q, v))
@@ -755,7 +759,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     obj_geoms, toy_geoms = set(wl.obj_geoms.tolist()), set(wl.toy_geoms.tolist())
     grasp = int(_GRASPS[aid])
     closed = np.asarray(_TPL_CLOSED[aid])
-    segment = np.asarray(A.segment_index(jnp.asarray(result["seg_steps"]), jnp.arange(N_STEPS)))
+    segment = np.asarray(A.segment_index(seg, jnp.arange(N_STEPS)))
     for b in range(len(pair)):
         m = world.mj_models[int(pair[b])]
         d = mujoco.MjData(m)

@@ -459,7 +459,7 @@ def world_mjcf(tool_body: str | None = None, grasp_bodies: Sequence[str] = ()) -
         pos, quat = tool_relpose(arm)
         rel = " ".join(f"{v:.9g}" for v in (*pos, *quat))
         welds.append(f'<weld name="tool_grip" body1="arm_hand" body2="{tool_body}" relpose="{rel}" '
-                     f'active="false" solref="0.01 1"/>')
+                     f'active="false" solref="0.008 1"/>')
     for name in grasp_bodies:
         welds.append(f'<weld name="grasp_{name}" body1="arm_hand" body2="{name}" '
                      f'relpose="0 0 0 1 0 0 0" active="false" solref="0.01 1"/>')
