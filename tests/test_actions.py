@@ -159,3 +159,18 @@ def test_rollout_fn_fields_and_errors():
     assert set(AC.ACTIONS) == set(AC.TEMPLATES) and len(AC.ACTIONS) == 9
     for a, tpl in AC.TEMPLATES.items():
         assert sum(tpl.seg_steps) == AC.N_STEPS and len(tpl.seg_steps) == AC.N_SEGMENTS, a
+
+
+def test_cli_generate_bad_input(tmp_path, capsys):
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    AC.register_cli(parser.add_subparsers())
+    for argv, msg in ((["generate", "fly", "--samples", "10", "--out", str(tmp_path / "a")], "unknown action 'fly'"),
+                      (["generate", "lift", "--samples", "1", "--out", str(tmp_path / "b")], "--samples must be >= 2"),
+                      (["generate", "lift", "--samples", "8", "--batch", "0", "--out", str(tmp_path / "c")],
+                       "--batch must be >= 1")):
+        args = parser.parse_args(argv)
+        assert args.func(args) == 2
+        assert msg in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())  # nothing half-written
