@@ -102,7 +102,7 @@ def preset(name: str) -> ReproduceConfig:
     spaces, every bootstrapping condition) sized to finish in under 15 minutes on two cores:
     200 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
     learning pools shrink to the data (``ExperimentConfig.shrink_to_data``).
-    ``tiny``: for tests: 40 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
+    ``tiny``: for tests: 32 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
     """
     from relaff_jax.experiment import preset as exp_preset
 
@@ -115,7 +115,7 @@ def preset(name: str) -> ReproduceConfig:
     if name == "tiny":
         exp = override(exp_preset("quick"), {"sizes": (2, 4, 10), "reps_pca": 2, "reps_rhf": 2,
                                              "forest.base_trees": 8, "forest.max_trees": 8})
-        return ReproduceConfig(n_samples=40, rollout_batch=16, max_rollouts=4_000, distance_bins=4,
+        return ReproduceConfig(n_samples=32, rollout_batch=16, max_rollouts=2_000, distance_bins=4,
                                borrow_fraction=1.0, feature_batch=8, examples_per_action=1, experiment=exp)
     raise ReproduceError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
 
@@ -271,7 +271,8 @@ def _clean_leftovers(root: Path) -> None:
 
 
 def default_rollout_factory(action: str, batch: int) -> tuple[Callable, dict, Sequence[str] | None]:
-    """``(rollout_fn, config_dict, object_names)`` of one action from ``relaff_jax.actions``."""
+    """``(rollout_fn, config_dict, object_names)`` of one action from ``relaff_jax.actions``
+    (default ``ActionConfig``; the rollouts carry object names, so no name table)."""
     try:
         actions = importlib.import_module("relaff_jax.actions")
     except ModuleNotFoundError as e:
@@ -280,14 +281,8 @@ def default_rollout_factory(action: str, batch: int) -> tuple[Callable, dict, Se
                 "the generate stage needs relaff_jax.actions (the arm's nine motor programs that label the "
                 "rollouts), which this installation does not have; the datasets cannot be generated") from e
         raise
-    fn = actions.make_rollout_fn(action, batch)
-    config = {}
-    for name in ("ActionConfig",):  # record the action model's config when the module exposes one
-        cls = getattr(actions, name, None)
-        if cls is not None and dataclasses.is_dataclass(cls):
-            config["action_config"] = to_dict(cls())
-    config = getattr(fn, "config_dict", None) or config
-    return fn, dict(config, action=action), getattr(actions, "OBJECT_NAMES", None)
+    cfg = actions.ActionConfig()
+    return actions.make_rollout_fn(action, batch, cfg), {"action": action, "action_config": to_dict(cfg)}, None
 
 
 def default_feature_factory(seed: int) -> tuple[Callable, dict]:
@@ -364,15 +359,15 @@ def _fmt_time(s: float | None) -> str:
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
 
 
-# Cost model for the time estimate before a stage has measurable progress, in seconds on two
-# idle cores (docs/reproduce.md: how they were measured).
+# Cost model for the time estimate before a stage has measurable progress: seconds on the
+# project's 2-core machine (docs/reproduce.md: where the figures come from).
 COST = {
-    "action_compile": 90.0,  # first rollout call of an action (MJX compile)
-    "rollouts_per_sample": 3.0,  # rollouts simulated per selected sample (positive rate, matching)
-    "rollouts_per_s": 20.0,
+    "sim_compile": 240.0,  # first rollout call: place + settle + action programs (one for all actions)
+    "rollouts_per_sample": 2.5,  # rollouts simulated per selected sample (positive rate, matching)
+    "rollouts_per_s": 0.8,  # settle + a 3.3 s motor program, MJX at batch 16-128
     "feature_compile": 40.0,
     "feature_scenes_per_s": 12.0,
-    "cpu_s_per_fit": 0.15,
+    "cpu_s_per_fit": 0.15,  # a forest of ~100 trees, fit + predict (docs/learning.md)
     "report_fixed": 60.0,
     "report_per_example": 1.5,
 }
@@ -380,10 +375,8 @@ COST = {
 
 def estimate_seconds(cfg: ReproduceConfig, jobs: int) -> dict[str, float]:
     """Rough wall time per stage from ``COST`` (used until a stage shows progress)."""
-    from relaff_jax import experiment as E
-
     n, a = cfg.n_samples, len(cfg.actions)
-    gen = a * (COST["action_compile"] + n * COST["rollouts_per_sample"] / COST["rollouts_per_s"])
+    gen = COST["sim_compile"] + a * n * COST["rollouts_per_sample"] / COST["rollouts_per_s"]
     feat = COST["feature_compile"] + a * n / COST["feature_scenes_per_s"]
     ec = cfg.experiment
     fits = 0
@@ -394,7 +387,6 @@ def estimate_seconds(cfg: ReproduceConfig, jobs: int) -> dict[str, float]:
         fits += learners * len(ec.sizes) * ec.reps(s) * a + a + ("CB1" in fams or "CBn" in fams) * a * (a - 1) // 2
     exp = fits * COST["cpu_s_per_fit"] / max(1, min(jobs, os.cpu_count() or 1))
     rep = COST["report_fixed"] + a * cfg.examples_per_action * COST["report_per_example"]
-    del E
     return {"generate": gen, "features": feat, "experiment": exp, "report": rep}
 
 

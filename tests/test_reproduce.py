@@ -106,7 +106,7 @@ def test_run_writes_every_expected_file(base):
     assert sorted(p.name for p in (out / "data").iterdir()) == sorted(ACTS)
     for a in ACTS:
         d = D.load_dataset(out / "data" / a)
-        assert len(d["label"]) == 40 and d["label"].sum() == 20 and d["pca"].shape == (40, 18)
+        assert len(d["label"]) == 32 and d["label"].sum() == 16 and d["pca"].shape == (32, 18)
     res = E.load_results(out / "results")
     assert res["meta"]["actions"] == list(ACTS) and res["meta"]["spaces"] == ["pca", "rhf"]
     assert res["pca"]["acc"].shape == (3, E.layout(3, 3)["n"], 2, 2)
@@ -121,7 +121,7 @@ def test_run_writes_every_expected_file(base):
 def test_run_log(base):
     out, log, _, _ = base
     assert log["format"] == R.FORMAT and log["preset"] == "tiny" and log["seed"] == 3
-    assert log["config"]["n_samples"] == 40 and log["config"]["experiment"]["forest"]["max_trees"] == 4
+    assert log["config"]["n_samples"] == 32 and log["config"]["experiment"]["forest"]["max_trees"] == 4
     assert R.config_from_dict(log["config"]) == R.override(R.preset("tiny"), FAST)
     assert log["versions"]["numpy"] == np.__version__ and log["versions"]["jax"]
     assert log["seeds"] == R.seeds(3)
@@ -132,7 +132,7 @@ def test_run_log(base):
     assert set(log["timings"]) == set(R.STAGES) and all(t > 0 for t in log["timings"].values())
     run0 = log["runs"][0]
     assert run0["status"] == "complete" and run0["argv"][:6] == ["relaff", "reproduce", "--preset", "tiny", "--out", str(out)] and run0["jobs"] == 1
-    assert run0["stages"]["generate"]["actions"]["lift"]["rollouts"] >= 40
+    assert run0["stages"]["generate"]["actions"]["lift"]["rollouts"] >= 32
 
 
 def test_second_run_skips_every_stage(base):
@@ -255,7 +255,7 @@ def test_other_seed_or_preset_in_the_same_folder_is_refused(base):
     with pytest.raises(R.ReproduceError, match="another seed"):
         run(out, seed=4)
     with pytest.raises(R.ReproduceError, match="another config"):
-        run(out, overrides=dict(FAST, n_samples=48))
+        run(out, overrides=dict(FAST, n_samples=40))
 
 
 def test_missing_actions_module_is_a_clear_error(tmp_path, monkeypatch):
