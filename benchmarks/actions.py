@@ -15,10 +15,6 @@ Usage:
 from __future__ import annotations
 
 import os
-
-if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
-
 import argparse
 import json
 import time

@@ -9,6 +9,15 @@ Affordances of Object Pairs using Transfer". Stages (one module each):
 """
 from __future__ import annotations
 
+import os
+
+# XLA:CPU's fusion emitters make MJX's kinematics cost grow exponentially with the depth of a
+# kinematic chain (google-deepmind/mujoco#2957, jax-ml/jax#33761): a step of the 6-DOF arm
+# world is 20-60x slower with them (docs/arm.md). The flag is read when JAX creates its CPU
+# client, so it is set here, before any relaff_jax module runs a computation.
+if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
+
 __version__ = "0.1.0"
 
 # Light re-exports; heavy modules (JAX, MuJoCo) load on first use.

@@ -602,18 +602,30 @@ def _simulate(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array, mx, d, q
     return d, trace
 
 
-def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
-    """``action_fn(action_id (), pair (B,), qpos (B, 14), qvel (B, 12)) -> dict`` of per-scene
-    results for any of the nine actions (pure; the caller jits; one compile per batch shape
-    for all actions). ``qpos``/``qvel``: settled object states in the arm-less layout
-    (``scenes.Scenes.qpos``/``qvel``).
-
-    Returns ``label`` (B,) bool, ``feasible``, ``ik_error``, ``com0``/``com_m``/``com_end``
-    (B, 2, 3) centres of mass of (toy, other), ``reach_before``/``reach_after`` (unobstruct),
-    ``qpos_final`` (B, 14) and the plan (``q_way``, ``grip_way``, ``seg_steps``).
-    """
+def make_prepare_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``prepare_fn(action_id (), pair (B,), qpos (B, 14)) -> (Plan, reach_before (B,))``: the
+    motor program of every scene and, for unobstruct, whether the toy is reachable in the
+    settled scene (False for the other actions). Pure; the caller jits."""
     st = setup(cfg)
     plan_fn = make_plan_fn(cfg)
+    reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
+
+    def prepare_fn(action_id, pair, qpos):
+        action_id = jnp.asarray(action_id, jnp.int32)
+        before = jax.lax.cond(action_id == _UNOBSTRUCT, lambda: reach(pair, qpos),
+                              lambda: jnp.zeros(pair.shape, bool))
+        return plan_fn(action_id, pair, qpos), before
+
+    return prepare_fn
+
+
+def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``simulate_fn(action_id (), pair (B,), qpos (B, 14), qvel (B, 12), plan, reach_before)
+    -> dict``: execute planned programs in MJX and label the outcomes. Pure; caller jits.
+
+    See ``make_action_fn`` for the inputs and the returned fields.
+    """
+    st = setup(cfg)
     world, arm = st.world, st.arm
     toy_b, obj_b = world.toy_body, world.obj_body
     observe = lambda d: jnp.stack([d.xipos[toy_b], d.xipos[obj_b]])
@@ -621,9 +633,8 @@ def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     reach = jax.vmap(lambda p, q: toy_reachable(arm, cfg, st.geo, p, q))
     wl = welds(world)
 
-    def action_fn(action_id, pair, qpos, qvel):
+    def simulate_fn(action_id, pair, qpos, qvel, plan, before):
         action_id = jnp.asarray(action_id, jnp.int32)
-        plan = plan_fn(action_id, pair, qpos)
         models = wd.scene_models(world, pair)
         data = jax.vmap(lambda q, v: _initial_data(st, cfg, action_id, q, v))(qpos, qvel)
         data = forward(models, data)
@@ -636,10 +647,8 @@ def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
             models, data, plan.q_way, plan.grip_way)
         nqo = qpos.shape[-1]
         qpos_final = final.qpos[:, :nqo]
-        no = jnp.zeros(pair.shape, bool)
-        before, after = jax.lax.cond(action_id == _UNOBSTRUCT,
-                                     lambda: (reach(pair, qpos), reach(pair, qpos_final)),
-                                     lambda: (no, no))
+        after = jax.lax.cond(action_id == _UNOBSTRUCT, lambda: reach(pair, qpos_final),
+                             lambda: jnp.zeros(pair.shape, bool))
         com_m = trace[:, jnp.asarray(_TPL_MEASURE)[action_id]]
         out = Outcome(com0, com_m, trace[:, -1], plan.direction, before, after)
         labels = jax.vmap(lambda o: goals(cfg, o))(out)[:, action_id] & plan.feasible
@@ -648,13 +657,46 @@ def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
                     qpos_final=qpos_final, q_way=plan.q_way, grip_way=plan.grip_way,
                     seg_steps=plan.seg_steps)
 
+    return simulate_fn
+
+
+def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``action_fn(action_id (), pair (B,), qpos (B, 14), qvel (B, 12)) -> dict`` of per-scene
+    results for any of the nine actions (pure; the caller jits; one compile per batch shape
+    for all actions). ``qpos``/``qvel``: settled object states in the arm-less layout
+    (``scenes.Scenes.qpos``/``qvel``). Composes ``make_prepare_fn`` and ``make_simulate_fn``.
+
+    Returns ``label`` (B,) bool, ``feasible``, ``ik_error``, ``com0``/``com_m``/``com_end``
+    (B, 2, 3) centres of mass of (toy, other), ``reach_before``/``reach_after`` (unobstruct),
+    ``qpos_final`` (B, 14) and the plan (``q_way``, ``grip_way``, ``seg_steps``).
+    """
+    prepare_fn, simulate_fn = make_prepare_fn(cfg), make_simulate_fn(cfg)
+
+    def action_fn(action_id, pair, qpos, qvel):
+        plan, before = prepare_fn(action_id, pair, qpos)
+        return simulate_fn(action_id, pair, qpos, qvel, plan, before)
+
     return action_fn
 
 
 @functools.lru_cache(maxsize=4)
+def jitted_stage_fns(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
+    """The jitted ``make_prepare_fn(cfg)`` and ``make_simulate_fn(cfg)``, cached: each compiles
+    once per batch shape and serves all nine actions (the action index is traced)."""
+    return jax.jit(make_prepare_fn(cfg)), jax.jit(make_simulate_fn(cfg))
+
+
 def jitted_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
-    """The jitted ``make_action_fn(cfg)``, cached: one compile per batch shape for all actions."""
-    return jax.jit(make_action_fn(cfg))
+    """``action_fn`` built from the two cached jitted stages (``jitted_stage_fns``), so that
+    it shares its compiled programs with ``make_rollout_fn``: two programs per batch shape
+    (plan, simulate), for all actions."""
+    prepare_fn, simulate_fn = jitted_stage_fns(cfg)
+
+    def action_fn(action_id, pair, qpos, qvel):
+        plan, before = prepare_fn(action_id, pair, qpos)
+        return simulate_fn(action_id, pair, qpos, qvel, plan, before)
+
+    return action_fn
 
 
 def action_id(action: str) -> int:
@@ -672,24 +714,45 @@ def allowed_pairs(world: wd.World, action: str) -> np.ndarray:
     return np.nonzero(geometry(world).pairing == PAIRING[action])[0]
 
 
-def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None) -> Callable:
+def default_sim_batch(batch: int) -> int:
+    """Scenes per simulation call in ``make_rollout_fn``: a quarter of the rollout batch
+    (about 40 % of sampled scenes are feasible, so a batch of 128 needs ~2 calls of 32)."""
+    return max(1, -(-int(batch) // 4))
+
+
+def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
+                    sim_batch: int | None = None) -> Callable:
     """``rollout_fn(key, batch_size) -> dict`` of numpy arrays per sample, for
     ``dataset.generate_dataset``: samples pairs of the action's pairing, places and settles
-    the scenes (``scenes.jitted_scene_fns`` on the arm-less world), runs the action, labels.
+    the scenes (``scenes.jitted_scene_fns`` on the arm-less world), plans the action, runs the
+    feasible programs, labels.
+
+    Only feasible programs are simulated, in calls of ``sim_batch`` scenes (default
+    ``default_sim_batch(batch)``; the last call is padded with repeats of its scenes). An
+    infeasible program is not executed (the arm stays home, ``make_plan_fn``) and its label is
+    False by definition, so skipping its simulation changes no label; its ``qpos_final`` is
+    the settled state and ``reach_after`` equals ``reach_before``. About 60 % of the sampled
+    scenes are infeasible (out of the arm's 1.2 m reach in the 1.8 m workspace), so this
+    simulates ~2.5x fewer scenes. ``tests/test_actions.py`` checks the labels against running
+    every scene.
 
     Fields: ``label``, ``relation`` (int codes into ``scenes.RELATIONS``), ``cog_distance``,
     ``toy``, ``other`` (names), ``pair`` (int32), ``qpos0`` / ``qpos_settled`` (float32 (14,),
     arm-less layout), ``qpos_final``, ``rollout_id`` (int64), ``intended``, ``at_rest``,
-    ``feasible``, ``ik_error``, ``reach_before``/``reach_after``.
+    ``feasible``, ``ik_error``, ``reach_before``/``reach_after``, ``simulated`` (bool: the
+    program ran in MJX).
     ``batch`` is the batch size the caller will use (compiled on the first call).
     """
     aid = action_id(action)
     if int(batch) < 1:
         raise ValueError(f"batch must be >= 1, got {batch}")
+    sim_batch = default_sim_batch(batch) if sim_batch is None else int(sim_batch)
+    if sim_batch < 1:
+        raise ValueError(f"sim_batch must be >= 1, got {sim_batch}")
     cfg = config or ActionConfig()
     scene_world = wd.build_world(cfg.phys)
     place_fn, settle_fn, _ = sc.jitted_scene_fns(scene_world, cfg.scene)
-    act = jitted_action_fn(cfg)
+    prepare_fn, simulate_fn = jitted_stage_fns(cfg)
     allowed = allowed_pairs(scene_world, action)
     names = np.asarray([(t, o) for t, o, _ in scene_world.pairs])
 
@@ -698,22 +761,40 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None)
         pair = sc.sample_pairs(kp, allowed, scene_world, int(batch_size))
         qpos0, intended = place_fn(ks, pair)
         scenes = settle_fn(pair, qpos0, intended)
-        out = jax.device_get(act(aid, pair, scenes.qpos, scenes.qvel))
-        s = jax.device_get(scenes)
+        plan, before = prepare_fn(aid, pair, scenes.qpos)
+        s, plan, before = jax.device_get((scenes, plan, before))
         p = np.asarray(pair)
+        qpos = np.asarray(s.qpos, np.float32)
+        # not executed: label False, objects where they settled
+        label = np.zeros(len(p), bool)
+        qpos_final = qpos.copy()
+        after = np.asarray(before, bool).copy()
+        run = np.flatnonzero(plan.feasible)
+        for lo in range(0, len(run), sim_batch):
+            rows = run[lo:lo + sim_batch]
+            idx = np.resize(rows, sim_batch)  # pad with repeats: one compiled shape
+            sub = Plan(plan.q_way[idx], plan.grip_way[idx], plan.seg_steps, plan.feasible[idx],
+                       plan.direction[idx], plan.ik_error[idx])
+            out = jax.device_get(simulate_fn(aid, p[idx], qpos[idx], np.asarray(s.qvel)[idx], sub,
+                                             np.asarray(before)[idx]))
+            k = len(rows)
+            label[rows] = out["label"][:k]
+            qpos_final[rows] = out["qpos_final"][:k]
+            after[rows] = out["reach_after"][:k]
+        simulated = np.zeros(len(p), bool)
+        simulated[run] = True
         base = int(jax.random.bits(kid, (), jnp.uint32))
         return dict(
-            label=np.asarray(out["label"], bool),
+            label=label,
             relation=np.asarray(s.relation, np.int32),
             cog_distance=np.asarray(s.cog_distance, np.float32),
             toy=names[p, 0], other=names[p, 1], pair=p.astype(np.int32),
-            qpos0=np.asarray(s.qpos0, np.float32), qpos_settled=np.asarray(s.qpos, np.float32),
-            qpos_final=np.asarray(out["qpos_final"], np.float32),
+            qpos0=np.asarray(s.qpos0, np.float32), qpos_settled=qpos,
+            qpos_final=np.asarray(qpos_final, np.float32),
             rollout_id=np.int64(base) * int(batch_size) + np.arange(int(batch_size), dtype=np.int64),
             intended=np.asarray(s.intended, np.int32), at_rest=np.asarray(s.at_rest, bool),
-            feasible=np.asarray(out["feasible"], bool), ik_error=np.asarray(out["ik_error"], np.float32),
-            reach_before=np.asarray(out["reach_before"], bool),
-            reach_after=np.asarray(out["reach_after"], bool),
+            feasible=np.asarray(plan.feasible, bool), ik_error=np.asarray(plan.ik_error, np.float32),
+            reach_before=np.asarray(before, bool), reach_after=after, simulated=simulated,
         )
 
     return rollout_fn

@@ -100,7 +100,7 @@ def preset(name: str) -> ReproduceConfig:
     repetitions, 4000 test samples, the paper's forests): days of CPU time.
     ``quick``: the README's main job, a small but complete study (all nine actions, both
     spaces, every bootstrapping condition) sized to finish in under 15 minutes on two cores:
-    200 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
+    100 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
     learning pools shrink to the data (``ExperimentConfig.shrink_to_data``).
     ``tiny``: for tests: 32 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
     """
@@ -110,7 +110,7 @@ def preset(name: str) -> ReproduceConfig:
         return ReproduceConfig(experiment=exp_preset("paper"))
     if name == "quick":
         exp = override(exp_preset("quick"), {"sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 2})
-        return ReproduceConfig(n_samples=200, rollout_batch=128, max_rollouts=20_000, distance_bins=10,
+        return ReproduceConfig(n_samples=100, rollout_batch=64, max_rollouts=20_000, distance_bins=10,
                                borrow_fraction=0.05, feature_batch=16, examples_per_action=2, experiment=exp)
     if name == "tiny":
         exp = override(exp_preset("quick"), {"sizes": (2, 4, 10), "reps_pca": 2, "reps_rhf": 2,
@@ -362,9 +362,9 @@ def _fmt_time(s: float | None) -> str:
 # Cost model for the time estimate before a stage has measurable progress: seconds on the
 # project's 2-core machine (docs/reproduce.md: where the figures come from).
 COST = {
-    "sim_compile": 240.0,  # first rollout call: place + settle + action programs (one for all actions)
+    "sim_compile": 170.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
     "rollouts_per_sample": 2.5,  # rollouts simulated per selected sample (positive rate, matching)
-    "rollouts_per_s": 0.8,  # settle + a 3.3 s motor program, MJX at batch 16-128
+    "rollouts_per_s": 6.0,  # settle + plan + the feasible 3.3 s motor programs, MJX at batch 64-128
     "feature_compile": 40.0,
     "feature_scenes_per_s": 12.0,
     "cpu_s_per_fit": 0.15,  # a forest of ~100 trees, fit + predict (docs/learning.md)

@@ -1,10 +1,6 @@
 """The nine actions on hand-built scenes whose outcome is obvious, at batch 8 (one compile
 serves every action), and a MuJoCo C replay of some of them."""
 import os
-
-if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -149,6 +145,31 @@ def test_native_replay_agrees(scenes, results, action):
     # the grasped object follows the same path; a toy that slides off and falls may land
     # elsewhere (chaotic), so only the labels are compared for it
     np.testing.assert_allclose(nat["com_m"][:, 1], results[action]["com_m"][idx, 1], atol=0.01)
+
+
+def test_rollout_fn_simulates_only_feasible_programs(scene_world):
+    """The dataset path skips infeasible programs; its labels equal running every scene."""
+    key = jax.random.PRNGKey(11)
+    out = AC.make_rollout_fn("lift", B, sim_batch=B)(key, B)  # programs shared with `results`
+    # the same scenes, rebuilt with the public scene functions, every program executed
+    kp, ks, _ = jax.random.split(key, 3)
+    place, settle, _ = sc.jitted_scene_fns(scene_world)
+    pair = sc.sample_pairs(kp, AC.allowed_pairs(scene_world, "lift"), scene_world, B)
+    s = settle(pair, *place(ks, pair))
+    full = jax.device_get(AC.jitted_action_fn()(AC.action_id("lift"), pair, s.qpos, s.qvel))
+    np.testing.assert_array_equal(out["pair"], np.asarray(pair))
+    np.testing.assert_array_equal(out["feasible"], full["feasible"])
+    sim, skip = out["simulated"], ~out["simulated"]
+    assert sim.any() and skip.any(), out["feasible"]  # both kinds in this batch
+    np.testing.assert_array_equal(sim, out["feasible"])
+    np.testing.assert_array_equal(out["label"], full["label"])
+    np.testing.assert_allclose(out["qpos_final"][sim], full["qpos_final"][sim], atol=1e-4)
+    # a skipped program would have left the objects where they settled
+    assert not out["label"][skip].any()
+    np.testing.assert_allclose(full["com_end"][skip], full["com0"][skip], atol=2e-3)
+    np.testing.assert_allclose(out["qpos_final"][skip], out["qpos_settled"][skip])
+    with pytest.raises(ValueError, match="sim_batch must be >= 1"):
+        AC.make_rollout_fn("lift", 4, sim_batch=0)
 
 
 def test_rollout_fn_fields_and_errors():

@@ -3,8 +3,6 @@ import os
 
 # MJX/XLA:CPU is ~100x slower on deep kinematic chains with the fusion emitters (docs/arm.md);
 # must be set before JAX creates its CPU client.
-if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
 
 import jax
 import jax.numpy as jnp

@@ -1,11 +1,7 @@
 """The arm in MJX: a waypoint program (reach, grasp, lift, tilt) on a free 1 kg box, checked by
 physics and replayed in native MuJoCo C (mj_step) with the same actuator commands."""
-import os
-
-if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
-
 import functools
+import os
 
 import chex
 import jax

@@ -1,7 +1,8 @@
 """The notebooks run top to bottom (nbclient) on a small run folder, so they cannot rot.
 
-The folder is test_reproduce_report's ``scene_run``: real settled scenes with features under
-data/, and results/ from `relaff experiment --synthetic`.
+Notebooks 02 and 03 read test_reproduce_report's ``scene_run`` folder: real settled scenes
+with features under data/, and results/ from `relaff experiment --synthetic`. Notebook 01
+builds its own two scenes and runs the lift action on them.
 """
 from pathlib import Path
 
@@ -59,3 +60,12 @@ def test_03_learning_and_bootstrapping(scene_run, monkeypatch):
     text = outputs(nb)
     assert "Table II (PCA) -- recomputed here, equal to experiment.analyse" in text
     assert "Table II (RHF)" in text and images(nb) >= 3
+
+
+@pytest.mark.slow  # compiles the settle and the action programs in a fresh kernel: minutes
+def test_01_scenes_and_actions(monkeypatch, tmp_path):
+    monkeypatch.setenv("RELAFF_NB_SCENES", "2")
+    nb = execute("01_scenes_and_actions.ipynb", tmp_path, monkeypatch)
+    text = outputs(nb)
+    assert "lift uses the toy+base pairing" in text and "positive:" in text
+    assert text.count("\nscene 1: label") == 1 and images(nb) == 2

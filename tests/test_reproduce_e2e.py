@@ -1,0 +1,107 @@
+"""End to end: `relaff reproduce --preset tiny` with the arm's nine actions, MJX scenes, the
+Kinect perception, the forests and the report.
+
+Checks every expected file, that a second run skips every stage, and that a run interrupted
+in the middle of simulating a dataset, then rerun, ends with the datasets, accuracies and
+findings of the uninterrupted run (the interruption is a KeyboardInterrupt raised after the
+first chunk, in process, so that the compiled programs are reused; tests/test_reproduce.py
+SIGKILLs a run of numpy stand-ins). Slow: it simulates every action (docs/reproduce.md).
+"""
+import argparse
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from relaff_jax import dataset as D
+from relaff_jax import experiment as E
+from relaff_jax import reproduce as R
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(5400)]
+
+SEED = 5
+
+
+def cli_run(out, *extra):
+    parser = argparse.ArgumentParser()
+    R.register_cli(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["reproduce", "--preset", "tiny", "--out", str(out), "--seed", str(SEED),
+                              "--no-progress", *extra])
+    assert args.func(args) == 0
+    return json.loads((out / R.RUN_LOG).read_text())
+
+
+def statuses(log):
+    return {s: v["status"] for s, v in log["runs"][-1]["stages"].items()}
+
+
+def test_tiny_end_to_end(tmp_path):
+    out = tmp_path / "tiny"
+    log = cli_run(out)
+    cfg = R.preset("tiny")
+    assert statuses(log) == dict.fromkeys(R.STAGES, "ran")
+
+    # every expected file
+    for a in R.ACTIONS:
+        d = D.load_dataset(out / "data" / a)
+        n = cfg.n_samples
+        assert d["label"].shape == (n,) and d["label"].sum() == n // 2
+        assert d["pca"].shape == (n, 18) and d["rhf"].shape == (n, 300) and np.isfinite(d["pca"]).all()
+        assert d["qpos_settled"].shape == (n, 14)
+        info = D.info(out / "data" / a)
+        assert info["status"] == "complete" and info["features"]["status"] == "complete"
+    assert E.is_complete(out / "results", R.SPACES)
+    res = E.load_results(out / "results")
+    assert res["meta"]["actions"] == list(R.ACTIONS)
+    assert res["pca"]["acc"].shape == (9, E.layout(9, 3)["n"], len(cfg.experiment.sizes), 2)
+    rep = out / "report"
+    for f in ("report.md", "report.html", "findings.json", "summary.json", "table2.csv", "table2_rhf.csv",
+              "table2.md", "fig_datasets.png", "fig06_nb_learning.png", "fig07_nb_spaces.png",
+              "fig08_db1_best.png", "fig09_db1_best_bf.png", "fig10_average_bf.png", "fig11_correlation.png",
+              "fig12_thresholds.png", R.REPORT_STAMP):
+        assert (rep / f).stat().st_size > 0, f
+    assert len(list((rep / "examples").glob("*.png"))) == 9 * cfg.examples_per_action
+    md = (rep / "report.md").read_text()
+    for a in R.ACTIONS:
+        assert f"| {a} | {cfg.n_samples} |" in md
+    assert len(json.loads((rep / "findings.json").read_text())["findings"]) == 5
+    assert set(log["timings"]) == set(R.STAGES)
+
+    # a second run skips every stage
+    log = cli_run(out)
+    assert statuses(log) == dict.fromkeys(R.STAGES, "skipped")
+
+    # interrupted after the first chunk of unobstruct, then rerun: the same results
+    out2 = tmp_path / "interrupted"
+    shutil.copytree(out, out2)
+    for p in (out2 / "data" / "unobstruct", out2 / "results", out2 / "report"):
+        shutil.rmtree(p)
+
+    def stop_after_first_chunk(action, batch):
+        fn, config, names = R.default_rollout_factory(action, batch)
+        calls = [0]
+
+        def rollout(key, b):
+            calls[0] += 1
+            if calls[0] > 1:
+                raise KeyboardInterrupt
+            return fn(key, b)
+
+        return rollout, config, names
+
+    with pytest.raises(KeyboardInterrupt):
+        R.reproduce(out2, "tiny", SEED, progress=False, rollout_factory=stop_after_first_chunk)
+    assert len(list((out2 / "data" / "unobstruct" / D.CHUNKS).iterdir())) == 1
+    log = cli_run(out2)
+    assert statuses(log) == {"generate": "ran", "features": "ran", "experiment": "ran", "report": "ran"}
+    gen = log["runs"][-1]["stages"]["generate"]["actions"]
+    assert gen["unobstruct"]["status"] == "ran" and gen["lift"]["status"] == "skipped"
+    a, b = D.load_dataset(out / "data" / "unobstruct"), D.load_dataset(out2 / "data" / "unobstruct")
+    for k in ("rollout", "label", "qpos_settled", "pca", "rhf"):
+        np.testing.assert_array_equal(a[k], b[k])
+    r1, r2 = E.load_results(out / "results"), E.load_results(out2 / "results")
+    for s in R.SPACES:
+        np.testing.assert_array_equal(r1[s]["acc"], r2[s]["acc"])
+    assert json.loads((out / "report" / "findings.json").read_text()) == \
+        json.loads((out2 / "report" / "findings.json").read_text())
