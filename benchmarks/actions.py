@@ -56,21 +56,27 @@ def label_table(actions, n, batch, seed, replay, out_json=None):
               + "  ".join(f"{k} {row[k][0]:.3f} (n={row[k][1]})" for k in sc.RELATIONS)
               + f"  {rate:.1f} rollouts/s (first chunk incl. compile {t_first:.0f} s)", flush=True)
         if replay:
-            k = min(replay, n)
-            res = AC.jitted_action_fn(cfg)(AC.action_id(action), jnp.asarray(data["pair"][:batch]),
-                                           jnp.asarray(data["qpos_settled"][:batch]),
+            # replay feasible programs only: an infeasible one is False in both by definition
+            feas = np.flatnonzero(data["feasible"])
+            k = min(replay, len(feas), batch)
+            idx = np.resize(feas, batch) if k else np.arange(batch)
+            res = AC.jitted_action_fn(cfg)(AC.action_id(action), jnp.asarray(data["pair"][idx]),
+                                           jnp.asarray(data["qpos_settled"][idx]),
                                            jnp.zeros((batch, 12), jnp.float32))
             res = jax.device_get(res)
-            nat = AC.replay_native(action, cfg, data["pair"][:k], data["qpos_settled"][:k],
-                                   np.zeros((k, 12), np.float32), {kk: v[:k] for kk, v in res.items()})
-            agree[action] = float(np.mean(nat["label"] == np.asarray(res["label"][:k])))
-            print(f"{'':10s} MJX vs MuJoCo C label agreement on {k} scenes: {agree[action]:.3f}", flush=True)
+            nat = AC.replay_native(action, cfg, data["pair"][idx[:k]], data["qpos_settled"][idx[:k]],
+                                   np.zeros((k, 12), np.float32),
+                                   {kk: v if kk == "seg_steps" else v[:k] for kk, v in res.items()})
+            agree[action] = (float(np.mean(nat["label"] == np.asarray(res["label"][:k]))), k,
+                             int(np.asarray(res["label"][:k]).sum()))
+            print(f"{'':10s} MJX vs MuJoCo C label agreement on {k} feasible scenes "
+                  f"({agree[action][2]} positive in MJX): {agree[action][0]:.3f}", flush=True)
     print("\nPositive rate by relation (n per cell in brackets)")
     print(f"{'action':10s} {'all':>6s} " + " ".join(f"{r:>16s}" for r in sc.RELATIONS)
           + (f" {'C agree':>8s}" if replay else ""))
     for a, row in rows.items():
         cells = " ".join(f"{row[r][0]:9.3f} ({row[r][1]:4d})" for r in sc.RELATIONS)
-        print(f"{a:10s} {row['positive_rate']:6.3f} {cells}" + (f" {agree[a]:8.3f}" if replay else ""))
+        print(f"{a:10s} {row['positive_rate']:6.3f} {cells}" + (f" {agree[a][0]:8.3f}" if replay else ""))
     if out_json:
         with open(out_json, "w") as f:
             json.dump({"labels": rows, "c_agreement": agree}, f, indent=1)

@@ -16,9 +16,11 @@ import sys
 COMMAND_MODULES = (
     "relaff_jax.objects",
     "relaff_jax.scenes",
+    "relaff_jax.actions",
     "relaff_jax.dataset",
     "relaff_jax.features",
     "relaff_jax.experiment",
+    "relaff_jax.reproduce",
 )
 
 

@@ -100,7 +100,7 @@ def preset(name: str) -> ReproduceConfig:
     repetitions, 4000 test samples, the paper's forests): days of CPU time.
     ``quick``: the README's main job, a small but complete study (all nine actions, both
     spaces, every bootstrapping condition) sized to finish in under 15 minutes on two cores:
-    100 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
+    80 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
     learning pools shrink to the data (``ExperimentConfig.shrink_to_data``).
     ``tiny``: for tests: 32 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
     """
@@ -110,12 +110,12 @@ def preset(name: str) -> ReproduceConfig:
         return ReproduceConfig(experiment=exp_preset("paper"))
     if name == "quick":
         exp = override(exp_preset("quick"), {"sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 2})
-        return ReproduceConfig(n_samples=100, rollout_batch=64, max_rollouts=20_000, distance_bins=10,
+        return ReproduceConfig(n_samples=80, rollout_batch=32, max_rollouts=20_000, distance_bins=8,
                                borrow_fraction=0.05, feature_batch=16, examples_per_action=2, experiment=exp)
     if name == "tiny":
         exp = override(exp_preset("quick"), {"sizes": (2, 4, 10), "reps_pca": 2, "reps_rhf": 2,
                                              "forest.base_trees": 8, "forest.max_trees": 8})
-        return ReproduceConfig(n_samples=32, rollout_batch=16, max_rollouts=2_000, distance_bins=4,
+        return ReproduceConfig(n_samples=32, rollout_batch=8, max_rollouts=2_000, distance_bins=4,
                                borrow_fraction=1.0, feature_batch=8, examples_per_action=1, experiment=exp)
     raise ReproduceError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
 
@@ -362,9 +362,9 @@ def _fmt_time(s: float | None) -> str:
 # Cost model for the time estimate before a stage has measurable progress: seconds on the
 # project's 2-core machine (docs/reproduce.md: where the figures come from).
 COST = {
-    "sim_compile": 170.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
+    "sim_compile": 120.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
     "rollouts_per_sample": 2.5,  # rollouts simulated per selected sample (positive rate, matching)
-    "rollouts_per_s": 6.0,  # settle + plan + the feasible 3.3 s motor programs, MJX at batch 64-128
+    "rollouts_per_s": 5.5,  # settle + plan + the feasible 3.3 s motor programs (docs/actions.md)
     "feature_compile": 40.0,
     "feature_scenes_per_s": 12.0,
     "cpu_s_per_fit": 0.15,  # a forest of ~100 trees, fit + predict (docs/learning.md)
@@ -411,6 +411,7 @@ class Progress:
         self.detail = ""
         self.probe: Callable[[], float] | None = None
         self.fraction = 0.0
+        self._first: tuple[float, float] | None = None  # (time, fraction) of the first progress
         self._last_detail = None
         self._last_print = 0.0
         self._stop = threading.Event()
@@ -434,13 +435,22 @@ class Progress:
     def begin(self, stage: str, probe: Callable[[], float] | None = None) -> None:
         with self._lock:
             self.stage, self.stage_t0, self.probe, self.fraction, self.detail = stage, time.perf_counter(), probe, 0.0, ""
+            self._first = None
 
     def set(self, detail: str | None = None, fraction: float | None = None) -> None:
         with self._lock:
             if detail is not None:
                 self.detail = detail
             if fraction is not None:
-                self.fraction = fraction
+                self._set_fraction(fraction)
+
+    def _set_fraction(self, f: float) -> None:
+        """Record progress (caller holds the lock); remember when it first moved, so that the
+        rate excludes what came before it (compiling, loading, the work of a killed run)."""
+        f = min(max(float(f), 0.0), 1.0)
+        if self._first is None and f > self.fraction:
+            self._first = (time.perf_counter(), f)
+        self.fraction = f
 
     def message(self, text: str) -> None:
         """A permanent line (a stage's result) above the progress line."""
@@ -457,9 +467,13 @@ class Progress:
         if self.stage not in STAGES:
             return None
         i = STAGES.index(self.stage)
-        spent = time.perf_counter() - self.stage_t0
+        now = time.perf_counter()
+        spent = now - self.stage_t0
         f = self.fraction
-        if f >= 0.02 and spent > 5:
+        if self._first is not None and f - self._first[1] >= 0.02 and now - self._first[0] > 5:
+            # the rate since progress first moved: compile time does not inflate the estimate
+            left = (now - self._first[0]) * (1 - f) / (f - self._first[1])
+        elif f >= 0.02 and spent > 5:
             left = spent * (1 - f) / f
         else:
             left = max(self.estimates.get(self.stage, 0.0) * (1 - f) - spent, 0.0)
@@ -480,7 +494,7 @@ class Progress:
             try:
                 f = float(probe())
                 with self._lock:
-                    self.fraction = min(max(f, 0.0), 1.0)
+                    self._set_fraction(f)
             except Exception:  # a file caught mid-replace: try again next tick
                 pass
         with self._lock:

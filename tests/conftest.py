@@ -1,8 +1,21 @@
 """Shared fixtures: the world and its jitted settle function are built once per session
 (compiling an MJX step costs tens of seconds on two cores)."""
-import pytest
+import atexit
+import os
+import shutil
+import tempfile
 
-from relaff_jax import scenes, world
+# Programs compiled in this session go to an on-disk JAX cache shared with the subprocesses
+# the tests start (notebook kernels, CLI runs): they then load a program instead of compiling
+# it again (minutes each on two cores). Set before JAX is imported; an outer setting wins.
+if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
+    _cache = tempfile.mkdtemp(prefix="relaff-jax-cache-")
+    os.environ["JAX_COMPILATION_CACHE_DIR"] = _cache
+    atexit.register(shutil.rmtree, _cache, ignore_errors=True)
+
+import pytest  # noqa: E402
+
+from relaff_jax import scenes, world  # noqa: E402
 
 
 @pytest.fixture(scope="session")

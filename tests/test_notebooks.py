@@ -64,8 +64,10 @@ def test_03_learning_and_bootstrapping(scene_run, monkeypatch):
 
 @pytest.mark.slow  # compiles the settle and the action programs in a fresh kernel: minutes
 def test_01_scenes_and_actions(monkeypatch, tmp_path):
-    monkeypatch.setenv("RELAFF_NB_SCENES", "2")
+    # 8 scenes: the batch shape of tests/test_actions.py, whose programs the kernel loads
+    # from the session's compilation cache (conftest.py) instead of compiling them again
+    monkeypatch.setenv("RELAFF_NB_SCENES", "8")
     nb = execute("01_scenes_and_actions.ipynb", tmp_path, monkeypatch)
     text = outputs(nb)
     assert "lift uses the toy+base pairing" in text and "positive:" in text
-    assert text.count("\nscene 1: label") == 1 and images(nb) == 2
+    assert text.count("\nscene 7: label") == 1 and images(nb) == 2

@@ -65,3 +65,14 @@ def test_cli_objects_json(capsys):
         lib.get(n).kind == "container" for n in lib.OBJECT_NAMES)
     assert cli.main(["objects"]) == 0
     assert "29 objects: 5 toys, 15 bases, 5 obstacles, 5 rakes" in capsys.readouterr().out
+
+
+def test_cli_offers_every_stage_command(capsys):
+    # the README's commands and `relaff reproduce`: each stage module registers its own
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    for command in ("objects", "scenes", "generate", "info", "features", "show", "experiment", "report",
+                    "reproduce"):
+        assert f"    {command} " in text or f"    {command}\n" in text, command

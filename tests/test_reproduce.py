@@ -297,6 +297,14 @@ def test_progress_line_and_eta():
     assert line.startswith("reproduce [2/4 features] pull (3/9)  25% |") and line.endswith("ETA 1:50")
     p.tick()  # nothing changed: no new line (not a terminal)
     assert buf.getvalue().count("\n") == 1
+    # a stage that compiled for 100 s, then went from 10 % to 20 % in 10 s: 80 s left, not
+    # the 800 s that the stage's whole time would give
+    p.begin("generate", None)
+    p.stage_t0 -= 110.0
+    p.set(fraction=0.1)
+    p._first = (p._first[0] - 10.0, p._first[1])
+    p.set(fraction=0.2)
+    assert p.eta() == pytest.approx(80.0 + 50.0 + 30.0 + 20.0, abs=0.5)
     p.begin("report", None)
     assert p.eta() == pytest.approx(20.0, abs=0.5)  # no progress yet: the cost model
     p.message("report: done")
