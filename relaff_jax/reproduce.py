@@ -99,8 +99,8 @@ def preset(name: str) -> ReproduceConfig:
     ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
     repetitions, 4000 test samples, the paper's forests): days of CPU time.
     ``quick``: the README's main job, a small but complete study (all nine actions, both
-    spaces, every bootstrapping condition) sized to finish in under 15 minutes on two cores:
-    80 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
+    spaces, every bootstrapping condition) meant to finish in under 15 minutes on two cores (it takes ~18, docs/reproduce.md):
+    100 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
     learning pools shrink to the data (``ExperimentConfig.shrink_to_data``).
     ``tiny``: for tests: 32 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
     """
@@ -110,7 +110,7 @@ def preset(name: str) -> ReproduceConfig:
         return ReproduceConfig(experiment=exp_preset("paper"))
     if name == "quick":
         exp = override(exp_preset("quick"), {"sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 2})
-        return ReproduceConfig(n_samples=80, rollout_batch=32, max_rollouts=20_000, distance_bins=8,
+        return ReproduceConfig(n_samples=100, rollout_batch=64, max_rollouts=20_000, distance_bins=10,
                                borrow_fraction=0.05, feature_batch=16, examples_per_action=2, experiment=exp)
     if name == "tiny":
         exp = override(exp_preset("quick"), {"sizes": (2, 4, 10), "reps_pca": 2, "reps_rhf": 2,
@@ -362,9 +362,9 @@ def _fmt_time(s: float | None) -> str:
 # Cost model for the time estimate before a stage has measurable progress: seconds on the
 # project's 2-core machine (docs/reproduce.md: where the figures come from).
 COST = {
-    "sim_compile": 120.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
+    "sim_compile": 150.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
     "rollouts_per_sample": 2.5,  # rollouts simulated per selected sample (positive rate, matching)
-    "rollouts_per_s": 5.5,  # settle + plan + the feasible 3.3 s motor programs (docs/actions.md)
+    "rollouts_per_s": 5.0,  # settle + plan + the feasible 3.3 s motor programs (docs/actions.md)
     "feature_compile": 40.0,
     "feature_scenes_per_s": 12.0,
     "cpu_s_per_fit": 0.15,  # a forest of ~100 trees, fit + predict (docs/learning.md)
@@ -858,7 +858,7 @@ def register_cli(subparsers) -> None:
         description="Generate the nine datasets, their features, the learning and bootstrapping experiment and "
                     "the report in OUT. Rerunning continues where a killed run stopped; finished stages are skipped.")
     p.add_argument("--preset", choices=PRESETS, default="quick",
-                   help="quick: < 15 min on 2 cores (default); paper: the full protocol; tiny: for tests")
+                   help="quick: ~18 min on 2 cores (default); paper: the full protocol; tiny: for tests")
     p.add_argument("--out", required=True, metavar="DIR", help="run folder (created, or continued)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",

@@ -6,10 +6,9 @@ builds its own two scenes and runs the lift action on them.
 """
 from pathlib import Path
 
+import nbclient
+import nbformat
 import pytest
-
-nbformat = pytest.importorskip("nbformat")
-nbclient = pytest.importorskip("nbclient")
 
 from test_reproduce_report import scene_run  # noqa: E402,F401  (session fixture, built once)
 
