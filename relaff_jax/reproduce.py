@@ -102,7 +102,7 @@ def preset(name: str) -> ReproduceConfig:
     spaces, every bootstrapping condition) meant to finish in under 15 minutes on two cores (it takes ~18, docs/reproduce.md):
     100 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
     learning pools shrink to the data (``ExperimentConfig.shrink_to_data``).
-    ``tiny``: for tests: 32 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
+    ``tiny``: for tests: 24 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
     """
     from relaff_jax.experiment import preset as exp_preset
 
@@ -115,7 +115,7 @@ def preset(name: str) -> ReproduceConfig:
     if name == "tiny":
         exp = override(exp_preset("quick"), {"sizes": (2, 4, 10), "reps_pca": 2, "reps_rhf": 2,
                                              "forest.base_trees": 8, "forest.max_trees": 8})
-        return ReproduceConfig(n_samples=32, rollout_batch=8, max_rollouts=2_000, distance_bins=4,
+        return ReproduceConfig(n_samples=24, rollout_batch=8, max_rollouts=2_000, distance_bins=4,
                                borrow_fraction=1.0, feature_batch=8, examples_per_action=1, experiment=exp)
     raise ReproduceError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
 

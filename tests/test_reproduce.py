@@ -26,7 +26,7 @@ from relaff_jax import reproduce as R
 # the tiny preset, smaller still: three actions, 4-tree forests, two sizes, no example scenes
 # (the stand-in rollouts have no scene to draw)
 ACTS = ("lift", "take", "pour")
-FAST = {"actions": ACTS, "experiment.forest.base_trees": 4, "experiment.forest.max_trees": 4,
+FAST = {"actions": ACTS, "n_samples": 32, "experiment.forest.base_trees": 4, "experiment.forest.max_trees": 4,
         "experiment.sizes": (4, 10), "examples_per_action": 0}
 FEATURE_CONFIG = {"kind": "numpy stand-in"}
 

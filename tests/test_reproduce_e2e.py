@@ -72,10 +72,10 @@ def test_tiny_end_to_end(tmp_path):
     log = cli_run(out)
     assert statuses(log) == dict.fromkeys(R.STAGES, "skipped")
 
-    # interrupted after the first chunk of unobstruct, then rerun: the same results
+    # interrupted after the first chunk of take (the cheapest action to regenerate), then rerun: the same results
     out2 = tmp_path / "interrupted"
     shutil.copytree(out, out2)
-    for p in (out2 / "data" / "unobstruct", out2 / "results", out2 / "report"):
+    for p in (out2 / "data" / "take", out2 / "results", out2 / "report"):
         shutil.rmtree(p)
 
     def stop_after_first_chunk(action, batch):
@@ -92,12 +92,12 @@ def test_tiny_end_to_end(tmp_path):
 
     with pytest.raises(KeyboardInterrupt):
         R.reproduce(out2, "tiny", SEED, progress=False, rollout_factory=stop_after_first_chunk)
-    assert len(list((out2 / "data" / "unobstruct" / D.CHUNKS).iterdir())) == 1
+    assert len(list((out2 / "data" / "take" / D.CHUNKS).iterdir())) == 1
     log = cli_run(out2)
     assert statuses(log) == {"generate": "ran", "features": "ran", "experiment": "ran", "report": "ran"}
     gen = log["runs"][-1]["stages"]["generate"]["actions"]
-    assert gen["unobstruct"]["status"] == "ran" and gen["lift"]["status"] == "skipped"
-    a, b = D.load_dataset(out / "data" / "unobstruct"), D.load_dataset(out2 / "data" / "unobstruct")
+    assert gen["take"]["status"] == "ran" and gen["lift"]["status"] == "skipped"
+    a, b = D.load_dataset(out / "data" / "take"), D.load_dataset(out2 / "data" / "take")
     for k in ("rollout", "label", "qpos_settled", "pca", "rhf"):
         np.testing.assert_array_equal(a[k], b[k])
     r1, r2 = E.load_results(out / "results"), E.load_results(out2 / "results")
