@@ -3,8 +3,9 @@
 Three parts (each optional):
   --labels N   N sampled scenes per action (scenes.py placement + settling, then the action):
                positive rate overall and by spatial relation, feasibility, rollouts/s.
-  --replay K   the first K scenes of each action replayed in native MuJoCo C (mj_step,
-               float64, same commands and grasp-lock rule): label agreement.
+  --replay K   the first K feasible scenes of each action replayed in native MuJoCo C
+               (mj_step, float64, same commands and grasp-lock rule): label agreement.
+  --json F     save the label table per finished action; the same command skips them.
   --batches    MJX rollouts/s of one action at several batch sizes against native MuJoCo C on
                the same scenes and commands (mujoco.rollout, both cores; without the grasp-lock
                switching, which needs per-step Python logic), with ratios, and against the
@@ -16,7 +17,6 @@ from __future__ import annotations
 
 import os
 import argparse
-import json
 import time
 
 import jax
@@ -27,12 +27,48 @@ import numpy as np
 from relaff_jax import actions as AC
 from relaff_jax import scenes as sc
 from relaff_jax import world as wd
+from relaff_jax.io import atomic_write_json, read_json
+
+
+def _replay(action, cfg, data, k, batch):
+    """Replay the first ``k`` feasible scenes of ``data`` in native MuJoCo C; return
+    (agreement, k, MJX positives among them). The plans are recomputed with the jitted
+    prepare stage (cheap, already compiled at ``batch``); the MJX labels are the rollouts'.
+    C starts the objects from rest; MJX started them from the settled state's residual
+    velocities (below the settle stage's at-rest threshold)."""
+    prepare_fn, _ = AC.jitted_stage_fns(cfg)
+    feas = np.flatnonzero(data["feasible"])[:k]
+    if not len(feas):
+        return float("nan"), 0, 0
+    plans = []
+    for lo in range(0, len(feas), batch):
+        rows = feas[lo:lo + batch]
+        idx = np.resize(rows, batch)  # pad with repeats: the compiled batch shape
+        plan, _ = jax.device_get(prepare_fn(AC.action_id(action), jnp.asarray(data["pair"][idx]),
+                                            jnp.asarray(data["qpos_settled"][idx])))
+        plans.append({f: getattr(plan, f)[:len(rows)] for f in ("q_way", "grip_way", "feasible")})
+    res = {f: np.concatenate([p[f] for p in plans]) for f in plans[0]}
+    nat = AC.replay_native(action, cfg, data["pair"][feas], data["qpos_settled"][feas],
+                           np.zeros((len(feas), 12), np.float32), res)["label"]
+    mjx_label = np.asarray(data["label"][feas])
+    return float(np.mean(nat == mjx_label)), len(feas), int(mjx_label.sum())
 
 
 def label_table(actions, n, batch, seed, replay, out_json=None):
+    """Label table of ``n`` sampled scenes per action (and a C replay of ``replay`` feasible
+    ones). With ``out_json`` every finished action is saved at once (atomically) and skipped
+    when the same command runs again, so a killed run loses at most the action in progress."""
     cfg = AC.ActionConfig()
-    rows, agree = {}, {}
+    setting = {"n": n, "batch": batch, "seed": seed, "replay": replay}
+    done = {}
+    if out_json and os.path.exists(out_json):
+        prev = read_json(out_json)
+        if prev.get("setting") == setting:
+            done = prev.get("actions", {})
     for action in actions:
+        if action in done and (not replay or "c_agreement" in done[action]):
+            print(f"{action:10s} (done in {out_json}, skipped)", flush=True)
+            continue
         fn = AC.make_rollout_fn(action, batch, cfg)
         chunks, t_first = [], None
         t0 = time.perf_counter()
@@ -51,35 +87,38 @@ def label_table(actions, n, batch, seed, replay, out_json=None):
         for r, name in enumerate(sc.RELATIONS):
             m = rel == r
             row[name] = (float(data["label"][m].mean()) if m.any() else float("nan"), int(m.sum()))
-        rows[action] = row
+            mf = m & data["feasible"]
+            row[name + "_feasible"] = (float(data["label"][mf].mean()) if mf.any() else float("nan"),
+                                       int(mf.sum()))
         print(f"{action:10s} n={n} positive {row['positive_rate']:.3f} feasible {row['feasible']:.3f} "
               + "  ".join(f"{k} {row[k][0]:.3f} (n={row[k][1]})" for k in sc.RELATIONS)
               + f"  {rate:.1f} rollouts/s (first chunk incl. compile {t_first:.0f} s)", flush=True)
+        if out_json:  # the labels are kept even if the replay below fails
+            atomic_write_json(out_json, {"setting": setting, "actions": {**done, action: row}})
         if replay:
-            # replay feasible programs only: an infeasible one is False in both by definition
-            feas = np.flatnonzero(data["feasible"])
-            k = min(replay, len(feas), batch)
-            idx = np.resize(feas, batch) if k else np.arange(batch)
-            res = AC.jitted_action_fn(cfg)(AC.action_id(action), jnp.asarray(data["pair"][idx]),
-                                           jnp.asarray(data["qpos_settled"][idx]),
-                                           jnp.zeros((batch, 12), jnp.float32))
-            res = jax.device_get(res)
-            nat = AC.replay_native(action, cfg, data["pair"][idx[:k]], data["qpos_settled"][idx[:k]],
-                                   np.zeros((k, 12), np.float32),
-                                   {kk: v if kk == "seg_steps" else v[:k] for kk, v in res.items()})
-            agree[action] = (float(np.mean(nat["label"] == np.asarray(res["label"][:k]))), k,
-                             int(np.asarray(res["label"][:k]).sum()))
+            # feasible programs only: an infeasible one is False in both by definition
+            t0 = time.perf_counter()
+            row["c_agreement"] = _replay(action, cfg, data, replay, batch)
+            agree, k, pos = row["c_agreement"]
             print(f"{'':10s} MJX vs MuJoCo C label agreement on {k} feasible scenes "
-                  f"({agree[action][2]} positive in MJX): {agree[action][0]:.3f}", flush=True)
-    print("\nPositive rate by relation (n per cell in brackets)")
-    print(f"{'action':10s} {'all':>6s} " + " ".join(f"{r:>16s}" for r in sc.RELATIONS)
-          + (f" {'C agree':>8s}" if replay else ""))
+                  f"({pos} positive in MJX): {agree:.3f} ({time.perf_counter() - t0:.0f} s)", flush=True)
+        done[action] = row
+        if out_json:
+            atomic_write_json(out_json, {"setting": setting, "actions": done})
+    rows = {a: done[a] for a in actions}
+    print("\nPositive rate by relation, all sampled scenes (n per cell in brackets)")
+    print(f"{'action':10s} {'all':>6s} {'feasible':>8s} " + " ".join(f"{r:>16s}" for r in sc.RELATIONS)
+          + (f" {'C agree (n)':>14s}" if replay else ""))
     for a, row in rows.items():
         cells = " ".join(f"{row[r][0]:9.3f} ({row[r][1]:4d})" for r in sc.RELATIONS)
-        print(f"{a:10s} {row['positive_rate']:6.3f} {cells}" + (f" {agree[a][0]:8.3f}" if replay else ""))
-    if out_json:
-        with open(out_json, "w") as f:
-            json.dump({"labels": rows, "c_agreement": agree}, f, indent=1)
+        c = row.get("c_agreement")
+        print(f"{a:10s} {row['positive_rate']:6.3f} {row['feasible']:8.3f} {cells}"
+              + (f" {c[0]:8.3f} ({c[1]:3d})" if replay else ""))
+    print("\nPositive rate by relation among feasible programs (reachable, the object fits the gripper)")
+    for a, row in rows.items():
+        cells = " ".join(f"{row[r + '_feasible'][0]:9.3f} ({row[r + '_feasible'][1]:4d})"
+                         for r in sc.RELATIONS)
+        print(f"{a:10s} {cells}")
 
 
 def throughput(action, batches, seed):
@@ -137,7 +176,7 @@ def main() -> None:
     ap.add_argument("--batches", type=int, nargs="*", default=[])
     ap.add_argument("--throughput-action", default="lift")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--json", default=None, help="write the label table here")
+    ap.add_argument("--json", default=None, help="label table file (resumable: finished actions are skipped)")
     args = ap.parse_args()
     print(f"jax {jax.__version__}, mujoco {mujoco.__version__}, XLA_FLAGS={os.environ['XLA_FLAGS']!r}")
     if args.labels:
