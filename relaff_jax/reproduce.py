@@ -99,7 +99,8 @@ def preset(name: str) -> ReproduceConfig:
     ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
     repetitions, 4000 test samples, the paper's forests): days of CPU time.
     ``quick``: the README's main job, a small but complete study (all nine actions, both
-    spaces, every bootstrapping condition) meant to finish in under 15 minutes on two cores (it takes ~18, docs/reproduce.md):
+    spaces, every bootstrapping condition) that finishes in under 15 minutes on two cores (10.4 min
+    measured on two idle cores, docs/reproduce.md):
     100 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
     learning pools shrink to the data (``ExperimentConfig.shrink_to_data``).
     ``tiny``: for tests: 24 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
@@ -634,13 +635,13 @@ def _load_datasets(run: Run) -> dict[str, dict]:
 
 
 def _experiment_valid(run: Run, datasets) -> str:
-    """'complete', 'partial' (resumable) or 'stale' (another config, seed or data)."""
+    """'absent', 'complete', 'partial' (resumable) or 'stale' (another config, seed or data)."""
     from relaff_jax import experiment as E
 
     res = run.paths.results
     meta_path = res / "experiment.json"
     if not meta_path.exists():
-        return "partial"
+        return "partial" if res.exists() else "absent"
     try:
         meta = rio.read_json(meta_path)
     except ValueError:
@@ -858,7 +859,7 @@ def register_cli(subparsers) -> None:
         description="Generate the nine datasets, their features, the learning and bootstrapping experiment and "
                     "the report in OUT. Rerunning continues where a killed run stopped; finished stages are skipped.")
     p.add_argument("--preset", choices=PRESETS, default="quick",
-                   help="quick: ~18 min on 2 cores (default); paper: the full protocol; tiny: for tests")
+                   help="quick: ~10 min on 2 idle cores (default); paper: the full protocol; tiny: for tests")
     p.add_argument("--out", required=True, metavar="DIR", help="run folder (created, or continued)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
