@@ -66,7 +66,7 @@ def label_table(actions, n, batch, seed, replay, out_json=None):
         if prev.get("setting") == setting:
             done = prev.get("actions", {})
     for action in actions:
-        if action in done and (not replay or "c_agreement" in done[action]):
+        if action in done:
             print(f"{action:10s} (done in {out_json}, skipped)", flush=True)
             continue
         fn = AC.make_rollout_fn(action, batch, cfg)
@@ -93,8 +93,6 @@ def label_table(actions, n, batch, seed, replay, out_json=None):
         print(f"{action:10s} n={n} positive {row['positive_rate']:.3f} feasible {row['feasible']:.3f} "
               + "  ".join(f"{k} {row[k][0]:.3f} (n={row[k][1]})" for k in sc.RELATIONS)
               + f"  {rate:.1f} rollouts/s (first chunk incl. compile {t_first:.0f} s)", flush=True)
-        if out_json:  # the labels are kept even if the replay below fails
-            atomic_write_json(out_json, {"setting": setting, "actions": {**done, action: row}})
         if replay:
             # feasible programs only: an infeasible one is False in both by definition
             t0 = time.perf_counter()
