@@ -97,7 +97,7 @@ def preset(name: str) -> ReproduceConfig:
     """The three presets.
 
     ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
-    repetitions, 4000 test samples, the paper's forests): days of CPU time.
+    repetitions, 4000 test samples, the paper's forests): about 30 hours on two cores.
     ``quick``: the README's main job, a small but complete study (all nine actions, both
     spaces, every bootstrapping condition) that finishes in under 15 minutes on two cores (10.4 min
     measured on two idle cores, docs/reproduce.md):
