@@ -346,7 +346,7 @@ def main(argv=None) -> int:
         f"`PYTHONPATH=. python benchmarks/perception.py --scenes {args.scenes} --batch {args.batch}`.",
         f"Machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, jax {jax.__version__}, mujoco {mujoco.__version__}; "
-        f"shared with other jobs, load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}.",
+        f"load average at the end {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f}.",
         "",
         f"{jx['scenes']} random library scenes at 640x480, JAX in batches of {args.batch} (vmap, "
         "XLA CPU may use both cores), native one scene at a time on one thread; one timed run "
