@@ -133,6 +133,7 @@ def test_run_log(base):
     run0 = log["runs"][0]
     assert run0["status"] == "complete" and run0["argv"][:6] == ["relaff", "reproduce", "--preset", "tiny", "--out", str(out)] and run0["jobs"] == 1
     assert run0["stages"]["generate"]["actions"]["lift"]["rollouts"] >= 32
+    assert run0["stages"]["experiment"]["was"] == "absent"  # a fresh folder, not a resumed one
 
 
 def test_second_run_skips_every_stage(base):
