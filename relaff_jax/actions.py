@@ -56,7 +56,7 @@ class ActionConfig:
     pull_distance: float = 0.25
     push_distance: float = 0.25
     unobstruct_distance: float = 0.30
-    move_distance: float = 0.35  # the closed gripper sweeps this far past the toy's side
+    move_distance: float = 0.25  # the closed gripper sweeps the toy this far (from its side)
     rake_pull: float = 0.30
     clearance: float = 0.10  # transit height of the fingertips above the highest object
     grip_margin: float = 0.02  # pre-grasp opening beyond the object's half width, per finger
@@ -67,7 +67,11 @@ class ActionConfig:
     moved: float = 0.03  # slide: the toy moved at least this much (and was not lifted)
     closer: float = 0.10  # pull, rake: horizontal distance to the robot shrank this much
     farther: float = 0.10  # push: grew this much
-    aside: float = 0.08  # move: displaced along the sweep direction at least this much
+    aside: float = 0.08  # move: the toy displaced along the sweep, relative to the base, this much
+    move_rule: str = "apart"  # "apart": toy moved aside from the base; "both": both moved aside
+    take_opening: float = 0.05  # take: fixed pre-grasp half opening (10 cm between the pads)
+    take_align: bool = False  # take: turn the wrist to the toy's narrow side (False: closing
+    # axis across the robot's line of sight, whatever the toy's yaw)
     corridor: float = 0.05  # unobstruct: clearance of the approach corridor (see docs)
     arm: A.ArmConfig = A.ArmConfig()
     phys: wd.PhysicsConfig = wd.PhysicsConfig()
@@ -114,15 +118,15 @@ _TILT = _LIFT + [(100, 3, True), (150, 3, True)]
 # Carry along the table: grasp, raise a little (2), carry (3), lower (4), open, retreat (5).
 _DRAG = _LIFT[:5] + [(40, 2, True), (150, 3, True), (40, 4, True), (40, 4, False), (60, 5, False),
                      (50, 5, False)]
-# Sweep with the closed gripper (move) or the held rake: above the start (0), down (1),
-# sweep / pull (2), retreat (3).
-_SWEEP = [(150, 0, True), (100, 1, True), (30, 1, True), (175, 2, True), (30, 2, True),
+# Rake: with the held rake above the start (0), down (1), pull (2), retreat (3); slow enough
+# that the head drags the toy instead of tipping it over.
+_SWEEP = [(150, 0, True), (100, 1, True), (30, 1, True), (250, 2, True), (30, 2, True),
           (60, 3, True), (30, 3, True)]
-# Rake: the same with a slower pull, so the head drags the toy instead of tipping it over.
-_RAKE_T = _SWEEP[:3] + [(250, 2, True)] + _SWEEP[4:]
+# Move: the same with the closed gripper and a slower sweep (1.6 s), a push rather than a blow.
+_MOVE = _SWEEP[:3] + [(400, 2, True)] + _SWEEP[4:]
 TEMPLATES = {
-    "lift": _template(_LIFT), "move": _template(_SWEEP), "pull": _template(_DRAG),
-    "push": _template(_DRAG), "rake": _template(_RAKE_T), "take": _template(_LIFT),
+    "lift": _template(_LIFT), "move": _template(_MOVE), "pull": _template(_DRAG),
+    "push": _template(_DRAG), "rake": _template(_SWEEP), "take": _template(_LIFT),
     "pour": _template(_TILT), "slide": _template(_TILT), "unobstruct": _template(_DRAG),
 }
 _TPL_STEPS = np.asarray([TEMPLATES[a].seg_steps for a in ACTIONS], np.int32)  # (9, S)
@@ -273,12 +277,27 @@ class Program(NamedTuple):
     direction: jax.Array  # (3,) the action's horizontal direction (move/pull/push/...), or 0
 
 
+def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
+    """Take's grasp: top-down at the toy's centre with a fixed pre-grasp opening
+    (``cfg.take_opening``) and, unless ``cfg.take_align``, the closing axis across the line
+    from the robot, whatever the toy's yaw. A toy wider than the opening along that axis is
+    not caught: the pads come down on it, and physics decides (the grasp lock needs both
+    pads' faces on the toy). In a container the pads must also fit beside the toy."""
+    g = _grasp(arm, cfg, toy)
+    if cfg.take_align:
+        closing = g.closing
+    else:
+        closing = _perp(_unit_xy(toy.centre))
+    opening = jnp.asarray(cfg.take_opening, jnp.float32)
+    return g._replace(closing=closing, opening=opening, fits=opening <= float(arm.finger_range[1]))
+
+
 def _transit_z(arm: A.Arm, cfg: ActionConfig, toy: Body, oth: Body) -> jax.Array:
     return jnp.maximum(toy.z_range()[1], oth.z_range()[1]) + cfg.clearance + arm.tip_below_tcp
 
 
 def _program_lift(arm, cfg, toy, oth, *, grasp_toy: bool, tilt: bool) -> Program:
-    g = _grasp(arm, cfg, toy if grasp_toy else oth)
+    g = _take_grasp(arm, cfg, toy) if grasp_toy else _grasp(arm, cfg, oth)
     up = jnp.maximum(_transit_z(arm, cfg, toy, oth), g.tcp_z + 0.05)
     pos = lambda z: g.xy + jnp.array([0.0, 0.0, 1.0]) * z
     targets = [_td(pos(up), g.closing), _td(pos(g.tcp_z), g.closing),
@@ -307,21 +326,46 @@ def _program_drag(arm, cfg, toy, oth, *, direction: jax.Array, distance: float, 
     return Program(_stack(targets), g.opening, g.fits, direction)
 
 
+def _exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax.Array:
+    """Smallest s >= 0 such that ``p - s * d`` (xy) lies outside the body's footprint
+    rectangle grown by ``margin`` (0 if it is outside already). p, d: (3,) horizontal."""
+    ax = _unit_xy(body.mat[:, 0])
+    ay = _perp(ax)
+    half = jnp.stack([body.half_width(ax), body.half_width(ay)]) + margin
+    rel = p - body.centre
+    o = jnp.stack([rel @ ax, rel @ ay])  # start in the box frame
+    v = -jnp.stack([d @ ax, d @ ay])  # walking direction in the box frame
+    safe = jnp.where(jnp.abs(v) > 1e-6, v, 1e-6)
+    t1, t2 = (-half - o) / safe, (half - o) / safe
+    t_in = jnp.max(jnp.minimum(t1, t2))
+    t_out = jnp.min(jnp.maximum(t1, t2))
+    inside = jnp.all(jnp.abs(o) < half)
+    return jnp.where(inside, jnp.maximum(t_out, 0.0), 0.0) * (t_in <= t_out)
+
+
 def _program_move(arm, cfg, toy, oth) -> Program:
-    """Sweep the toy aside, towards the other object (horizontally; across the robot's line
-    of sight if the toy sits over the other's centre)."""
+    """Sweep the toy aside along the table: the closed gripper comes down on free table
+    beside the toy, fingertips just above the table, and sweeps ``cfg.move_distance`` across
+    the toy's place, at right angles to the line from the toy to the other object (across the
+    robot's line of sight if their centres nearly coincide), towards the robot's side.
+
+    The program knows where the toy is, not what it stands on: if the toy's side lies over
+    the other object, the descent point moves out along the sweep line until it is over free
+    table, and the sweep then meets the other object first."""
+    c = toy.centre
+    c = jnp.array([c[0], c[1], 0.0])
     towards = oth.centre - toy.centre
     far = jnp.linalg.norm(towards[:2]) > 0.02
-    side = _perp(_unit_xy(toy.centre))
-    d = jnp.where(far, _unit_xy(towards), side)
+    d = _perp(jnp.where(far, _unit_xy(towards), _unit_xy(c)))
+    d = jnp.where(jnp.dot(d, c) > 0, -d, d)  # the end nearer the robot
     reach = toy.half_width(d) + arm.pad_thickness + cfg.rake_gap
-    c = toy.centre
-    start = jnp.array([c[0], c[1], 0.0]) - d * reach
-    zmin = toy.z_range()[0]
-    tcp_z = zmin + cfg.tip_clearance + 0.005 + arm.tip_below_tcp
+    finger = arm.pad_thickness + cfg.rake_gap  # half the closed fingers' footprint, plus a gap
+    start = c - d * reach
+    start = start - d * _exit_distance(start, d, oth, finger)
+    tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
     up = _transit_z(arm, cfg, toy, oth)
     z = jnp.array([0.0, 0.0, 1.0])
-    end = start + d * cfg.move_distance
+    end = c + d * (cfg.move_distance - reach)
     targets = [_td(start + z * up, d), _td(start + z * tcp_z, d), _td(end + z * tcp_z, d),
                _td(end + z * (tcp_z + 0.10), d)]
     return Program(_stack(targets), jnp.asarray(0.0), jnp.asarray(True), d)
@@ -515,13 +559,19 @@ def goals(cfg: ActionConfig, o: Outcome) -> jax.Array:
     r1 = jnp.linalg.norm(o.com_end[:, :2], axis=-1)
     along = (o.com_end - o.com0) @ o.direction
     toy_moved = jnp.linalg.norm(o.com_m[0] - o.com0[0]) >= cfg.moved
+    if cfg.move_rule == "apart":  # the toy moved aside from the base (the base left behind)
+        move = along[0] - along[1] >= cfg.aside
+    elif cfg.move_rule == "both":  # Table I read literally: both moved aside
+        move = jnp.all(along >= cfg.aside)
+    else:
+        raise ValueError(f"unknown move_rule {cfg.move_rule!r}; valid: 'apart', 'both'")
     rules = {
         "lift": lifted[0] & lifted[1],  # base and toy lifted
-        "move": jnp.all(along >= cfg.aside),  # toy and base moved aside
+        "move": move,  # toy and base moved aside (from each other, by default)
         "pull": jnp.all(r1 - r0 <= -cfg.closer),  # both pulled closer
         "push": jnp.all(r1 - r0 >= cfg.farther),  # both pushed further away
         "rake": r1[0] - r0[0] <= -cfg.closer,  # toy brought closer
-        "take": lifted[0],  # toy lifted
+        "take": lifted[0] & ~lifted[1],  # toy lifted (taken: its base, if any, left behind)
         "pour": lifted[0] & lifted[1],  # base and toy lifted (after the tilt)
         "slide": lifted[1] & toy_moved & ~lifted[0],  # base lifted, toy moved, not lifted
         "unobstruct": ~o.reach_before & o.reach_after,  # toy reachable now, not before
@@ -807,14 +857,17 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
 
 
 def _both_pads(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bool:
-    """Do both finger pads touch one of ``geoms`` (C contacts, same rule as finger_contacts)?"""
+    """Do both finger pads touch one of ``geoms`` with their gripping face (C contacts, the
+    rule of ``arm.finger_contacts``)?"""
     hit = [False, False]
     for c in d.contact[:d.ncon]:
         if c.dist >= cfg.arm.contact_dist:
             continue
         for i, pad in enumerate(arm.pad_geoms):
             if (c.geom1 == pad and c.geom2 in geoms) or (c.geom2 == pad and c.geom1 in geoms):
-                hit[i] = True
+                axis = d.geom_xmat[pad].reshape(3, 3)[:, 1]
+                if abs(float(np.dot(c.frame[:3], axis))) >= cfg.arm.contact_face_cos:
+                    hit[i] = True
     return hit[0] and hit[1]
 
 

@@ -87,6 +87,9 @@ class ArmConfig:
     grip_open: float = 0.12  # m, default half opening (finger joint value) when open; max 0.21
     grip_closed: float = 0.0  # m, command when closing (force-limited, stops at the object)
     contact_dist: float = 0.002  # m: a pad "touches" a geom if their distance is below
+    # ... and only with its inner face: the contact normal within ~45 deg of the closing axis
+    # (a pad resting on top of an object, or an edge of it on a rim, is no grip)
+    contact_face_cos: float = 0.7
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -572,10 +575,13 @@ def run_program(
 
 
 def finger_contacts(arm: Arm, cfg: ArmConfig, dx, geoms: Sequence[int] | jax.Array) -> jax.Array:
-    """(2,) bool: does the left / right finger pad touch any of ``geoms`` (ids) in ``dx``?
+    """(2,) bool: does the left / right finger pad touch any of ``geoms`` (ids) in ``dx``
+    with its gripping face?
 
     Reads the MJX contact list (one scene); a contact counts when its distance is below
-    ``cfg.contact_dist``. A grasp is a grasp only if both are True.
+    ``cfg.contact_dist`` and its normal is within ``arccos(cfg.contact_face_cos)`` of the
+    pad's closing axis (its local y), so a pad pressing on the top of an object does not
+    count. A grasp is a grasp only if both are True.
     """
     geoms = jnp.asarray(geoms).reshape(-1)
     con = dx._impl.contact
@@ -583,10 +589,13 @@ def finger_contacts(arm: Arm, cfg: ArmConfig, dx, geoms: Sequence[int] | jax.Arr
     near = con.dist < cfg.contact_dist
     is_obj1 = jnp.any(g1[:, None] == geoms[None, :], axis=1)
     is_obj2 = jnp.any(g2[:, None] == geoms[None, :], axis=1)
+    normal = con.frame[:, 0, :]  # (ncon, 3)
 
     def touches(pad):
+        axis = dx.geom_xmat[pad][:, 1]
+        face = jnp.abs(normal @ axis) >= cfg.contact_face_cos
         hit = ((g1 == pad) & is_obj2) | ((g2 == pad) & is_obj1)
-        return jnp.any(hit & near)
+        return jnp.any(hit & near & face)
 
     return jnp.stack([touches(int(arm.pad_geoms[0])), touches(int(arm.pad_geoms[1]))])
 

@@ -29,7 +29,9 @@ BASE_ROWS = [
     ("block", "plate", (1.55, -0.3, 0.0), (0.9, -0.6, 0.0), 0.0),  # 4 beside, toy out of reach
     ("toy_car", "book", (0.9, 0.2, 0.032), (0.9, 0.2, 0.0), 0.0),  # 5 on top
     ("block", "open_box", (0.75, -0.15, 0.0), (0.75, 0.05, 0.0), 0.0),  # 6 beside, 7.5 cm gap
-    ("ball", "tray", (0.9, 0.2, 0.0), (0.5, 0.95, 0.0), 0.0),  # 7 beside, far
+    # 7 beside, far; the car's long side 25 deg off take's closing axis (11 cm across the
+    # 10 cm opening: the pads land on its corners and may turn it into the gap)
+    ("toy_car", "tray", (0.604, -0.667, 0.0), (0.5, 0.95, 0.0), 0.0),
 ]
 OBST_ROWS = [
     ("block", "brick", (0.8, 0.0, 0.0), (0.6, 0.0, 0.0), 0.0),  # 0 brick in the way
@@ -48,12 +50,14 @@ RAKE_ROWS = [
 T, F, _ = True, False, None
 EXPECT = {
     "lift": [T, T, F, T, F, T, F, F],
-    "take": [_, _, T, _, F, _, T, T],
+    # take row 0: the pads (10 cm apart) come down outside the 9 cm cup and lift it, block
+    # and all: the pair is lifted, the toy is not taken
+    "take": [F, T, T, _, F, T, T, _],
     "pour": [T, F, F, T, F, _, F, F],
     "slide": [F, T, F, F, F, _, F, F],
     "pull": [T, T, F, T, F, T, F, F],
     "push": [T, T, F, T, F, _, F, F],
-    "move": [_, F, F, _, F, F, T, F],
+    "move": [F, F, T, F, F, F, T, T],
     "unobstruct": [T, F, F, F] * 2,
     "rake": [T, _, F, F] * 2,
 }
@@ -135,7 +139,7 @@ def test_toy_is_only_moved_by_contacts(results):
         np.testing.assert_allclose(r["com_end"][7, 0], r["com0"][7, 0], atol=2e-3)
 
 
-@pytest.mark.parametrize("action", ["lift", "slide", "pull"])
+@pytest.mark.parametrize("action", ["lift", "slide", "pull", "take"])
 def test_native_replay_agrees(scenes, results, action):
     pair, s = scenes["base"]
     idx = [0, 1, 2]
@@ -195,3 +199,36 @@ def test_cli_generate_bad_input(tmp_path, capsys):
         assert args.func(args) == 2
         assert msg in capsys.readouterr().err
     assert not any(tmp_path.iterdir())  # nothing half-written
+
+
+def test_exit_distance_hand_worked():
+    # a 40 x 20 cm box at the origin; walking from p along -d until outside the box grown by m
+    box = lambda yaw: AC.Body(jnp.zeros(3), AC._quat_mat(jnp.asarray(quat(yaw), jnp.float32)),
+                              jnp.array([-0.2, -0.1, 0.0]), jnp.array([0.2, 0.1, 0.02]))
+    ex = lambda p, d, b, m: float(AC._exit_distance(jnp.asarray(p), jnp.asarray(d), b, m))
+    np.testing.assert_allclose(ex([0.1, 0.0, 0.0], [1.0, 0.0, 0.0], box(0.0), 0.03), 0.33, atol=1e-6)
+    np.testing.assert_allclose(ex([0.1, 0.0, 0.0], [0.0, -1.0, 0.0], box(0.0), 0.0), 0.1, atol=1e-6)
+    np.testing.assert_allclose(ex([0.0, 0.1, 0.0], [0.0, -1.0, 0.0], box(np.pi / 2), 0.0), 0.1, atol=1e-5)
+    assert ex([0.5, 0.0, 0.0], [1.0, 0.0, 0.0], box(0.0), 0.03) == 0.0  # already on free table
+    # diagonal walk from the centre: leaves through the nearer face (y = 0.1 at s = 0.1 * sqrt 2)
+    d = np.array([-1.0, -1.0, 0.0]) / np.sqrt(2)
+    np.testing.assert_allclose(ex([0.0, 0.0, 0.0], d, box(0.0), 0.0), 0.1 * np.sqrt(2), atol=1e-6)
+
+
+def test_move_and_take_rules_hand_worked():
+    d = jnp.array([1.0, 0.0, 0.0])
+    com0 = jnp.array([[0.8, 0.0, 0.03], [0.8, 0.3, 0.01]])
+
+    def label(action, shift_toy, shift_oth, **kw):
+        end = com0 + jnp.stack([jnp.asarray(shift_toy), jnp.asarray(shift_oth)])
+        o = AC.Outcome(com0, end, end, d, jnp.asarray(False), jnp.asarray(False))
+        return bool(AC.goals(AC.ActionConfig(**kw), o)[AC.action_id(action)])
+
+    assert label("move", [0.2, 0, 0], [0, 0, 0])  # swept away from the base
+    assert not label("move", [0.2, 0, 0], [0.2, 0, 0])  # pushed along with its container
+    assert label("move", [0.2, 0, 0], [0.2, 0, 0], move_rule="both")  # the literal rule
+    assert not label("move", [0.05, 0, 0], [0, 0, 0])  # below the 8 cm threshold
+    assert label("take", [0, 0, 0.2], [0, 0, 0])
+    assert not label("take", [0, 0, 0.2], [0, 0, 0.2])  # lifted with its container: not taken
+    with pytest.raises(ValueError, match="unknown move_rule 'sideways'"):
+        label("move", [0.2, 0, 0], [0, 0, 0], move_rule="sideways")
