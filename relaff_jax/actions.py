@@ -4,7 +4,8 @@ Takes settled scenes (``scenes.py`` on the arm-less world) and the action world
 (``world.build_world(arm=True)``: the same pairs plus the arm of ``scenes/arm.xml``); gives, per
 scene, whether the action's goal was reached (the affordance label) and diagnostics.
 
-Pipeline of one batch (one compile per action and batch shape):
+Pipeline of one batch (two compiled programs per batch shape, plan and simulate, shared by
+all nine actions: the action index is traced):
   1. ``plan``: tcp waypoints from the settled object poses (``_program_*``), solved by the
      batched IK (``arm.solve_ik_path``) from the arm's home pose. No path planning (paper IV-D):
      if any waypoint is unreachable or badly conditioned, or the object does not fit the
@@ -18,7 +19,8 @@ Settled scenes map into the action world one to one: both worlds put the toy's a
 object's free joints first (qpos 0..13), the arm's joints follow. The arm starts at its home
 pose holding the rake's grip point (``PhysicsConfig.held_rake_pos``); in rake scenes the rake is
 attached to the hand by the weld ``tool_grip`` (the paper: rakes are "attached to the robot arm
-as a tool"); every other grasp is by friction only.
+as a tool"); every other grasp is the pads' friction plus a grasp lock that engages only while
+the fingers close with both pads' faces on the grasped body (``_simulate``).
 
 Public API: ``ACTIONS``, ``ActionConfig``, ``make_plan_fn``, ``make_action_fn``,
 ``make_rollout_fn(action, batch, config)`` (for ``dataset.generate_dataset``),

@@ -371,12 +371,19 @@ def findings(an: Mapping[str, Mapping[str, Any]], cfg, rules: FindingRules = Fin
     space = "PCA" if pca is not None else next(iter(an)).upper()
     db1, cbn, dbn = _row(a, "DB1 best"), _row(a, "CBn"), _row(a, "DBn")
     p2 = dict(zip(("avg", "min", "max"), PAPER_TABLE2["DB1 best"])), dict(zip(("avg", "min", "max"), PAPER_TABLE2["CBn"]))
-    # 2. DB1 best and CBn well above 1
+    # 2. DB1 best and CBn well above 1; with no category kept at CBn's threshold CBn is NB
+    # itself (bf 1 by construction), so the finding is not measurable rather than failed
+    th_t = [float(t) for t in a["thresholds"]["T"]]
+    t_cbn = float(getattr(cfg, "cbn_threshold", 0.5))
+    cbn_built = (int(a["thresholds"]["count"][th_t.index(t_cbn)]) if t_cbn in th_t else -1)
+    cbn_note = f" (no category kept at T = {t_cbn:g}: CBn is NB)" if cbn_built == 0 else ""
     add("bootstrapping_helps", "DB1 best and CBn are well above 1",
         f"Table II: DB1 best {p2[0]['avg']:.3f}, CBn {p2[1]['avg']:.3f}",
         f"Table II ({space}) average of both rows >= {rules.well_above}",
-        f"{space} Table II average: DB1 best {_fmt(db1)}, CBn {_fmt(cbn)}",
-        {"db1_best": db1, "cbn": cbn}, _decide(db1 >= rules.well_above and cbn >= rules.well_above, db1, cbn))
+        f"{space} Table II average: DB1 best {_fmt(db1)}, CBn {_fmt(cbn)}{cbn_note}",
+        {"db1_best": db1, "cbn": cbn, "cbn_categories": cbn_built},
+        _decide(db1 >= rules.well_above and cbn >= rules.well_above, db1,
+                cbn if cbn_built != 0 else float("nan")))
     # 3. DBn below DB1 best
     add("dbn_below_db1", "DBn is below DB1 best", f"Table II: DBn {PAPER_TABLE2['DBn'][0]:.3f} < DB1 best {p2[0]['avg']:.3f}",
         f"Table II ({space}) average of DBn < that of DB1 best",

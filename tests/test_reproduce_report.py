@@ -105,6 +105,11 @@ def test_findings_hand_worked():
     # undefined numbers (no category kept at T = 0.5; no RHF sweep) are "not measurable"
     v = verdicts(_analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0, 1.9, np.nan]))
     assert v["pruning_cheap"] is None
+    # CBn with no category kept at its threshold (T = 0.5) is NB itself: not measurable
+    f = {x["id"]: x for x in R.findings(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, CBn=1.0), [2.0] * 3,
+                                                 counts=(36, 5, 0)), CFG)}
+    assert f["bootstrapping_helps"]["reproduced"] is None
+    assert "no category kept at T = 0.5: CBn is NB" in f["bootstrapping_helps"]["numbers"]
     an = _analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0] * 3)
     del an["rhf"]
     assert verdicts(an)["rhf_faster"] is None
