@@ -58,7 +58,7 @@ class ActionConfig:
     pull_distance: float = 0.25
     push_distance: float = 0.25
     unobstruct_distance: float = 0.30
-    move_distance: float = 0.25  # the closed gripper sweeps the toy this far (from its side)
+    move_distance: float = 0.25  # move: the fingers end this far beyond their start beside the toy
     rake_pull: float = 0.30
     clearance: float = 0.10  # transit height of the fingertips above the highest object
     grip_margin: float = 0.02  # pre-grasp opening beyond the object's half width, per finger
@@ -282,9 +282,9 @@ class Program(NamedTuple):
 def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
     """Take's grasp: top-down at the toy's centre with a fixed pre-grasp opening
     (``cfg.take_opening``) and, unless ``cfg.take_align``, the closing axis across the line
-    from the robot, whatever the toy's yaw. A toy wider than the opening along that axis is
-    not caught: the pads come down on it, and physics decides (the grasp lock needs both
-    pads' faces on the toy). In a container the pads must also fit beside the toy."""
+    from the robot, whatever the toy's yaw. A toy wider than the opening along that axis
+    meets the pads as they come down; physics decides whether they turn it into the gap or
+    miss (the grasp lock needs both pads' faces on the toy). In a container the pads must also fit beside the toy."""
     g = _grasp(arm, cfg, toy)
     if cfg.take_align:
         closing = g.closing
@@ -347,8 +347,8 @@ def _exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax
 
 def _program_move(arm, cfg, toy, oth) -> Program:
     """Sweep the toy aside along the table: the closed gripper comes down on free table
-    beside the toy, fingertips just above the table, and sweeps ``cfg.move_distance`` across
-    the toy's place, at right angles to the line from the toy to the other object (across the
+    beside the toy, fingertips just above the table, and sweeps across the toy's place to
+    ``cfg.move_distance`` beyond that start (further if the start had to step back), at right angles to the line from the toy to the other object (across the
     robot's line of sight if their centres nearly coincide), towards the robot's side.
 
     The program knows where the toy is, not what it stands on: if the toy's side lies over
