@@ -374,8 +374,8 @@ def findings(an: Mapping[str, Mapping[str, Any]], cfg, rules: FindingRules = Fin
     # 2. DB1 best and CBn well above 1; with no category kept at CBn's threshold CBn is NB
     # itself (bf 1 by construction), so the finding is not measurable rather than failed
     th_t = [float(t) for t in a["thresholds"]["T"]]
-    t_cbn = float(getattr(cfg, "cbn_threshold", 0.5))
-    cbn_built = (int(a["thresholds"]["count"][th_t.index(t_cbn)]) if t_cbn in th_t else -1)
+    t_cbn = float(cfg.cbn_threshold)
+    cbn_built = int(a["thresholds"]["count"][th_t.index(t_cbn)])
     cbn_note = f" (no category kept at T = {t_cbn:g}: CBn is NB)" if cbn_built == 0 else ""
     add("bootstrapping_helps", "DB1 best and CBn are well above 1",
         f"Table II: DB1 best {p2[0]['avg']:.3f}, CBn {p2[1]['avg']:.3f}",

@@ -2,6 +2,7 @@
 serves every action), and a MuJoCo C replay of some of them."""
 import os
 import jax
+import mujoco
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -232,3 +233,34 @@ def test_move_and_take_rules_hand_worked():
     assert not label("take", [0, 0, 0.2], [0, 0, 0.2])  # lifted with its container: not taken
     with pytest.raises(ValueError, match="unknown move_rule 'sideways'"):
         label("move", [0.2, 0, 0], [0, 0, 0], move_rule="sideways")
+
+
+def test_grasp_needs_the_pads_faces_mjx_and_c():
+    """Hand-worked contacts: a pad counts only with a normal near its closing axis (its local
+    y), in the MJX rule (arm.finger_contacts) and the C replay's rule (_both_pads) alike."""
+    from types import SimpleNamespace as NS
+    from relaff_jax import arm as A
+
+    m = mujoco.MjModel.from_xml_path(str(A.arm_test_xml_path()))
+    arm, cfg = A.arm_from_model(m), AC.ActionConfig()
+    pl, pr = (int(g) for g in arm.pad_geoms)
+    obj = m.geom("obj_geom").id
+    xmat = np.tile(np.eye(3), (m.ngeom, 1, 1))  # every geom axis-aligned: closing axis = world y
+    side, top = np.eye(3)[[1, 0, 2]], np.eye(3)[[2, 0, 1]]  # contact frames, normal first row
+    tilted = np.array([[0.0, 0.6, 0.8], [1, 0, 0], [0, 0.8, -0.6]])  # |n.y| = 0.6 < 0.7
+    cases = [  # (frames of the contacts pad_l-obj, pad_r-obj), both pads held?
+        ((side, side), True), ((side, top), False), ((top, top), False), ((side, tilted), False),
+    ]
+    for (fl, fr), want in cases:
+        frames = np.stack([fl, fr])
+        dx = NS(_impl=NS(contact=NS(geom=jnp.array([[pl, obj], [obj, pr]]), dist=jnp.array([0.0, -0.001]),
+                                    frame=jnp.asarray(frames))), geom_xmat=jnp.asarray(xmat))
+        assert bool(jnp.all(A.finger_contacts(arm, cfg.arm, dx, [obj]))) == want
+        cons = [NS(dist=0.0, geom1=pl, geom2=obj, frame=fl.reshape(-1)),
+                NS(dist=-0.001, geom1=obj, geom2=pr, frame=fr.reshape(-1))]
+        d = NS(contact=cons, ncon=2, geom_xmat=xmat.reshape(m.ngeom, 9))
+        assert AC._both_pads(d, arm, cfg, {obj}) == want
+    # far contacts do not count, whatever their normal
+    dx = NS(_impl=NS(contact=NS(geom=jnp.array([[pl, obj], [pr, obj]]), dist=jnp.array([0.0, 0.01]),
+                                frame=jnp.asarray(np.stack([side, side])))), geom_xmat=jnp.asarray(xmat))
+    assert A.finger_contacts(arm, cfg.arm, dx, [obj]).tolist() == [True, False]
