@@ -338,11 +338,9 @@ def _exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax
     o = jnp.stack([rel @ ax, rel @ ay])  # start in the box frame
     v = -jnp.stack([d @ ax, d @ ay])  # walking direction in the box frame
     safe = jnp.where(jnp.abs(v) > 1e-6, v, 1e-6)
-    t1, t2 = (-half - o) / safe, (half - o) / safe
-    t_in = jnp.max(jnp.minimum(t1, t2))
-    t_out = jnp.min(jnp.maximum(t1, t2))
+    t_out = jnp.min(jnp.maximum((-half - o) / safe, (half - o) / safe))  # leaves the last slab
     inside = jnp.all(jnp.abs(o) < half)
-    return jnp.where(inside, jnp.maximum(t_out, 0.0), 0.0) * (t_in <= t_out)
+    return jnp.where(inside, jnp.maximum(t_out, 0.0), 0.0)
 
 
 def _program_move(arm, cfg, toy, oth) -> Program:
