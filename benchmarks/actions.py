@@ -24,9 +24,9 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from relaff_jax import actions as AC
-from relaff_jax import scenes as sc
-from relaff_jax import world as wd
+from relaff_jax.sim import actions as AC
+from relaff_jax.sim import scenes as sc
+from relaff_jax.sim import world as wd
 from relaff_jax.io import atomic_write_json, read_json
 
 

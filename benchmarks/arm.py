@@ -19,7 +19,7 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
-from relaff_jax import arm as A
+from relaff_jax.sim import arm as A
 
 SEG = (200, 50, 150, 75, 200, 50)  # home->above, dwell, ->down, close, ->lift, dwell
 

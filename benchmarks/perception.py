@@ -30,9 +30,9 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from relaff_jax import objects as lib
-from relaff_jax import perception as P
-from relaff_jax import world as wd
+from relaff_jax.sim import objects as lib
+from relaff_jax.perception import core as P
+from relaff_jax.sim import world as wd
 
 
 def make_scenes(n: int, seed: int = 0):

@@ -22,9 +22,10 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
-from relaff_jax import config, native
-from relaff_jax import scenes as sc
-from relaff_jax import world as wd
+from relaff_jax import config
+from relaff_jax.sim import native
+from relaff_jax.sim import scenes as sc
+from relaff_jax.sim import world as wd
 
 
 def mjx_rate(w, cfg, batch, reps=2):

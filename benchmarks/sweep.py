@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from relaff_jax import experiment as E
-from relaff_jax import learning as L
+from relaff_jax.learn import experiment as E
+from relaff_jax.learn import forests as L
 
 SIZES = (4, 25, 100)
 DIMS = {"pca": 18, "rhf": 318}

@@ -15,7 +15,7 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
 
 import pytest  # noqa: E402
 
-from relaff_jax import scenes, world  # noqa: E402
+from relaff_jax.sim import scenes, world  # noqa: E402
 
 
 @pytest.fixture(scope="session")

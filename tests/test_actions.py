@@ -7,10 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from relaff_jax import actions as AC
-from relaff_jax import objects as lib
-from relaff_jax import scenes as sc
-from relaff_jax import world as wd
+from relaff_jax.sim import actions as AC
+from relaff_jax.sim import objects as lib
+from relaff_jax.sim import scenes as sc
+from relaff_jax.sim import world as wd
 
 B = 8
 CUP_FLOOR = dict(lib.get("cup").parts)["base"].size[2]
@@ -239,7 +239,7 @@ def test_grasp_needs_the_pads_faces_mjx_and_c():
     """Hand-worked contacts: a pad counts only with a normal near its closing axis (its local
     y), in the MJX rule (arm.finger_contacts) and the C replay's rule (_both_pads) alike."""
     from types import SimpleNamespace as NS
-    from relaff_jax import arm as A
+    from relaff_jax.sim import arm as A
 
     m = mujoco.MjModel.from_xml_path(str(A.arm_test_xml_path()))
     arm, cfg = A.arm_from_model(m), AC.ActionConfig()

@@ -10,7 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from relaff_jax import arm as A
+from relaff_jax.sim import arm as A
 
 
 @pytest.fixture(scope="module")

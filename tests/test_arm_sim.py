@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from mujoco import mjx
 
-from relaff_jax import arm as A
+from relaff_jax.sim import arm as A
 
 # home->above, dwell, ->down, close, ->lift, ->tilt, dwell (control steps of 4 ms)
 SEG = (200, 50, 150, 75, 200, 200, 50)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from relaff_jax import dataset as ds
+from relaff_jax.data import dataset as ds
 
 TOYS = ("ball", "cube")
 OTHERS = ("plate", "cup", "box")

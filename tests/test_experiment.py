@@ -5,8 +5,8 @@ import csv
 import numpy as np
 import pytest
 
-from relaff_jax import experiment as E
-from relaff_jax import learning as L
+from relaff_jax.learn import experiment as E
+from relaff_jax.learn import forests as L
 from relaff_jax.config import override
 
 # Small forests keep the sweep tests fast; the paper's forest settings are tested in test_learning.

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 ds = pytest.importorskip("relaff_jax.dataset")
-from relaff_jax import experiment as E  # noqa: E402
+from relaff_jax.learn import experiment as E  # noqa: E402
 
 
 def _rollout_fn(key, b):

@@ -6,8 +6,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from relaff_jax import cli, dataset, features, load_dataset
-from relaff_jax import scenes as sc
+from relaff_jax import cli, load_dataset
+from relaff_jax.data import dataset
+from relaff_jax.perception import from_sim as features
+from relaff_jax.sim import scenes as sc
 
 B = 8
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from sklearn.ensemble import RandomForestClassifier
 
-from relaff_jax import learning as L
+from relaff_jax.learn import forests as L
 from relaff_jax.config import override
 
 

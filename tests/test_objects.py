@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import cli
-from relaff_jax import objects as lib
+from relaff_jax.sim import objects as lib
 
 
 def test_paper_counts():

@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from relaff_jax import perception as P
+from relaff_jax.perception import core as P
 from relaff_jax.config import ConfigError, override
 
 SMALL = P.PerceptionConfig(
@@ -586,7 +586,7 @@ def test_features_batched_no_retrace_and_sane(random_scenes, chain):
 
 
 def _library_scene(toy, other, toy_pose, other_pose):
-    from relaff_jax import world as wd
+    from relaff_jax.sim import world as wd
 
     m = mujoco.MjModel.from_xml_string(wd.pair_xml(toy, other))
     d = mujoco.MjData(m)

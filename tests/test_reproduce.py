@@ -19,9 +19,9 @@ import time
 import numpy as np
 import pytest
 
-from relaff_jax import dataset as D
-from relaff_jax import experiment as E
-from relaff_jax import reproduce as R
+from relaff_jax.data import dataset as D
+from relaff_jax.learn import experiment as E
+from relaff_jax.reproduce import run as R
 
 # the tiny preset, smaller still: three actions, 4-tree forests, two sizes, no example scenes
 # (the stand-in rollouts have no scene to draw)
@@ -260,12 +260,12 @@ def test_other_seed_or_preset_in_the_same_folder_is_refused(base):
 
 
 def test_missing_actions_module_is_a_clear_error(tmp_path, monkeypatch):
-    monkeypatch.setitem(sys.modules, "relaff_jax.actions", None)  # as if the module did not exist
+    monkeypatch.setitem(sys.modules, "relaff_jax.sim.actions", None)  # as if the module did not exist
     parser = argparse.ArgumentParser()
     R.register_cli(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["reproduce", "--preset", "tiny", "--out", str(tmp_path / "r"), "--no-progress"]
                              + [x for k, v in FAST.items() for x in ("--set", f"{k}={json.dumps(v)}")])
-    with pytest.raises(R.ReproduceError, match="needs relaff_jax.actions"):
+    with pytest.raises(R.ReproduceError, match="needs relaff_jax.sim.actions"):
         args.func(args)
     log = json.loads((tmp_path / "r" / R.RUN_LOG).read_text())
     assert log["runs"][0]["status"].startswith("failed: ReproduceError") and "(in generate)" in log["runs"][0]["status"]

@@ -14,9 +14,9 @@ import shutil
 import numpy as np
 import pytest
 
-from relaff_jax import dataset as D
-from relaff_jax import experiment as E
-from relaff_jax import reproduce as R
+from relaff_jax.data import dataset as D
+from relaff_jax.learn import experiment as E
+from relaff_jax.reproduce import run as R
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(5400)]
 

@@ -9,10 +9,12 @@ import jax
 import numpy as np
 import pytest
 
-from relaff_jax import cli, dataset, features
-from relaff_jax import experiment as E
-from relaff_jax import report as R
-from relaff_jax import scenes as sc
+from relaff_jax import cli
+from relaff_jax.data import dataset
+from relaff_jax.perception import from_sim as features
+from relaff_jax.learn import experiment as E
+from relaff_jax.report import report as R
+from relaff_jax.sim import scenes as sc
 
 B = 8
 _CACHE = {}  # the run folder is built once per session, also when test_notebooks imports the fixture

@@ -10,9 +10,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from relaff_jax import cli, config, native
-from relaff_jax import objects as lib
-from relaff_jax import scenes as sc
+from relaff_jax import cli, config
+from relaff_jax.sim import native
+from relaff_jax.sim import objects as lib
+from relaff_jax.sim import scenes as sc
 
 B = 8
 
@@ -174,7 +175,7 @@ def test_bad_input():
 
 HANG_SCRIPT = textwrap.dedent("""
     import jax, jax.numpy as jnp, numpy as np
-    from relaff_jax import scenes, world
+    from relaff_jax.sim import scenes, world
     w = world.build_world()
     place, settle, _ = scenes.jitted_scene_fns(w, scenes.SceneConfig(settle_steps=4))
     pair = scenes.sample_pairs(jax.random.PRNGKey(0), np.arange(w.n_pairs), w, 1024)

@@ -51,8 +51,7 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.config import to_dict
 
-ACTIONS = ("lift", "move", "pull", "push", "rake", "take", "pour", "slide", "unobstruct")
-RELATIONS = ("beside", "on_top", "inside")
+from relaff_jax.constants import ACTIONS, RELATIONS  # noqa: F401 (re-exported)
 REQUIRED_FIELDS = ("label", "relation", "cog_distance", "toy", "other")
 RESERVED_FIELDS = ("rollout", "selected", "action")
 

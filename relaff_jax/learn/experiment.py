@@ -40,7 +40,8 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.config import from_dict, override, to_dict
-from relaff_jax.learning import (
+from relaff_jax.constants import FAMILIES
+from relaff_jax.learn.forests import (
     ACTIONS,
     SPACES,
     ForestConfig,
@@ -55,7 +56,6 @@ from relaff_jax.learning import (
     synthetic_datasets,
 )
 
-FAMILIES = ("NB", "DB1", "DBn", "CB1", "CBn")
 SPACE_CODE = {"pca": 0, "rhf": 1}
 FORMAT_VERSION = 1
 
@@ -259,7 +259,7 @@ def fingerprint(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[str]
 def load_datasets(dirs: Sequence[str | os.PathLike]) -> dict[str, dict]:
     """``{action: load_dataset(DIR)}`` for the given dataset directories."""
     try:
-        from relaff_jax.dataset import load_dataset
+        from relaff_jax.data.dataset import load_dataset
     except ImportError as e:  # the dataset stage is another module
         raise ValueError(f"cannot read datasets: relaff_jax.dataset.load_dataset is unavailable ({e})") from e
     out: dict[str, dict] = {}
@@ -785,7 +785,7 @@ def _cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from relaff_jax.report import write_report
+    from relaff_jax.report.report import write_report
 
     out = write_report(args.results, args.out)
     print(f"report: {out}")

@@ -44,14 +44,12 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.config import ConfigError, from_dict, override, to_dict
 
-ACTIONS = ("lift", "move", "pull", "push", "rake", "take", "pour", "slide", "unobstruct")
-STAGES = ("generate", "features", "experiment", "report")
+from relaff_jax.constants import ACTIONS, SPACES, STAGES  # noqa: F401 (re-exported)
 PRESETS = ("tiny", "quick", "paper")
 FORMAT = "relaff_jax.reproduce"
 FORMAT_VERSION = 1
 RUN_LOG = "run.json"
 REPORT_STAMP = "report_stamp.json"
-SPACES = ("pca", "rhf")
 
 
 class ReproduceError(ValueError):
@@ -62,7 +60,7 @@ class ReproduceError(ValueError):
 
 
 def _experiment_config():
-    from relaff_jax.experiment import ExperimentConfig
+    from relaff_jax.learn.experiment import ExperimentConfig
 
     return ExperimentConfig()
 
@@ -105,7 +103,7 @@ def preset(name: str) -> ReproduceConfig:
     learning pools shrink to the data (``ExperimentConfig.shrink_to_data``).
     ``tiny``: for tests: 24 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
     """
-    from relaff_jax.experiment import preset as exp_preset
+    from relaff_jax.learn.experiment import preset as exp_preset
 
     if name == "paper":
         return ReproduceConfig(experiment=exp_preset("paper"))
@@ -123,7 +121,7 @@ def preset(name: str) -> ReproduceConfig:
 
 def config_from_dict(d: Mapping[str, Any]) -> ReproduceConfig:
     """Rebuild a config from ``to_dict`` output (the run log's ``config``)."""
-    from relaff_jax.experiment import ExperimentConfig
+    from relaff_jax.learn.experiment import ExperimentConfig
 
     d = dict(d)
     exp = from_dict(ExperimentConfig, d.pop("experiment"))
@@ -133,7 +131,7 @@ def config_from_dict(d: Mapping[str, Any]) -> ReproduceConfig:
 
 def check_config(cfg: ReproduceConfig, seed: int) -> None:
     """Fail before any simulation if the config cannot give a complete study."""
-    from relaff_jax import experiment as E
+    from relaff_jax.learn import experiment as E
 
     def pos_int(name, v, lo=1):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
@@ -272,14 +270,14 @@ def _clean_leftovers(root: Path) -> None:
 
 
 def default_rollout_factory(action: str, batch: int) -> tuple[Callable, dict, Sequence[str] | None]:
-    """``(rollout_fn, config_dict, object_names)`` of one action from ``relaff_jax.actions``
+    """``(rollout_fn, config_dict, object_names)`` of one action from ``relaff_jax.sim.actions``
     (default ``ActionConfig``; the rollouts carry object names, so no name table)."""
     try:
-        actions = importlib.import_module("relaff_jax.actions")
+        actions = importlib.import_module("relaff_jax.sim.actions")
     except ModuleNotFoundError as e:
-        if e.name == "relaff_jax.actions":
+        if e.name == "relaff_jax.sim.actions":
             raise ReproduceError(
-                "the generate stage needs relaff_jax.actions (the arm's nine motor programs that label the "
+                "the generate stage needs relaff_jax.sim.actions (the arm's nine motor programs that label the "
                 "rollouts), which this installation does not have; the datasets cannot be generated") from e
         raise
     cfg = actions.ActionConfig()
@@ -288,9 +286,9 @@ def default_rollout_factory(action: str, batch: int) -> tuple[Callable, dict, Se
 
 def default_feature_factory(seed: int) -> tuple[Callable, dict]:
     """``(compute_fn, config_dict)`` of the perception stage, as ``relaff features`` uses it."""
-    from relaff_jax import features as F
-    from relaff_jax import perception as pc
-    from relaff_jax import world as wd
+    from relaff_jax.perception.core import from_sim as F
+    from relaff_jax.perception import core as pc
+    from relaff_jax.sim import world as wd
 
     cfg = pc.PerceptionConfig()
     return F.make_feature_fn(wd.build_world(), cfg, seed), {"perception": to_dict(cfg), "seed": seed}
@@ -298,14 +296,14 @@ def default_feature_factory(seed: int) -> tuple[Callable, dict]:
 
 def feature_config(seed: int) -> dict:
     """The feature config dict the default factory stores (without building the world)."""
-    from relaff_jax import perception as pc
+    from relaff_jax.perception import core as pc
 
     return {"perception": to_dict(pc.PerceptionConfig()), "seed": seed}
 
 
 def _dataset_complete(path: Path, action: str, n: int, seed: int, batch: int) -> bool:
     """A finished dataset of exactly this request whose chunks and selection verify."""
-    from relaff_jax import dataset as D
+    from relaff_jax.data import dataset as D
 
     side = path / D.SIDECAR
     if not side.exists():
@@ -324,7 +322,7 @@ def _dataset_complete(path: Path, action: str, n: int, seed: int, batch: int) ->
 
 def _features_state(path: Path, batch: int, config: Mapping) -> str:
     """'complete' (features of this config, verified), 'partial' (resumable), 'stale', 'absent'."""
-    from relaff_jax import dataset as D
+    from relaff_jax.data import dataset as D
 
     side = path / D.FEATURES_SIDECAR
     if not side.exists():
@@ -535,7 +533,7 @@ class Run:
 
 
 def _stage_generate(run: Run) -> dict:
-    from relaff_jax import dataset as D
+    from relaff_jax.data import dataset as D
 
     cfg, paths = run.cfg, run.paths
     if "generate" in run.force:
@@ -581,7 +579,7 @@ def _stage_generate(run: Run) -> dict:
 
 
 def _stage_features(run: Run) -> dict:
-    from relaff_jax import dataset as D
+    from relaff_jax.data import dataset as D
 
     cfg, paths = run.cfg, run.paths
     fseed = run.log["seeds"]["features"]
@@ -623,7 +621,7 @@ def _stage_features(run: Run) -> dict:
 
 
 def _load_datasets(run: Run) -> dict[str, dict]:
-    from relaff_jax.dataset import load_dataset
+    from relaff_jax.data.dataset import load_dataset
 
     out = {}
     for a in run.cfg.actions:
@@ -636,7 +634,7 @@ def _load_datasets(run: Run) -> dict[str, dict]:
 
 def _experiment_valid(run: Run, datasets) -> str:
     """'absent', 'complete', 'partial' (resumable) or 'stale' (another config, seed or data)."""
-    from relaff_jax import experiment as E
+    from relaff_jax.learn import experiment as E
 
     res = run.paths.results
     meta_path = res / "experiment.json"
@@ -657,7 +655,7 @@ def _experiment_valid(run: Run, datasets) -> str:
 
 
 def _stage_experiment(run: Run) -> dict:
-    from relaff_jax import experiment as E
+    from relaff_jax.learn import experiment as E
 
     cfg, res = run.cfg, run.paths.results
     ec = cfg.experiment
@@ -701,7 +699,7 @@ def _stage_experiment(run: Run) -> dict:
 
 
 def _report_inputs(run: Run) -> list[Path]:
-    from relaff_jax import dataset as D
+    from relaff_jax.data import dataset as D
 
     res = run.paths.results
     files = [res / "experiment.json"] + [res / s / "results.npz" for s in run.cfg.spaces]
@@ -711,7 +709,7 @@ def _report_inputs(run: Run) -> list[Path]:
 
 
 def _stage_report(run: Run) -> dict:
-    from relaff_jax import report as R
+    from relaff_jax.report import report as R
 
     out = run.paths.report
     run.progress.begin("report", None)

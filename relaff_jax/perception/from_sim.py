@@ -20,9 +20,9 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from . import config as rconfig
-from . import perception as pc
-from . import world as wd
+from relaff_jax import config as rconfig
+from . import core as pc
+from relaff_jax.sim import world as wd
 
 
 def scene_geoms(world: wd.World, pair: jax.Array, qpos: jax.Array):
@@ -83,7 +83,7 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
 def add_features(path, batch: int = 32, seed: int = 0, overrides: dict | None = None,
                  progress: bool = True, overwrite: bool = False) -> dict:
     """Attach PCA and RHF features to the dataset at ``path`` (resumable)."""
-    from . import dataset
+    from relaff_jax.data import dataset
 
     cfg = rconfig.override(pc.PerceptionConfig(), overrides or {})
     world = wd.build_world()
@@ -131,7 +131,7 @@ def _register_show(sub) -> None:
 
 
 def _cmd_show(args) -> int:
-    from . import dataset
+    from relaff_jax.data import dataset
 
     ds = dataset.load_dataset(args.dir, features=False)
     n = len(ds["label"])

@@ -29,10 +29,7 @@ import sklearn
 from sklearn.ensemble import RandomForestClassifier
 
 # The nine actions, in the order used everywhere (arrays, tables, figures).
-ACTIONS = ("lift", "move", "pull", "push", "rake", "take", "pour", "slide", "unobstruct")
-SPACES = ("pca", "rhf")
-PCA_PER_OBJECT = 9
-RHF_BINS = 300
+from relaff_jax.constants import ACTIONS, PCA_PER_OBJECT, RHF_BINS, SPACES  # noqa: F401 (re-exported)
 # Actions whose manipulated object is the toy; for the others it is the base / obstacle /
 # rake (paper Table I), whose nine PCA values then come first in the state.
 TOY_MANIPULATED = frozenset({"move", "take"})

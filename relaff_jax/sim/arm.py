@@ -58,7 +58,7 @@ def scenes_dir() -> pathlib.Path:
             return path
     except (ModuleNotFoundError, TypeError):  # not installed: running from the repo
         pass
-    path = pathlib.Path(__file__).resolve().parent.parent / "scenes"
+    path = pathlib.Path(__file__).resolve().parents[2] / "scenes"
     if not (path / "arm.xml").exists():
         raise FileNotFoundError(f"arm.xml not found in relaff_jax.assets nor in {path}")
     return path

@@ -43,9 +43,7 @@ from . import objects as lib
 from . import scenes as sc
 from . import world as wd
 
-ACTIONS = ("lift", "move", "pull", "push", "rake", "take", "pour", "slide", "unobstruct")
-PAIRING = {"lift": 0, "move": 0, "pull": 0, "push": 0, "take": 0, "pour": 0, "slide": 0,
-           "unobstruct": 1, "rake": 2}  # index into objects.PAIRINGS
+from relaff_jax.constants import ACTIONS, PAIRING, action_id  # noqa: F401 (re-exported)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -749,13 +747,6 @@ def jitted_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     return action_fn
 
 
-def action_id(action: str) -> int:
-    """Index of ``action`` in ``ACTIONS``; an unknown name lists the valid ones."""
-    if action not in ACTIONS:
-        raise ValueError(f"unknown action {action!r}; valid actions: {', '.join(ACTIONS)}")
-    return ACTIONS.index(action)
-
-
 # ----------------------------------------------------------------- dataset rollouts
 
 
@@ -971,8 +962,8 @@ def _cmd_generate(args) -> int:
     import json
     import sys
 
-    from . import config as rc
-    from . import dataset as ds
+    from relaff_jax import config as rc
+    from relaff_jax.data import dataset as ds
 
     if args.action not in ACTIONS:
         print(f"error: unknown action {args.action!r}; valid actions: {', '.join(ACTIONS)}", file=sys.stderr)

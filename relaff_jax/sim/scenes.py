@@ -38,8 +38,7 @@ from mujoco import mjx
 from . import objects as lib
 from . import world as wd
 
-RELATIONS = ("beside", "on_top", "inside")
-BESIDE, ON_TOP, INSIDE = 0, 1, 2
+from relaff_jax.constants import BESIDE, INSIDE, ON_TOP, RELATIONS  # noqa: F401 (re-exported)
 
 
 @dataclasses.dataclass(frozen=True)

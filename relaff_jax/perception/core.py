@@ -44,9 +44,7 @@ import numpy as np
 GEOM_PLANE, GEOM_SPHERE, GEOM_CAPSULE, GEOM_BOX = 0, 2, 3, 6
 SUPPORTED_GEOMS = {GEOM_PLANE: "plane", GEOM_SPHERE: "sphere", GEOM_CAPSULE: "capsule", GEOM_BOX: "box"}
 
-SEG_NONE = -1  # pixel with no valid hit / geom never rendered
-SEG_TABLE, SEG_TOY, SEG_OTHER = 0, 1, 2
-OBJECT_SEGMENTS = (SEG_TOY, SEG_OTHER)
+from relaff_jax.constants import OBJECT_SEGMENTS, SEG_BACKGROUND, SEG_NONE, SEG_OTHER, SEG_TOY  # noqa: F401
 
 PCA_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "eig_major", "eig_middle", "eig_minor")
 RHF_NAMES = ("dx", "dy", "dz", "dist", "angle_na_nb", "angle_na_d")
@@ -247,7 +245,7 @@ def make_scene(geom_type, geom_seg, size, xpos, xmat) -> SceneGeoms:
     if len(gt) != len(gs):
         raise ValueError(f"geom_type has {len(gt)} entries but geom_seg has {len(gs)}")
     for i, (t, s) in enumerate(zip(gt, gs)):
-        if s not in (SEG_NONE, SEG_TABLE, SEG_TOY, SEG_OTHER):
+        if s not in (SEG_NONE, SEG_BACKGROUND, SEG_TOY, SEG_OTHER):
             raise ValueError(f"geom {i}: segment label {s} not in (-1, 0, 1, 2)")
         if s != SEG_NONE and t not in SUPPORTED_GEOMS:
             raise ValueError(
@@ -1054,7 +1052,7 @@ def render_scene_png(scene: SceneGeoms, key, out_path, cfg: PerceptionConfig = P
     import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
 
-    from .io import atomic_write_bytes
+    from relaff_jax.io import atomic_write_bytes
 
     v = scene_view(scene, key, cfg)
     fig = plt.figure(figsize=(15, 4.8))

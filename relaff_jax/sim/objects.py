@@ -239,7 +239,7 @@ def members(group: str) -> tuple[str, ...]:
     return tuple(n for n, s in OBJECTS.items() if group in s.groups)
 
 
-PAIRINGS = ("toy+base", "toy+obstacle", "toy+rake")
+from relaff_jax.constants import PAIRINGS  # noqa: E402,F401 (re-exported)
 
 
 def pairs() -> tuple[tuple[str, str, str], ...]:

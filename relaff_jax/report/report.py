@@ -22,7 +22,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.experiment import PAPER_TABLE2, TABLE2_ROWS, analyse, categories_per_threshold, layout, load_results
+from relaff_jax.learn.experiment import PAPER_TABLE2, TABLE2_ROWS, analyse, categories_per_threshold, layout, load_results
 
 CSV_COLUMNS = ("method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max")
 SHORT = {"unobstruct": "unob"}
@@ -98,7 +98,7 @@ def _markdown(res: Mapping[str, Any], an: Mapping[str, Any]) -> str:
 
 
 def _avg(curve: np.ndarray, sizes, cfg) -> float:
-    from relaff_jax.experiment import average_bf
+    from relaff_jax.learn.experiment import average_bf
 
     return float(average_bf(np.asarray(curve), sizes, *cfg.bf_sizes))
 
@@ -515,7 +515,7 @@ def _rate(r) -> str:
 
 def dataset_blocks(infos: Mapping[str, Mapping[str, Any]], fig: str | None) -> list[tuple]:
     """Dataset statistics per action from ``dataset.info`` dicts."""
-    from relaff_jax.dataset import RELATIONS
+    from relaff_jax.data.dataset import RELATIONS
 
     blocks: list[tuple] = [("h", 2, "Datasets"), (
         "p", "Per action: the balanced selection (half positive; negatives matched to the positives' distribution of the "
@@ -538,7 +538,7 @@ def dataset_blocks(infos: Mapping[str, Mapping[str, Any]], fig: str | None) -> l
 
 
 def dataset_figure(infos: Mapping[str, Mapping[str, Any]], out: Path) -> Path:
-    from relaff_jax.dataset import RELATIONS
+    from relaff_jax.data.dataset import RELATIONS
 
     plt = _plt()
     acts = list(infos)
@@ -562,14 +562,14 @@ def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_ac
     """Draw ``per_action`` example scenes per action (positives and negatives alternating, in
     rollout order) with ``features.show_scene``; returns ``(action, file name, caption)``.
     Datasets without the scene fields (``pair``, ``qpos_settled``) get none."""
-    from relaff_jax.dataset import load_dataset
+    from relaff_jax.data.dataset import load_dataset
 
     if per_action < 1:
         return []
     import jax
 
-    from relaff_jax import features as F
-    from relaff_jax import world as wd
+    from relaff_jax.perception.core import from_sim as F
+    from relaff_jax.sim import world as wd
 
     world = None
     shown: list[tuple[str, str, str]] = []
@@ -640,7 +640,7 @@ def write_full_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike
     # datasets and example scenes
     infos = {}
     if data_dirs:
-        from relaff_jax.dataset import info
+        from relaff_jax.data.dataset import info
 
         infos = {act: info(d) for act, d in data_dirs.items()}
         dataset_figure(infos, out / "fig_datasets.png")

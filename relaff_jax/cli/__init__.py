@@ -14,13 +14,13 @@ import sys
 
 # Stage modules that contribute subcommands, in pipeline order.
 COMMAND_MODULES = (
-    "relaff_jax.objects",
-    "relaff_jax.scenes",
-    "relaff_jax.actions",
-    "relaff_jax.dataset",
-    "relaff_jax.features",
-    "relaff_jax.experiment",
-    "relaff_jax.reproduce",
+    "relaff_jax.sim.objects",
+    "relaff_jax.sim.scenes",
+    "relaff_jax.sim.actions",
+    "relaff_jax.data.dataset",
+    "relaff_jax.perception.from_sim",
+    "relaff_jax.learn.experiment",
+    "relaff_jax.reproduce.run",
 )
 
 

@@ -30,7 +30,7 @@ from mujoco import mjx
 from . import objects as lib
 
 # Segment labels the camera reports per geom (colour segmentation stand-in).
-SEG_BACKGROUND, SEG_TOY, SEG_OTHER, SEG_HIDDEN = 0, 1, 2, -1
+from relaff_jax.constants import SEG_BACKGROUND, SEG_HIDDEN, SEG_OTHER, SEG_TOY  # noqa: F401
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,1 @@
+"""Datasets: chunked, resumable, balanced stores of labelled rollouts and their features."""

@@ -1,0 +1,1 @@
+"""Learning: the paper's random forests, the bootstrapping protocol, sweeps and their analysis."""

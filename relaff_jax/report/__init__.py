@@ -1,0 +1,1 @@
+"""Reports: Table II, findings, figures and the report document."""

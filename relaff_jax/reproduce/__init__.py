@@ -1,0 +1,1 @@
+"""``relaff reproduce``: the whole study in one resumable command."""
