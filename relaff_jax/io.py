@@ -3,6 +3,10 @@
 A run that is killed must never leave a half-written file where a finished one is
 expected: everything is written to a temporary sibling and renamed into place
 (``os.replace`` is atomic on POSIX within one file system).
+
+Permissions follow the umask, as ``open`` and ``mkdir`` would give them: ``tempfile`` creates
+files 0600 and folders 0700 whatever the umask, which would hide reports and datasets from a
+colleague, a notebook server or a web server running as another user.
 """
 from __future__ import annotations
 
@@ -15,6 +19,17 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import numpy as np
+
+
+def _umask() -> int:
+    mask = os.umask(0)  # the only portable way to read it; restored at once
+    os.umask(mask)
+    return mask
+
+
+def _chmod_default(path: str | os.PathLike, directory: bool) -> None:
+    """Give ``path`` the mode a plain ``open``/``mkdir`` would (0666/0777 minus the umask)."""
+    os.chmod(path, (0o777 if directory else 0o666) & ~_umask())
 
 
 def _fsync_dir(path: Path) -> None:
@@ -36,6 +51,7 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
+        _chmod_default(tmp, directory=False)
         os.replace(tmp, path)
         _fsync_dir(path.parent)
     except BaseException:
@@ -92,6 +108,7 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
         raise FileExistsError(f"{path} already exists")
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent))
+    _chmod_default(tmp, directory=True)
     try:
         yield tmp
         os.replace(tmp, path)
@@ -99,3 +116,21 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def remove_tree(path: str | os.PathLike) -> None:
+    """Delete a folder so that a kill leaves no half-deleted output under its name: it is
+    renamed to a hidden ``.NAME.old.tmp`` first (``clean_leftovers`` removes those)."""
+    path = Path(path)
+    if not path.exists():
+        return
+    tmp = path.parent / f".{path.name}.old.tmp"
+    shutil.rmtree(tmp, ignore_errors=True)
+    os.replace(path, tmp)
+    shutil.rmtree(tmp)
+
+
+def clean_leftovers(root: str | os.PathLike) -> None:
+    """Remove the hidden leftovers of ``remove_tree`` calls that were killed."""
+    for p in Path(root).glob(".*.old.tmp"):
+        shutil.rmtree(p, ignore_errors=True)
