@@ -1,11 +1,19 @@
 """relaff_jax: relational affordances of object pairs, bootstrapped by transfer.
 
 A vectorised JAX/MJX reimplementation of Fichtl et al., "Bootstrapping Relational
-Affordances of Object Pairs using Transfer". Stages (one module each):
-``objects`` (the 29-object library) -> ``world`` (one MJX model for every pair) ->
-``scenes`` (sampling, settling, relations) -> ``actions`` (arm, motor programs, labels) ->
-``dataset`` (balanced, resumable datasets) -> ``perception`` (Kinect, PCA, RHF) ->
-``learning`` / ``experiment`` / ``report`` (forests, bootstrapping, Table II).
+Affordances of Object Pairs using Transfer". One subpackage per stage, in pipeline order:
+
+- ``sim``: the object library, one MJX world for every pair, scene sampling and settling,
+  the 6-DOF arm, the nine motor programs and their physics labels, MuJoCo C references;
+- ``data``: balanced, resumable datasets of labelled rollouts; export;
+- ``perception``: the simulated Kinect, voxel grids, PCA and RHF features;
+- ``learn``: the paper's forests, the bootstrapping protocol and sweeps, their analysis;
+- ``report``: Table II, findings, figures, the report document;
+- ``reproduce``: the whole study as one resumable command; ``cli``: the ``relaff`` command.
+
+Shared by all: ``constants`` (actions, relations, segment codes), ``runconfig`` (the one
+config tree), ``config`` (overrides), ``errors`` (``UserError``), ``io`` (atomic writes),
+``provenance`` (versions, seeds).
 """
 from __future__ import annotations
 
@@ -17,6 +25,10 @@ import os
 # client, so it is set here, before any relaff_jax module runs a computation.
 if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
+
+from relaff_jax import quiet as _quiet  # noqa: E402
+
+_quiet.install()  # MJX's "Failed to import warp" lines are noise on a CPU-only project
 
 __version__ = "0.1.0"
 

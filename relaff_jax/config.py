@@ -1,19 +1,47 @@
-"""Frozen config dataclasses and the one path for overriding them.
+"""The one path for overriding frozen config dataclasses.
 
-Every stage owns a frozen dataclass of its static settings (defaults are the paper's).
-``override(cfg, {"key": value})`` returns a copy with checked overrides: an unknown key
-is an error that lists the valid ones, never silently ignored.
+Every stage owns a frozen dataclass of its static settings (defaults are the paper's);
+``relaff_jax.runconfig.RunConfig`` nests them into one tree. ``override(cfg, {"key": value})``
+returns a copy with checked overrides: an unknown key is an error that lists the valid ones,
+never silently ignored. ``parse_set`` turns the CLI's ``--set dotted.key=value`` into such a
+mapping.
 """
 from __future__ import annotations
 
 import dataclasses
-from typing import Any, Mapping, TypeVar
+import json
+from typing import Any, Iterable, Mapping, TypeVar
+
+from relaff_jax.errors import UserError
 
 T = TypeVar("T")
 
 
-class ConfigError(ValueError):
+class ConfigError(UserError):
     """A config key or value that the stage does not know."""
+
+
+def parse_set(items: Iterable[str]) -> dict[str, Any]:
+    """``["a.b=1", "c=[1, 2]", "d=robwork"]`` -> ``{"a.b": 1, "c": (1, 2), "d": "robwork"}``.
+
+    Values are read as JSON where they parse (numbers, booleans, lists, null), else kept as
+    strings; lists become tuples (config fields are immutable).
+    """
+    out: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--set expects KEY=VALUE, got {item!r}")
+        try:
+            v = json.loads(value)
+        except json.JSONDecodeError:
+            v = value
+        out[key.strip()] = _freeze(v)
+    return out
+
+
+def _freeze(v: Any) -> Any:
+    return tuple(_freeze(x) for x in v) if isinstance(v, list) else v
 
 
 def override(cfg: T, updates: Mapping[str, Any] | None = None, **kwargs: Any) -> T:
@@ -33,13 +61,44 @@ def override(cfg: T, updates: Mapping[str, Any] | None = None, **kwargs: Any) ->
             raise ConfigError(
                 f"unknown config key {key!r} for {type(cfg).__name__}; valid keys: {sorted(names)}"
             )
+        if rest and not dataclasses.is_dataclass(getattr(cfg, head)):
+            raise ConfigError(f"config key {key!r}: {type(cfg).__name__}.{head} has no sub-keys")
         if rest:
             nested.setdefault(head, {})[rest] = value
         else:
-            direct[head] = value
+            direct[head] = _checked(type(cfg).__name__, key, getattr(cfg, head), value)
     for head, sub in nested.items():
         direct[head] = override(getattr(cfg, head), sub)
     return dataclasses.replace(cfg, **direct)
+
+
+def _checked(owner: str, key: str, old: Any, new: Any) -> Any:
+    """``new`` if it has the kind of value ``old`` has (ints for ints, numbers for floats,
+    booleans for booleans, tuples for tuples); a float field given an int gets a float, so a
+    config has one spelling per value. ``None`` fields take anything."""
+    where = f"config key {key!r} ({owner})"
+    if dataclasses.is_dataclass(old):
+        raise ConfigError(f"{where} is a group of settings; set one of its keys, e.g. {key}.<name>")
+    if old is None or new is None:
+        return new
+    if isinstance(old, bool):
+        if not isinstance(new, bool):
+            raise ConfigError(f"{where} expects true or false, got {new!r}")
+    elif isinstance(old, int):
+        if isinstance(new, bool) or not isinstance(new, int):
+            raise ConfigError(f"{where} expects an integer, got {new!r}")
+    elif isinstance(old, float):
+        if isinstance(new, bool) or not isinstance(new, (int, float)):
+            raise ConfigError(f"{where} expects a number, got {new!r}")
+        return float(new)
+    elif isinstance(old, str):
+        if not isinstance(new, str):
+            raise ConfigError(f"{where} expects a string, got {new!r}")
+    elif isinstance(old, tuple):
+        if not isinstance(new, (tuple, list)):
+            raise ConfigError(f"{where} expects a list, e.g. [1, 2], got {new!r}")
+        return tuple(new)
+    return new
 
 
 def to_dict(cfg: Any) -> dict[str, Any]:

@@ -13,6 +13,27 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     os.environ["JAX_COMPILATION_CACHE_DIR"] = _cache
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)
 
+
+def _preload_libusb() -> None:
+    """Open3D's wheel links the system library libusb-1.0.so.0, which a fresh machine may
+    lack; the ``libusb-package`` wheel (a test extra) ships it. Loaded globally before Open3D
+    is imported, it satisfies that dependency with no system package."""
+    import ctypes
+    import ctypes.util
+
+    if ctypes.util.find_library("usb-1.0"):
+        return
+    try:
+        import libusb_package
+    except ImportError:
+        return
+    path = libusb_package.get_library_path()
+    if path is not None:
+        ctypes.CDLL(str(path), mode=ctypes.RTLD_GLOBAL)
+
+
+_preload_libusb()
+
 import pytest  # noqa: E402
 
 from relaff_jax.sim import scenes, world  # noqa: E402

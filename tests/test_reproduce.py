@@ -19,15 +19,21 @@ import time
 import numpy as np
 import pytest
 
-from relaff_jax.data import dataset as D
-from relaff_jax.learn import experiment as E
-from relaff_jax.reproduce import run as R
+from relaff_jax import data as D
+from relaff_jax import learn as E
+from relaff_jax import reproduce as R
+from relaff_jax import runconfig
+from relaff_jax.cli import reproduce as cli_reproduce
+from relaff_jax.config import override
+from relaff_jax.constants import ACTIONS, FAMILIES
+from relaff_jax.reproduce import features as stage_features
+from relaff_jax.reproduce import generate as stage_generate
 
 # the tiny preset, smaller still: three actions, 4-tree forests, two sizes, no example scenes
 # (the stand-in rollouts have no scene to draw)
 ACTS = ("lift", "take", "pour")
-FAST = {"actions": ACTS, "n_samples": 32, "experiment.forest.base_trees": 4, "experiment.forest.max_trees": 4,
-        "experiment.sizes": (4, 10), "examples_per_action": 0}
+FAST = {"reproduce.actions": ACTS, "dataset.n_samples": 32, "experiment.forest.base_trees": 4,
+        "experiment.forest.max_trees": 4, "experiment.sizes": (4, 10), "reproduce.examples_per_action": 0}
 FEATURE_CONFIG = {"kind": "numpy stand-in"}
 
 
@@ -38,7 +44,7 @@ def rollout_factory(action, batch, stop_after=None):
         calls[0] += 1
         if stop_after is not None and calls[0] > stop_after:
             raise KeyboardInterrupt  # what Ctrl-C does mid-stage
-        rng = np.random.default_rng(np.asarray(key).tolist() + [D.ACTIONS.index(action)])
+        rng = np.random.default_rng(np.asarray(key).tolist() + [ACTIONS.index(action)])
         rel = rng.integers(0, 3, b)
         dist = np.where(rel == 0, rng.uniform(0.1, 1.2, b), rng.uniform(0.03, 0.2, b))
         return {"label": rng.random(b) < np.where(rel == 0, 0.25, 0.75),
@@ -84,11 +90,10 @@ def base(tmp_path_factory):
     """One uninterrupted run through the CLI (factories patched in), then a second one."""
     out = tmp_path_factory.mktemp("run") / "quick"
     mp = pytest.MonkeyPatch()
-    mp.setattr(R, "default_rollout_factory", rollout_factory)
-    mp.setattr(R, "default_feature_factory", feature_factory)
-    mp.setattr(R, "feature_config", HOOKS["feature_config_fn"])
+    mp.setattr(stage_generate, "rollout_factory_for", lambda cfg: rollout_factory)
+    mp.setattr(stage_features, "factories_for", lambda cfg: (feature_factory, HOOKS["feature_config_fn"]))
     parser = argparse.ArgumentParser()
-    R.register_cli(parser.add_subparsers(dest="command"))
+    cli_reproduce.register(parser.add_subparsers(dest="command"))
     sets = [x for k, v in FAST.items() for x in ("--set", f"{k}={json.dumps(v)}")]
     argv = ["reproduce", "--preset", "tiny", "--out", str(out), "--seed", "3", "--jobs", "1", "--no-progress"] + sets
     args = parser.parse_args(argv)
@@ -121,8 +126,8 @@ def test_run_writes_every_expected_file(base):
 def test_run_log(base):
     out, log, _, _ = base
     assert log["format"] == R.FORMAT and log["preset"] == "tiny" and log["seed"] == 3
-    assert log["config"]["n_samples"] == 32 and log["config"]["experiment"]["forest"]["max_trees"] == 4
-    assert R.config_from_dict(log["config"]) == R.override(R.preset("tiny"), FAST)
+    assert log["config"]["dataset"]["n_samples"] == 32 and log["config"]["experiment"]["forest"]["max_trees"] == 4
+    assert runconfig.from_json(log["config"]) == override(R.preset("tiny"), FAST)
     assert log["versions"]["numpy"] == np.__version__ and log["versions"]["jax"]
     assert log["seeds"] == R.seeds(3)
     assert len(set(log["seeds"]["datasets"].values())) == 9  # every action its own stream
@@ -140,7 +145,7 @@ def test_second_run_skips_every_stage(base):
     out, first, second, _ = base
     assert statuses(second) == dict.fromkeys(R.STAGES, "skipped")
     assert len(second["runs"]) == 2 and second["timings"] == first["timings"]
-    assert all(v["status"] == "skipped" for v in second["runs"][1]["stages"]["generate"]["actions"].values())
+    assert second["runs"][1]["stages"]["generate"]["why"] == "3 of 3 complete"
 
 
 def test_forced_stage_with_identical_output_keeps_the_later_ones(base):
@@ -232,15 +237,19 @@ def test_bad_input(tmp_path):
         run(tmp_path / "a", seed=-1)
     with pytest.raises(R.ReproduceError, match="unknown config key 'n_sample'"):
         run(tmp_path / "a", overrides={"n_sample": 10})
+    with pytest.raises(R.ReproduceError, match="unknown config key 'dataset.n_sample'"):
+        run(tmp_path / "a", overrides={"dataset.n_sample": 10})
+    with pytest.raises(R.ReproduceError, match="expects an integer"):
+        run(tmp_path / "a", overrides={"dataset.n_samples": "many"})
     # the experiment's pools must fit: fail before simulating anything
     with pytest.raises(R.ReproduceError, match="cannot run on 20 samples"):
-        run(tmp_path / "a", overrides=dict(FAST, n_samples=20))
+        run(tmp_path / "a", overrides=dict(FAST, **{"dataset.n_samples": 20}))
     with pytest.raises(R.ReproduceError, match="canonical order"):
-        run(tmp_path / "a", overrides=dict(FAST, actions=("take", "lift")))
+        run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("take", "lift")}))
     with pytest.raises(R.ReproduceError, match="at least two"):
-        run(tmp_path / "a", overrides=dict(FAST, actions=("lift",)))
+        run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("lift",)}))
     with pytest.raises(R.ReproduceError, match="rollout_batch"):
-        run(tmp_path / "a", overrides=dict(FAST, rollout_batch=0))
+        run(tmp_path / "a", overrides=dict(FAST, **{"dataset.rollout_batch": 0}))
     assert not (tmp_path / "a").exists()
     foreign = tmp_path / "foreign"
     foreign.mkdir()
@@ -256,16 +265,16 @@ def test_other_seed_or_preset_in_the_same_folder_is_refused(base):
     with pytest.raises(R.ReproduceError, match="another seed"):
         run(out, seed=4)
     with pytest.raises(R.ReproduceError, match="another config"):
-        run(out, overrides=dict(FAST, n_samples=40))
+        run(out, overrides=dict(FAST, **{"dataset.n_samples": 40}))
 
 
 def test_missing_actions_module_is_a_clear_error(tmp_path, monkeypatch):
-    monkeypatch.setitem(sys.modules, "relaff_jax.sim.actions", None)  # as if the module did not exist
+    monkeypatch.setitem(sys.modules, "relaff_jax.sim.rollouts", None)  # as if the module did not exist
     parser = argparse.ArgumentParser()
-    R.register_cli(parser.add_subparsers(dest="command"))
+    cli_reproduce.register(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["reproduce", "--preset", "tiny", "--out", str(tmp_path / "r"), "--no-progress"]
                              + [x for k, v in FAST.items() for x in ("--set", f"{k}={json.dumps(v)}")])
-    with pytest.raises(R.ReproduceError, match="needs relaff_jax.sim.actions"):
+    with pytest.raises(R.ReproduceError, match="needs relaff_jax.sim.rollouts"):
         args.func(args)
     log = json.loads((tmp_path / "r" / R.RUN_LOG).read_text())
     assert log["runs"][0]["status"].startswith("failed: ReproduceError") and "(in generate)" in log["runs"][0]["status"]
@@ -275,38 +284,8 @@ def test_presets():
     tiny, quick, paper = (R.preset(p) for p in R.PRESETS)
     for p in (tiny, quick, paper):
         R.check_config(p, 0)
-    assert paper.n_samples == 10_000 and paper.experiment == E.preset("paper")
+    assert paper.dataset.n_samples == 10_000 and paper.experiment == E.experiment_preset("paper")
     assert (paper.experiment.reps_pca, paper.experiment.reps_rhf) == (50, 25)
-    assert tiny.experiment.reps_pca == 2 and 2 <= len(tiny.experiment.sizes) <= 3 and tiny.n_samples < 100
-    assert quick.experiment.conditions_pca == E.FAMILIES  # every bootstrapping condition
-    assert quick.spaces == ("pca", "rhf")
-
-
-# ----------------------------------------------------------------------------- progress
-
-
-def test_progress_line_and_eta():
-    buf = io.StringIO()
-    p = R.Progress({"generate": 100.0, "features": 50.0, "experiment": 30.0, "report": 20.0}, stream=buf, every=1e9)
-    p.begin("features", lambda: 0.25)
-    p.stage_t0 -= 20.0  # 20 s into the stage
-    p.set("pull (3/9)")
-    p.tick()
-    # 25 % done after 20 s: 60 s left in the stage, plus 30 + 20 s for the stages after it
-    assert p.eta() == pytest.approx(110.0, abs=0.5)
-    line = buf.getvalue().strip()
-    assert line.startswith("reproduce [2/4 features] pull (3/9)  25% |") and line.endswith("ETA 1:50")
-    p.tick()  # nothing changed: no new line (not a terminal)
-    assert buf.getvalue().count("\n") == 1
-    # a stage that compiled for 100 s, then went from 10 % to 20 % in 10 s: 80 s left, not
-    # the 800 s that the stage's whole time would give
-    p.begin("generate", None)
-    p.stage_t0 -= 110.0
-    p.set(fraction=0.1)
-    p._first = (p._first[0] - 10.0, p._first[1])
-    p.set(fraction=0.2)
-    assert p.eta() == pytest.approx(80.0 + 50.0 + 30.0 + 20.0, abs=0.5)
-    p.begin("report", None)
-    assert p.eta() == pytest.approx(20.0, abs=0.5)  # no progress yet: the cost model
-    p.message("report: done")
-    assert buf.getvalue().endswith("report: done\n")
+    assert tiny.experiment.reps_pca == 2 and 2 <= len(tiny.experiment.sizes) <= 3 and tiny.dataset.n_samples < 100
+    assert quick.experiment.conditions_pca == FAMILIES  # every bootstrapping condition
+    assert quick.reproduce.spaces == ("pca", "rhf")

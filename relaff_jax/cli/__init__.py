@@ -1,31 +1,30 @@
 """The ``relaff`` command line: one subcommand per pipeline stage.
 
-Each stage module that offers commands has ``register_cli(subparsers)``, which adds
-its subcommands with ``set_defaults(func=...)``; ``func(args) -> int`` is the exit code.
-Modules are imported lazily by name so that a broken optional stage cannot break the
-others, and so that ``relaff --help`` stays fast.
+Each module of this package registers the commands of one stage (``register(subparsers)``,
+``set_defaults(func=...)``; ``func(args) -> int`` is the exit code) and calls the stage's
+library functions; the stages themselves know nothing of argparse.
+
+Errors: a ``relaff_jax.errors.UserError`` (bad option, unusable folder, corrupt data) is
+printed as one line, ``relaff COMMAND: error: MESSAGE``, exit code 2, the prefix argparse uses
+for its own errors. Any other exception is a bug and keeps its full traceback (exit 1).
 """
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import sys
 
-# Stage modules that contribute subcommands, in pipeline order.
+from relaff_jax import quiet
+from relaff_jax.errors import UserError
+
+# Modules that contribute subcommands, in pipeline order.
 COMMAND_MODULES = (
-    "relaff_jax.sim.objects",
-    "relaff_jax.sim.scenes",
-    "relaff_jax.sim.actions",
-    "relaff_jax.data.dataset",
-    "relaff_jax.perception.from_sim",
-    "relaff_jax.learn.experiment",
-    "relaff_jax.reproduce.run",
+    "relaff_jax.cli.sim",
+    "relaff_jax.cli.data",
+    "relaff_jax.cli.perception",
+    "relaff_jax.cli.learn",
+    "relaff_jax.cli.reproduce",
 )
-
-
-class UserError(Exception):
-    """An error caused by the user's input; printed without a traceback."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -36,27 +35,23 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
-        importlib.import_module(name).register_cli(sub)
+        importlib.import_module(name).register(sub)
     return parser
 
 
-def _quiet_mjx_import() -> None:
-    """mujoco.mjx prints "Failed to import warp" to stdout when the optional GPU backend is
-    absent (always, on this CPU-only project); send it to stderr so --json output stays JSON."""
-    with contextlib.redirect_stdout(sys.stderr):
-        importlib.import_module("mujoco.mjx")
-
-
 def main(argv: list[str] | None = None) -> int:
-    _quiet_mjx_import()
+    quiet.install()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (UserError, ValueError, KeyError, FileNotFoundError, FileExistsError) as e:
-        msg = e.args[0] if isinstance(e, KeyError) and e.args else e
-        print(f"relaff {args.command}: error: {msg}", file=sys.stderr)
+    except UserError as e:
+        print(f"relaff {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"relaff {args.command}: interrupted; what was finished is kept, rerun the same command "
+              "to continue", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,0 +1,81 @@
+"""Stage 2, ``features``: PCA (18) and RHF (300) features of every sample
+(``relaff_jax.data.add_features`` with the perception of ``relaff_jax.perception``)."""
+from __future__ import annotations
+
+import functools
+import math
+import time
+from typing import Any
+
+from relaff_jax import data as D
+from relaff_jax import io as rio
+from relaff_jax.config import to_dict
+from relaff_jax.reproduce.stage import Run, Status
+
+NAME = "features"
+
+
+def default_feature_factory(seed: int, config: Any = None):
+    """``(compute_fn, config_dict)`` of the perception stage, as ``relaff features`` uses it."""
+    from relaff_jax import perception as pc
+    from relaff_jax.perception import from_sim
+    from relaff_jax.sim import build_world
+
+    cfg = config if config is not None else pc.PerceptionConfig()
+    return from_sim.make_feature_fn(build_world(), cfg, seed), feature_config(seed, cfg)
+
+
+def feature_config(seed: int, config: Any = None) -> dict:
+    """The config dict ``default_feature_factory`` stores (without building the world)."""
+    from relaff_jax import perception as pc
+
+    return {"perception": to_dict(config if config is not None else pc.PerceptionConfig()), "seed": seed}
+
+
+def factories_for(cfg: Any):
+    """``(feature_factory, feature_config)`` bound to a ``RunConfig``'s perception settings."""
+    return (functools.partial(default_feature_factory, config=cfg.perception),
+            functools.partial(feature_config, config=cfg.perception))
+
+
+def action_status(run: Run, action: str) -> Status:
+    want = run.feature_config(run.log["seeds"]["features"])
+    return Status(*D.features_status(run.paths.dataset(action), run.cfg.dataset.feature_batch, want))
+
+
+def status(run: Run) -> Status:
+    return Status.combine({a: action_status(run, a) for a in run.cfg.reproduce.actions})
+
+
+def progress(run: Run) -> float:
+    acts = run.cfg.reproduce.actions
+    chunks = math.ceil(run.cfg.dataset.n_samples / run.cfg.dataset.feature_batch)
+    done = 0.0
+    for a in acts:
+        side = run.paths.dataset(a) / D.FEATURES_SIDECAR
+        if side.exists():
+            done += min(rio.read_json(side)["chunks"] / chunks, 1.0)
+    return done / len(acts)
+
+
+def run(run: Run, forced: bool) -> dict:
+    cfg = run.cfg
+    fseed = run.log["seeds"]["features"]
+    acts = cfg.reproduce.actions
+    items: dict[str, Any] = {}
+    compute = None
+    for i, action in enumerate(acts):
+        run.progress.set(f"{action} ({i + 1}/{len(acts)})")
+        st = action_status(run, action)
+        if st.state == "complete" and not forced:
+            items[action] = {"status": "skipped"}
+            continue
+        t0 = time.perf_counter()
+        if compute is None:
+            compute, config_dict = run.feature_factory(fseed)
+        D.add_features(run.paths.dataset(action), compute, cfg.dataset.feature_batch, False, config_dict,
+                       overwrite=forced or st.state in ("stale", "corrupt"))
+        dt = time.perf_counter() - t0
+        items[action] = {"status": "ran", "seconds": round(dt, 2), "was": st.state}
+        run.progress.message(f"features {action}: {cfg.dataset.n_samples} scenes in {dt:.0f} s")
+    return items

@@ -1,0 +1,89 @@
+"""Stage 1, ``generate``: one balanced dataset per action (``relaff_jax.data.generate_dataset``
+with the simulation's ``make_rollout_fn``), in ``DIR/data/<action>/``."""
+from __future__ import annotations
+
+import functools
+import importlib
+import time
+from typing import Any
+
+from relaff_jax import data as D
+from relaff_jax import io as rio
+from relaff_jax.config import to_dict
+from relaff_jax.reproduce.folder import ReproduceError
+from relaff_jax.reproduce.stage import Run, Status
+
+NAME = "generate"
+
+
+def default_rollout_factory(action: str, batch: int, config: Any = None):
+    """``(rollout_fn, config_dict, object_names)`` of one action from ``relaff_jax.sim``
+    (``config``: its ``ActionConfig``, default the paper's; the rollouts carry object names)."""
+    try:
+        sim = importlib.import_module("relaff_jax.sim.rollouts")
+    except ModuleNotFoundError as e:
+        if e.name == "relaff_jax.sim.rollouts":
+            raise ReproduceError(
+                "the generate stage needs relaff_jax.sim.rollouts (the arm's nine motor programs that label the "
+                "rollouts), which this installation does not have; the datasets cannot be generated") from e
+        raise
+    cfg = config if config is not None else sim.ActionConfig()
+    return sim.make_rollout_fn(action, batch, cfg), {"action": action, "action_config": to_dict(cfg)}, None
+
+
+def rollout_factory_for(cfg: Any):
+    """The default factory bound to a ``RunConfig``'s action settings."""
+    return functools.partial(default_rollout_factory, config=cfg.action)
+
+
+def _expected(run: Run, action: str) -> dict[str, Any]:
+    return {"action": action, "n_samples": run.cfg.dataset.n_samples,
+            "seed": run.log["seeds"]["datasets"][action], "batch": run.cfg.dataset.rollout_batch}
+
+
+def action_status(run: Run, action: str) -> Status:
+    return Status(*D.dataset_status(run.paths.dataset(action), _expected(run, action)))
+
+
+def status(run: Run) -> Status:
+    return Status.combine({a: action_status(run, a) for a in run.cfg.reproduce.actions})
+
+
+def progress(run: Run) -> float:
+    acts = run.cfg.reproduce.actions
+    half = run.cfg.dataset.n_samples // 2
+    done = 0.0
+    for a in acts:
+        side = run.paths.dataset(a) / D.SIDECAR
+        if side.exists():
+            meta = rio.read_json(side)
+            done += 1.0 if meta.get("status") == "complete" else min(meta["counts"]["positives"], half) / half
+    return done / len(acts)
+
+
+def run(run: Run, forced: bool) -> dict:
+    cfg, paths = run.cfg, run.paths
+    if forced:
+        rio.remove_tree(paths.data)
+    acts = cfg.reproduce.actions
+    items: dict[str, Any] = {}
+    for i, action in enumerate(acts):
+        run.progress.set(f"{action} ({i + 1}/{len(acts)})")
+        st = action_status(run, action)
+        if st.state == "complete":
+            items[action] = {"status": "skipped"}
+            continue
+        if st.state in ("stale", "corrupt"):
+            raise ReproduceError(f"{paths.dataset(action)}: {st.why}; remove it or run with --force generate")
+        t0 = time.perf_counter()
+        fn, config_dict, names = run.rollout_factory(action, cfg.dataset.rollout_batch)
+        s = D.generate_dataset(paths.dataset(action), action, cfg.dataset.n_samples, fn,
+                               run.log["seeds"]["datasets"][action], cfg.dataset.rollout_batch, config_dict,
+                               progress=False, dataset_config=cfg.dataset, object_names=names)
+        dt = time.perf_counter() - t0
+        items[action] = {"status": "ran", "seconds": round(dt, 2), "rollouts": s["rollouts"],
+                         "new_rollouts": s["new_chunks"] * cfg.dataset.rollout_batch,
+                         "positive_rate": s["positive_rate"], "borrowed": s["borrowed"]}
+        run.progress.message(f"generate {action}: {cfg.dataset.n_samples} samples from {s['rollouts']} rollouts "
+                             f"(positive rate {s['positive_rate']:.1%}) in {dt:.0f} s")
+    return items

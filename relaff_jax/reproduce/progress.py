@@ -1,0 +1,171 @@
+"""One progress line for a whole ``relaff reproduce`` run: stage, progress, elapsed, ETA.
+
+A stage's progress comes from its ``progress(run)`` probe (what it has written to disk), read
+by a background thread, so it is right after a resume. Before a stage has measurable
+progress its time comes from a cost model (``COST``, seconds on the project's 2-core
+machine, docs/reproduce.md); once it moves, the measured rate takes over gradually, so the
+estimate does not jump when the first few percent happen to be fast or slow.
+"""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from relaff_jax.constants import STAGES
+
+COST = {
+    "sim_compile": 150.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
+    "rollouts_per_sample": 2.5,  # rollouts simulated per selected sample (positive rate, matching)
+    "rollouts_per_s": 5.0,  # settle + plan + the feasible 3.3 s motor programs (docs/actions.md)
+    "feature_compile": 40.0,
+    "feature_scenes_per_s": 12.0,
+    "cpu_s_per_fit": 0.15,  # a forest of ~100 trees, fit + predict (docs/learning.md)
+    "report_fixed": 60.0,
+    "report_per_example": 1.5,
+}
+TRUST_AFTER = 0.25  # fraction of a stage after which the measured rate alone gives its ETA
+
+
+def fmt_time(s: float | None) -> str:
+    """``m:ss`` or ``h:mm:ss``; ``--:--`` when unknown."""
+    if s is None or not np.isfinite(s):
+        return "--:--"
+    s = int(round(s))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+def estimate_seconds(cfg: Any, jobs: int, cpus: int) -> dict[str, float]:
+    """Rough wall time per stage of a ``RunConfig`` from ``COST``."""
+    from relaff_jax.learn import forests_per_space
+
+    n, a = cfg.dataset.n_samples, len(cfg.reproduce.actions)
+    gen = COST["sim_compile"] + a * n * COST["rollouts_per_sample"] / COST["rollouts_per_s"]
+    feat = COST["feature_compile"] + a * n / COST["feature_scenes_per_s"]
+    fits = sum(forests_per_space(cfg.experiment, a, s) for s in cfg.reproduce.spaces)
+    exp = fits * COST["cpu_s_per_fit"] / max(1, min(jobs, cpus))
+    rep = COST["report_fixed"] + a * cfg.reproduce.examples_per_action * COST["report_per_example"]
+    return {"generate": gen, "features": feat, "experiment": exp, "report": rep}
+
+
+def stage_left(model: float, spent: float, f: float, first: tuple[float, float] | None, now: float) -> float:
+    """Seconds left in a stage at fraction ``f`` after ``spent`` seconds.
+
+    ``model``: the cost model's seconds for the whole stage; ``first``: (time, fraction) when
+    progress first moved (the rate excludes compiling and the work of a killed run). The
+    measured estimate is blended in with weight rising from 0 to 1 over ``TRUST_AFTER`` of
+    the stage.
+    """
+    model_left = max(model * (1 - f) - spent, model * (1 - f) * 0.1)
+    if first is None or f <= first[1] or now - first[0] < 5:
+        return model_left
+    measured_left = (now - first[0]) * (1 - f) / (f - first[1])
+    w = min(1.0, (f - first[1]) / TRUST_AFTER)
+    return w * measured_left + (1 - w) * model_left
+
+
+class Progress:
+    """The progress line. On a terminal it is redrawn in place; otherwise a line is printed
+    when the stage's item changes and every ``every`` seconds."""
+
+    def __init__(self, estimates: Mapping[str, float], enabled: bool = True, stream=None, every: float = 30.0):
+        self.estimates = dict(estimates)
+        self.enabled = enabled
+        self.stream = stream or sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.every = every
+        self.t0 = time.perf_counter()
+        self.stage = ""
+        self.stage_t0 = self.t0
+        self.detail = ""
+        self.probe: Callable[[], float] | None = None
+        self.fraction = 0.0
+        self._first: tuple[float, float] | None = None
+        self._last_detail = None
+        self._last_print = 0.0
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._thread: threading.Thread | None = None
+
+    # -- control
+    def start(self) -> None:
+        if self.enabled:
+            self._thread = threading.Thread(target=self._loop, daemon=True)
+            self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        if self.enabled and self.tty:
+            self.stream.write("\n")
+            self.stream.flush()
+
+    def begin(self, stage: str, probe: Callable[[], float] | None = None) -> None:
+        with self._lock:
+            self.stage, self.stage_t0, self.probe, self.fraction, self.detail = stage, time.perf_counter(), probe, 0.0, ""
+            self._first = None
+
+    def set(self, detail: str | None = None, fraction: float | None = None) -> None:
+        with self._lock:
+            if detail is not None:
+                self.detail = detail
+            if fraction is not None:
+                self._set_fraction(fraction)
+
+    def _set_fraction(self, f: float) -> None:
+        """Record progress (caller holds the lock) and when it first moved."""
+        f = min(max(float(f), 0.0), 1.0)
+        if self._first is None and f > self.fraction:
+            self._first = (time.perf_counter(), f)
+        self.fraction = f
+
+    def message(self, text: str) -> None:
+        """A permanent line (a stage's result) above the progress line."""
+        if not self.enabled:
+            return
+        with self._lock:
+            self.stream.write(("\r\033[K" if self.tty else "") + text + "\n")
+            self.stream.flush()
+
+    # -- rendering
+    def eta(self) -> float | None:
+        """Seconds left: the current stage (``stage_left``) plus the model's later stages."""
+        if self.stage not in STAGES:
+            return None
+        i = STAGES.index(self.stage)
+        now = time.perf_counter()
+        left = stage_left(self.estimates.get(self.stage, 0.0), now - self.stage_t0, self.fraction, self._first, now)
+        return left + sum(self.estimates.get(s, 0.0) for s in STAGES[i + 1:])
+
+    def line(self) -> str:
+        i = STAGES.index(self.stage) + 1 if self.stage in STAGES else 0
+        return (f"reproduce [{i}/{len(STAGES)} {self.stage}] {self.detail} {100 * self.fraction:3.0f}% | "
+                f"elapsed {fmt_time(time.perf_counter() - self.t0)} | ETA {fmt_time(self.eta())}")
+
+    def _loop(self) -> None:
+        while not self._stop.wait(1.0 if self.tty else 2.0):
+            self.tick()
+
+    def tick(self) -> None:
+        probe = self.probe
+        if probe is not None:
+            try:
+                f = float(probe())
+                with self._lock:
+                    self._set_fraction(f)
+            except (OSError, ValueError, KeyError):  # a file caught mid-replace: try again next tick
+                pass
+        with self._lock:
+            text = self.line()
+            now = time.perf_counter()
+            if self.tty:
+                self.stream.write("\r\033[K" + text)
+                self.stream.flush()
+            elif (self.stage, self.detail) != self._last_detail or now - self._last_print >= self.every:
+                self.stream.write(text + "\n")
+                self.stream.flush()
+                self._last_detail, self._last_print = (self.stage, self.detail), now

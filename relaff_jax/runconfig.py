@@ -1,0 +1,136 @@
+"""One config tree for every command: the stages' frozen configs nested under one root.
+
+::
+
+    RunConfig
+      action       sim.ActionConfig: motor programs and outcome rules; .scene (sampling,
+                   settling), .phys (the MJX world), .arm (IK, gripper) nested inside, since
+                   the programs run on the scenes that config settles
+      perception   perception.PerceptionConfig: camera, noise, voxel grid, RHF, culling
+      dataset      data.DatasetConfig: samples per action, batches, rollout cap, matching
+      experiment   learn.ExperimentConfig: sizes, repetitions, conditions, forests
+      reproduce    ReproduceConfig: which actions and spaces a study covers, report examples
+
+Every command takes ``--set dotted.key=value`` (``--set perception.voxel.size=0.02``), checked
+against this tree: an unknown key is an error listing the valid ones. Every output folder
+records the whole resolved tree (``to_dict``), so a folder says how it was made.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Mapping
+
+from relaff_jax.config import ConfigError, from_dict, override, to_dict
+from relaff_jax.constants import ACTIONS, SPACES
+from relaff_jax.errors import UserError
+
+PRESETS = ("tiny", "quick", "paper")
+
+
+@dataclasses.dataclass(frozen=True)
+class ReproduceConfig:
+    """What ``relaff reproduce`` covers besides the stages' own settings.
+
+    actions: the actions studied (the paper's nine; at least two, in ``ACTIONS`` order).
+    spaces: state spaces of the experiment.
+    examples_per_action: example scenes drawn per action in the report.
+    """
+
+    actions: tuple[str, ...] = ACTIONS
+    spaces: tuple[str, ...] = SPACES
+    examples_per_action: int = 2
+
+
+def _action():
+    from relaff_jax.sim import ActionConfig
+
+    return ActionConfig()
+
+
+def _perception():
+    from relaff_jax.perception import PerceptionConfig
+
+    return PerceptionConfig()
+
+
+def _dataset():
+    from relaff_jax.data import DatasetConfig
+
+    return DatasetConfig()
+
+
+def _experiment():
+    from relaff_jax.learn import ExperimentConfig
+
+    return ExperimentConfig()
+
+
+@dataclasses.dataclass(frozen=True)
+class RunConfig:
+    """The whole tree; defaults are the paper's (the ``paper`` preset)."""
+
+    action: Any = dataclasses.field(default_factory=_action)
+    perception: Any = dataclasses.field(default_factory=_perception)
+    dataset: Any = dataclasses.field(default_factory=_dataset)
+    experiment: Any = dataclasses.field(default_factory=_experiment)
+    reproduce: ReproduceConfig = ReproduceConfig()
+
+
+def preset(name: str) -> RunConfig:
+    """The three presets of ``relaff reproduce``.
+
+    ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
+    repetitions, 4000 test samples, the paper's forests): about 30 hours on two cores.
+    ``quick``: the README's main job, a small but complete study (all nine actions, both
+    spaces, every bootstrapping condition), 10-16 minutes on two cores (docs/reproduce.md):
+    100 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the
+    learning pools shrink to the data (``ExperimentConfig.shrink_to_data``).
+    ``tiny``: for tests: 24 samples per action, n in {2, 4, 10}, 2 repetitions, 8-tree forests.
+    """
+    from relaff_jax.learn import experiment_preset
+
+    if name == "paper":
+        return override(RunConfig(), {"dataset.rollout_batch": 1024})
+    if name == "quick":
+        exp = override(experiment_preset("quick"), {"sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 2})
+        return override(RunConfig(experiment=exp), {
+            "dataset.n_samples": 100, "dataset.rollout_batch": 64, "dataset.max_rollouts": 20_000,
+            "dataset.distance_bins": 10, "dataset.borrow_fraction": 0.05, "dataset.feature_batch": 16,
+            "reproduce.examples_per_action": 2})
+    if name == "tiny":
+        exp = override(experiment_preset("quick"), {"sizes": (2, 4, 10), "reps_pca": 2, "reps_rhf": 2,
+                                                    "forest.base_trees": 8, "forest.max_trees": 8})
+        return override(RunConfig(experiment=exp), {
+            "dataset.n_samples": 24, "dataset.rollout_batch": 8, "dataset.max_rollouts": 2_000,
+            "dataset.distance_bins": 4, "dataset.borrow_fraction": 1.0, "dataset.feature_batch": 8,
+            "reproduce.examples_per_action": 1})
+    raise UserError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
+
+
+def resolve(base: RunConfig | None = None, overrides: Mapping[str, Any] | None = None) -> RunConfig:
+    """``base`` (default: the paper's settings) with checked ``--set`` overrides."""
+    return override(base or RunConfig(), dict(overrides or {}))
+
+
+def from_json(d: Mapping[str, Any]) -> RunConfig:
+    """Rebuild a tree from ``to_dict`` output (a run log's ``config``)."""
+    try:
+        return from_dict(RunConfig, {k: v for k, v in d.items()})
+    except (TypeError, AttributeError) as e:
+        raise ConfigError(f"not a relaff_jax config tree: {e}") from e
+
+
+def keys(cfg: Any = None, prefix: str = "") -> list[str]:
+    """Every settable dotted key of the tree (for help texts and error messages)."""
+    cfg = RunConfig() if cfg is None else cfg
+    out = []
+    for f in dataclasses.fields(cfg):
+        v = getattr(cfg, f.name)
+        if dataclasses.is_dataclass(v):
+            out += keys(v, f"{prefix}{f.name}.")
+        else:
+            out.append(prefix + f.name)
+    return out
+
+
+__all__ = ["RunConfig", "ReproduceConfig", "PRESETS", "preset", "resolve", "from_json", "keys", "to_dict"]

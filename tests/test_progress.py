@@ -1,0 +1,64 @@
+"""The progress line of `relaff reproduce` and its time estimate (hand-worked cases)."""
+import io
+
+import pytest
+
+from relaff_jax.reproduce.progress import TRUST_AFTER, Progress, fmt_time, stage_left
+
+EST = {"generate": 100.0, "features": 50.0, "experiment": 30.0, "report": 20.0}
+
+
+def test_fmt_time():
+    assert fmt_time(59.4) == "0:59" and fmt_time(3725) == "1:02:05" and fmt_time(None) == "--:--"
+    assert fmt_time(float("nan")) == "--:--"
+
+
+def test_stage_left_before_progress_is_the_cost_model():
+    # 40 s of a 100 s stage spent, nothing measured: 60 s left
+    assert stage_left(100.0, 40.0, 0.0, None, 1000.0) == pytest.approx(60.0)
+    # overran the model: never below a tenth of the model's remainder
+    assert stage_left(100.0, 400.0, 0.0, None, 1000.0) == pytest.approx(10.0)
+
+
+def test_stage_left_trusts_the_measured_rate_gradually():
+    # progress moved from 10 % at t = 0 to 10 % + TRUST_AFTER at t = 50: fully measured
+    f = 0.1 + TRUST_AFTER
+    measured = 50.0 * (1 - f) / TRUST_AFTER
+    assert stage_left(100.0, 60.0, f, (0.0, 0.1), 50.0) == pytest.approx(measured)
+    # half way to TRUST_AFTER: the mean of the model's and the measured estimate
+    f = 0.1 + TRUST_AFTER / 2
+    measured = 50.0 * (1 - f) / (TRUST_AFTER / 2)
+    model = max(100.0 * (1 - f) - 60.0, 100.0 * (1 - f) * 0.1)
+    assert stage_left(100.0, 60.0, f, (0.0, 0.1), 50.0) == pytest.approx((measured + model) / 2)
+
+
+def test_eta_does_not_jump_when_the_first_percent_is_fast_or_slow():
+    """The reported jump (17:54, then 1:51:28, then 25:02): extrapolating the rate since
+    progress first moved, from the first percent on, moved the ETA by 7x here; the blend
+    keeps it within 2x (a 100 s stage, progress first moved at 1 % at t = 0)."""
+    first = (0.0, 0.01)
+    steps = ((6.0, 0.02), (30.0, 0.021), (60.0, 0.15))
+    old = [t * (1 - f) / (f - first[1]) for t, f in steps]  # the former estimate
+    new = [stage_left(100.0, t, f, first, t) for t, f in steps]
+    assert max(old) / min(old) > 7
+    assert max(new) / min(new) < 2
+    p = Progress(EST, enabled=False)
+    p.begin("generate", None)
+    p.fraction, p._first = 0.15, (p.stage_t0, 0.01)
+    assert p.eta() >= sum(EST[s] for s in ("features", "experiment", "report"))
+
+
+def test_line_and_messages():
+    buf = io.StringIO()
+    p = Progress(EST, stream=buf, every=1e9)
+    p.begin("features", lambda: 0.25)
+    p.set("pull (3/9)")
+    p.tick()
+    line = buf.getvalue().strip()
+    assert line.startswith("reproduce [2/4 features] pull (3/9)  25% |") and "ETA" in line
+    p.tick()  # nothing changed: no new line (not a terminal)
+    assert buf.getvalue().count("\n") == 1
+    p.begin("report", None)
+    assert p.eta() == pytest.approx(20.0, abs=0.5)  # no progress yet: the cost model
+    p.message("report: done")
+    assert buf.getvalue().endswith("report: done\n")
