@@ -50,25 +50,26 @@ def override(cfg: T, updates: Mapping[str, Any] | None = None, **kwargs: Any) ->
     Nested dataclasses are addressed with dots: ``{"camera.width": 320}``.
     """
     merged = dict(updates or {}, **kwargs)
-    if not merged:
-        return cfg
+    return _override(cfg, merged, "") if merged else cfg
+
+
+def _override(cfg: T, merged: Mapping[str, Any], prefix: str) -> T:
     direct: dict[str, Any] = {}
     nested: dict[str, dict[str, Any]] = {}
     names = {f.name for f in dataclasses.fields(cfg)}
     for key, value in merged.items():
         head, _, rest = key.partition(".")
         if head not in names:
-            raise ConfigError(
-                f"unknown config key {key!r} for {type(cfg).__name__}; valid keys: {sorted(names)}"
-            )
+            raise ConfigError(f"unknown config key {prefix + key!r}: {type(cfg).__name__} has no {head!r}; "
+                              f"valid keys{' under ' + prefix[:-1] if prefix else ''}: {sorted(names)}")
         if rest and not dataclasses.is_dataclass(getattr(cfg, head)):
-            raise ConfigError(f"config key {key!r}: {type(cfg).__name__}.{head} has no sub-keys")
+            raise ConfigError(f"config key {prefix + key!r}: {prefix + head} has no sub-keys")
         if rest:
             nested.setdefault(head, {})[rest] = value
         else:
-            direct[head] = _checked(type(cfg).__name__, key, getattr(cfg, head), value)
+            direct[head] = _checked(type(cfg).__name__, prefix + key, getattr(cfg, head), value)
     for head, sub in nested.items():
-        direct[head] = override(getattr(cfg, head), sub)
+        direct[head] = _override(getattr(cfg, head), sub, f"{prefix}{head}.")
     return dataclasses.replace(cfg, **direct)
 
 
@@ -78,6 +79,8 @@ def _checked(owner: str, key: str, old: Any, new: Any) -> Any:
     config has one spelling per value. ``None`` fields take anything."""
     where = f"config key {key!r} ({owner})"
     if dataclasses.is_dataclass(old):
+        if isinstance(new, type(old)):  # a whole group, e.g. from ``from_dict``
+            return new
         raise ConfigError(f"{where} is a group of settings; set one of its keys, e.g. {key}.<name>")
     if old is None or new is None:
         return new

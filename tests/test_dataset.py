@@ -14,7 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from relaff_jax.data import dataset as ds
+from relaff_jax import data as ds
+from relaff_jax.cli import data as cli_data
+from relaff_jax.data import generate, store
 
 TOYS = ("ball", "cube")
 OTHERS = ("plate", "cup", "box")
@@ -333,7 +335,7 @@ def test_resume_mismatch(built, tmp_path):
 
 def test_concurrent_writer_refused(built, tmp_path):
     p = copy(built, tmp_path)
-    with ds._writer_lock(p):
+    with store.writer_lock(p):
         with pytest.raises(ds.DatasetError, match="another process"):
             gen(p)
 
@@ -435,7 +437,7 @@ def test_info_values_and_cli(built, capsys):
     assert d["config"] == CFG and d["versions"]["orbax-checkpoint"]
 
     parser = argparse.ArgumentParser()
-    ds.register_cli(parser.add_subparsers(dest="command"))
+    cli_data.register(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["info", str(path), "--json"])
     assert args.func(args) == 0
     j = json.loads(capsys.readouterr().out)
@@ -576,3 +578,140 @@ def test_sigkill_mid_run_then_resume(built, tmp_path):
     for k in a:
         np.testing.assert_array_equal(a[k], b[k])
     assert not [p for p in (target / "chunks").iterdir() if p.name.startswith(".")]
+
+
+# ----------------------------------------------------------------------------- fault-probe regressions
+
+
+def test_lock_race_loser_leaves_winner_folder(tmp_path, monkeypatch):
+    """A creates the folder, B takes the lock first: A's failure must not delete B's folder."""
+    import contextlib
+
+    p = tmp_path / "race"
+    real = store.prepare_dir
+    winner = contextlib.ExitStack()
+
+    def prepare_then_lose(path):
+        created = real(path)
+        winner.enter_context(store.writer_lock(path))  # B wins the lock race ...
+        (path / ds.SIDECAR).write_text("{}")  # ... and starts writing
+        return created
+
+    monkeypatch.setattr(generate, "prepare_dir", prepare_then_lose)
+    with winner:
+        with pytest.raises(ds.DatasetError, match="another process"):
+            gen(p)
+        assert (p / ds.SIDECAR).exists()  # B's folder is untouched
+    monkeypatch.undo()
+    # a creator that fails on its own (under its lock) still leaves nothing behind
+    with pytest.raises(ds.DatasetError, match="lacks required field"):
+        gen(tmp_path / "own", fn=lambda key, b: {"label": np.zeros(b, bool)})
+    assert not (tmp_path / "own").exists()
+
+
+def test_writer_lock_refuses_removed_lock_file(built, tmp_path, monkeypatch):
+    """A writer that waited on a lock file which the previous holder then removed (with the
+    folder it created) holds a lock that excludes nobody: it must refuse."""
+    import fcntl
+
+    p = copy(built, tmp_path)
+    real = fcntl.flock
+
+    def flock_after_removal(fd, op):
+        (p / ds.LOCK).unlink()  # the previous holder's remove_created
+        (p / ds.LOCK).write_text("")  # and a newcomer's fresh lock file
+        return real(fd, op)
+
+    monkeypatch.setattr(fcntl, "flock", flock_after_removal)
+    with pytest.raises(ds.DatasetError, match="removed this dataset folder"):
+        with store.writer_lock(p):
+            pass
+    monkeypatch.undo()
+    with store.writer_lock(p):  # the current lock file works
+        pass
+
+
+def _corrupt_feature_chunk(p: Path, k: int = 1) -> None:
+    for f in (p / "features" / f"chunk_{k:06d}" / "arrays").rglob("*"):
+        if f.is_file() and f.parent.name == "d":
+            b = bytearray(f.read_bytes())
+            b[len(b) // 2] ^= 0xFF
+            f.write_bytes(bytes(b))
+
+
+def test_features_status_and_overwrite_recovers_corrupt_chunk(built, tmp_path):
+    p = copy(built, tmp_path)
+    cfg = {"voxel": 0.0125}
+    assert ds.features_status(p, 12, cfg)[0] == "absent"
+    with pytest.raises(Killed):
+        ds.add_features(p, feature_fn(kill_after=2), batch=12, progress=False, config_dict=cfg)
+    assert ds.features_status(p, 12, cfg) == ("partial", "2 of 4 feature chunks")
+    ds.add_features(p, feature_fn(), batch=12, progress=False, config_dict=cfg)
+    assert ds.features_status(p, 12, cfg)[0] == "complete"
+    state, why = ds.features_status(p, 12, {"voxel": 0.02})
+    assert state == "stale" and "voxel" in why
+    assert ds.features_status(p, 16, cfg)[0] == "stale"
+    want = ds.load_dataset(p)["rhf"]
+    _corrupt_feature_chunk(p, 1)
+    state, why = ds.features_status(p, 12, cfg)
+    assert state == "corrupt" and "chunk_000001" in why
+    with pytest.raises(ds.CorruptDatasetError, match="overwrite=True"):
+        ds.add_features(p, feature_fn(), batch=12, progress=False, config_dict=cfg)
+    sizes: list = []
+    res = ds.add_features(p, feature_fn(sizes=sizes), batch=12, progress=False, config_dict=cfg, overwrite=True)
+    assert res["new_chunks"] == 4 and len(sizes) == 4
+    assert ds.features_status(p, 12, cfg)[0] == "complete"
+    np.testing.assert_array_equal(ds.load_dataset(p)["rhf"], want)
+    (p / ds.FEATURES_SIDECAR).write_text("{oops")
+    assert ds.features_status(p, 12, cfg)[0] == "corrupt"
+
+
+def test_dataset_status(built, tmp_path):
+    path, summary = built
+    expected = {"action": "lift", "n_samples": 40, "seed": 3, "batch": 16, "config": CFG}
+    assert ds.dataset_status(path, expected) == ("complete", f"40 samples from {summary['rollouts']} rollouts")
+    assert ds.dataset_status(tmp_path / "none", expected)[0] == "absent"
+    (tmp_path / "empty").mkdir()
+    assert ds.dataset_status(tmp_path / "empty", expected)[0] == "absent"
+    state, why = ds.dataset_status(path, dict(expected, seed=4))
+    assert state == "stale" and "seed" in why
+    part = tmp_path / "part"
+    with pytest.raises(Killed):
+        gen(part, fn=synthetic_rollout_fn(kill_after=2))
+    assert ds.dataset_status(part, expected)[0] == "partial"
+    for how in ("flipped byte in orbax data", "edited index", "corrupt sidecar"):
+        p = tmp_path / how.replace(" ", "_")
+        shutil.copytree(path, p)
+        _damage(p, how)
+        assert ds.dataset_status(p, expected)[0] == "corrupt", how
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "x.txt").write_text("mine")
+    with pytest.raises(ds.ForeignDirectoryError):
+        ds.dataset_status(foreign, expected)
+
+
+def test_corrupt_chunk_read_prints_no_event_loop_error(built, tmp_path):
+    """orbax's restore leaves tensorstore futures on a closed asyncio loop after a failed read;
+    their collection printed "RuntimeError: Event loop is closed" after our clear message."""
+    import os
+    import subprocess
+    import sys
+
+    p = copy(built, tmp_path)
+    _damage(p, "flipped byte in orbax data")
+    code = (
+        "import gc, sys\n"
+        "from relaff_jax import data as D\n"
+        "for _ in range(3):\n"
+        "    try:\n"
+        "        D.load_dataset(sys.argv[1])\n"
+        "    except D.CorruptDatasetError as e:\n"
+        "        print('clear:', e, file=sys.stderr)\n"
+        "    gc.collect()\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code, str(p)], capture_output=True, text=True, timeout=300,
+                         env=dict(os.environ, JAX_PLATFORMS="cpu"), cwd=str(Path(__file__).parent.parent))
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.count("clear: chunk") == 3
+    assert "Event loop is closed" not in res.stderr and "Traceback" not in res.stderr

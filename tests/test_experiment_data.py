@@ -1,15 +1,16 @@
 """`relaff experiment --data` on real dataset folders (dataset stage storage, synthetic rollouts).
 
 The rollouts and features here are numpy draws, not physics: this checks the hand-over from
-``relaff_jax.dataset.load_dataset`` to the learning stage, not any result.
+``relaff_jax.data.load_dataset`` to the learning stage, not any result.
 """
 import argparse
 
 import numpy as np
 import pytest
 
-ds = pytest.importorskip("relaff_jax.dataset")
-from relaff_jax.learn import experiment as E  # noqa: E402
+ds = pytest.importorskip("relaff_jax.data")
+from relaff_jax import learn as E  # noqa: E402
+from relaff_jax.cli import learn as cli_learn  # noqa: E402
 
 
 def _rollout_fn(key, b):
@@ -46,7 +47,7 @@ def test_experiment_reads_dataset_folders(tmp_path):
     assert loaded["lift"]["pca"].shape == (120, 18)
 
     parser = argparse.ArgumentParser()
-    E.register_cli(parser.add_subparsers(dest="command"))
+    cli_learn.register(parser.add_subparsers(dest="command"))
     sets = ["--set", "sizes=[2,10]", "--set", "reps_pca=1", "--set", "reps_rhf=1",
             "--set", "forest.base_trees=5", "--set", "forest.max_trees=5"]
     args = parser.parse_args(["experiment", "--data", *dirs, "--out", str(tmp_path / "res"), "--jobs", "1",

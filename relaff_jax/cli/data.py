@@ -1,0 +1,57 @@
+"""``relaff info`` and ``relaff export``: look at a dataset, or export it for other tools.
+
+Takes parsed arguments; prints ``data.info`` as a table or JSON, or writes
+``data.export_dataset``'s Parquet file, feature schema and dataset card. Problems a user can
+fix are ``relaff_jax.errors.UserError`` (one line, exit code 2).
+"""
+from __future__ import annotations
+
+import json
+
+from relaff_jax import data as D
+from relaff_jax.data import export as X
+
+
+def _cmd_info(args) -> int:
+    d = D.info(args.dir)
+    if args.json:
+        print(json.dumps(d, sort_keys=True))
+    else:
+        print(D.format_info(d))
+    return 0
+
+
+def _cmd_export(args) -> int:
+    # export_dataset checks --out and --format before it loads or writes anything
+    paths = D.export_dataset(args.dir, args.out, format=args.format, overwrite=args.overwrite)
+    for p in paths.values():
+        print(f"wrote {p}")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``relaff info DIR [--json]`` and ``relaff export DIR --out FILE_OR_DIR``."""
+    p = subparsers.add_parser(
+        "info",
+        help="counts and positive rates of a dataset",
+        description="Show counts, positive rates by spatial relation and by object pair, "
+        "rollouts used and attached features of a relaff dataset.",
+    )
+    p.add_argument("dir", metavar="DIR", help="dataset directory")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.set_defaults(func=_cmd_info)
+
+    p = subparsers.add_parser(
+        "export",
+        help="export a dataset as Parquet with a feature schema and a dataset card",
+        description="Write the selected samples of a finished dataset (labels, names, poses, "
+        "PCA and RHF features when present) as one Parquet file, plus a JSON schema of the "
+        "feature columns and a README dataset card. OUT ending in .parquet is the file "
+        "(schema and card beside it as STEM.schema.json, STEM.md); any other OUT is a folder "
+        "(data.parquet, features_schema.json, README.md).",
+    )
+    p.add_argument("dir", metavar="DIR", help="dataset directory")
+    p.add_argument("--out", required=True, metavar="FILE_OR_DIR", help="a .parquet file or a folder")
+    p.add_argument("--format", default="parquet", choices=X.FORMATS, help="output format (default parquet)")
+    p.add_argument("--overwrite", action="store_true", help="replace existing output files")
+    p.set_defaults(func=_cmd_export)

@@ -1,0 +1,101 @@
+"""Dataset settings and on-disk names: ``DatasetConfig``, the folder layout, argument checks.
+
+Takes user arguments; gives ``DatasetConfig`` (one config node with every dataset setting),
+the file and folder names of a dataset directory (``SIDECAR``, ``SELECTION``, ``CHUNKS``,
+``FEATURES``, ``FEATURES_SIDECAR``, ``LOCK``), the required/reserved rollout field names, and
+``check_int``, ``check_action``, ``check_dataset_config``, ``jsonable_config`` which raise
+``DatasetError`` with a message saying what to fix.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from relaff_jax.constants import ACTIONS
+from relaff_jax.data.errors import DatasetError
+
+REQUIRED_FIELDS = ("label", "relation", "cog_distance", "toy", "other")
+RESERVED_FIELDS = ("rollout", "selected", "action")
+
+FORMAT = "relaff_jax.dataset"
+FORMAT_VERSION = 1
+SIDECAR = "relaff_dataset.json"
+SELECTION = "selection.json"
+CHUNKS = "chunks"
+FEATURES = "features"
+FEATURES_SIDECAR = "features.json"
+LOCK = ".relaff.lock"
+
+
+@dataclasses.dataclass(frozen=True)
+class DatasetConfig:
+    """Every dataset setting: how many samples, batch sizes, the rollout cap, negative matching.
+
+    n_samples: balanced samples per action (N/2 positives, N/2 distance-matched negatives).
+    rollout_batch: rollouts simulated per chunk (one ``rollout_fn`` call, one compile).
+    feature_batch: samples per feature chunk (one perception call).
+        ``generate_dataset`` and ``add_features`` take these three as explicit arguments; the
+        fields let one config node (``runconfig``) hold them for the callers.
+    max_rollouts: cap on simulated rollouts (rounded up to whole chunks); the paper's
+        1.5M simulations over nine actions are ~170k per action. Not part of the resume
+        check, so a run stopped by the cap can be rerun with a larger one.
+    distance_bins: equal-width COG-distance bins spanning the selected positives' range.
+    borrow_fraction: generation stops once at most this fraction of the negatives has to be
+        borrowed from outside its distance bin (0 = exact histogram match). At the cap any
+        amount is accepted, with a warning, and the number is recorded.
+    """
+
+    max_rollouts: int = 200_000
+    distance_bins: int = 20
+    borrow_fraction: float = 0.01
+    n_samples: int = 10_000
+    rollout_batch: int = 256
+    feature_batch: int = 32
+
+
+def check_action(action: Any) -> str:
+    if action not in ACTIONS:
+        raise DatasetError(f"unknown action {action!r}; valid actions: {', '.join(ACTIONS)}")
+    return action
+
+
+def check_int(name: str, value: Any, lo: int, hi: int | None = None) -> int:
+    """``value`` as an int in [lo, hi]; a ``DatasetError`` naming ``name`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise DatasetError(f"{name} must be an integer, got {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        rng = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise DatasetError(f"{name} must be {rng}, got {value}")
+    return int(value)
+
+
+def check_dataset_config(cfg: DatasetConfig) -> None:
+    check_int("max_rollouts", cfg.max_rollouts, 1)
+    check_int("distance_bins", cfg.distance_bins, 1)
+    if not 0.0 <= float(cfg.borrow_fraction) <= 1.0:
+        raise DatasetError(f"borrow_fraction must be in [0, 1], got {cfg.borrow_fraction}")
+    check_int("n_samples", cfg.n_samples, 2)
+    check_int("rollout_batch", cfg.rollout_batch, 1)
+    check_int("feature_batch", cfg.feature_batch, 1)
+
+
+def jsonable_config(config_dict: Mapping[str, Any] | None) -> Any:
+    """``config_dict`` as it reads back from JSON (tuples become lists), for resume checks."""
+    try:
+        return json.loads(json.dumps(dict(config_dict or {}), sort_keys=True, default=_json_default))
+    except (TypeError, ValueError) as e:
+        raise DatasetError(f"config_dict is not JSON serialisable ({e})") from e
+
+
+def _json_default(obj: Any) -> Any:  # as relaff_jax.io writes JSON
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

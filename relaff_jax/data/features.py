@@ -1,0 +1,121 @@
+"""Per-sample features (e.g. PCA, RHF) of a finished dataset, computed in resumable chunks.
+
+Takes a dataset directory and ``compute_fn(samples) -> dict of (batch, ...) arrays``; gives
+``features/chunk_*`` orbax chunks and ``features.json`` (batch, config, sample count, the
+selection's checksum, status), which ``load_dataset`` then serves as extra (N, ...) arrays.
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from relaff_jax import io as rio
+from relaff_jax import provenance
+from relaff_jax.data.config import FEATURES, FEATURES_SIDECAR, check_int, jsonable_config
+from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError
+from relaff_jax.data.load import load_dataset, load_feature_chunks, read_features_sidecar
+from relaff_jax.data.progress import progress_bar
+from relaff_jax.data.store import (chunk_indices, chunk_path, clean_tmp, mismatch, read_chunk, read_sidecar,
+                                   writer_lock, write_chunk)
+from relaff_jax.data.validate import check_schema, schema_of, standardize_features
+
+
+def add_features(
+    path: str | os.PathLike,
+    compute_fn: Callable[[dict[str, np.ndarray]], Mapping[str, Any]],
+    batch: int,
+    progress: bool = True,
+    config_dict: Mapping[str, Any] | None = None,
+    *,
+    overwrite: bool = False,
+) -> dict[str, Any]:
+    """Compute per-sample features of a finished dataset in resumable chunks and store them.
+
+    compute_fn(samples) -> dict of (batch, ...) numeric/bool arrays (e.g. ``pca`` (batch, 18),
+    ``rhf`` (batch, 300), ``unseen`` (batch, 2) bool). ``samples`` holds the (batch, ...)
+    per-sample arrays of ``load_dataset`` (no features, no ``action``); every call gets exactly
+    ``batch`` samples: the last batch is padded by repeating its last sample and the padded
+    rows' outputs are dropped. Feature chunk ``f`` covers selected samples
+    ``[f * batch, (f + 1) * batch)``. ``config_dict`` (e.g. the perception config) is stored
+    and compared on resume; a mismatch is an error unless ``overwrite`` removes the old features.
+    ``overwrite`` never reads the old feature chunks, so it also recovers corrupt ones
+    (``status.features_status`` tells which state the features are in).
+    Returns ``{"n", "chunks", "new_chunks", "features": {name: shape}}``.
+    """
+    path = Path(path)
+    batch = check_int("batch", batch, 1)
+    if not callable(compute_fn):
+        raise DatasetError("compute_fn must be callable")
+    config = jsonable_config(config_dict)
+    meta = read_sidecar(path)
+    with writer_lock(path):
+        samples = load_dataset(path, features=False)
+        samples.pop("action")
+        n = len(samples["label"])
+        header = {"batch": batch, "config": config, "n": n, "selection_sha256": meta["selection"]["sha256"]}
+        fdir, fside = path / FEATURES, path / FEATURES_SIDECAR
+        clean_tmp(path, fdir)
+        fmeta = None
+        try:
+            fmeta = read_features_sidecar(path)
+        except CorruptDatasetError:
+            if not overwrite:
+                raise
+        if fmeta is not None:
+            diff = mismatch(fmeta, header, ("batch", "config", "n", "selection_sha256"))
+            if diff and not overwrite:
+                raise DatasetMismatchError(f"{path}: holds features of another run ({'; '.join(diff)}); pass overwrite=True to recompute")
+            if overwrite:
+                fmeta = None
+        if fmeta is None:
+            remove_features(path)
+            fmeta = dict(header, status="generating", chunks=0, versions=provenance.versions())
+            rio.atomic_write_json(fside, fmeta)
+        elif fmeta["status"] == "complete":
+            try:
+                feats = load_feature_chunks(path, fmeta, n)
+            except CorruptDatasetError as e:
+                raise CorruptDatasetError(f"{e}; pass overwrite=True to recompute the features") from e
+            return {"n": n, "chunks": fmeta["chunks"], "new_chunks": 0, "features": {k: list(a.shape) for k, a in feats.items()}}
+        done = chunk_indices(fdir)
+        if len(done) < fmeta["chunks"]:
+            raise CorruptDatasetError(f"{path}: features sidecar records {fmeta['chunks']} chunks, found {len(done)}")
+        schema = None
+        if done:
+            _, m0 = read_chunk(chunk_path(fdir, 0))
+            schema = {k: [s["dtype"], s["shape"][1:]] for k, s in m0["arrays"].items()}
+        n_chunks = math.ceil(n / batch)
+        bar = progress_bar(progress, n, "features", unit="sample")
+        bar.update(min(len(done) * batch, n))
+        try:
+            for f in range(len(done), n_chunks):
+                lo, hi = f * batch, min((f + 1) * batch, n)
+                idx = np.minimum(np.arange(lo, lo + batch), hi - 1)  # pad by repeating the last sample
+                out = compute_fn({k: v[idx] for k, v in samples.items()})
+                arrays = standardize_features(out, batch, set(samples))
+                arrays = {k: a[: hi - lo] for k, a in arrays.items()}
+                check_schema(f"feature chunk {f}", schema_of(arrays), schema)
+                schema = schema or schema_of(arrays)
+                write_chunk(chunk_path(fdir, f), arrays, {"chunk": f, "batch": batch, "start": lo, "stop": hi})
+                fmeta["chunks"] = f + 1
+                rio.atomic_write_json(fside, fmeta)
+                bar.update(hi - lo)
+        finally:
+            bar.close()
+        feats = load_feature_chunks(path, fmeta, n)
+        fmeta["status"] = "complete"
+        fmeta["features"] = {k: {"shape": list(a.shape), "dtype": a.dtype.str} for k, a in feats.items()}
+        rio.atomic_write_json(fside, fmeta)
+        return {"n": n, "chunks": n_chunks, "new_chunks": n_chunks - len(done), "features": {k: list(a.shape) for k, a in feats.items()}}
+
+
+def remove_features(path: Path) -> None:
+    """Delete old features: sidecar first, so a kill leaves only ignorable orphan chunks."""
+    with contextlib.suppress(FileNotFoundError):
+        (path / FEATURES_SIDECAR).unlink()
+    rio.remove_tree(path / FEATURES)

@@ -1,0 +1,224 @@
+"""Generation of a balanced, resumable dataset of labelled rollouts for one action.
+
+Takes a *rollout function* ``rollout_fn(key, batch_size) -> dict[str, array]`` that simulates
+and labels one batch of scenes, an action, N, a seed and a batch size; gives a dataset
+directory holding every rollout (orbax chunks) and a balanced selection of N of them
+(``selection.py``), and returns a summary.
+
+Every rollout dict holds, with leading axis ``B`` (the batch size): ``label`` (B,) bool,
+``relation`` (B,) str in ``RELATIONS`` (or int codes into ``RELATIONS``), ``cog_distance``
+(B,) float metres, ``toy`` and ``other`` (B,) object names (or int ids into
+``object_names``), plus any other numeric or string per-sample arrays (poses, pair index,
+per-sample seed, ...). Strings are stored as int32 codes with a per-chunk vocabulary (orbax's
+tensorstore backend has no string dtype) and come back as numpy ``str`` arrays. The driver
+adds ``rollout`` (B,) int64, the global rollout index ``chunk * batch + i``.
+
+Determinism: chunk ``k`` is simulated with ``jax.random.fold_in(PRNGKey(seed), k)``, the
+generator stops after the first chunk count at which a balanced selection exists, and the
+selection is a function of the stored labels/distances and ``seed`` only; so a run that is
+killed and rerun gives the same chunks and the same dataset as one that never stopped.
+Layout, selection scheme and error cases: ``docs/datasets.md``.
+"""
+from __future__ import annotations
+
+import math
+import os
+import sys
+import warnings
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from relaff_jax import io as rio
+from relaff_jax import provenance
+from relaff_jax.config import to_dict
+from relaff_jax.data.config import (CHUNKS, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, DatasetConfig,
+                                    check_action, check_dataset_config, check_int, jsonable_config)
+from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, RolloutCapError
+from relaff_jax.data.load import load_dataset
+from relaff_jax.data.progress import progress_bar
+from relaff_jax.data.selection import select_balanced
+from relaff_jax.data.store import (check_rollout_ids, chunk_dirs_exist, chunk_indices, chunk_path, clean_tmp,
+                                   mismatch, prepare_dir, read_chunk, read_sidecar, remove_created, sha256,
+                                   writer_lock, write_chunk)
+from relaff_jax.data.validate import check_schema, schema_of, standardize_rollouts
+
+
+def generate_dataset(
+    out_dir: str | os.PathLike,
+    action: str,
+    n_samples: int,
+    rollout_fn: Callable[[Any, int], Mapping[str, Any]],
+    seed: int,
+    batch: int,
+    config_dict: Mapping[str, Any] | None = None,
+    progress: bool = True,
+    *,
+    dataset_config: DatasetConfig | None = None,
+    object_names: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """Simulate rollouts in chunks until ``n_samples`` balanced samples exist; write the dataset.
+
+    out_dir: new, empty or resumable dataset directory.
+    rollout_fn(key, batch) -> dict of (batch, ...) arrays (see module docstring); called with
+        ``jax.random.fold_in(jax.random.PRNGKey(seed), k)`` for chunk ``k``, always with
+        ``batch`` as its second argument (static shapes: one compile).
+    config_dict: the action/physics config, stored in the sidecar and compared on resume.
+    object_names: table for int ``toy``/``other`` ids, if the rollout_fn returns ids.
+    Returns a summary: ``rollouts`` simulated, ``chunks``, ``positives``/``positive_rate``
+    over all rollouts, ``borrowed`` negatives, ``new_chunks`` simulated by this call.
+    """
+    check_action(action)
+    n_samples = check_int("n_samples", n_samples, 2)
+    batch = check_int("batch", batch, 1)
+    seed = check_int("seed", seed, 0, 2**32 - 1)
+    if not callable(rollout_fn):
+        raise DatasetError("rollout_fn must be callable")
+    dcfg = dataset_config or DatasetConfig()
+    check_dataset_config(dcfg)
+    config = jsonable_config(config_dict)
+    header = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "action": action,
+        "n_samples": n_samples,
+        "seed": seed,
+        "batch": batch,
+        "config": config,
+        "object_names": list(object_names) if object_names is not None else None,
+        "selection_scheme": {"distance_bins": dcfg.distance_bins, "borrow_fraction": dcfg.borrow_fraction},
+    }
+    path = Path(out_dir)
+    created = prepare_dir(path)
+    # Losing the lock race leaves the folder to the winner, even if this call created it.
+    with writer_lock(path):
+        try:
+            return _generate_locked(path, header, rollout_fn, dcfg, object_names, progress)
+        except BaseException:
+            # A dataset this call created but never gave a chunk leaves nothing behind.
+            if created and not chunk_dirs_exist(path):
+                remove_created(path)
+            raise
+
+
+def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress) -> dict[str, Any]:
+    cdir = path / CHUNKS
+    clean_tmp(path, cdir)
+    if (path / SIDECAR).exists():
+        meta = read_sidecar(path)
+        diff = mismatch(meta, header, ("action", "n_samples", "seed", "batch", "config", "object_names", "selection_scheme"))
+        if diff:
+            raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff))
+        if meta["status"] == "complete":
+            load_dataset(path)  # verifies chunks and index
+            return _summary(meta, new_chunks=0)
+    else:
+        meta = dict(header, status="generating", counts={"chunks": 0, "rollouts": 0, "positives": 0})
+        meta["versions"] = provenance.versions()
+        meta["dataset_config"] = to_dict(dcfg)
+        rio.atomic_write_json(path / SIDECAR, meta)
+    meta["dataset_config"] = to_dict(dcfg)  # the cap may change between runs; record the last
+    action, n, seed, batch = meta["action"], meta["n_samples"], meta["seed"], meta["batch"]
+
+    done = chunk_indices(cdir)
+    if len(done) < meta["counts"]["chunks"]:
+        raise CorruptDatasetError(
+            f"{path}: sidecar records {meta['counts']['chunks']} chunks but only {len(done)} exist (truncated)"
+        )
+    labels, dists, schema = [], [], None
+    for k in done:
+        arrays, _ = read_chunk(chunk_path(cdir, k))
+        check_rollout_ids(chunk_path(cdir, k), arrays, k, batch)
+        arrays.pop("rollout")
+        check_schema(f"chunk {k}", schema_of(arrays), schema)
+        schema = schema or schema_of(arrays)
+        labels.append(arrays["label"])
+        dists.append(arrays["cog_distance"])
+    k0 = len(done)
+    max_chunks = math.ceil(dcfg.max_rollouts / batch)
+    bar = progress_bar(progress, n // 2, f"{action} positives")
+    bar.update(min(int(sum(l.sum() for l in labels)), n // 2))
+    k = k0
+    try:
+        while True:
+            lab = np.concatenate(labels) if labels else np.zeros(0, bool)
+            dist = np.concatenate(dists) if dists else np.zeros(0)
+            sel = select_balanced(lab, dist, n, seed, dcfg.distance_bins)
+            at_cap = k >= max_chunks
+            if sel is not None and (at_cap or sel.borrowed <= dcfg.borrow_fraction * sel.n_negative):
+                break
+            if at_cap:
+                rate = lab.mean() if lab.size else float("nan")
+                raise RolloutCapError(
+                    f"{action}: rollout cap reached (max_rollouts={dcfg.max_rollouts}, {lab.size} rollouts in "
+                    f"{k} chunks) with {int(lab.sum())} positives and {int((~lab).sum())} negatives, "
+                    f"positive rate {rate:.2%}; {n} samples need {n // 2} positives and {n - n // 2} "
+                    f"negatives. Rerun with a larger max_rollouts to continue from the chunks kept in {cdir}."
+                )
+            import jax
+
+            key = jax.random.fold_in(jax.random.PRNGKey(seed), k)
+            arrays = standardize_rollouts(rollout_fn(key, batch), batch, object_names)
+            check_schema(f"chunk {k} from rollout_fn", schema_of(arrays), schema)
+            schema = schema or schema_of(arrays)
+            arrays["rollout"] = k * batch + np.arange(batch, dtype=np.int64)
+            write_chunk(chunk_path(cdir, k), arrays, {"chunk": k, "batch": batch, "positives": int(arrays["label"].sum())})
+            labels.append(arrays["label"])
+            dists.append(arrays["cog_distance"])
+            k += 1
+            npos = int(sum(l.sum() for l in labels))
+            meta["counts"] = {"chunks": k, "rollouts": k * batch, "positives": npos}
+            rio.atomic_write_json(path / SIDECAR, meta)
+            bar.update(min(npos, n // 2) - bar.n)
+            bar.set_postfix(rollouts=k * batch, pos_rate=f"{npos / (k * batch):.1%}")
+    finally:
+        bar.close()
+    if sel.borrowed > dcfg.borrow_fraction * sel.n_negative:
+        warnings.warn(
+            f"{action}: rollout cap reached; {sel.borrowed} of {sel.n_negative} negatives come from "
+            f"outside their COG-distance bin (recorded in {SELECTION})",
+            stacklevel=2,
+        )
+    index = {
+        "n": n,
+        "n_positive": sel.n_positive,
+        "n_negative": sel.n_negative,
+        "seed": seed,
+        "chunks": k,
+        "rollouts": k * batch,
+        "bin_edges": sel.bin_edges.tolist(),
+        "positive_bin_counts": sel.positive_bin_counts.tolist(),
+        "negative_bin_counts": sel.negative_bin_counts.tolist(),
+        "borrowed": sel.borrowed,
+        "at_cap": bool(k >= max_chunks),
+        "selected": sel.selected.tolist(),
+    }
+    rio.atomic_write_json(path / SELECTION, index)
+    meta["status"] = "complete"
+    meta["selection"] = {key: index[key] for key in ("n", "n_positive", "n_negative", "chunks", "rollouts", "borrowed", "at_cap")}
+    meta["selection"]["sha256"] = sha256(sel.selected.astype(np.int64))
+    rio.atomic_write_json(path / SIDECAR, meta)
+    summary = _summary(meta, new_chunks=k - k0)
+    if progress:
+        print(
+            f"{action}: {n} samples selected from {summary['rollouts']} rollouts ({k} chunks, "
+            f"{k - k0} new), positive rate {summary['positive_rate']:.2%}, "
+            f"{sel.borrowed} negatives borrowed across distance bins",
+            file=sys.stderr,
+        )
+    return summary
+
+
+def _summary(meta: Mapping[str, Any], new_chunks: int) -> dict[str, Any]:
+    c = meta["counts"]
+    return {
+        "action": meta["action"],
+        "n": meta["n_samples"],
+        "rollouts": c["rollouts"],
+        "chunks": c["chunks"],
+        "positives": c["positives"],
+        "positive_rate": c["positives"] / c["rollouts"] if c["rollouts"] else float("nan"),
+        "borrowed": meta.get("selection", {}).get("borrowed"),
+        "new_chunks": new_chunks,
+    }

@@ -1,0 +1,89 @@
+"""What state a dataset's generated data and its features are in, without changing anything.
+
+Takes a dataset directory and what the caller expects there; gives ``(state, why)`` with
+state one of ``absent`` (nothing there yet), ``partial`` (resumable, not finished),
+``complete`` (finished, every chunk and the selection verified), ``stale`` (made with other
+settings: regenerate, or recompute the features with ``overwrite=True``) or ``corrupt``
+(damaged on disk; ``why`` names what). A folder that is not a relaff dataset is still a
+``ForeignDirectoryError``: there is nothing to regenerate in someone else's folder.
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any, Mapping
+
+from relaff_jax.data.config import FEATURES, LOCK, jsonable_config
+from relaff_jax.data.errors import CorruptDatasetError
+from relaff_jax.data.load import load_dataset, load_feature_chunks, load_rollouts, read_features_sidecar
+from relaff_jax.data.store import chunk_indices, chunk_path, mismatch, read_chunk, read_sidecar
+
+STATES = ("absent", "partial", "complete", "stale", "corrupt")
+FEATURE_KEYS = ("batch", "config", "n", "selection_sha256")
+
+
+def dataset_status(path: str | os.PathLike, expected: Mapping[str, Any] | None = None) -> tuple[str, str]:
+    """State of the generated data at ``path``.
+
+    expected: sidecar values the caller would generate with, e.g. ``{"action": "lift",
+        "n_samples": 10000, "seed": 0, "batch": 256, "config": {...}}`` (any sidecar keys;
+        compared after a JSON round trip, so tuples match lists). A difference is ``stale``.
+    Verifies every chunk (and, once complete, the selection index); damage is ``corrupt``.
+    """
+    path = Path(path)
+    if not path.exists():
+        return "absent", f"{path} does not exist"
+    if path.is_dir() and not any(p.name != LOCK for p in path.iterdir()):
+        return "absent", f"{path} is empty"
+    try:
+        meta = read_sidecar(path)
+    except CorruptDatasetError as e:
+        return "corrupt", str(e)
+    wanted = jsonable_config(expected)
+    diff = mismatch(meta, wanted, sorted(wanted))
+    if diff:
+        return "stale", "; ".join(diff)
+    try:
+        if meta["status"] != "complete":
+            r = load_rollouts(path)
+            return "partial", f"{len(r['label'])} rollouts in {meta['counts']['chunks']} chunks, generation not finished"
+        d = load_dataset(path, features=False)
+    except CorruptDatasetError as e:
+        return "corrupt", str(e)
+    return "complete", f"{len(d['label'])} samples from {meta['counts']['rollouts']} rollouts"
+
+
+def features_status(path: str | os.PathLike, batch: int, config: Mapping[str, Any] | None = None) -> tuple[str, str]:
+    """State of the features of the dataset at ``path`` for ``add_features(path, fn, batch,
+    config_dict=config)``: ``absent`` (none, or the dataset is not finished), ``partial``,
+    ``complete``, ``stale`` (other batch, config or selection) or ``corrupt`` (a damaged
+    feature chunk or ``features.json``; ``add_features(..., overwrite=True)`` recomputes).
+    """
+    path = Path(path)
+    try:
+        meta = read_sidecar(path)
+        if meta["status"] != "complete":
+            return "absent", "dataset generation not finished"
+        fmeta = read_features_sidecar(path)
+    except CorruptDatasetError as e:
+        return "corrupt", str(e)
+    if fmeta is None:
+        return "absent", "no features computed"
+    n = meta["n_samples"]
+    header = {"batch": batch, "config": jsonable_config(config), "n": n,
+              "selection_sha256": meta.get("selection", {}).get("sha256")}
+    diff = mismatch(fmeta, header, FEATURE_KEYS)
+    if diff:
+        return "stale", "; ".join(diff)
+    try:
+        if fmeta["status"] != "complete":
+            fdir = path / FEATURES
+            done = chunk_indices(fdir)
+            for k in done:
+                read_chunk(chunk_path(fdir, k))
+            return "partial", f"{len(done)} of {math.ceil(n / batch)} feature chunks"
+        load_feature_chunks(path, fmeta, n)
+    except CorruptDatasetError as e:
+        return "corrupt", str(e)
+    return "complete", f"features of {n} samples in {fmeta['chunks']} chunks"
