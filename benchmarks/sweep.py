@@ -1,7 +1,7 @@
 """Forest throughput of the learning sweep, and the projected wall time of the paper protocol.
 
 Measures affordance-classifier fits per second (fit on n samples + accuracy on 4000 test
-samples, exactly the sweep's inner step ``experiment.run_block``) at n = 4, 25, 100, in PCA
+samples, exactly the sweep's inner step ``learn.run_block``) at n = 4, 25, 100, in PCA
 space with one bootstrap input (24 dims) and RHF space with one (348 dims), on one core and
 on all cores (one worker process per core, each running its own blocks, as the sweep does).
 Then projects the full paper protocol (sizes 2..100, 50 PCA / 25 RHF repetitions, every
@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from relaff_jax.learn import experiment as E
-from relaff_jax.learn import forests as L
+from relaff_jax import learn as E
+from relaff_jax import learn as L
 
 SIZES = (4, 25, 100)
 DIMS = {"pca": 18, "rhf": 318}
@@ -138,7 +138,7 @@ def main() -> None:
     print("| preset | space | learners per (target, rep, n) | sizes | reps | forests | sweep, measured | sweep, idle | + sources & categories (one core) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name in ("quick", "paper"):
-        cfg = E.preset(name)
+        cfg = E.experiment_preset(name)
         proj, pidle = project(cfg, rates), project(cfg, idle)
         for s in ("pca", "rhf"):
             nf = 9 * learners_per_target(cfg, s) * len(cfg.sizes) * cfg.reps(s)
@@ -146,7 +146,7 @@ def main() -> None:
                   f"{_hms(proj[s])} | {_hms(pidle[s])} | {_hms(prep[s])} |")
         print(f"| {name} | total | | | | | **{_hms(sum(proj.values()) + sum(prep.values()))}** | "
               f"**{_hms(sum(pidle.values()) + sum(prep.values()))}** | |")
-    cfg = E.preset("paper")
+    cfg = E.experiment_preset("paper")
     both = E.ExperimentConfig(conditions_rhf=E.FAMILIES)
     print()
     print(f"Paper protocol (idle projection) with every condition also in RHF: {_hms(sum(project(both, idle).values()) + sum(prep.values()))}; "

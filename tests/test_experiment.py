@@ -1,13 +1,16 @@
-"""Protocol, bootstrap factors, Table II, resumable sweeps and the CLI (relaff_jax.experiment)."""
+"""Protocol, bootstrap factors, Table II, resumable sweeps and the CLI (relaff_jax.learn, relaff_jax.cli.learn)."""
 import argparse
 import csv
 
 import numpy as np
 import pytest
 
-from relaff_jax.learn import experiment as E
-from relaff_jax.learn import forests as L
+from relaff_jax import learn as E
+from relaff_jax import learn as L
+from relaff_jax.cli import learn as cli_learn
 from relaff_jax.config import override
+from relaff_jax.learn import sweep
+from relaff_jax.provenance import derive_seed
 
 # Small forests keep the sweep tests fast; the paper's forest settings are tested in test_learning.
 TINY = {
@@ -18,7 +21,7 @@ ACTS3 = ("lift", "pull", "take")
 
 
 def tiny_cfg(**kw):
-    return override(E.preset("quick"), dict(TINY, **kw))
+    return override(E.experiment_preset("quick"), dict(TINY, **kw))
 
 
 @pytest.fixture(scope="module")
@@ -165,7 +168,7 @@ def test_source_outputs_are_the_source_predictor_on_target_scenes_in_its_order(d
     src = pools["take"]["source"]
     d = data3["take"]
     f = L.fit_forest(L.state_features(d["pca"][src], None, "take", "pca"), d["label"][src],
-                     E._seed(9, 2, 0, L.ACTIONS.index("take")), cfg.forest)
+                     derive_seed(9, 2, 0, L.ACTIONS.index("take")), cfg.forest)
     tgt = pools["lift"]["target"]
     np.testing.assert_array_equal(prep["target:lift"], tgt)
     expect = L.predict_class(f, L.state_features(data3["lift"]["pca"][tgt], None, "take", "pca"))
@@ -174,6 +177,48 @@ def test_source_outputs_are_the_source_predictor_on_target_scenes_in_its_order(d
     assert prep["corr"].shape == (3, 3) and int(prep["corr_n"]) == 3 * 20
     for a in ACTS3:  # source/corr pools never overlap the target pool
         assert not np.intersect1d(pools[a]["target"], np.concatenate([pools[a]["source"], pools[a]["corr"]])).size
+
+
+def test_forests_per_space_hand_worked():
+    paper = E.experiment_preset("paper")  # 9 actions, 99 sizes, 50 PCA / 25 RHF repetitions
+    # PCA: 9 sources + 36 categories, then per target NB + 8 DB1 + DBn + 28 CB1 + 3 CBn = 41 forests
+    assert E.forests_per_space(paper, 9, "pca") == 9 + 36 + 9 * 41 * 99 * 50 == 1_826_595
+    # RHF runs NB and DB1 only: no categories
+    assert E.forests_per_space(paper, 9, "rhf") == 9 + 9 * 9 * 99 * 25 == 200_484
+    with_t = override(paper, {"categories_with_target": True})
+    assert E.forests_per_space(with_t, 9, "pca") == 9 + 36 + 9 * (1 + 8 + 1 + 36 + 3) * 99 * 50
+    # with the correlations, CBn sets that repeat another condition's share its forest:
+    # corr 0.3 keeps all 28 categories at T = 0 and 0.125 (one set) and none at 0.5 (NB's)
+    corr = np.full((9, 9), 0.3)
+    assert E.forests_per_space(paper, 9, "pca", corr) == 9 + 36 + 9 * 39 * 99 * 50
+
+
+def _count_fits(monkeypatch):
+    from relaff_jax.learn import blocks, prep
+
+    n = {"fits": 0}
+    real = L.fit_forest
+
+    def counting(*args, **kwargs):
+        n["fits"] += 1
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(prep, "fit_forest", counting)
+    monkeypatch.setattr(blocks, "fit_forest", counting)
+    return n
+
+
+def test_forests_per_space_is_the_number_of_fits_a_run_makes(data3, tmp_path, monkeypatch):
+    cfg = tiny_cfg(sizes=(2, 4, 10), conditions_rhf=("NB", "DB1", "CBn"))
+    n = _count_fits(monkeypatch)
+    for space in ("pca", "rhf"):
+        n["fits"] = 0
+        path = E.run_experiment(data3, tmp_path / space, cfg, [space], seed=1, jobs=1, progress=False)[space]
+        res = np.load(path)
+        exact = E.forests_per_space(cfg, 3, space, res["corr"])
+        assert n["fits"] == exact == int(res["new_fits"]) + 3 + 3  # sweep + 3 sources + 3 categories
+        # before the run (no correlations) every condition counts as its own forest: an upper bound
+        assert E.forests_per_space(cfg, 3, space) >= exact
 
 
 # ----------------------------------------------------------------- sweeps and resuming
@@ -192,7 +237,7 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
 
     # interrupted run: the third block raises (like a kill), then a rerun finishes the rest
     calls = {"n": 0}
-    real = E._block_job
+    real = sweep.run_block_to_file
 
     def flaky(*args):
         calls["n"] += 1
@@ -200,12 +245,12 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
             raise KeyboardInterrupt
         return real(*args)
 
-    monkeypatch.setattr(E, "_block_job", flaky)
+    monkeypatch.setattr(sweep, "run_block_to_file", flaky)
     with pytest.raises(KeyboardInterrupt):
         E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
     blocks = sorted((tmp_path / "b" / "pca" / "blocks").glob("*.npz"))
     assert len(blocks) == 2 and not (tmp_path / "b" / "pca" / "results.npz").exists()
-    monkeypatch.setattr(E, "_block_job", real)
+    monkeypatch.setattr(sweep, "run_block_to_file", real)
     done = {p.name: p.stat().st_mtime_ns for p in blocks}
     b = np.load(E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
     np.testing.assert_array_equal(b["acc"], acc)
@@ -260,7 +305,7 @@ def test_bad_inputs_are_clear_errors(data3, tmp_path):
     with pytest.raises(ValueError, match="select_size 10"):
         E.check_config(tiny_cfg(sizes=(2, 4, 25)))
     with pytest.raises(ValueError, match="unknown preset"):
-        E.preset("huge")
+        E.experiment_preset("huge")
 
 
 # ------------------------------------------------------------------------------- CLI
@@ -268,7 +313,7 @@ def test_bad_inputs_are_clear_errors(data3, tmp_path):
 
 def test_cli_experiment_and_report(tmp_path):
     parser = argparse.ArgumentParser()
-    E.register_cli(parser.add_subparsers(dest="command"))
+    cli_learn.register(parser.add_subparsers(dest="command"))
     sets = []
     for k, v in dict(TINY, reps_pca=1, sizes=[2, 10]).items():
         sets += ["--set", f"{k}={list(v) if isinstance(v, tuple) else v}".replace(" ", "")]
@@ -293,3 +338,25 @@ def test_cli_experiment_and_report(tmp_path):
         assert (tmp_path / "rep" / f"{fig}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(FileNotFoundError, match="not an experiment folder"):
         E.load_results(tmp_path / "rep")
+
+
+def test_cli_out_paths_are_checked_before_any_work(tmp_path):
+    from relaff_jax.errors import UserError
+
+    parser = argparse.ArgumentParser()
+    cli_learn.register(parser.add_subparsers(dest="command"))
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    for argv in (["experiment", "--synthetic", "150", "--out", str(blocker / "res")],
+                 ["experiment", "--synthetic", "150", "--out", str(blocker)],
+                 ["report", str(tmp_path), "--out", str(blocker / "rep")]):
+        args = parser.parse_args(argv)
+        with pytest.raises(UserError, match="file"):
+            args.func(args)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # nothing was made
+    args = parser.parse_args(["experiment", "--out", str(tmp_path / "res")])
+    with pytest.raises(UserError, match="give --data"):
+        args.func(args)
+    args = parser.parse_args(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "rep")])
+    with pytest.raises(UserError, match="not an experiment folder"):
+        args.func(args)

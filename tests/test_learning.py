@@ -1,11 +1,11 @@
-"""Forests, state spaces, bootstrap inputs and the correlation heuristic (relaff_jax.learning)."""
+"""Forests, state spaces, bootstrap inputs and the correlation heuristic (relaff_jax.learn)."""
 import math
 
 import numpy as np
 import pytest
 from sklearn.ensemble import RandomForestClassifier
 
-from relaff_jax.learn import forests as L
+from relaff_jax import learn as L
 from relaff_jax.config import override
 
 

@@ -14,8 +14,8 @@ import shutil
 import numpy as np
 import pytest
 
-from relaff_jax.data import dataset as D
-from relaff_jax.learn import experiment as E
+from relaff_jax import data as D
+from relaff_jax import learn as E
 from relaff_jax.reproduce import run as R
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(5400)]

@@ -4,16 +4,18 @@ real settled scenes (labels from a test rule, not from the arm's actions)."""
 import base64
 import json
 import re
+import subprocess
+import sys
 
 import jax
 import numpy as np
 import pytest
 
 from relaff_jax import cli
-from relaff_jax.data import dataset
+from relaff_jax import data as dataset
+from relaff_jax import learn as E
+from relaff_jax import report as R
 from relaff_jax.perception import from_sim as features
-from relaff_jax.learn import experiment as E
-from relaff_jax.report import report as R
 from relaff_jax.sim import scenes as sc
 
 B = 8
@@ -145,6 +147,22 @@ def test_render_markdown_and_html(tmp_path):
         R.render_markdown([("video", "x")])
 
 
+def test_figures_leave_the_matplotlib_backend_alone(tmp_path):
+    """Library code draws on ``matplotlib.figure.Figure``: importing the report and writing a
+    figure neither switches the backend (a notebook keeps its own) nor loads pyplot."""
+    script = f"""
+import sys, matplotlib
+matplotlib.use("svg")
+import relaff_jax.report as R
+infos = {{"lift": {{"rollouts_positive_rate_by_relation": {{"beside": 0.1, "on_top": 0.8, "inside": None}}}}}}
+p = R.dataset_figure(infos, __import__("pathlib").Path({str(tmp_path / "f.png")!r}))
+assert p.read_bytes()[:8] == b"\\x89PNG\\r\\n\\x1a\\n"
+assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
+assert "matplotlib.pyplot" not in sys.modules
+"""
+    subprocess.run([sys.executable, "-c", script], check=True)
+
+
 # ---------------------------------------------------------------------- the whole report
 
 
@@ -153,7 +171,7 @@ def test_full_report(scene_run, tmp_path):
     data_dirs = {"lift": scene_run / "data" / "lift", "take": scene_run / "data" / "take"}
     info = {"preset": "tiny", "seed": 0, "timings": {"generate": 12.5, "report": None},
             "versions": {"jax": jax.__version__}}
-    R.write_full_report(scene_run / "results", out, data_dirs, info, examples_per_action=2)
+    R.write_report(scene_run / "results", out, data_dirs, info, examples_per_action=2)
     for f in ("report.md", "report.html", "findings.json", "summary.json", "table2.csv", "fig_datasets.png",
               "fig06_nb_learning.png", "fig11_correlation.png", "fig12_thresholds.png"):
         assert (out / f).stat().st_size > 0, f
@@ -185,7 +203,7 @@ def test_full_report(scene_run, tmp_path):
     res = E.load_results(scene_run / "results")
     an = {s: E.analyse(res[s], res["config"]) for s in ("pca", "rhf")}
     t2 = an["pca"]["table2"]
-    row = lambda name: f"| {name} | " + " | ".join(R._fmt(v) for v in t2[E.TABLE2_ROWS.index(name)])
+    row = lambda name: f"| {name} | " + " | ".join(R.fmt(v) for v in t2[E.TABLE2_ROWS.index(name)])
     assert row("DB1 best") in md and row("CBn") in md and "| 2.819 | 0.976 | 3.657 |" in md
     found = json.loads((out / "findings.json").read_text())["findings"]
     assert [f["id"] for f in found] == [f["id"] for f in R.findings(an, res["config"])]

@@ -1,1 +1,98 @@
-"""Learning: the paper's random forests, the bootstrapping protocol, sweeps and their analysis."""
+"""Learning: the paper's random forests, the bootstrapping protocol, sweeps and their analysis.
+
+Takes one featured dataset per action (``load_datasets(DIRS)``, or ``synthetic_datasets``)
+and gives, per state space, the accuracies of every bootstrapping condition on disk
+(``run_experiment``), from which ``analyse`` computes bootstrap factors and Table II.
+
+Files, in pipeline order:
+
+- ``forests.py``: ``ForestConfig``, ``n_trees``, ``make_forest``, ``fit_forest``, ``predict_class``;
+- ``states.py``: ``state_features`` (manipulated object first), ``augment`` (bootstrap inputs);
+- ``correlation.py``: the categories and the correlation heuristic;
+- ``synthetic.py``: synthetic datasets in ``load_dataset``'s layout (``--synthetic``, tests);
+- ``config.py``: ``ExperimentConfig``, ``experiment_preset``, ``check_config``, Table II rows;
+- ``protocol.py``: condition axis and plans, pools and draws, ``forests_per_space``;
+- ``datasets.py``: loading, checking and fingerprinting the input datasets;
+- ``prep.py``: source predictors, categories and the correlation matrix of one space;
+- ``blocks.py``: one (target, repetition, sizes) block of the sweep, saved and re-read;
+- ``parallel.py``: forest jobs over worker processes with a progress bar;
+- ``sweep.py``: ``run_experiment``, the resumable sweep of one or both spaces;
+- ``results.py``: ``load_results``, ``is_complete``;
+- ``analysis.py``: curves, bootstrap factors, Table II, the threshold study.
+
+Nothing here imports the report or the command line (``relaff_jax.cli.learn``).
+"""
+from relaff_jax.constants import ACTIONS, FAMILIES, SPACES
+from relaff_jax.learn.analysis import (
+    analyse,
+    average_bf,
+    bootstrap_factor,
+    categories_per_threshold,
+    curves,
+    select_at,
+    select_best,
+    size_mask,
+    threshold_study,
+)
+from relaff_jax.learn.blocks import read_block, run_block, run_block_to_file
+from relaff_jax.learn.config import (
+    PAPER_TABLE2,
+    SPACE_CODE,
+    TABLE2_ROWS,
+    ExperimentConfig,
+    check_config,
+    experiment_preset,
+)
+from relaff_jax.learn.correlation import (
+    categories_above,
+    category_pairs,
+    correlation_matrix,
+)
+from relaff_jax.learn.datasets import check_datasets, fingerprint, load_datasets
+from relaff_jax.learn.forests import (
+    ForestConfig,
+    check_forest_config,
+    fit_forest,
+    make_forest,
+    n_trees,
+    predict_class,
+)
+from relaff_jax.learn.prep import prepare
+from relaff_jax.learn.protocol import (
+    block_fits,
+    category_allowed,
+    category_masks,
+    condition_names,
+    condition_plan,
+    draw_rep,
+    forests_per_space,
+    layout,
+    split_pools,
+)
+from relaff_jax.learn.results import (
+    FORMAT_VERSION,
+    ResultsNotFound,
+    is_complete,
+    load_results,
+)
+from relaff_jax.learn.states import (
+    TOY_MANIPULATED,
+    augment,
+    check_action,
+    manipulated_first_order,
+    state_features,
+)
+from relaff_jax.learn.sweep import run_experiment, run_space
+from relaff_jax.learn.synthetic import synthetic_datasets
+
+__all__ = [
+    "ACTIONS", "FAMILIES", "SPACES", "FORMAT_VERSION", "PAPER_TABLE2", "SPACE_CODE", "TABLE2_ROWS", "TOY_MANIPULATED",
+    "ExperimentConfig", "ForestConfig", "ResultsNotFound",
+    "analyse", "augment", "average_bf", "block_fits", "bootstrap_factor", "categories_above", "categories_per_threshold",
+    "category_allowed", "category_masks", "category_pairs", "check_action", "check_config", "check_datasets",
+    "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep",
+    "experiment_preset", "fingerprint", "fit_forest", "forests_per_space", "is_complete", "layout", "load_datasets",
+    "load_results", "make_forest", "manipulated_first_order", "n_trees", "predict_class", "prepare", "read_block",
+    "run_block", "run_block_to_file", "run_experiment", "run_space", "select_at", "select_best", "size_mask",
+    "split_pools", "state_features", "synthetic_datasets", "threshold_study",
+]

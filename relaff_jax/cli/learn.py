@@ -1,0 +1,72 @@
+"""``relaff experiment`` and ``relaff report``: the learning sweeps, and the report of their results.
+
+Takes parsed arguments; ``experiment`` runs (or resumes) ``learn.run_experiment`` on dataset
+folders or synthetic data and prints the results paths; ``report`` writes
+``report.write_report`` (Table II, findings, figures, report.md / report.html) of a results
+folder. Output folders are checked before any work; problems a user can fix are
+``relaff_jax.errors.UserError`` (one line, exit code 2).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+
+from relaff_jax.cli.options import check_out_dir
+from relaff_jax.config import override, parse_set
+from relaff_jax.constants import SPACES
+from relaff_jax.errors import UserError
+
+EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bootstrap factors and Table II."
+
+
+def cmd_experiment(args: argparse.Namespace) -> int:
+    from relaff_jax import learn
+
+    cfg = override(learn.experiment_preset(args.preset), parse_set(args.set or []))
+    spaces = list(SPACES) if args.space == "both" else [args.space]
+    if args.synthetic and args.data:
+        raise UserError("give either --data or --synthetic, not both")
+    if not args.synthetic and not args.data:
+        raise UserError("give --data DIR... (one featured dataset per action) or --synthetic N")
+    check_out_dir(args.out)
+    if args.synthetic:
+        datasets, desc = learn.synthetic_datasets(args.synthetic, seed=args.seed), [f"synthetic:{args.synthetic}"]
+    else:
+        datasets, desc = learn.load_datasets(args.data), list(args.data)
+    jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
+    paths = learn.run_experiment(datasets, args.out, cfg, spaces, seed=args.seed, jobs=jobs,
+                                 progress=not args.no_progress, data_desc=desc)
+    for space, p in paths.items():
+        print(f"{space}: {p}")
+    return 0
+
+
+def cmd_report(args: argparse.Namespace) -> int:
+    from relaff_jax.report import write_report
+
+    check_out_dir(args.out)
+    out = write_report(args.results, args.out)
+    print(f"report: {out}")
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add ``relaff experiment`` and ``relaff report``."""
+    p = subparsers.add_parser("experiment", help="learning curves and bootstrapping sweeps (paper section V)",
+                              description=EXPERIMENT_DESCRIPTION)
+    p.add_argument("--data", nargs="+", metavar="DIR", help="featured dataset folders, one per action")
+    p.add_argument("--synthetic", type=int, metavar="N", default=0,
+                   help="use N synthetic samples per action instead of --data (a dry run of the stage)")
+    p.add_argument("--out", required=True, metavar="RESULTS", help="results folder (resumed if it exists)")
+    p.add_argument("--preset", choices=("quick", "paper"), default="quick")
+    p.add_argument("--space", choices=("pca", "rhf", "both"), default="both")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
+    p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a config field, e.g. --set reps_pca=5 --set 'sizes=[2,10,25]'")
+    p.add_argument("--no-progress", action="store_true")
+    p.set_defaults(func=cmd_experiment)
+    r = subparsers.add_parser("report", help="Table II, findings, figures and report.html from an experiment folder")
+    r.add_argument("results", metavar="RESULTS")
+    r.add_argument("--out", required=True, metavar="REPORT")
+    r.set_defaults(func=cmd_report)

@@ -1,0 +1,103 @@
+"""Settings of the evaluation protocol (paper section V) and the paper's Table II.
+
+``ExperimentConfig`` is the frozen protocol (defaults are the paper's, REFERENCE section 6);
+``experiment_preset`` gives the ``paper`` and ``quick`` presets; ``check_config`` fails early
+on settings that cannot give a study. ``TABLE2_ROWS`` / ``PAPER_TABLE2`` are the rows of
+Table II and the paper's numbers (PCA, average bootstrap factor over n = 4..25: avg, min,
+max over the nine affordances).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from relaff_jax.constants import FAMILIES, SPACES
+from relaff_jax.errors import UserError
+from relaff_jax.learn.forests import ForestConfig, check_forest_config
+
+# Integer code of each state space in seed keys (part of every forest's seed: never change).
+SPACE_CODE = {"pca": 0, "rhf": 1}
+
+TABLE2_ROWS = (
+    "NB", "DB1 average", "DB1 best", "DB1 best after ten", "DBn",
+    "CB1 average", "CB1 best", "CB1 best after ten", "CBn",
+)
+PAPER_TABLE2 = {
+    "NB": (1.0, 1.0, 1.0),
+    "DB1 average": (1.356, 0.8055, 1.582),
+    "DB1 best": (2.819, 0.9760, 3.657),
+    "DB1 best after ten": (2.751, 0.8756, 3.657),
+    "DBn": (2.357, 1.064, 3.090),
+    "CB1 average": (1.548, 0.7860, 1.913),
+    "CB1 best": (2.889, 0.8503, 3.701),
+    "CB1 best after ten": (2.802, 0.7702, 3.752),
+    "CBn": (2.895, 0.9072, 3.888),
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class ExperimentConfig:
+    """Protocol settings; defaults are the paper's (section V, REFERENCE section 6)."""
+
+    sizes: tuple[int, ...] = tuple(range(2, 101))  # training sizes n
+    reps_pca: int = 50
+    reps_rhf: int = 25
+    test_size: int = 4000
+    source_size: int = 2000  # samples per source predictor (and per half of a category)
+    corr_scenes: int = 500  # held-out scenes per action shown to all nine predictors
+    shrink_to_data: bool = False  # quick preset: shrink source/corr/test sizes to small datasets
+    repeats_pca: int = 6  # bootstrap input repetitions (24-dim PCA state with one input)
+    repeats_rhf: int = 30  # (348-dim RHF state with one input)
+    thresholds: tuple[float, ...] = (0.0, 0.125, 0.5)  # correlation heuristic, paper V-F
+    cbn_threshold: float = 0.5  # categories used by CBn in Table II (paper V-G)
+    categories_with_target: bool = False  # may a category built from the target itself be used?
+    conditions_pca: tuple[str, ...] = FAMILIES
+    conditions_rhf: tuple[str, ...] = ("NB", "DB1")  # the paper shows only NB and DB1 in RHF
+    bf_sizes: tuple[int, int] = (4, 25)  # average bootstrap factor interval (paper V-C)
+    best_sizes: tuple[int, int] = (2, 100)  # "best" = highest mean accuracy over these n
+    select_size: int = 10  # "best after ten"
+    chance: float = 0.5
+    sizes_per_block: int = 25
+    forest: ForestConfig = ForestConfig()
+
+    def reps(self, space: str) -> int:
+        return self.reps_pca if space == "pca" else self.reps_rhf
+
+    def repeats(self, space: str) -> int:
+        return self.repeats_pca if space == "pca" else self.repeats_rhf
+
+    def conditions(self, space: str) -> tuple[str, ...]:
+        return self.conditions_pca if space == "pca" else self.conditions_rhf
+
+
+def experiment_preset(name: str) -> ExperimentConfig:
+    """``paper``: the full protocol. ``quick``: every condition at 5 sizes, 2 repetitions,
+    2000 test samples, shrunk to small datasets; ~4.5k forests, minutes on 2 cores."""
+    if name == "paper":
+        return ExperimentConfig()
+    if name == "quick":
+        return ExperimentConfig(
+            sizes=(2, 4, 10, 25, 50), reps_pca=2, reps_rhf=2, test_size=2000, shrink_to_data=True,
+        )
+    raise UserError(f"unknown preset {name!r}; expected 'quick' or 'paper'")
+
+
+def check_config(cfg: ExperimentConfig) -> None:
+    """Raise ``UserError`` if ``cfg`` cannot give a complete study."""
+    sizes = np.asarray(cfg.sizes)
+    if sizes.ndim != 1 or len(sizes) == 0 or np.any(sizes < 2) or np.any(np.diff(sizes) <= 0):
+        raise UserError(f"sizes must be strictly increasing integers >= 2, got {cfg.sizes}")
+    if cfg.select_size not in cfg.sizes:
+        raise UserError(f"select_size {cfg.select_size} ('best after ten') must be one of sizes {cfg.sizes}")
+    if not any(cfg.bf_sizes[0] <= s <= cfg.bf_sizes[1] for s in cfg.sizes):
+        raise UserError(f"no training size inside bf_sizes {cfg.bf_sizes}")
+    if cfg.cbn_threshold not in cfg.thresholds:
+        raise UserError(f"cbn_threshold {cfg.cbn_threshold} must be one of thresholds {cfg.thresholds}")
+    for space in SPACES:
+        bad = set(cfg.conditions(space)) - set(FAMILIES)
+        if bad or "NB" not in cfg.conditions(space):
+            raise UserError(f"conditions_{space} must include NB and be among {FAMILIES}, got {cfg.conditions(space)}")
+    check_forest_config(cfg.forest)
+    if min(cfg.reps_pca, cfg.reps_rhf, cfg.test_size, cfg.source_size, cfg.corr_scenes, cfg.sizes_per_block) < 1:
+        raise UserError("reps, test_size, source_size, corr_scenes and sizes_per_block must be >= 1")

@@ -1,0 +1,91 @@
+"""Step 2 of the protocol, once per seed and space: source predictors, categories, correlation.
+
+Takes ``{action: dataset}``, the space, the config and the seed; fits the A source predictors
+(each on its action's source pool, in its own state order) and, when the space runs CB1 or
+CBn, the A(A-1)/2 categories (each on the union of two source pools, canonical order), and
+returns (``prepare``) their 0/1 outputs on every target pool and the correlation matrix of
+the predictors on the held-out correlation scenes. Prep forests never see a target-pool scene.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import numpy as np
+
+from relaff_jax.constants import ACTIONS
+from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig
+from relaff_jax.learn.correlation import category_pairs, correlation_matrix
+from relaff_jax.learn.datasets import check_datasets
+from relaff_jax.learn.forests import ForestConfig, fit_forest, predict_class
+from relaff_jax.learn.parallel import run_parallel
+from relaff_jax.learn.protocol import split_pools
+from relaff_jax.learn.states import state_features
+from relaff_jax.provenance import derive_seed
+
+
+def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, actions: list[str],
+                targets: dict, corr_idx: dict, space: str, seed: int, fcfg: ForestConfig):
+    """Fit one action's source predictor; predict every target pool and the corr scenes."""
+    def states(b: str, idx: np.ndarray) -> np.ndarray:  # scenes of action b in this source's order
+        return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space)
+
+    forest = fit_forest(states(action, src), labels[src], derive_seed(seed, 2, SPACE_CODE[space], ACTIONS.index(action)), fcfg)
+
+    def on(b: str, idx: np.ndarray) -> np.ndarray:
+        return predict_class(forest, states(b, idx))
+
+    return [on(t, targets[t]) for t in actions], np.concatenate([on(b, corr_idx[b]) for b in actions])
+
+
+def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, actions: list[str],
+                  targets: dict, space: str, seed: int, fcfg: ForestConfig):
+    """Fit one category on the union of two source sets (canonical order: toy first)."""
+    def canon(b: str, idx: np.ndarray) -> np.ndarray:
+        return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, None, space)
+
+    a, b = pair
+    x = np.concatenate([canon(a, src[a]), canon(b, src[b])])
+    y = np.concatenate([labels[a][src[a]], labels[b][src[b]]])
+    k = category_pairs(ACTIONS).index((ACTIONS.index(a), ACTIONS.index(b)))
+    forest = fit_forest(x, y, derive_seed(seed, 3, SPACE_CODE[space], k), fcfg)
+    return [predict_class(forest, canon(t, targets[t])) for t in actions]
+
+
+def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: ExperimentConfig, seed: int,
+            jobs: int = 1, progress: bool = False) -> dict[str, np.ndarray]:
+    """Source predictors, categories and the correlation heuristic for one space.
+
+    Returns a flat dict of arrays: ``boot:<t>`` (A + K, M_t) 0/1 outputs on target t's pool
+    (rows: the A source predictors, then the K categories; NaN rows for categories a space
+    does not use, so a misuse cannot pass silently), ``target:<t>`` (M_t,) pool
+    indices, ``test_size:<t>``, ``corr`` (A, A), ``corr_n`` (scenes used).
+    """
+    from joblib import delayed
+
+    actions = check_datasets(datasets, [space])
+    pools = {a: split_pools(len(datasets[a]["label"]), ACTIONS.index(a), cfg, seed) for a in actions}
+    feats = {a: {k: np.asarray(datasets[a][k], dtype=np.float32) for k in (("pca", "rhf") if space == "rhf" else ("pca",))} for a in actions}
+    labels = {a: np.asarray(datasets[a]["label"]).astype(bool) for a in actions}
+    targets = {a: pools[a]["target"] for a in actions}
+    src = {a: pools[a]["source"] for a in actions}
+    corr_idx = {a: pools[a]["corr"] for a in actions}
+    pairs = [(actions[i], actions[j]) for i, j in category_pairs(actions)]
+    # categories are only trained when this space uses them (the paper's RHF runs NB and DB1)
+    with_cats = bool({"CB1", "CBn"} & set(cfg.conditions(space)))
+    calls = [delayed(_source_job)(feats, a, labels[a], src[a], actions, targets, corr_idx, space, seed, cfg.forest) for a in actions]
+    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest) for p in pairs] if with_cats else []
+    desc = f"{space} source predictors" + (" + categories" if with_cats else "")
+    results = run_parallel(calls, jobs, progress, total=len(calls), desc=desc, unit="forest")
+    sources = results[: len(actions)]
+    cats = results[len(actions) :] if with_cats else [[np.full(len(targets[t]), np.nan, np.float32) for t in actions]] * len(pairs)
+    out: dict[str, np.ndarray] = {}
+    for ti, t in enumerate(actions):
+        rows = [sources[s][0][ti] for s in range(len(actions))] + [c[ti] for c in cats]
+        out[f"boot:{t}"] = np.stack(rows).astype(np.float32)
+        out[f"target:{t}"] = targets[t]
+        out[f"test_size:{t}"] = pools[t]["test_size"]
+    corr_out = np.stack([s[1] for s in sources])
+    out["corr"] = correlation_matrix(corr_out)
+    out["corr_outputs_mean"] = corr_out.mean(axis=1)
+    out["corr_n"] = np.asarray(corr_out.shape[1])
+    return out

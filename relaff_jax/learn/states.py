@@ -1,0 +1,72 @@
+"""State spaces (paper section III-A) and bootstrap inputs (section III-C).
+
+Takes per-action numpy features in the dataset stage's canonical layout (PCA ``(N, 18)``
+with the toy's nine values first, RHF ``(N, 300)`` with toy = A, other = B) and gives
+
+* ``state_features``: the state of an action in its own order (manipulated object first),
+  ``(N, 18)`` in PCA space or ``(N, 318)`` in RHF space;
+* ``augment``: a state extended with bootstrap inputs (0/1 predicted classes of other
+  affordance or category predictors), each repeated 6 (PCA) or 30 (RHF) times.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from relaff_jax.constants import ACTIONS, PCA_PER_OBJECT, RHF_BINS, SPACES
+from relaff_jax.errors import UserError
+
+# Actions whose manipulated object is the toy; for the others it is the base / obstacle /
+# rake (paper Table I), whose nine PCA values then come first in the state.
+TOY_MANIPULATED = frozenset({"move", "take"})
+
+
+def manipulated_first_order(action: str) -> np.ndarray:
+    """Column order ``(18,)`` that turns canonical PCA (toy first) into the action's order
+    (manipulated object first)."""
+    check_action(action)
+    toy, other = np.arange(PCA_PER_OBJECT), np.arange(PCA_PER_OBJECT, 2 * PCA_PER_OBJECT)
+    return np.concatenate([toy, other] if action in TOY_MANIPULATED else [other, toy])
+
+
+def state_features(pca: np.ndarray, rhf: np.ndarray | None, action: str | None, space: str) -> np.ndarray:
+    """The state of scenes as seen by an ``action``'s predictor.
+
+    pca: (N, 18) canonical PCA (toy's 9 values, then the other object's 9).
+    rhf: (N, 300) relational histogram (toy = A, other = B); unused in PCA space.
+    action: whose order to use (its manipulated object first); ``None`` keeps the canonical
+      order (used by category predictors, whose training data mixes two actions).
+    Returns (N, 18) in PCA space, (N, 318) in RHF space, float32.
+    """
+    pca = np.asarray(pca, dtype=np.float32)
+    if pca.ndim != 2 or pca.shape[1] != 2 * PCA_PER_OBJECT:
+        raise ValueError(f"pca features must be (N, 18), got {pca.shape}")
+    state = pca if action is None else pca[:, manipulated_first_order(action)]
+    if space == "pca":
+        return np.ascontiguousarray(state)
+    if space == "rhf":
+        if rhf is None:
+            raise ValueError("RHF space needs the rhf features, got None")
+        rhf = np.asarray(rhf, dtype=np.float32)
+        if rhf.shape != (pca.shape[0], RHF_BINS):
+            raise ValueError(f"rhf features must be (N, {RHF_BINS}) matching pca's N={pca.shape[0]}, got {rhf.shape}")
+        return np.concatenate([state, rhf], axis=1)
+    raise UserError(f"unknown state space {space!r}; expected one of {SPACES}")
+
+
+def check_action(action: str) -> None:
+    if action not in ACTIONS:
+        raise UserError(f"unknown action {action!r}; expected one of {ACTIONS}")
+
+
+def augment(X: np.ndarray, outputs: np.ndarray, repeats: int) -> np.ndarray:
+    """State extended with bootstrap inputs.
+
+    X: (N, D) state; outputs: (K, N) 0/1 predicted classes of K predictors on the same scenes.
+    Returns (N, D + K * repeats): each predictor's column repeated ``repeats`` times
+    (paper V-B: repetition makes the input more likely to be among the sqrt(M) tried
+    features at a split).
+    """
+    outputs = np.asarray(outputs, dtype=np.float32).reshape(-1, X.shape[0])
+    if outputs.shape[0] == 0:
+        return np.asarray(X, dtype=np.float32)
+    return np.concatenate([np.asarray(X, dtype=np.float32), np.repeat(outputs.T, repeats, axis=1)], axis=1)

@@ -1,0 +1,169 @@
+"""The sweep of paper section V: every condition, size and repetition of one or both spaces.
+
+Takes ``{action: dataset}`` (``load_datasets`` or ``synthetic_datasets``), an output folder,
+the config, the spaces and the seed; ``run_experiment`` writes ``out/experiment.json``
+(config, seed, actions, data fingerprint) and per space ``out/<space>/prep.npz``, the
+finished blocks ``out/<space>/blocks/*.npz`` and ``out/<space>/results.npz`` with the
+accuracies ``acc: (target, condition, size, rep)``, and returns the results paths. A rerun
+resumes from the finished blocks; another config, seed or data in the same folder is refused.
+
+Protocol (docs/learning.md has the full story):
+
+1. Pools, once per seed and action (``protocol.split_pools``): a *source pool* (trains the
+   action's source predictor and categories), ``corr_scenes`` held-out scenes for the
+   correlation heuristic, and a disjoint *target pool*.
+2. Prep, once per seed and space (``prep.prepare``): source predictors, categories, their
+   outputs on every target pool, the correlation matrix.
+3. Sweep, one block per (target, repetition, chunk of sizes) (``blocks.run_block``): the
+   target pool is permuted (same permutation for PCA and RHF); the first ``test_size``
+   samples are the test set, the next ``max(sizes)`` the training order, and size n trains
+   on its first n (nested training sets, shared by every condition: paired comparisons).
+   Repetitions are the outer loop, so early blocks are representative for the ETA.
+"""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from relaff_jax import io as rio
+from relaff_jax.config import to_dict
+from relaff_jax.constants import ACTIONS, SPACES
+from relaff_jax.errors import UserError
+from relaff_jax.learn.blocks import read_block, run_block_to_file
+from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config
+from relaff_jax.learn.datasets import check_datasets, fingerprint
+from relaff_jax.learn.parallel import run_parallel
+from relaff_jax.learn.prep import prepare
+from relaff_jax.learn.protocol import (
+    block_fits,
+    category_masks,
+    condition_names,
+    condition_plan,
+    draw_rep,
+    layout,
+)
+from relaff_jax.learn.results import FORMAT_VERSION
+from relaff_jax.learn.states import state_features
+
+
+def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
+                   spaces: Sequence[str] = SPACES, seed: int = 0, jobs: int = 1, progress: bool = True,
+                   data_desc: Sequence[str] = ()) -> dict[str, Path]:
+    """Run (or resume) the protocol; write ``out/<space>/results.npz``; return their paths.
+
+    ``out/experiment.json`` records config, seed, actions and a data fingerprint; resuming
+    with different ones is an error (start a new ``out`` instead).
+    """
+    check_config(cfg)
+    spaces = list(dict.fromkeys(spaces))
+    for s in spaces:
+        if s not in SPACES:
+            raise UserError(f"unknown space {s!r}; expected one of {SPACES}")
+    actions = check_datasets(datasets, spaces)
+    out = Path(out)
+    meta = {
+        "format": FORMAT_VERSION,
+        "config": to_dict(cfg),
+        "seed": int(seed),
+        "actions": actions,
+        "spaces": spaces,
+        "fingerprint": fingerprint(datasets, spaces),
+    }
+    meta_path = out / "experiment.json"
+    if meta_path.exists():
+        # same protocol, seed, actions and data; a space may be added to a finished one
+        old = rio.read_json(meta_path)
+        now = rio.jsonable(meta)
+        diff = [k for k in ("format", "config", "seed", "actions") if old.get(k) != now[k]]
+        diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
+        if diff:
+            raise UserError(f"{out} holds an experiment with different {diff}; use a new --out to start another")
+        if set(spaces) - set(old["spaces"]):
+            old["spaces"] = [s for s in SPACES if s in set(old["spaces"]) | set(spaces)]
+            old["fingerprint"] = dict(old["fingerprint"], **now["fingerprint"])
+            rio.atomic_write_json(meta_path, old)
+    else:
+        rio.atomic_write_json(meta_path, dict(meta, data=list(map(str, data_desc)), started=time.strftime("%Y-%m-%d %H:%M:%S")))
+    paths = {}
+    for space in spaces:
+        paths[space] = run_space(datasets, out / space, cfg, space, actions, seed, jobs, progress)
+    return paths
+
+
+def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: ExperimentConfig, space: str,
+              actions: list[str], seed: int, jobs: int, progress: bool) -> Path:
+    """One space of ``run_experiment`` in ``sdir``: prep (reused if saved), every block not yet
+    on disk, then ``sdir/results.npz``; returns its path."""
+    t0 = time.perf_counter()
+    prep_path = sdir / "prep.npz"
+    if prep_path.exists():
+        with np.load(prep_path) as z:
+            prep = {k: z[k] for k in z.files}
+    else:
+        prep = prepare(datasets, space, cfg, seed, jobs, progress)
+        rio.atomic_save_npz(prep_path, **prep)
+    t_prep = time.perf_counter() - t0
+    a, sizes, reps = len(actions), list(cfg.sizes), cfg.reps(space)
+    n_cond = layout(a, len(cfg.thresholds))["n"]
+    chunks = [sizes[i : i + cfg.sizes_per_block] for i in range(0, len(sizes), cfg.sizes_per_block)]
+    corr = prep["corr"]
+    plans = [condition_plan(actions, ti, corr, cfg, space) for ti in range(a)]
+    acc = np.full((a, n_cond, len(sizes), reps), np.nan)
+    calls, weights, done_fits, total_fits = [], [], 0, 0
+    keys = []
+    target_data: dict[str, tuple] = {}  # (X, y, boot) per target, built once, shared by all its blocks
+    for r in range(reps):  # repetitions outermost: early blocks are representative for the ETA
+        for ti, t in enumerate(actions):
+            pool = prep[f"target:{t}"]
+            draws = None
+            for ci, chunk in enumerate(chunks):
+                path = sdir / "blocks" / f"{t}_r{r:03d}_c{ci:02d}.npz"
+                fits = block_fits(plans[ti], len(chunk))
+                total_fits += fits
+                s0 = sizes.index(chunk[0])
+                got = read_block(path, n_cond, chunk)
+                if got is not None:
+                    acc[ti, :, s0 : s0 + len(chunk), r] = got
+                    done_fits += fits
+                    continue
+                if t not in target_data:
+                    ds = datasets[t]
+                    target_data[t] = (
+                        state_features(np.asarray(ds["pca"])[pool], np.asarray(ds["rhf"])[pool] if space == "rhf" else None, t, space),
+                        np.asarray(ds["label"]).astype(bool)[pool],
+                        prep[f"boot:{t}"],
+                    )
+                if draws is None:
+                    draws = draw_rep(len(pool), int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), r)
+                X, y, boot = target_data[t]
+                test_idx, train_order = draws
+                seed_keys = (seed, 5, SPACE_CODE[space], ACTIONS.index(t), r)
+                calls.append((run_block_to_file, (str(path), X, y, boot, plans[ti], train_order, test_idx, chunk,
+                                           cfg.repeats(space), n_cond, cfg.forest, seed_keys), {}))
+                weights.append(fits)
+                keys.append((ti, s0, len(chunk), r))
+    results = run_parallel(calls, jobs, progress, total=total_fits, desc=f"{space} sweep", unit="fit",
+                            weights=weights, initial=done_fits)
+    for (ti, s0, n, r), got in zip(keys, results):
+        acc[ti, :, s0 : s0 + n, r] = got
+    masks = category_masks(corr, actions, cfg)
+    res_path = sdir / "results.npz"
+    rio.atomic_save_npz(
+        res_path,
+        acc=acc,
+        sizes=np.asarray(sizes),
+        actions=np.asarray(actions),
+        conditions=np.asarray(condition_names(actions, cfg.thresholds)),
+        thresholds=np.asarray(cfg.thresholds, dtype=float),
+        corr=corr,
+        category_masks=masks,
+        test_size=np.asarray([int(prep[f"test_size:{t}"]) for t in actions]),
+        seconds=np.asarray(time.perf_counter() - t0),
+        seconds_prep=np.asarray(t_prep),
+        new_fits=np.asarray(sum(weights)),
+    )
+    return res_path

@@ -1,0 +1,47 @@
+"""Example scenes of the report: what the robot saw, drawn by the perception stage.
+
+Takes dataset folders ``{action: DIR}`` whose samples keep their scenes (``pair``,
+``qpos_settled``); ``example_scenes`` writes ``per_action`` pictures per action (positives
+and negatives alternating) under ``out`` and returns ``(action, relative path, caption)``.
+JAX, MuJoCo and the perception stage load only when pictures are drawn.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+
+def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_action: int) -> list[tuple[str, str, str]]:
+    """Draw ``per_action`` example scenes per action (positives and negatives alternating, in
+    rollout order) with ``perception.from_sim.show_scene``; returns ``(action, file name, caption)``.
+    Datasets without the scene fields (``pair``, ``qpos_settled``) get none."""
+    if per_action < 1:
+        return []
+    import jax
+
+    from relaff_jax.data import load_dataset
+    from relaff_jax.perception import from_sim
+    from relaff_jax.sim import world as wd
+
+    world = None
+    shown: list[tuple[str, str, str]] = []
+    for action, d in data_dirs.items():
+        ds = load_dataset(d, features=False)
+        if not {"pair", "qpos_settled"} <= set(ds):
+            continue
+        world = world or wd.build_world()
+        label = np.asarray(ds["label"], bool)
+        pos, neg = list(np.flatnonzero(label)), list(np.flatnonzero(~label))
+        order = [x for pair in zip(pos, neg) for x in pair] + pos[len(neg):] + neg[len(pos):]
+        for i in order[:per_action]:
+            rid = int(ds["rollout_id"][i]) if "rollout_id" in ds else int(ds["rollout"][i])
+            caption = (f"{action}: {ds['toy'][i]} + {ds['other'][i]}, {ds['relation'][i]}, "
+                       f"{'positive' if label[i] else 'negative'} (sample {i})")
+            name = f"{action}_{i:05d}.png"
+            from_sim.show_scene(world, int(ds["pair"][i]), np.asarray(ds["qpos_settled"][i]), out / name,
+                                jax.random.PRNGKey(rid % 2**31), title=caption)
+            shown.append((action, f"{out.name}/{name}", caption))
+    return shown

@@ -1,0 +1,184 @@
+"""The sections of the report document, each a list of blocks (``document.py``).
+
+Takes the experiment (``load_results``), its one analysis ``{space: analyse(...)}``, the
+findings and the report folder (a figure block is only added when its PNG was written);
+gives the blocks of: the introduction, the findings summary, the datasets and example scenes,
+the learning curves, Table II per space, best after ten, the correlation clusters, the
+threshold study and the run (preset, timings, versions).
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from relaff_jax.constants import RELATIONS
+from relaff_jax.learn import PAPER_TABLE2, TABLE2_ROWS, categories_per_threshold, layout
+from relaff_jax.report.findings import correlation_clusters, verdict
+from relaff_jax.report.formatting import SHORT, curve_average, fmt, nanmean
+
+
+def fig_block(out: Path, name: str, caption: str) -> list[tuple]:
+    """An image block if ``out/name`` was written, else nothing."""
+    return [("img", name, caption)] if (out / name).exists() else []
+
+
+def intro_blocks(res: Mapping[str, Any], results_dir: str | Path, run_info: Mapping[str, Any] | None) -> list[tuple]:
+    cfg = res["config"]
+    spaces = list(res["meta"]["spaces"])
+    blocks: list[tuple] = [("h", 1, "Bootstrapping relational affordances: reproduction report")]
+    intro = (f"Generated {time.strftime('%Y-%m-%d %H:%M')} from `{Path(results_dir)}`: actions {', '.join(res['meta']['actions'])}; "
+             f"spaces {', '.join(s.upper() for s in spaces)}; seed {res['meta']['seed']}; training sizes "
+             f"{', '.join(map(str, cfg.sizes)) if len(cfg.sizes) <= 12 else f'{min(cfg.sizes)}..{max(cfg.sizes)}'}; "
+             f"repetitions PCA {cfg.reps_pca}, RHF {cfg.reps_rhf}.")
+    if run_info:
+        intro += f" Preset `{run_info.get('preset')}`."
+    blocks += [("p", intro)]
+    if any(str(d).startswith("synthetic") for d in res["meta"].get("data", [])):
+        blocks.append(("p", "**These results come from synthetic features** (`relaff experiment --synthetic`): they test "
+                            "the pipeline and say nothing about the paper."))
+    return blocks
+
+
+def findings_blocks(found: Sequence[Mapping[str, Any]]) -> list[tuple]:
+    blocks: list[tuple] = [("h", 2, "Which of the paper's findings this run reproduces"),
+                           ("table", ["finding", "paper", "this run", "verdict"],
+                            [[f["finding"], f["paper"], f["numbers"], f"**{verdict(f['reproduced'])}**"] for f in found]),
+                           ("p", "Rules: " + "; ".join(f"{f['finding']}: {f['rule']}" for f in found) + ".")]
+    n_ok = sum(f["reproduced"] is True for f in found)
+    blocks.append(("p", f"{n_ok} of {len(found)} findings reproduced, "
+                        f"{sum(f['reproduced'] is False for f in found)} not, {sum(f['reproduced'] is None for f in found)} not measurable."))
+    return blocks
+
+
+def _rate(r) -> str:
+    return "-" if r is None else f"{100 * r:.0f} %"
+
+
+def dataset_blocks(infos: Mapping[str, Mapping[str, Any]], fig: str | None) -> list[tuple]:
+    """Dataset statistics per action from ``relaff_jax.data.info`` dicts."""
+    blocks: list[tuple] = [("h", 2, "Datasets"), (
+        "p", "Per action: the balanced selection (half positive; negatives matched to the positives' distribution of the "
+        "distance between the objects' centres of gravity) and every rollout simulated to find it. Positive rates by "
+        "the settled spatial relation, over all rollouts (what the action does in each relation) and, with counts, "
+        "over the selected samples.")]
+    header = ["action", "samples", "rollouts", "rollout pos. rate"] + [f"rollouts {r}" for r in RELATIONS] \
+        + [f"selected {r} (n)" for r in RELATIONS] + ["borrowed", "unseen"]
+    rows = []
+    for action, d in infos.items():
+        sel = [f"{_rate(d['positive_rate_by_relation'][r])} ({d['count_by_relation'][r]['n']})" for r in RELATIONS]
+        feats = d.get("features") or {}
+        rows.append([action, d["n"], d["rollouts"], _rate(d["rollouts_positive_rate"])]
+                    + [_rate(d["rollouts_positive_rate_by_relation"][r]) for r in RELATIONS] + sel
+                    + [d.get("borrowed"), feats.get("unseen_samples", "-")])
+    blocks.append(("table", header, rows))
+    if fig:
+        blocks.append(("img", fig, "Positive rate of every rollout by spatial relation, per action"))
+    return blocks
+
+
+def example_blocks(shown: Sequence[tuple[str, str, str]]) -> list[tuple]:
+    """The example scenes ``[(action, relative path, caption)]`` of ``examples.example_scenes``."""
+    if not shown:
+        return []
+    blocks: list[tuple] = [("h", 2, "Example scenes"),
+                           ("p", "What the robot saw (`features.show_scene`): the simulated Kinect depth image, its "
+                                 "colour segmentation into the toy and the other object, and the two objects' voxel clouds "
+                                 "with their PCA frames.")]
+    return blocks + [("img", path, cap) for _, path, cap in shown]
+
+
+def learning_blocks(out: Path, main: str) -> list[tuple]:
+    blocks: list[tuple] = [("h", 2, "Learning curves")]
+    blocks += fig_block(out, "fig06_nb_learning.png", f"Non-bootstrapped learning curves ({main.upper()}), paper Fig. 6")
+    blocks += fig_block(out, "fig07_nb_spaces.png", "NB per affordance in PCA and RHF, paper Fig. 7")
+    blocks += fig_block(out, "fig08_db1_best.png", "NB and the best DB1 learner per affordance, paper Fig. 8")
+    blocks += fig_block(out, "fig09_db1_best_bf.png", "Bootstrap factor of the best DB1 learner (average over the shaded n), paper Fig. 9")
+    return blocks
+
+
+def table2_blocks(an: Mapping[str, Mapping[str, Any]], cfg: Any, out: Path) -> list[tuple]:
+    blocks: list[tuple] = []
+    for space, x in an.items():
+        paper = space == "pca"
+        header = ["method", "avg", "min", "max"] + (["paper avg", "paper min", "paper max"] if paper else [])
+        rows = [[name] + [fmt(v) for v in row] + ([fmt(v) for v in PAPER_TABLE2[name]] if paper else [])
+                for name, row in zip(TABLE2_ROWS, x["table2"])]
+        blocks += [("h", 2, f"Table II ({space.upper()})"),
+                   ("p", f"Average bootstrap factor over n = {cfg.bf_sizes[0]}..{cfg.bf_sizes[1]}, avg / min / max over the "
+                         f"{len(x['actions'])} affordances" + (", beside the paper's Table II." if paper else
+                                                               " (the paper has no RHF table).")),
+                   ("table", header, rows)]
+        rows = [[name] + [fmt(v, 2) for v in r] for name, r in zip(TABLE2_ROWS, x["table2_per_target"])
+                if np.any(np.isfinite(r))]
+        blocks += [("p", "Per affordance (paper Fig. 10 as numbers):"),
+                   ("table", ["method"] + list(x["actions"]), rows)]
+    blocks += fig_block(out, "fig10_average_bf.png", "Average bootstrap factor per method and affordance, paper Fig. 10")
+    return blocks
+
+
+def best_after_ten_blocks(a: Mapping[str, Any], cfg: Any, main: str) -> list[tuple]:
+    conds = a["conditions"]
+    lay = layout(len(a["actions"]), len(cfg.thresholds))
+    rows = []
+    for fam in ("db1", "cb1"):
+        if np.all(np.isnan(a["mean"][:, lay[fam.upper()]])):
+            continue
+        for ti, t in enumerate(a["actions"]):
+            b, k = a[f"best_{fam}"][ti], a[f"ten_{fam}"][ti]
+            rows.append([fam.upper(), t, conds[b].split(":")[1], fmt(a["avg_bf"][ti, b]), conds[k].split(":")[1],
+                         fmt(a["avg_bf"][ti, k]), "yes" if b == k else "no"])
+    if not rows:
+        return []
+    return [("h", 2, "Best after ten"),
+            ("p", f"'Best' is the source with the highest mean accuracy over n = {cfg.best_sizes[0]}..{cfg.best_sizes[1]}; "
+                  f"'after ten' is the one an agent would keep after {cfg.select_size} samples ({main.upper()})."),
+            ("table", ["family", "target", "best source", "avg bf", "after-ten source", "avg bf", "same"], rows)]
+
+
+def correlation_blocks(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], cfg: Any, out: Path) -> list[tuple]:
+    blocks: list[tuple] = [("h", 2, "Correlation of the predictors and its clusters")]
+    for space, x in an.items():
+        corr = res[space]["corr"]
+        acts = x["actions"]
+        cl = correlation_clusters(corr, acts, cfg.cbn_threshold)
+        groups = [g for g in cl if len(g) > 1]
+        blocks.append(("p", f"{space.upper()}: affordances linked by correlations above T = {cfg.cbn_threshold:g}: "
+                            + ("; ".join("{" + ", ".join(g) + "}" for g in groups) if groups else "none")
+                            + (f"; alone: {', '.join(g[0] for g in cl if len(g) == 1)}" if any(len(g) == 1 for g in cl) else "") + "."))
+        blocks.append(("table", [""] + [SHORT.get(x, x) for x in acts],
+                       [[SHORT.get(x, x)] + [f"{v:+.2f}" for v in corr[i]] for i, x in enumerate(acts)]))
+    blocks += fig_block(out, "fig11_correlation.png", "Correlation of the source predictors' outputs, paper Fig. 11")
+    return blocks
+
+
+def threshold_blocks(corr: np.ndarray, a: Mapping[str, Any], cfg: Any, main: str, out: Path) -> list[tuple]:
+    th = a["thresholds"]
+    if not np.any(np.isfinite(th["overall_curve"])):
+        return []
+    lay = layout(len(a["actions"]), len(cfg.thresholds))
+    k = len(a["actions"]) * (len(a["actions"]) - 1) // 2
+    counts = categories_per_threshold(corr, cfg.thresholds)
+    rows = [[f"{t:g}", counts[f"{t:g}"]["built"], fmt(curve_average(c, a["sizes"], cfg)),
+             fmt(nanmean(a["avg_bf"][:, lay["CBn"][i]]))]
+            for i, (t, c) in enumerate(zip(th["T"], th["best_curve"]))]
+    rows.append(["all categories (overall average)", k, fmt(curve_average(th["overall_curve"], a["sizes"], cfg)), "-"])
+    blocks: list[tuple] = [("h", 2, "Threshold study"),
+                           ("p", f"Categories built at each correlation threshold T and the average bf ({main.upper()}, mean over "
+                                 "affordances) of each affordance's best category among them, and of CBn (all of them together)."),
+                           ("table", ["T", f"categories built (of {k})", "best category avg bf", "CBn avg bf"], rows)]
+    return blocks + fig_block(out, "fig12_thresholds.png", "Best category above each threshold, paper Fig. 12")
+
+
+def run_blocks(run_info: Mapping[str, Any] | None) -> list[tuple]:
+    if not run_info:
+        return []
+    items = [f"preset `{run_info.get('preset')}`, seed {run_info.get('seed')}"]
+    for st, t in (run_info.get("timings") or {}).items():
+        items.append(f"{st}: {t:.0f} s" if isinstance(t, (int, float)) else f"{st}: {t}")
+    v = run_info.get("versions") or {}
+    if v:
+        items.append("versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val))
+    return [("h", 2, "The run"), ("ul", items)]

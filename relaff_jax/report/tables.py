@@ -1,0 +1,110 @@
+"""Table II and the numbers beside it, as text: ``table2.csv``, ``table2.md``, ``summary.json``.
+
+Takes the experiment (``load_results``) and its analysis ``{space: analyse(...)}``; gives the
+CSV of Table II (``table2_csv``: columns ``method, avg, min, max, paper_avg, paper_min,
+paper_max``; no paper numbers for RHF, the paper has no RHF table), the Markdown tables
+(``table2_markdown``) and the ``summary.json`` dict (``summary``).
+"""
+from __future__ import annotations
+
+import csv
+import io
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from relaff_jax.learn import PAPER_TABLE2, TABLE2_ROWS, categories_per_threshold, layout
+from relaff_jax.report.formatting import SHORT, curve_average, finite, fmt
+
+CSV_COLUMNS = ("method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max")
+
+
+def table2_csv(table: np.ndarray, paper: bool) -> str:
+    """CSV text of Table II: ``table (rows, 3)`` avg/min/max in ``TABLE2_ROWS`` order."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(CSV_COLUMNS)
+    for name, row in zip(TABLE2_ROWS, table):
+        ref = PAPER_TABLE2[name] if paper else (np.nan,) * 3
+        w.writerow([name] + [fmt(v, 4) for v in row] + [fmt(v, 4) for v in ref])
+    return buf.getvalue()
+
+
+def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]]) -> str:
+    """``table2.md``: per space Table II (beside the paper's in PCA), the per-affordance average
+    bootstrap factors, the chosen sources, the correlation matrix, categories per threshold
+    and the threshold study."""
+    cfg = res["config"]
+    meta = res["meta"]
+    lines = ["# Learning and bootstrapping results", ""]
+    lines += [
+        f"Seed {meta['seed']}; actions: {', '.join(meta['actions'])}; training sizes {list(cfg.sizes)[:3]}...{max(cfg.sizes)} "
+        f"({len(cfg.sizes)} sizes); repetitions PCA {cfg.reps_pca}, RHF {cfg.reps_rhf}; "
+        f"average bootstrap factor over n = {cfg.bf_sizes[0]}..{cfg.bf_sizes[1]}; 'best' = highest mean accuracy over "
+        f"n = {cfg.best_sizes[0]}..{cfg.best_sizes[1]}; 'best after ten' = highest accuracy at n = {cfg.select_size}.",
+        "",
+    ]
+    for space, a in an.items():
+        r = res[space]
+        paper = space == "pca"
+        lines += [f"## Table II ({space.upper()})", ""]
+        if paper:
+            lines += ["| method | avg | min | max | paper avg | paper min | paper max |", "|---|---|---|---|---|---|---|"]
+        else:
+            lines += ["| method | avg | min | max |", "|---|---|---|---|"]
+        for name, row in zip(TABLE2_ROWS, a["table2"]):
+            cells = [fmt(v) for v in row] + ([fmt(v) for v in PAPER_TABLE2[name]] if paper else [])
+            lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines += ["", f"### Average bootstrap factor per affordance ({space.upper()}, paper Fig. 10)", ""]
+        acts = a["actions"]
+        lines += ["| method | " + " | ".join(acts) + " |", "|---|" + "---|" * len(acts)]
+        for name, row in zip(TABLE2_ROWS, a["table2_per_target"]):
+            lines.append(f"| {name} | " + " | ".join(fmt(v, 2) for v in row) + " |")
+        conds = a["conditions"]
+        lines += ["", "Chosen bootstrapping sources (target <- source):", ""]
+        for fam in ("db1", "cb1"):
+            if np.all(np.isnan(a["mean"][:, layout(len(acts), len(cfg.thresholds))[fam.upper()]])):
+                continue
+            best = ", ".join(f"{t} <- ({conds[i].split(':')[1]})" for t, i in zip(acts, a[f"best_{fam}"]))
+            ten = ", ".join(f"{t} <- ({conds[i].split(':')[1]})" for t, i in zip(acts, a[f"ten_{fam}"]))
+            lines += [f"- {fam.upper()} best: {best}", f"- {fam.upper()} best after ten: {ten}"]
+        lines += ["", f"### Correlation of the nine predictors' outputs ({space.upper()}, paper Fig. 11)", ""]
+        corr = r["corr"]
+        lines += ["| | " + " | ".join(SHORT.get(x, x) for x in acts) + " |", "|---|" + "---|" * len(acts)]
+        for i, x in enumerate(acts):
+            lines.append(f"| {SHORT.get(x, x)} | " + " | ".join(f"{v:+.2f}" for v in corr[i]) + " |")
+        counts = categories_per_threshold(corr, cfg.thresholds)
+        k = len(acts) * (len(acts) - 1) // 2
+        lines += ["", f"Categories built per threshold T (of {k}; T = 0 is 'no heuristic', every pair): "
+                  + "; ".join(f"T = {t}: {c['built']} (pairs with corr > T: {c['corr_above']})" for t, c in counts.items()), ""]
+        th = a["thresholds"]
+        lines += ["Threshold study (paper Fig. 12), average bf over n = "
+                  f"{cfg.bf_sizes[0]}..{cfg.bf_sizes[1]} of the best category built at T, mean over affordances: "
+                  + "; ".join(f"T = {t:g}: {fmt(curve_average(c, a['sizes'], cfg))}" for t, c in zip(th["T"], th["best_curve"]))
+                  + f"; all categories (overall average): {fmt(curve_average(th['overall_curve'], a['sizes'], cfg))}", ""]
+        lines += [f"Test samples per affordance: {', '.join(f'{t} {int(n)}' for t, n in zip(acts, r['test_size']))}; "
+                  f"sweep time {float(r['seconds']):.0f} s (of which source predictors/categories {float(r['seconds_prep']):.0f} s).", ""]
+    return "\n".join(lines)
+
+
+def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures: Sequence[str]) -> dict[str, Any]:
+    """``summary.json``: Table II per space (avg/min/max and per affordance), the chosen
+    sources, the correlation matrix and categories per threshold, the paper's Table II and
+    the figure file names; NaN as None."""
+    out = {
+        s: {
+            "actions": x["actions"],
+            "table2": {name: dict(zip(("avg", "min", "max"), row)) for name, row in zip(TABLE2_ROWS, x["table2"])},
+            "table2_per_affordance": {name: dict(zip(x["actions"], row)) for name, row in zip(TABLE2_ROWS, x["table2_per_target"])},
+            "db1_best": {t: x["conditions"][i] for t, i in zip(x["actions"], x["best_db1"])},
+            "db1_best_after_ten": {t: x["conditions"][i] for t, i in zip(x["actions"], x["ten_db1"])},
+            "cb1_best": {t: x["conditions"][i] for t, i in zip(x["actions"], x["best_cb1"])},
+            "cb1_best_after_ten": {t: x["conditions"][i] for t, i in zip(x["actions"], x["ten_cb1"])},
+            "corr": res[s]["corr"],
+            "categories_per_threshold": categories_per_threshold(res[s]["corr"], res["config"].thresholds),
+        }
+        for s, x in an.items()
+    }
+    out["paper_table2"] = {k: dict(zip(("avg", "min", "max"), v)) for k, v in PAPER_TABLE2.items()}
+    out["figures"] = list(figures)
+    return finite(out)

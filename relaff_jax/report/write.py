@@ -1,0 +1,78 @@
+"""The one report writer: an experiment folder (and optionally its datasets) to a report folder.
+
+Takes ``RESULTS`` written by ``relaff experiment`` (``experiment.json`` + ``<space>/results.npz``),
+optionally the dataset folders ``{action: DIR}`` and a run log; analyses every space once
+(``relaff_jax.learn.analyse``) and writes, from that one analysis, to ``REPORT``:
+
+* ``table2.csv`` (PCA, beside the paper's), ``table2_rhf.csv`` when RHF was run, ``table2.md``
+  and ``summary.json`` (``tables.py``);
+* ``fig06_nb_learning.png`` ... ``fig12_thresholds.png`` (``figures.py``);
+* ``findings.json`` (``findings.py``);
+* with datasets: ``fig_datasets.png`` and ``examples/*.png`` (``examples.py``);
+* ``report.md`` and the self-contained ``report.html`` (``sections.py``, ``document.py``).
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+from pathlib import Path
+from typing import Any, Mapping
+
+from relaff_jax import io as rio
+from relaff_jax.learn import analyse, load_results
+from relaff_jax.report import sections as S
+from relaff_jax.report.document import render_html, render_markdown
+from relaff_jax.report.examples import example_scenes
+from relaff_jax.report.figures import dataset_figure, write_figures
+from relaff_jax.report.findings import FindingRules, findings
+from relaff_jax.report.formatting import finite
+from relaff_jax.report.tables import summary, table2_csv, table2_markdown
+
+
+def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
+                 data_dirs: Mapping[str, str | os.PathLike] | None = None,
+                 info: Mapping[str, Any] | None = None, examples_per_action: int = 2,
+                 rules: FindingRules = FindingRules()) -> Path:
+    """Write the report of ``results_dir`` to ``out_dir``; return ``out_dir``.
+
+    data_dirs: ``{action: DIR}`` of the datasets the experiment learnt from; adds their
+      statistics, ``fig_datasets.png`` and ``examples_per_action`` example scenes per action.
+    info: the run log of ``relaff reproduce`` (``preset``, ``seed``, ``timings``, ``versions``).
+    rules: how the findings summary decides whether a paper finding is reproduced.
+    """
+    res = load_results(results_dir)
+    cfg = res["config"]
+    spaces = list(res["meta"]["spaces"])
+    an = {s: analyse(res[s], cfg) for s in spaces}
+    main = "pca" if "pca" in an else spaces[0]
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+
+    # tables, figures and the summary
+    rio.atomic_write_text(out / "table2.csv", table2_csv(an[main]["table2"], paper=main == "pca"))
+    if main == "pca" and "rhf" in an:
+        rio.atomic_write_text(out / "table2_rhf.csv", table2_csv(an["rhf"]["table2"], paper=False))
+    rio.atomic_write_text(out / "table2.md", table2_markdown(res, an))
+    figs = write_figures(res, an, out)
+    rio.atomic_write_json(out / "summary.json", summary(res, an, [p.name for p in figs]))
+
+    # datasets and example scenes
+    data_blocks: list[tuple] = []
+    if data_dirs:
+        from relaff_jax.data import info as dataset_info
+
+        infos = {act: dataset_info(d) for act, d in data_dirs.items()}
+        dataset_figure(infos, out / "fig_datasets.png")
+        data_blocks = S.dataset_blocks(infos, "fig_datasets.png")
+        data_blocks += S.example_blocks(example_scenes(data_dirs, out / "examples", examples_per_action))
+
+    # the document
+    found = findings(an, cfg, rules)
+    blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + data_blocks
+              + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out) + S.best_after_ten_blocks(an[main], cfg, main)
+              + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
+              + S.run_blocks(info))
+    rio.atomic_write_json(out / "findings.json", finite({"findings": found, "rules": dataclasses.asdict(rules)}))
+    rio.atomic_write_text(out / "report.md", render_markdown(blocks))
+    rio.atomic_write_text(out / "report.html", render_html(blocks, out, "relaff_jax reproduction report"))
+    return out
