@@ -118,7 +118,7 @@ def from_dict(cls: type[T], data: Mapping[str, Any]) -> T:
         if dataclasses.is_dataclass(field) and isinstance(value, Mapping):
             flat[key] = from_dict(type(field), value)
         elif isinstance(getattr(default, key, None), tuple) and isinstance(value, list):
-            flat[key] = tuple(value)
+            flat[key] = _freeze(value)  # nested lists too: JSON has no tuples
         else:
             flat[key] = value
     return override(default, flat)

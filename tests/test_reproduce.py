@@ -26,6 +26,7 @@ from relaff_jax import runconfig
 from relaff_jax.cli import reproduce as cli_reproduce
 from relaff_jax.config import override
 from relaff_jax.constants import ACTIONS, FAMILIES
+from relaff_jax.errors import UserError
 from relaff_jax.reproduce import features as stage_features
 from relaff_jax.reproduce import generate as stage_generate
 
@@ -235,11 +236,11 @@ def test_bad_input(tmp_path):
         run(tmp_path / "a", jobs=-1)
     with pytest.raises(R.ReproduceError, match="seed"):
         run(tmp_path / "a", seed=-1)
-    with pytest.raises(R.ReproduceError, match="unknown config key 'n_sample'"):
+    with pytest.raises(UserError, match="unknown config key 'n_sample'"):
         run(tmp_path / "a", overrides={"n_sample": 10})
-    with pytest.raises(R.ReproduceError, match="unknown config key 'dataset.n_sample'"):
+    with pytest.raises(UserError, match="unknown config key 'dataset.n_sample'"):
         run(tmp_path / "a", overrides={"dataset.n_sample": 10})
-    with pytest.raises(R.ReproduceError, match="expects an integer"):
+    with pytest.raises(UserError, match="expects an integer"):
         run(tmp_path / "a", overrides={"dataset.n_samples": "many"})
     # the experiment's pools must fit: fail before simulating anything
     with pytest.raises(R.ReproduceError, match="cannot run on 20 samples"):
