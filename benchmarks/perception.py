@@ -31,7 +31,7 @@ import mujoco
 import numpy as np
 
 from relaff_jax.sim import objects as lib
-from relaff_jax.perception import core as P
+from relaff_jax import perception as P
 from relaff_jax.sim import world as wd
 
 

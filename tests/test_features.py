@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from relaff_jax import cli, load_dataset
-from relaff_jax.data import dataset
+from relaff_jax import data as dataset
+from relaff_jax.errors import UserError
 from relaff_jax.perception import from_sim as features
 from relaff_jax.sim import scenes as sc
 
@@ -81,7 +82,44 @@ def test_features_command_and_show(small_dataset, tmp_path, capsys):
     assert "out of range" in capsys.readouterr().err
 
 
+def test_show_checks_out_before_work(small_dataset, tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert cli.main(["show", str(small_dataset), "--out", str(blocker / "scene.png")]) == 2
+    assert "is a file" in capsys.readouterr().err
+    assert cli.main(["show", str(small_dataset), "--out", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+
+
+def test_noise_keys_use_all_64_bits_of_the_rollout_id():
+    root = jax.random.PRNGKey(3)
+    ids = np.array([5, 5 + 2**32, 2**32 - 1, 7 * 2**32 + 5, 0], np.int64)
+    keys = np.asarray(features.rollout_keys(root, ids))
+    # ids < 2^32: exactly the key of earlier versions, fold_in(root, uint32 id)
+    for i in (0, 2, 4):
+        np.testing.assert_array_equal(keys[i], jax.random.fold_in(root, np.uint32(ids[i])))
+    # ids differing by multiples of 2^32 no longer share a noise stream
+    assert len({tuple(k) for k in keys[[0, 1, 3]]}) == 3
+    noise = [np.asarray(jax.random.normal(k, (8,))) for k in keys[[0, 1]]]
+    assert not np.array_equal(*noise)
+    np.testing.assert_array_equal(features.show_key(5), jax.random.PRNGKey(5))
+    np.testing.assert_array_equal(features.show_key(2**32 - 1), jax.random.PRNGKey(2**32 - 1))
+    assert not np.array_equal(features.show_key(5 + 2**32), jax.random.PRNGKey(5))
+
+
+def test_features_of_ids_differing_by_2_32_differ(small_dataset, scene_world):
+    ds = dataset.load_dataset(small_dataset, features=False)
+    fn = features.make_feature_fn(scene_world)
+    i = np.zeros(4, int)  # one scene four times (a batch of 4, as the CLI test compiled)
+    r = int(ds["rollout_id"][0]) % 2**32
+    out = fn({"pair": ds["pair"][i], "qpos_settled": ds["qpos_settled"][i],
+              "rollout_id": np.array([r, r + 2**32, r, r + 2**33], np.int64)})
+    np.testing.assert_array_equal(out["pca"][0], out["pca"][2])
+    assert not np.array_equal(out["pca"][0], out["pca"][1])
+    assert not np.array_equal(out["pca"][1], out["pca"][3])
+
+
 def test_missing_fields_is_a_clear_error(scene_world):
     fn = features.make_feature_fn(scene_world)
-    with pytest.raises(ValueError, match="lack.*qpos_settled"):
+    with pytest.raises(UserError, match="lack.*qpos_settled"):
         fn({"pair": np.zeros(2, np.int32), "rollout_id": np.zeros(2)})

@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from relaff_jax.perception import core as P
+from relaff_jax import perception as P
 from relaff_jax.config import ConfigError, override
 
 SMALL = P.PerceptionConfig(
@@ -670,3 +670,38 @@ def test_render_scene_png_writes_a_picture(tmp_path, random_scenes):
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
     assert v["depth"].shape == (120, 160) and v["seg"].shape == (120, 160)
     assert set(np.unique(v["seg"])) <= {-1, 0, 1, 2}
+
+
+def test_object_crop_window():
+    seg = np.zeros((120, 160), np.int32)
+    assert P.object_crop(seg) is None
+    seg[50:60, 70:90] = 1
+    seg[58:64, 95:100] = 2
+    r0, r1, c0, c1 = P.object_crop(seg, margin=0.25, min_margin=8)
+    m = int(np.ceil(0.25 * 29))  # 25 % of the larger side of the box (rows 50-63, cols 70-99)
+    assert (r0, r1, c0, c1) == (50 - m, 64 + m, 70 - m, 100 + m)
+    seg[:] = 0
+    seg[0:3, 0:3] = 2  # clipped at the image border
+    assert P.object_crop(seg) == (0, 11, 0, 11)
+
+
+def test_library_never_changes_the_matplotlib_backend(tmp_path, random_scenes):
+    """Importing the package or drawing a scene keeps a notebook's backend (no pyplot)."""
+    import subprocess
+    import sys
+
+    import matplotlib
+
+    code = ("import matplotlib; matplotlib.use('svg'); import relaff_jax.perception, "
+            "relaff_jax.perception.plots, relaff_jax.perception.from_sim; "
+            "assert matplotlib.get_backend() == 'svg', matplotlib.get_backend()")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    before = matplotlib.get_backend()
+    matplotlib.use("pdf")
+    try:
+        scenes, seg = random_scenes
+        m, d = scenes[0]
+        P.render_scene_png(P.scene_from_mujoco(m, d, seg), jax.random.key(0), tmp_path / "s.png", SMALL)
+        assert matplotlib.get_backend() == "pdf"
+    finally:
+        matplotlib.use(before)

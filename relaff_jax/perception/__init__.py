@@ -1,2 +1,100 @@
-"""Perception: the simulated Kinect (ray casting, depth noise), voxel grids, PCA and RHF
-descriptors, and the glue from stored scenes to features."""
+"""Perception (paper section IV-B): simulated Kinect -> segmented clouds -> PCA and RHF features.
+
+Takes one settled scene described by its geoms (``SceneGeoms``: static MuJoCo geom types and
+segment labels, per-scene sizes, positions and rotation matrices in the robot frame) and a
+PRNG key; returns the paper's two state spaces for that scene:
+
+* ``pca``  (18,)  toy's 9 values then the other object's 9 (centroid xyz, roll/pitch/yaw of
+  the eigenvector frame, three eigenvalues), canonical order, the learning stage reorders;
+* ``rhf``  (300,) six 50-bin relational histograms over all (toy point, other point) pairs;
+* ``unseen`` (2,) flags, ``n_points`` (2,) voxel counts and overflow flags.
+
+Stages, each a pure single-scene function (vmap at the caller, the caller owns jit):
+
+1. ``render``      : pinhole depth camera, one ray per pixel cast against the geoms with our
+                     own ray-primitive intersection (plane, sphere, capsule, box); the hit
+                     geom's segment label stands in for colour segmentation. The feature path
+                     uses ``render_objects`` (the same rays, only in image tiles that can show
+                     an object) and ``compact_objects`` (object pixels into a fixed buffer).
+2. ``add_depth_noise``: z noise in the camera frame (RobWork model, or Khoshelham-Elberink,
+                     Nguyen), keyed.
+3. ``voxel_downsample``: per object, one point per occupied 0.0125 m voxel at the centroid of
+                     its points (Open3D ``voxel_down_sample`` semantics), fixed capacity, overflow
+                     flagged.
+4. ``pca_object``  : centroid, roll/pitch/yaw, eigenvalues; ``unseen`` below ``min_points``.
+5. ``rhf_histograms``: normals from the ray-hit geometry averaged per voxel; six histograms,
+                     computed tile by tile so memory does not grow with the point count.
+
+``features`` chains them for one scene; ``make_batched_features`` builds the jitted batch
+version once; ``render_scene_png`` draws what the robot saw. Exact definitions (camera pose,
+noise formulas, voxel grid origin, angle convention, sign rule, RHF bins) are in
+docs/perception.md.
+
+Files, in dependency order (this module re-exports their public names):
+
+- ``config.py``: ``PerceptionConfig`` and its parts, ``validate_config``, feature names;
+- ``ops.py``: scatter and prefix-sum primitives with fast XLA CPU batching;
+- ``scene.py``: ``SceneGeoms`` (the geoms of one scene), ``make_scene``, bounding spheres;
+- ``camera.py``: camera pose, intrinsics, per-pixel and per-tile rays (static numpy);
+- ``raycast.py``: ray/primitive intersections and surface normals (``cast_rays``);
+- ``render.py``: stage 1, depth images, tile culling, object pixel compaction;
+- ``noise.py``: stage 2, depth noise models;
+- ``voxels.py``: stage 3, per-object voxel grid;
+- ``descriptors.py``: stages 4-5, PCA values and RHF histograms;
+- ``pipeline.py``: ``point_cloud``, ``features``, ``make_batched_features``;
+- ``plots.py``: ``scene_view`` and ``render_scene_png`` (pyplot-free);
+- ``from_sim.py``: dataset samples -> features (``make_feature_fn``, ``add_features``,
+  ``show_scene``); not imported here (it needs MJX and the world).
+"""
+from __future__ import annotations
+
+from relaff_jax.constants import OBJECT_SEGMENTS, SEG_BACKGROUND, SEG_NONE, SEG_OTHER, SEG_TOY
+
+from .camera import camera_frame, camera_rays, intrinsics, tile_rays
+from .config import (
+    NOISE_MODEL_NAMES,
+    PCA_NAMES,
+    RHF_NAMES,
+    CameraConfig,
+    CullConfig,
+    NoiseConfig,
+    PerceptionConfig,
+    RHFConfig,
+    VoxelConfig,
+    validate_config,
+)
+from .descriptors import fast_arccos, pca_frame, pca_object, rhf_bin, rhf_histograms, rhf_pair_values, rotation_to_rpy
+from .noise import NOISE_MODELS, add_depth_noise, depth_noise_sigma, pixel_radius
+from .pipeline import features, features_from_voxels, make_batched_features, point_cloud
+from .plots import object_crop, render_scene_png, scene_view
+from .raycast import cast_rays, surface_normals
+from .render import active_tiles, compact_objects, render, render_objects
+from .scene import (
+    GEOM_BOX,
+    GEOM_CAPSULE,
+    GEOM_PLANE,
+    GEOM_SPHERE,
+    SUPPORTED_GEOMS,
+    SceneGeoms,
+    bounding_radius,
+    make_scene,
+    scene_from_mujoco,
+)
+from .voxels import voxel_downsample
+
+__all__ = [
+    "OBJECT_SEGMENTS", "SEG_BACKGROUND", "SEG_NONE", "SEG_OTHER", "SEG_TOY",
+    "camera_frame", "camera_rays", "intrinsics", "tile_rays",
+    "NOISE_MODEL_NAMES", "PCA_NAMES", "RHF_NAMES", "CameraConfig", "CullConfig", "NoiseConfig",
+    "PerceptionConfig", "RHFConfig", "VoxelConfig", "validate_config",
+    "fast_arccos", "pca_frame", "pca_object", "rhf_bin", "rhf_histograms", "rhf_pair_values",
+    "rotation_to_rpy",
+    "NOISE_MODELS", "add_depth_noise", "depth_noise_sigma", "pixel_radius",
+    "features", "features_from_voxels", "make_batched_features", "point_cloud",
+    "object_crop", "render_scene_png", "scene_view",
+    "cast_rays", "surface_normals",
+    "active_tiles", "compact_objects", "render", "render_objects",
+    "GEOM_BOX", "GEOM_CAPSULE", "GEOM_PLANE", "GEOM_SPHERE", "SUPPORTED_GEOMS", "SceneGeoms",
+    "bounding_radius", "make_scene", "scene_from_mujoco",
+    "voxel_downsample",
+]

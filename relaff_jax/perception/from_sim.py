@@ -4,11 +4,12 @@ Takes a dataset's per-sample ``pair`` (int) and ``qpos_settled`` ((nq,) settled 
 in the arm-less world layout) and gives ``pca`` (18,), ``rhf`` (300,), ``unseen`` (2,) and the
 overflow flag per sample: the scene's geoms are placed by ``mjx.kinematics`` on the pair's
 model (batched model fields, as in ``world.py``), then ``perception.features`` sees them.
-The depth-noise key of a sample is ``fold_in(PRNGKey(seed), rollout_id)``, so features do
-not depend on the batch size or on resuming.
+The depth-noise key of a sample depends only on the seed and its ``rollout_id``
+(``rollout_keys``), so features do not depend on the batch size or on resuming.
 
-``relaff features DIR`` attaches them to a dataset (resumable, progress bar);
-``relaff show DIR --index I --out scene.png`` draws what the robot saw.
+``add_features`` attaches them to a dataset (resumable, progress bar), ``show_scene`` draws
+what the robot saw; ``relaff_jax.cli.perception`` offers both as ``relaff features`` and
+``relaff show``.
 """
 from __future__ import annotations
 
@@ -21,7 +22,8 @@ import numpy as np
 from mujoco import mjx
 
 from relaff_jax import config as rconfig
-from . import core as pc
+from relaff_jax import perception as pc
+from relaff_jax.errors import UserError
 from relaff_jax.sim import world as wd
 
 
@@ -43,15 +45,48 @@ def scene_geoms(world: wd.World, pair: jax.Array, qpos: jax.Array):
     return jax.vmap(one, in_axes=(world.model_axes, 0))(models, qpos)
 
 
+def split_ids(rollout_ids) -> tuple[np.ndarray, np.ndarray]:
+    """Low and high 32 bits (uint32 each, shape of ``rollout_ids``) of non-negative int64 ids."""
+    ids = np.asarray(rollout_ids).astype(np.int64)
+    return (ids & 0xFFFFFFFF).astype(np.uint32), (ids >> 32).astype(np.uint32)
+
+
+def rollout_keys(root, rollout_ids):
+    """Depth-noise keys (B, 2) of samples: ``fold_in(root, low 32 bits of the id)``, and for
+    ids >= 2^32 that key folded with the high 32 bits too.
+
+    Ids below 2^32 keep the key of earlier versions (which used the low 32 bits only); ids that
+    differ by a multiple of 2^32 used to share a noise stream and no longer do.
+    """
+    lo, hi = split_ids(rollout_ids)
+
+    def one(lo, hi):
+        k = jax.random.fold_in(root, lo)
+        return jnp.where(hi == 0, k, jax.random.fold_in(k, hi))
+
+    return jax.vmap(one)(jnp.asarray(lo), jnp.asarray(hi))
+
+
+def show_key(rollout_id: int):
+    """Image and feature noise key of ``show_scene`` for one sample: ``PRNGKey(id)`` for
+    ids < 2^32 (as before), ``fold_in(PRNGKey(low 32 bits), high 32 bits)`` above (before,
+    the high bits were dropped)."""
+    lo, hi = (int(x) for x in split_ids(rollout_id))
+    key = jax.random.PRNGKey(lo)
+    return key if hi == 0 else jax.random.fold_in(key, hi)
+
+
 @functools.lru_cache(maxsize=4)
 def _jitted_geoms(world: wd.World):
     return jax.jit(lambda pair, qpos: scene_geoms(world, pair, qpos))
 
 
 def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionConfig(), seed: int = 0):
-    """``compute(samples) -> dict of numpy arrays`` for ``dataset.add_features``.
+    """``compute(samples) -> dict of numpy arrays`` for ``relaff_jax.data.add_features``.
 
-    ``samples`` needs ``pair`` (B,), ``qpos_settled`` (B, nq) and ``rollout_id`` (B,).
+    ``samples`` needs ``pair`` (B,), ``qpos_settled`` (B, nq) and ``rollout_id`` (B,) int64;
+    a sample's noise key is ``rollout_keys(PRNGKey(seed), rollout_id)``. Raises ``UserError``
+    if fields are missing or a scene exceeds a perception capacity.
     """
     feats = pc.make_batched_features(world.mj_model.geom_type, world.geom_seg, cfg)
     geoms = _jitted_geoms(world)
@@ -60,17 +95,17 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
     def compute(samples: dict) -> dict:
         missing = {"pair", "qpos_settled", "rollout_id"} - set(samples)
         if missing:
-            raise ValueError(f"samples lack {sorted(missing)}: not a scene dataset of this version")
+            raise UserError(f"samples lack {sorted(missing)}: not a scene dataset of this version")
         size, xpos, xmat = geoms(jnp.asarray(samples["pair"], jnp.int32),
                                  jnp.asarray(samples["qpos_settled"], jnp.float32))
-        ids = np.asarray(samples["rollout_id"]).astype(np.uint32)
-        keys = jax.vmap(lambda i: jax.random.fold_in(root, i))(jnp.asarray(ids))
+        ids = np.asarray(samples["rollout_id"])
+        keys = rollout_keys(root, ids)
         out = jax.device_get(feats(size, xpos, xmat, keys))
         if out["overflow"].any():
             bad = np.flatnonzero(out["overflow"])
             flags = {k: np.asarray(out[k])[bad].tolist() for k in
                      ("tile_overflow", "pixel_overflow", "voxel_overflow", "range_overflow")}
-            raise ValueError(
+            raise UserError(
                 f"perception capacity exceeded for rollout_id {ids[bad].tolist()} ({flags}); "
                 "raise the matching capacity in PerceptionConfig (docs/perception.md) rather than "
                 "truncate the point clouds")
@@ -83,36 +118,21 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
 def add_features(path, batch: int = 32, seed: int = 0, overrides: dict | None = None,
                  progress: bool = True, overwrite: bool = False) -> dict:
     """Attach PCA and RHF features to the dataset at ``path`` (resumable)."""
-    from relaff_jax.data import dataset
+    from relaff_jax import data
 
     cfg = rconfig.override(pc.PerceptionConfig(), overrides or {})
     world = wd.build_world()
     fn = make_feature_fn(world, cfg, seed)
-    return dataset.add_features(path, fn, batch, progress,
-                                {"perception": rconfig.to_dict(cfg), "seed": seed}, overwrite=overwrite)
-
-
-def register_cli(sub) -> None:
-    p = sub.add_parser("features", help="add PCA and RHF features to a dataset (resumable)")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--batch", type=int, default=32)
-    p.add_argument("--seed", type=int, default=0, help="depth-noise seed")
-    p.add_argument("--overwrite", action="store_true", help="recompute features of another config")
-    p.set_defaults(func=_cmd_features)
-    _register_show(sub)
-
-
-def _cmd_features(args) -> int:
-    out = add_features(args.dir, args.batch, args.seed, overwrite=args.overwrite)
-    print(f"{args.dir}: features for {out['n']} samples: "
-          + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))
-    return 0
+    return data.add_features(path, fn, batch, progress,
+                             {"perception": rconfig.to_dict(cfg), "seed": seed}, overwrite=overwrite)
 
 
 def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, key=None,
                cfg: pc.PerceptionConfig = pc.PerceptionConfig(), title: str = "") -> Path:
     """Draw what the robot saw in one settled scene (``perception.render_scene_png``: noisy
-    depth image, segmentation, voxel clouds with PCA frames); writes ``out`` atomically."""
+    depth image, the objects' depth and segments, voxel clouds with PCA frames); writes
+    ``out`` atomically.
+    ``key`` defaults to ``PRNGKey(0)``; ``show_key(rollout_id)`` is the key ``relaff show`` uses."""
     key = jax.random.PRNGKey(0) if key is None else key
     size, xpos, xmat = jax.device_get(_jitted_geoms(world)(
         jnp.asarray([pair], jnp.int32), jnp.asarray(qpos, jnp.float32)[None]))
@@ -120,27 +140,3 @@ def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, ke
     toy, other = world.pairs[pair][:2]
     pc.render_scene_png(scene, key, out, cfg, title=title or f"{toy} + {other}")
     return Path(out)
-
-
-def _register_show(sub) -> None:
-    p = sub.add_parser("show", help="draw what the robot saw in one sample of a dataset")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--index", type=int, default=0)
-    p.add_argument("--out", type=Path, default=Path("scene.png"))
-    p.set_defaults(func=_cmd_show)
-
-
-def _cmd_show(args) -> int:
-    from relaff_jax.data import dataset
-
-    ds = dataset.load_dataset(args.dir, features=False)
-    n = len(ds["label"])
-    if not 0 <= args.index < n:
-        raise ValueError(f"--index {args.index} out of range: the dataset has {n} samples")
-    i = args.index
-    title = (f"{ds['action']} sample {i}: {ds['toy'][i]} + {ds['other'][i]}, {ds['relation'][i]}, "
-             f"label {bool(ds['label'][i])}")
-    out = show_scene(wd.build_world(), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
-                     jax.random.PRNGKey(int(ds["rollout_id"][i])), title=title)
-    print(f"wrote {out}")
-    return 0

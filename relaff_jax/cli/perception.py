@@ -1,0 +1,65 @@
+"""The perception commands of ``relaff``: ``features`` and ``show``.
+
+``register(subparsers)`` adds both subcommands; each sets ``func(args) -> int`` (exit code).
+
+* ``relaff features DIR [--batch B] [--seed S] [--overwrite]``: attach PCA and RHF features
+  to the dataset in DIR (resumable; ``perception.from_sim.add_features``).
+* ``relaff show DIR [--index I] [--out scene.png]``: draw what the robot saw in sample I
+  (``perception.from_sim.show_scene``), with the noise key ``show_key(rollout_id)``.
+
+Mistakes a user can fix (an index out of range, an ``--out`` that cannot be written) are
+``UserError``s, raised before any simulation or compilation starts.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from relaff_jax.errors import UserError
+
+from .options import check_out_file
+
+
+def register(subparsers) -> None:
+    """Add ``features`` and ``show`` to an ``argparse`` subparsers object."""
+    p = subparsers.add_parser("features", help="add PCA and RHF features to a dataset (resumable)")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--batch", type=int, default=32)
+    p.add_argument("--seed", type=int, default=0, help="depth-noise seed")
+    p.add_argument("--overwrite", action="store_true", help="recompute features of another config")
+    p.set_defaults(func=cmd_features)
+
+    p = subparsers.add_parser("show", help="draw what the robot saw in one sample of a dataset")
+    p.add_argument("dir", type=Path)
+    p.add_argument("--index", type=int, default=0)
+    p.add_argument("--out", type=Path, default=Path("scene.png"))
+    p.set_defaults(func=cmd_show)
+
+
+def cmd_features(args) -> int:
+    """``relaff features``: attach features, print their shapes."""
+    from relaff_jax.perception import from_sim
+
+    out = from_sim.add_features(args.dir, args.batch, args.seed, overwrite=args.overwrite)
+    print(f"{args.dir}: features for {out['n']} samples: "
+          + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))
+    return 0
+
+
+def cmd_show(args) -> int:
+    """``relaff show``: draw sample ``--index`` of the dataset into ``--out``."""
+    from relaff_jax import data
+    from relaff_jax.perception import from_sim
+    from relaff_jax.sim import world as wd
+
+    check_out_file(args.out)
+    ds = data.load_dataset(args.dir, features=False)
+    n = len(ds["label"])
+    if not 0 <= args.index < n:
+        raise UserError(f"--index {args.index} out of range: the dataset has {n} samples")
+    i = args.index
+    title = (f"{ds['action']} sample {i}: {ds['toy'][i]} + {ds['other'][i]}, {ds['relation'][i]}, "
+             f"label {bool(ds['label'][i])}")
+    out = from_sim.show_scene(wd.build_world(), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
+                              from_sim.show_key(int(ds["rollout_id"][i])), title=title)
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,116 @@
+"""The whole perception chain for one scene, and its jitted batched form.
+
+Takes a ``SceneGeoms`` (or a geom layout plus batched sizes/poses), PRNG key(s) and a
+``PerceptionConfig``; gives ``point_cloud`` (stages 1-3), ``features_from_voxels``
+(stages 4-5) and ``features`` (pca (18,), rhf (300,), unseen (2,), counts, overflow flags);
+``make_batched_features`` builds the jitted vmapped version once per layout.
+"""
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .config import PerceptionConfig, validate_config
+from .descriptors import pca_object, rhf_histograms
+from .noise import add_depth_noise
+from .raycast import surface_normals
+from .render import compact_objects, render_objects
+from .scene import SceneGeoms, make_scene
+from .voxels import voxel_downsample
+
+
+def point_cloud(scene: SceneGeoms, key, cfg: PerceptionConfig) -> dict:
+    """Stages 1-3 for one scene: object pixels (noisy) and per-object voxel clouds.
+
+    Returns dict(pixels=``compact_objects`` result after noise, voxels=``voxel_downsample``
+    result plus n_pixels, pixel_overflow and tile_overflow).
+    """
+    ro = render_objects(scene, cfg)
+    pix = compact_objects(ro, cfg)
+    # Normals come from the exact (noise-free) hit geometry, see docs/perception.md.
+    pix["normal"] = surface_normals(scene, pix["points"], pix["geom"])
+    if cfg.noise.model != "none":
+        pix = add_depth_noise(pix, key, cfg)
+    vox = voxel_downsample(pix["points"], pix["normal"], pix["seg"], cfg)
+    vox["n_pixels"] = pix["n_pixels"]
+    vox["pixel_overflow"] = pix["pixel_overflow"]
+    vox["tile_overflow"] = ro["tile_overflow"]
+    return dict(pixels=pix, voxels=vox)
+
+
+def features_from_voxels(vox: dict, cfg: PerceptionConfig) -> dict:
+    """Stages 4-5 on a ``point_cloud(...)["voxels"]`` result; see ``features`` for the outputs."""
+    pca_t, un_t = pca_object(vox["points"][0], vox["mask"][0], cfg.min_points)
+    pca_o, un_o = pca_object(vox["points"][1], vox["mask"][1], cfg.min_points)
+    unseen = jnp.stack([un_t, un_o])
+    cnt = jnp.where(jnp.any(unseen), 0, jnp.minimum(vox["count"], cfg.voxel.max_voxels))
+    rhf = rhf_histograms(
+        vox["points"][0], vox["normals"][0], cnt[0], vox["points"][1], vox["normals"][1], cnt[1], cfg.rhf
+    )
+    overflow = (vox["tile_overflow"] | vox["pixel_overflow"] | jnp.any(vox["voxel_overflow"])
+                | vox["range_overflow"])
+    return dict(
+        pca=jnp.concatenate([pca_t, pca_o]),
+        rhf=rhf,
+        unseen=unseen,
+        n_points=vox["count"],
+        n_pixels=vox["n_pixels"],
+        overflow=overflow,
+        tile_overflow=vox["tile_overflow"],
+        pixel_overflow=vox["pixel_overflow"],
+        voxel_overflow=vox["voxel_overflow"],
+        range_overflow=vox["range_overflow"],
+    )
+
+
+def features(scene: SceneGeoms, key, cfg: PerceptionConfig = PerceptionConfig()) -> dict:
+    """Whole chain for one scene (pure; vmap over scenes and jit at the caller).
+
+    Returns
+      pca (18,) float32: toy [x y z roll pitch yaw eig1 eig2 eig3] then other object, robot
+          frame, metres / radians / m^2; an unseen object's nine values are 0.
+      rhf (300,) float32: six 50-bin histograms (RHF_NAMES order), each sums to 1, or all 0
+          if either object is unseen.
+      unseen (2,) bool, n_points (2,) int32 occupied voxels, n_pixels (2,) int32,
+      overflow () bool = tile_overflow | pixel_overflow | any(voxel_overflow) | range_overflow
+          (each also returned); features of an overflowing scene are computed from the data that
+          fit and must not be used silently.
+    """
+    validate_config(cfg)  # static: runs once per trace
+    return features_from_voxels(point_cloud(scene, key, cfg)["voxels"], cfg)
+
+
+def make_batched_features(geom_type, geom_seg, cfg: PerceptionConfig = PerceptionConfig(), wrap=None):
+    """Jitted batched ``features`` for one geom layout, built once.
+
+    Returns f(size (B, G, 3), xpos (B, G, 3), xmat (B, G, 3, 3) or (B, G, 9), keys (B,) keys)
+    -> dict of (B, ...) arrays (see ``features``). Same shapes never retrace; ``f.jitted`` is
+    the underlying jitted function. ``wrap`` (optional) decorates the single-scene function
+    before vmap, e.g. ``chex.assert_max_traces(n=1)`` in tests.
+    """
+    validate_config(cfg)
+    g = len(np.asarray(geom_type).ravel())
+    static = make_scene(geom_type, geom_seg, np.zeros((g, 3)), np.zeros((g, 3)), np.tile(np.eye(3), (g, 1, 1)))
+
+    def one(size, xpos, xmat, key):
+        return features(SceneGeoms(static.geom_type, static.geom_seg, size, xpos, xmat), key, cfg)
+
+    batched = jax.jit(jax.vmap(wrap(one) if wrap is not None else one))
+
+    def f(size, xpos, xmat, keys):
+        xmat = jnp.asarray(xmat, jnp.float32)
+        if xmat.shape[-1] == 9:
+            xmat = xmat.reshape(xmat.shape[:-1] + (3, 3))
+        size = jnp.asarray(size, jnp.float32)
+        xpos = jnp.asarray(xpos, jnp.float32)
+        b = size.shape[0] if size.ndim == 3 else None
+        if size.shape != (b, g, 3) or xpos.shape != (b, g, 3) or xmat.shape != (b, g, 3, 3):
+            raise ValueError(f"expected size and xpos (B, {g}, 3), xmat (B, {g}, 3, 3) or (B, {g}, 9); "
+                             f"got {size.shape}, {xpos.shape}, {xmat.shape}")
+        if len(keys) != b:
+            raise ValueError(f"need one PRNG key per scene: {b} scenes, {len(keys)} keys")
+        return batched(size, xpos, xmat, keys)
+
+    f.jitted = batched
+    return f
