@@ -74,9 +74,6 @@ def json_default(obj: Any) -> Any:
     raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
 
 
-_json_default = json_default  # TODO(re-cut): old private name, removed once every caller uses json_default
-
-
 def jsonable(obj: Any) -> Any:
     """``obj`` as it reads back from JSON (tuples become lists, numpy scalars numbers): the
     form in which stored and requested configs are compared."""
@@ -143,3 +140,24 @@ def clean_leftovers(root: str | os.PathLike) -> None:
     """Remove the hidden leftovers of ``remove_tree`` calls that were killed."""
     for p in Path(root).glob(".*.old.tmp"):
         shutil.rmtree(p, ignore_errors=True)
+
+
+def check_writable_dir(path: str | os.PathLike, what: str = "--out") -> None:
+    """Fail at once (``UserError``) if ``path`` cannot be an output folder: it is a file, lies
+    under a file, or its nearest existing ancestor cannot be written. Called before any
+    simulation or learning, so a typo costs no minutes."""
+    from relaff_jax.errors import UserError
+
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UserError(f"{what} {path} exists and is a file, not a folder")
+    probe = path
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    if not probe.is_dir():
+        raise UserError(f"{what} {path}: {probe} is a file, so no folder can be made under it")
+    try:
+        with tempfile.TemporaryFile(dir=probe):
+            pass
+    except OSError as e:
+        raise UserError(f"{what} {path}: cannot write in {probe} ({e.strerror or e})") from e

@@ -3,11 +3,11 @@ checks of output paths made before any work starts."""
 from __future__ import annotations
 
 import argparse
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from relaff_jax.config import parse_set
+from relaff_jax.io import check_writable_dir
 from relaff_jax.errors import UserError
 
 
@@ -25,21 +25,9 @@ def config(args: argparse.Namespace, base: Any = None) -> Any:
 
 
 def check_out_dir(path: Path, what: str = "--out") -> None:
-    """An output folder must be a folder (or not exist yet) and its nearest existing ancestor
-    writable; checked before any simulation or learning, so a typo costs no minutes."""
-    path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise UserError(f"{what} {path} exists and is a file, not a folder")
-    probe = path
-    while not probe.exists() and probe.parent != probe:
-        probe = probe.parent
-    if not probe.is_dir():
-        raise UserError(f"{what} {path}: {probe} is a file, so no folder can be made under it")
-    try:
-        with tempfile.TemporaryFile(dir=probe):
-            pass
-    except OSError as e:
-        raise UserError(f"{what} {path}: cannot write in {probe} ({e.strerror or e})") from e
+    """An output folder must be a folder (or not exist yet) in a writable place
+    (``relaff_jax.io.check_writable_dir``)."""
+    check_writable_dir(path, what)
 
 
 def check_out_file(path: Path, what: str = "--out") -> None:

@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
 
+from relaff_jax import io as rio
 from relaff_jax.constants import ACTIONS
 from relaff_jax.data.errors import DatasetError
 
@@ -86,16 +86,6 @@ def check_dataset_config(cfg: DatasetConfig) -> None:
 def jsonable_config(config_dict: Mapping[str, Any] | None) -> Any:
     """``config_dict`` as it reads back from JSON (tuples become lists), for resume checks."""
     try:
-        return json.loads(json.dumps(dict(config_dict or {}), sort_keys=True, default=_json_default))
+        return json.loads(json.dumps(dict(config_dict or {}), sort_keys=True, default=rio.json_default))
     except (TypeError, ValueError) as e:
         raise DatasetError(f"config_dict is not JSON serialisable ({e})") from e
-
-
-def _json_default(obj: Any) -> Any:  # as relaff_jax.io writes JSON
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")

@@ -16,7 +16,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
-import tempfile
 import time
 from pathlib import Path
 from typing import Any
@@ -74,29 +73,13 @@ def now() -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S")
 
 
-def check_writable(root: Path) -> None:
-    """Fail at once if ``root`` cannot become a run folder: it is a file, lies under a file,
-    or its first existing ancestor cannot be written (instead of a traceback after minutes)."""
-    if root.exists() and not root.is_dir():
-        raise ReproduceError(f"--out {root} exists and is not a directory")
-    probe = root
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if not probe.is_dir():
-        raise ReproduceError(f"--out {root}: {probe} is a file, so no folder can be made under it")
-    try:
-        with tempfile.TemporaryFile(dir=probe):
-            pass
-    except OSError as e:
-        raise ReproduceError(f"--out {root}: cannot write in {probe} ({e.strerror or e})") from e
-
-
 def open_log(paths: Paths, preset_name: str, cfg: Any, seed: int) -> dict[str, Any]:
     """Read or create the run log; a DIR of another preset, config or seed is refused."""
     root = paths.root
-    check_writable(root)
+    try:
+        rio.check_writable_dir(root)
+    except UserError as e:
+        raise ReproduceError(str(e)) from e
     want = {"preset": preset_name, "seed": int(seed),
             "config": json.loads(json.dumps(to_dict(cfg), default=rio.json_default))}
     if paths.log.exists():
