@@ -24,7 +24,9 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from relaff_jax.sim import actions as AC
+from relaff_jax.constants import ACTIONS, action_id
+from relaff_jax.sim import arm as A
+from relaff_jax.sim import native, planning, rollouts, simulate, templates
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 from relaff_jax.io import atomic_write_json, read_json
@@ -36,7 +38,7 @@ def _replay(action, cfg, data, k, batch):
     prepare stage (cheap, already compiled at ``batch``); the MJX labels are the rollouts'.
     C starts the objects from rest; MJX started them from the settled state's residual
     velocities (below the settle stage's at-rest threshold)."""
-    prepare_fn, _ = AC.jitted_stage_fns(cfg)
+    prepare_fn, _ = rollouts.jitted_stage_fns(cfg)
     feas = np.flatnonzero(data["feasible"])[:k]
     if not len(feas):
         return float("nan"), 0, 0
@@ -44,11 +46,11 @@ def _replay(action, cfg, data, k, batch):
     for lo in range(0, len(feas), batch):
         rows = feas[lo:lo + batch]
         idx = np.resize(rows, batch)  # pad with repeats: the compiled batch shape
-        plan, _ = jax.device_get(prepare_fn(AC.action_id(action), jnp.asarray(data["pair"][idx]),
+        plan, _ = jax.device_get(prepare_fn(action_id(action), jnp.asarray(data["pair"][idx]),
                                             jnp.asarray(data["qpos_settled"][idx])))
         plans.append({f: getattr(plan, f)[:len(rows)] for f in ("q_way", "grip_way", "feasible")})
     res = {f: np.concatenate([p[f] for p in plans]) for f in plans[0]}
-    nat = AC.replay_native(action, cfg, data["pair"][feas], data["qpos_settled"][feas],
+    nat = native.replay_native(action, cfg, data["pair"][feas], data["qpos_settled"][feas],
                            np.zeros((len(feas), 12), np.float32), res)["label"]
     mjx_label = np.asarray(data["label"][feas])
     return float(np.mean(nat == mjx_label)), len(feas), int(mjx_label.sum())
@@ -58,7 +60,7 @@ def label_table(actions, n, batch, seed, replay, out_json=None):
     """Label table of ``n`` sampled scenes per action (and a C replay of ``replay`` feasible
     ones). With ``out_json`` every finished action is saved at once (atomically) and skipped
     when the same command runs again, so a killed run loses at most the action in progress."""
-    cfg = AC.ActionConfig()
+    cfg = templates.ActionConfig()
     setting = {"n": n, "batch": batch, "seed": seed, "replay": replay}
     done = {}
     if out_json and os.path.exists(out_json):
@@ -69,7 +71,7 @@ def label_table(actions, n, batch, seed, replay, out_json=None):
         if action in done:
             print(f"{action:10s} (done in {out_json}, skipped)", flush=True)
             continue
-        fn = AC.make_rollout_fn(action, batch, cfg)
+        fn = rollouts.make_rollout_fn(action, batch, cfg)
         chunks, t_first = [], None
         t0 = time.perf_counter()
         for c in range(-(-n // batch)):
@@ -120,14 +122,14 @@ def label_table(actions, n, batch, seed, replay, out_json=None):
 
 
 def throughput(action, batches, seed):
-    cfg = AC.ActionConfig()
+    cfg = templates.ActionConfig()
     scene_world = wd.build_world(cfg.phys)
     place_fn, settle_fn, _ = sc.jitted_scene_fns(scene_world, cfg.scene)
-    act = AC.jitted_action_fn(cfg)
-    st = AC.setup(cfg)
-    aid = AC.action_id(action)
-    allowed = AC.allowed_pairs(scene_world, action)
-    print(f"\n{action}: {AC.N_STEPS} control steps of {cfg.phys.timestep * 1e3:g} ms per rollout")
+    act = rollouts.jitted_action_fn(cfg)
+    st = planning.setup(cfg)
+    aid = action_id(action)
+    allowed = rollouts.allowed_pairs(scene_world, action)
+    print(f"\n{action}: {templates.N_STEPS} control steps of {cfg.phys.timestep * 1e3:g} ms per rollout")
     print(f"{'batch':>5s} {'MJX rollouts/s':>14s} {'C rollouts/s':>12s} {'MJX/C':>6s} {'MJX env-steps/s':>15s}"
           f" {'vs paper (1/min)':>16s}")
     for b in batches:
@@ -141,11 +143,11 @@ def throughput(action, batches, seed):
         t_mjx = time.perf_counter() - t0
         # native C on both cores: the same initial states and command sequences
         ctrl_fn = jax.jit(jax.vmap(jax.vmap(
-            lambda qw, gw, t: AC.A.program_ctrl(st.arm, qw, gw, jnp.asarray(res["seg_steps"]), t),
+            lambda qw, gw, t: A.program_ctrl(st.arm, qw, gw, jnp.asarray(res["seg_steps"]), t),
             in_axes=(None, None, 0)), in_axes=(0, 0, None)))
         ctrl = np.asarray(ctrl_fn(jnp.asarray(res["q_way"]), jnp.asarray(res["grip_way"]),
-                                  jnp.arange(AC.N_STEPS)), np.float64)
-        init = jax.jit(jax.vmap(lambda q, v: AC._initial_data(st, cfg, jnp.int32(aid), q, v)))(
+                                  jnp.arange(templates.N_STEPS)), np.float64)
+        init = jax.jit(jax.vmap(lambda q, v: simulate.initial_data(st, cfg, jnp.int32(aid), q, v)))(
             s.qpos, s.qvel)
         models = [st.world.mj_models[int(p)] for p in np.asarray(pair)]
         datas = [mujoco.MjData(models[0]) for _ in range(2)]
@@ -161,13 +163,13 @@ def throughput(action, batches, seed):
         rollout.rollout(models, datas, state, ctrl)
         t_c = time.perf_counter() - t0
         mjx_rate, c_rate = b / t_mjx, b / t_c
-        print(f"{b:5d} {mjx_rate:14.1f} {c_rate:12.1f} {mjx_rate / c_rate:6.2f} {mjx_rate * AC.N_STEPS:15.0f}"
+        print(f"{b:5d} {mjx_rate:14.1f} {c_rate:12.1f} {mjx_rate / c_rate:6.2f} {mjx_rate * templates.N_STEPS:15.0f}"
               f" {mjx_rate * 60:15.0f}x", flush=True)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--actions", nargs="+", default=list(AC.ACTIONS))
+    ap.add_argument("--actions", nargs="+", default=list(ACTIONS))
     ap.add_argument("--labels", type=int, default=0, help="scenes per action for the label table")
     ap.add_argument("--batch", type=int, default=64)
     ap.add_argument("--replay", type=int, default=0, help="scenes per action replayed in MuJoCo C")

@@ -38,6 +38,6 @@ __all__ = ["load_dataset", "__version__"]
 
 def load_dataset(path):
     """Load a dataset directory as named numpy arrays (see ``relaff_jax.dataset.load_dataset``)."""
-    from .dataset import load_dataset as _load
+    from .data import load_dataset as _load
 
     return _load(path)

@@ -7,7 +7,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from relaff_jax.sim import actions as AC
+from relaff_jax.cli import sim as cli_sim
+from relaff_jax.constants import ACTIONS, action_id
+from relaff_jax.errors import UserError
+from relaff_jax.sim import bodies, geometry, labels, native, programs, rollouts, templates
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
@@ -89,17 +92,17 @@ def scenes(scene_world, settle):
 
 @pytest.fixture(scope="module")
 def results(scenes):
-    act = AC.jitted_action_fn()
+    act = rollouts.jitted_action_fn()
     res = {}
-    for action in AC.ACTIONS:
+    for action in ACTIONS:
         kind = {"unobstruct": "obst", "rake": "rake"}.get(action, "base")
         pair, s = scenes[kind]
-        res[action] = jax.device_get(act(AC.action_id(action), jnp.asarray(pair), jnp.asarray(s.qpos),
+        res[action] = jax.device_get(act(action_id(action), jnp.asarray(pair), jnp.asarray(s.qpos),
                                          jnp.asarray(s.qvel)))
     return res
 
 
-@pytest.mark.parametrize("action", AC.ACTIONS)
+@pytest.mark.parametrize("action", ACTIONS)
 def test_obvious_outcomes(results, action):
     got = results[action]["label"]
     for i, want in enumerate(EXPECT[action]):
@@ -144,7 +147,7 @@ def test_toy_is_only_moved_by_contacts(results):
 def test_native_replay_agrees(scenes, results, action):
     pair, s = scenes["base"]
     idx = [0, 1, 2]
-    nat = AC.replay_native(action, AC.ActionConfig(), pair[idx], np.asarray(s.qpos)[idx],
+    nat = native.replay_native(action, templates.ActionConfig(), pair[idx], np.asarray(s.qpos)[idx],
                            np.asarray(s.qvel)[idx], {k: v[idx] for k, v in results[action].items()})
     np.testing.assert_array_equal(nat["label"], results[action]["label"][idx])
     # the grasped object follows the same path; a toy that slides off and falls may land
@@ -155,13 +158,13 @@ def test_native_replay_agrees(scenes, results, action):
 def test_rollout_fn_simulates_only_feasible_programs(scene_world):
     """The dataset path skips infeasible programs; its labels equal running every scene."""
     key = jax.random.PRNGKey(11)
-    out = AC.make_rollout_fn("lift", B, sim_batch=B)(key, B)  # programs shared with `results`
+    out = rollouts.make_rollout_fn("lift", B, sim_batch=B)(key, B)  # programs shared with `results`
     # the same scenes, rebuilt with the public scene functions, every program executed
     kp, ks, _ = jax.random.split(key, 3)
     place, settle, _ = sc.jitted_scene_fns(scene_world)
-    pair = sc.sample_pairs(kp, AC.allowed_pairs(scene_world, "lift"), scene_world, B)
+    pair = sc.sample_pairs(kp, rollouts.allowed_pairs(scene_world, "lift"), scene_world, B)
     s = settle(pair, *place(ks, pair))
-    full = jax.device_get(AC.jitted_action_fn()(AC.action_id("lift"), pair, s.qpos, s.qvel))
+    full = jax.device_get(rollouts.jitted_action_fn()(action_id("lift"), pair, s.qpos, s.qvel))
     np.testing.assert_array_equal(out["pair"], np.asarray(pair))
     np.testing.assert_array_equal(out["feasible"], full["feasible"])
     sim, skip = out["simulated"], ~out["simulated"]
@@ -174,39 +177,46 @@ def test_rollout_fn_simulates_only_feasible_programs(scene_world):
     np.testing.assert_allclose(full["com_end"][skip], full["com0"][skip], atol=2e-3)
     np.testing.assert_allclose(out["qpos_final"][skip], out["qpos_settled"][skip])
     with pytest.raises(ValueError, match="sim_batch must be >= 1"):
-        AC.make_rollout_fn("lift", 4, sim_batch=0)
+        rollouts.make_rollout_fn("lift", 4, sim_batch=0)
 
 
 def test_rollout_fn_fields_and_errors():
     with pytest.raises(ValueError, match="unknown action 'fly'"):
-        AC.make_rollout_fn("fly", 4)
+        rollouts.make_rollout_fn("fly", 4)
     with pytest.raises(ValueError, match="batch must be >= 1"):
-        AC.make_rollout_fn("lift", 0)
-    assert set(AC.ACTIONS) == set(AC.TEMPLATES) and len(AC.ACTIONS) == 9
-    for a, tpl in AC.TEMPLATES.items():
-        assert sum(tpl.seg_steps) == AC.N_STEPS and len(tpl.seg_steps) == AC.N_SEGMENTS, a
+        rollouts.make_rollout_fn("lift", 0)
+    assert set(ACTIONS) == set(templates.TEMPLATES) and len(ACTIONS) == 9
+    for a, tpl in templates.TEMPLATES.items():
+        assert sum(tpl.seg_steps) == templates.N_STEPS and len(tpl.seg_steps) == templates.N_SEGMENTS, a
 
 
-def test_cli_generate_bad_input(tmp_path, capsys):
+def test_cli_generate_bad_input(tmp_path):
     import argparse
 
+    import re
+
     parser = argparse.ArgumentParser()
-    AC.register_cli(parser.add_subparsers())
+    cli_sim.register(parser.add_subparsers())
+    (tmp_path / "file").write_text("x")
     for argv, msg in ((["generate", "fly", "--samples", "10", "--out", str(tmp_path / "a")], "unknown action 'fly'"),
                       (["generate", "lift", "--samples", "1", "--out", str(tmp_path / "b")], "--samples must be >= 2"),
                       (["generate", "lift", "--samples", "8", "--batch", "0", "--out", str(tmp_path / "c")],
-                       "--batch must be >= 1")):
+                       "--batch must be >= 1"),
+                      # checked before any simulation: a file, or a folder below a file
+                      (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file")], "is not a folder"),
+                      (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file" / "d")],
+                       "cannot be created")):
         args = parser.parse_args(argv)
-        assert args.func(args) == 2
-        assert msg in capsys.readouterr().err
-    assert not any(tmp_path.iterdir())  # nothing half-written
+        with pytest.raises(UserError, match=re.escape(msg)):
+            args.func(args)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]  # nothing half-written
 
 
 def test_exit_distance_hand_worked():
     # a 40 x 20 cm box at the origin; walking from p along -d until outside the box grown by m
-    box = lambda yaw: AC.Body(jnp.zeros(3), AC._quat_mat(jnp.asarray(quat(yaw), jnp.float32)),
+    box = lambda yaw: bodies.Body(jnp.zeros(3), geometry.quat_to_mat(jnp.asarray(quat(yaw), jnp.float32)),
                               jnp.array([-0.2, -0.1, 0.0]), jnp.array([0.2, 0.1, 0.02]))
-    ex = lambda p, d, b, m: float(AC._exit_distance(jnp.asarray(p), jnp.asarray(d), b, m))
+    ex = lambda p, d, b, m: float(programs.exit_distance(jnp.asarray(p), jnp.asarray(d), b, m))
     np.testing.assert_allclose(ex([0.1, 0.0, 0.0], [1.0, 0.0, 0.0], box(0.0), 0.03), 0.33, atol=1e-6)
     np.testing.assert_allclose(ex([0.1, 0.0, 0.0], [0.0, -1.0, 0.0], box(0.0), 0.0), 0.1, atol=1e-6)
     np.testing.assert_allclose(ex([0.0, 0.1, 0.0], [0.0, -1.0, 0.0], box(np.pi / 2), 0.0), 0.1, atol=1e-5)
@@ -222,8 +232,8 @@ def test_move_and_take_rules_hand_worked():
 
     def label(action, shift_toy, shift_oth, **kw):
         end = com0 + jnp.stack([jnp.asarray(shift_toy), jnp.asarray(shift_oth)])
-        o = AC.Outcome(com0, end, end, d, jnp.asarray(False), jnp.asarray(False))
-        return bool(AC.goals(AC.ActionConfig(**kw), o)[AC.action_id(action)])
+        o = labels.Outcome(com0, end, end, d, jnp.asarray(False), jnp.asarray(False))
+        return bool(labels.goals(templates.ActionConfig(**kw), o)[action_id(action)])
 
     assert label("move", [0.2, 0, 0], [0, 0, 0])  # swept away from the base
     assert not label("move", [0.2, 0, 0], [0.2, 0, 0])  # pushed along with its container
@@ -242,7 +252,7 @@ def test_grasp_needs_the_pads_faces_mjx_and_c():
     from relaff_jax.sim import arm as A
 
     m = mujoco.MjModel.from_xml_path(str(A.arm_test_xml_path()))
-    arm, cfg = A.arm_from_model(m), AC.ActionConfig()
+    arm, cfg = A.arm_from_model(m), templates.ActionConfig()
     pl, pr = (int(g) for g in arm.pad_geoms)
     obj = m.geom("obj_geom").id
     xmat = np.tile(np.eye(3), (m.ngeom, 1, 1))  # every geom axis-aligned: closing axis = world y
@@ -259,7 +269,7 @@ def test_grasp_needs_the_pads_faces_mjx_and_c():
         cons = [NS(dist=0.0, geom1=pl, geom2=obj, frame=fl.reshape(-1)),
                 NS(dist=-0.001, geom1=obj, geom2=pr, frame=fr.reshape(-1))]
         d = NS(contact=cons, ncon=2, geom_xmat=xmat.reshape(m.ngeom, 9))
-        assert AC._both_pads(d, arm, cfg, {obj}) == want
+        assert native.both_pads(d, arm, cfg, {obj}) == want
     # far contacts do not count, whatever their normal
     dx = NS(_impl=NS(contact=NS(geom=jnp.array([[pl, obj], [pr, obj]]), dist=jnp.array([0.0, 0.01]),
                                 frame=jnp.asarray(np.stack([side, side])))), geom_xmat=jnp.asarray(xmat))

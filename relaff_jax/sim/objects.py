@@ -25,7 +25,6 @@ All sizes are full extents in metres, masses in kg, in the object's own frame
 from __future__ import annotations
 
 import dataclasses
-import json
 
 GROUPS = ("toy", "base", "obstacle", "rake")
 
@@ -254,25 +253,3 @@ def pairs() -> tuple[tuple[str, str, str], ...]:
                 if toy != other:
                     out.append((toy, other, f"toy+{group}"))
     return tuple(out)
-
-
-def register_cli(sub) -> None:
-    p = sub.add_parser("objects", help="list the 29 objects of the library")
-    p.add_argument("--json", action="store_true", help="one JSON array")
-    p.set_defaults(func=_cmd_objects)
-
-
-def _cmd_objects(args) -> int:
-    rows = [s.to_json() for s in OBJECTS.values()]
-    if args.json:
-        print(json.dumps(rows, indent=1))
-        return 0
-    print(f"{'name':15s} {'groups':11s} {'kind':10s} {'size (cm)':>18s} {'mass':>6s}  colour")
-    for r in rows:
-        size = "x".join(f"{v:g}" for v in r["size_cm"])
-        print(f"{r['name']:15s} {'+'.join(r['groups']):11s} {r['kind']:10s} {size:>18s} "
-              f"{r['mass_kg']:6.2f}  {tuple(r['colour'])}")
-    counts = {g: len(members(g)) for g in GROUPS}
-    print(f"{len(rows)} objects: " + ", ".join(f"{v} {k}s" for k, v in counts.items()))
-    return 0
-

@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import json
 import time
 from typing import Any
 
@@ -37,8 +36,10 @@ from mujoco import mjx
 
 from . import objects as lib
 from . import world as wd
+from .contacts import contacts
 
 from relaff_jax.constants import BESIDE, INSIDE, ON_TOP, RELATIONS  # noqa: F401 (re-exported)
+from relaff_jax.errors import UserError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -238,7 +239,7 @@ def contact_masks(world: wd.World) -> tuple[np.ndarray, np.ndarray]:
     Returns two (ncon,) bool arrays.
     """
     m = mjx.put_model(world.mj_model)
-    con = jax.jit(mjx.forward)(m, mjx.make_data(world.mj_model))._impl.contact
+    con = contacts(jax.jit(mjx.forward)(m, mjx.make_data(world.mj_model)))
     g = np.asarray(world.mj_model.geom_bodyid)
     b1, b2 = g[np.asarray(con.geom1)], g[np.asarray(con.geom2)]
     toy, obj = world.toy_body, world.obj_body
@@ -257,7 +258,7 @@ def relation_of(world: wd.World, table: PairTable, cfg: SceneConfig, pair: jax.A
     Returns:
       () int in {BESIDE, ON_TOP, INSIDE}.
     """
-    touching = d._impl.contact.dist < cfg.contact_dist
+    touching = contacts(d).dist < cfg.contact_dist
     on_obj = jnp.any(touching & masks[0])
     on_table = jnp.any(touching & masks[1])
     supported = on_obj & ~on_table
@@ -342,9 +343,9 @@ def run_scenes(n: int, seed: int = 0, batch: int = 1024, allowed: np.ndarray | N
     Returns (scenes as numpy arrays with leading (n,) axis, stats dict).
     """
     if n < 1:
-        raise ValueError(f"n must be >= 1, got {n}")
+        raise UserError(f"n must be >= 1, got {n}")
     if batch < 1:
-        raise ValueError(f"batch must be >= 1, got {batch}")
+        raise UserError(f"batch must be >= 1, got {batch}")
     world = world or wd.build_world()
     allowed = np.arange(world.n_pairs) if allowed is None else np.asarray(allowed)
     place_fn, settle_fn, traces = jitted_scene_fns(world, cfg)
@@ -404,28 +405,3 @@ def summary(world: wd.World, scenes: Scenes, stats: dict) -> dict:
         "seconds": round(stats["seconds"], 3),
         "scenes_per_second": round(n / max(stats["seconds"], 1e-9), 2),
     }
-
-
-def register_cli(sub) -> None:
-    p = sub.add_parser("scenes", help="sample and settle N mixed scenes in MJX, print a summary")
-    p.add_argument("n", type=int, help="number of scenes")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--batch", type=int, default=1024, help="scenes per compiled batch (memory bound)")
-    p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.set_defaults(func=_cmd_scenes)
-
-
-def _cmd_scenes(args) -> int:
-    world = wd.build_world()
-    scenes, stats = run_scenes(args.n, args.seed, args.batch, world=world, progress=not args.json)
-    s = summary(world, scenes, stats)
-    if args.json:
-        print(json.dumps(s))
-        return 0
-    print(f"{s['n']} scenes settled in {s['seconds']:.1f} s ({s['scenes_per_second']:.1f} scenes/s), "
-          f"{s['compilations']} compilation(s), {s['at_rest']} at rest")
-    print("relations: " + ", ".join(f"{k} {v}" for k, v in s["relations"].items()))
-    for pg, row in s["pairings"].items():
-        print(f"  {pg:13s} n={row['n']:6d}  " + "  ".join(f"{r}={row[r]}" for r in RELATIONS))
-    print(f"sampler intent agrees with the settled relation in {100 * s['intended_agrees']:.1f} %")
-    return 0

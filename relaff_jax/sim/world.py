@@ -31,6 +31,7 @@ from . import objects as lib
 
 # Segment labels the camera reports per geom (colour segmentation stand-in).
 from relaff_jax.constants import SEG_BACKGROUND, SEG_HIDDEN, SEG_OTHER, SEG_TOY  # noqa: F401
+from relaff_jax.errors import UserError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -123,9 +124,9 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
     """MJCF of the scene of one (toy, other) pair; both objects start at the origin."""
     t, o = lib.get(toy), lib.get(other)
     if "toy" not in t.groups:
-        raise ValueError(f"{toy!r} is not a toy; toys: {', '.join(lib.members('toy'))}")
+        raise UserError(f"{toy!r} is not a toy; toys: {', '.join(lib.members('toy'))}")
     if o.group == "toy" and "base" not in o.groups or toy == other:
-        raise ValueError(f"invalid pair ({toy!r}, {other!r}): one toy plus one object of another group")
+        raise UserError(f"invalid pair ({toy!r}, {other!r}): one toy plus one object of another group")
     arm_xml = ""
     if arm:
         # The arm's sections go at the top level, with inactive hand welds switched on per

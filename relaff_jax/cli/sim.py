@@ -1,0 +1,135 @@
+"""The simulation stage's commands: ``relaff objects``, ``relaff scenes``, ``relaff generate``.
+
+Takes an argparse subparsers object; ``register(subparsers)`` adds the three subcommands with
+``set_defaults(func=...)``; each ``cmd_*(args) -> int`` returns the exit code. A mistake the
+user can fix raises ``relaff_jax.errors.UserError`` (printed as one line by the CLI).
+The heavy modules (JAX, MJX, the dataset store) are imported when a command runs.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from relaff_jax.constants import ACTIONS, RELATIONS
+from relaff_jax.errors import UserError
+
+
+def register(subparsers) -> None:
+    """Add ``objects``, ``scenes`` and ``generate`` to ``subparsers``."""
+    p = subparsers.add_parser("objects", help="list the 29 objects of the library")
+    p.add_argument("--json", action="store_true", help="one JSON array")
+    p.set_defaults(func=cmd_objects)
+
+    p = subparsers.add_parser("scenes", help="sample and settle N mixed scenes in MJX, print a summary")
+    p.add_argument("n", type=int, help="number of scenes")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--batch", type=int, default=1024, help="scenes per compiled batch (memory bound)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=cmd_scenes)
+
+    p = subparsers.add_parser(
+        "generate",
+        help="simulate an action on sampled scenes and write a balanced, resumable dataset",
+        description="Sample and settle scenes, run the action in MJX, label by physics, and keep "
+        "N samples with 50%% positives (negatives matched to the positives' COG-distance "
+        "distribution). Rerun with the same arguments to resume an interrupted run.",
+    )
+    p.add_argument("action", help=f"one of: {', '.join(ACTIONS)}")
+    p.add_argument("--samples", type=int, required=True, help="balanced samples to keep (N >= 2)")
+    p.add_argument("--out", required=True, help="dataset directory (new, empty or resumable)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--batch", type=int, default=256, help="scenes per simulated chunk")
+    p.add_argument("--max-rollouts", type=int, default=None, help="stop after this many rollouts")
+    p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    p.set_defaults(func=cmd_generate)
+
+
+def cmd_objects(args) -> int:
+    from relaff_jax.sim import objects as lib
+
+    rows = [s.to_json() for s in lib.OBJECTS.values()]
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"{'name':15s} {'groups':11s} {'kind':10s} {'size (cm)':>18s} {'mass':>6s}  colour")
+    for r in rows:
+        size = "x".join(f"{v:g}" for v in r["size_cm"])
+        print(f"{r['name']:15s} {'+'.join(r['groups']):11s} {r['kind']:10s} {size:>18s} "
+              f"{r['mass_kg']:6.2f}  {tuple(r['colour'])}")
+    counts = {g: len(lib.members(g)) for g in lib.GROUPS}
+    print(f"{len(rows)} objects: " + ", ".join(f"{v} {k}s" for k, v in counts.items()))
+    return 0
+
+
+def cmd_scenes(args) -> int:
+    from relaff_jax.sim import scenes as sc
+    from relaff_jax.sim import world as wd
+
+    world = wd.build_world()
+    scenes, stats = sc.run_scenes(args.n, args.seed, args.batch, world=world, progress=not args.json)
+    s = sc.summary(world, scenes, stats)
+    if args.json:
+        print(json.dumps(s))
+        return 0
+    print(f"{s['n']} scenes settled in {s['seconds']:.1f} s ({s['scenes_per_second']:.1f} scenes/s), "
+          f"{s['compilations']} compilation(s), {s['at_rest']} at rest")
+    print("relations: " + ", ".join(f"{k} {v}" for k, v in s["relations"].items()))
+    for pg, row in s["pairings"].items():
+        print(f"  {pg:13s} n={row['n']:6d}  " + "  ".join(f"{r}={row[r]}" for r in RELATIONS))
+    print(f"sampler intent agrees with the settled relation in {100 * s['intended_agrees']:.1f} %")
+    return 0
+
+
+def check_out_dir(out: str | os.PathLike) -> None:
+    """Raise ``UserError`` at once if ``out`` cannot become a dataset folder: it exists and is
+    not a folder, or its nearest existing ancestor is not a writable folder (so the folder
+    cannot be created). Creates nothing."""
+    path = Path(out)
+    if path.exists():
+        if not path.is_dir():
+            raise UserError(f"--out {str(out)!r} exists and is not a folder")
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise UserError(f"--out {str(out)!r} is a folder this user cannot write to")
+        return
+    parent = path.absolute().parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise UserError(f"--out {str(out)!r} cannot be created: {str(parent)!r} is not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UserError(f"--out {str(out)!r} cannot be created: {str(parent)!r} is not writable")
+
+
+def cmd_generate(args) -> int:
+    if args.action not in ACTIONS:
+        raise UserError(f"unknown action {args.action!r}; valid actions: {', '.join(ACTIONS)}")
+    if args.samples < 2:
+        raise UserError(f"--samples must be >= 2, got {args.samples}")
+    if args.batch < 1:
+        raise UserError(f"--batch must be >= 1, got {args.batch}")
+    check_out_dir(args.out)  # before any simulation (minutes) or world building
+
+    from relaff_jax import config as rc
+    from relaff_jax import data as ds
+    from relaff_jax.sim.rollouts import make_rollout_fn
+    from relaff_jax.sim.templates import ActionConfig
+
+    cfg = ActionConfig()
+    dcfg = ds.DatasetConfig() if args.max_rollouts is None else ds.DatasetConfig(max_rollouts=args.max_rollouts)
+    try:
+        summary = ds.generate_dataset(
+            args.out, args.action, args.samples, make_rollout_fn(args.action, args.batch, cfg),
+            args.seed, args.batch, {"action": rc.to_dict(cfg)}, progress=not args.json,
+            dataset_config=dcfg)
+    except ds.DatasetError as e:
+        if isinstance(e, UserError):
+            raise
+        raise UserError(str(e)) from e
+    if args.json:
+        print(json.dumps(summary, default=str))
+    else:
+        print(f"{args.action}: {args.samples} samples written to {args.out} after "
+              f"{summary.get('rollouts')} rollouts (positive rate over all rollouts "
+              f"{summary.get('positive_rate', float('nan')):.3f})")
+    return 0

@@ -1,0 +1,96 @@
+"""Planning: the joint-space waypoints of a batch of motor programs.
+
+Takes an ``ActionConfig``; gives ``setup(cfg)`` (the action world with the arm, its tables, the
+pairs' geometry and the arm's home pose; built once and cached) and
+``make_plan_fn(cfg) -> plan_fn(action_id (), pair (B,), qpos (B, 14)) -> Plan``: the tcp
+targets of ``programs.program`` solved by the batched IK (``arm.solve_ik_path``) from the home
+pose. If any waypoint is unreachable or badly conditioned, or the object does not fit the
+gripper, the action is *infeasible*: the arm stays home and the label is False.
+"""
+from __future__ import annotations
+
+import functools
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import arm as A
+from . import world as wd
+from .bodies import Geometry, geometry
+from .programs import program
+from .templates import N_TARGETS, TPL_CLOSED, TPL_STEPS, TPL_TARGET, ActionConfig
+
+from relaff_jax.constants import ACTIONS
+
+
+class Setup(NamedTuple):
+    """Static pieces shared by planning, simulation and replay (built once in Python)."""
+
+    world: wd.World
+    arm: A.Arm
+    geo: Geometry
+    q_home: np.ndarray  # (6,) home pose: the tcp at the held rake's grip point
+
+
+@functools.lru_cache(maxsize=4)
+def setup(cfg: ActionConfig = ActionConfig()) -> Setup:
+    world = wd.build_world(cfg.phys, arm=True)
+    arm = A.arm_from_model(world.mj_model)
+    held = jnp.asarray(cfg.phys.held_rake_pos, jnp.float32)
+    home = jax.jit(functools.partial(A.solve_ik, arm, cfg.arm))(
+        A.tool_tcp_target(held, jnp.eye(3)), jnp.zeros(6))
+    if not bool(home.reachable):
+        raise RuntimeError(f"the held rake pose {cfg.phys.held_rake_pos} is not reachable by the arm")
+    return Setup(world, arm, geometry(world), np.asarray(home.q))
+
+
+def home_grip(cfg: ActionConfig) -> np.ndarray:
+    """(9,) finger command at the start: closed on the rake's handle, else half open."""
+    return np.where(np.asarray(ACTIONS) == "rake", cfg.arm.grip_closed, 0.06).astype(np.float32)
+
+
+class Plan(NamedTuple):
+    """Joint-space program of a batch: ``q_way`` (B, S+1, 6), ``grip_way`` (B, S+1),
+    ``seg_steps`` (S,) segment lengths, ``feasible`` (B,) bool, ``direction`` (B, 3) the
+    action's horizontal direction, ``ik_error`` (B,) largest tcp residual of the IK (m)."""
+
+    q_way: jax.Array
+    grip_way: jax.Array
+    seg_steps: jax.Array
+    feasible: jax.Array
+    direction: jax.Array
+    ik_error: jax.Array
+
+
+def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``plan_fn(action_id (), pair (B,), qpos (B, nq)) -> Plan`` for any of the nine actions
+    (``action_id`` indexes ``ACTIONS``; traced, so one compile serves all). Pure; caller jits."""
+    st = setup(cfg)
+    q_home = jnp.asarray(st.q_home, jnp.float32)
+    grip_home = jnp.asarray(home_grip(cfg))
+    branches = [functools.partial(program, a, st.arm, cfg, st.geo) for a in ACTIONS]
+
+    def one(action_id, pair, qpos):
+        prog = jax.lax.switch(action_id, branches, pair, qpos)
+        res = A.solve_ik_path(st.arm, cfg.arm, prog.targets, q_home)
+        # only the targets the template uses count (the padding repeats the last one)
+        used = jnp.arange(N_TARGETS) <= jnp.max(jnp.asarray(TPL_TARGET)[action_id])
+        feasible = jnp.all(res.reachable | ~used) & prog.ok
+        q_way = jnp.concatenate([q_home[None], res.q[jnp.asarray(TPL_TARGET)[action_id]]])
+        opening = jnp.clip(prog.opening, 0.0, float(st.arm.finger_range[1]))
+        grip = jnp.where(jnp.asarray(TPL_CLOSED)[action_id], cfg.arm.grip_closed, opening)
+        g0 = grip_home[action_id]
+        grip_way = jnp.concatenate([g0[None], grip])
+        # an infeasible program is not executed: the arm holds its home pose
+        q_way = jnp.where(feasible, q_way, q_home[None])
+        grip_way = jnp.where(feasible, grip_way, g0)
+        return q_way, grip_way, feasible, prog.direction, jnp.max(jnp.where(used, res.pos_err, 0.0))
+
+    def plan_fn(action_id, pair, qpos):
+        action_id = jnp.asarray(action_id, jnp.int32)
+        q_way, grip_way, feasible, direction, err = jax.vmap(one, in_axes=(None, 0, 0))(action_id, pair, qpos)
+        return Plan(q_way, grip_way, jnp.asarray(TPL_STEPS)[action_id], feasible, direction, err)
+
+    return plan_fn

@@ -1,0 +1,212 @@
+"""The nine motor programs of Table I: tcp targets from a settled scene, one scene at a time.
+
+Takes the arm tables, an ``ActionConfig``, the pairs' ``Geometry`` (``bodies.geometry``), a
+pair index and the settled object ``qpos`` (14,); gives a ``Program``: up to ``N_TARGETS``
+tcp targets (``arm.IKTarget``), the pre-grasp opening, a geometric precondition flag and the
+action's horizontal direction. ``toy_reachable`` is unobstruct's reachability test. No path
+planning (paper IV-D): the targets are solved by the batched IK in ``planning.py``. Pure JAX;
+the caller vmaps and jits. Motor programs: docs/actions.md.
+"""
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from . import arm as A
+from .bodies import (DOWN, Body, Geometry, Grasp, bodies, perp, stack_targets, top_down, top_down_grasp,
+                     unit_xy)
+from .geometry import axis_rotation
+from .templates import N_TARGETS, ActionConfig
+
+from relaff_jax.constants import ACTIONS
+
+
+# -------------------------------------------------------------------------- motor programs
+
+
+class Program(NamedTuple):
+    """Per-scene part of a motor program (single scene)."""
+
+    targets: A.IKTarget  # (K,) tcp targets
+    opening: jax.Array  # () pre-grasp half opening
+    ok: jax.Array  # () bool: geometric preconditions (object fits the gripper, ...)
+    direction: jax.Array  # (3,) the action's horizontal direction (move/pull/push/...), or 0
+
+
+def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
+    """Take's grasp: top-down at the toy's centre with a fixed pre-grasp opening
+    (``cfg.take_opening``) and, unless ``cfg.take_align``, the closing axis across the line
+    from the robot, whatever the toy's yaw. A toy wider than the opening along that axis
+    meets the pads as they come down; physics decides whether they turn it into the gap or
+    miss (the grasp lock needs both pads' faces on the toy). In a container the pads must also fit beside the toy."""
+    g = top_down_grasp(arm, cfg, toy)
+    if cfg.take_align:
+        closing = g.closing
+    else:
+        closing = perp(unit_xy(toy.centre))
+    opening = jnp.asarray(cfg.take_opening, jnp.float32)
+    return g._replace(closing=closing, opening=opening, fits=opening <= float(arm.finger_range[1]))
+
+
+def _transit_z(arm: A.Arm, cfg: ActionConfig, toy: Body, oth: Body) -> jax.Array:
+    return jnp.maximum(toy.z_range()[1], oth.z_range()[1]) + cfg.clearance + arm.tip_below_tcp
+
+
+def _program_lift(arm, cfg, toy, oth, *, grasp_toy: bool, tilt: bool) -> Program:
+    g = _take_grasp(arm, cfg, toy) if grasp_toy else top_down_grasp(arm, cfg, oth)
+    up = jnp.maximum(_transit_z(arm, cfg, toy, oth), g.tcp_z + 0.05)
+    pos = lambda z: g.xy + jnp.array([0.0, 0.0, 1.0]) * z
+    targets = [top_down(pos(up), g.closing), top_down(pos(g.tcp_z), g.closing),
+               top_down(pos(g.tcp_z + cfg.lift_height), g.closing)]
+    if tilt:
+        # tilt about the closing axis: the surface slopes along the pads' faces, so nothing
+        # slides into a finger (a finger would act as a wall and keep the toy); lean the tool
+        # towards the robot, the side the arm reaches more easily
+        rot = axis_rotation(g.closing, jnp.deg2rad(cfg.tilt_deg))
+        lean_out = jnp.dot(rot @ DOWN, unit_xy(g.xy)) > 0
+        rot = jnp.where(lean_out, rot.T, rot)
+        targets.append(A.IKTarget(pos(g.tcp_z + cfg.lift_height), rot @ DOWN, rot @ g.closing,
+                                  jnp.asarray(1.0), jnp.asarray(0.0)))
+    return Program(stack_targets(targets), g.opening, g.fits, jnp.zeros(3))
+
+
+def _program_drag(arm, cfg, toy, oth, *, direction: jax.Array, distance: float, raise_by: float) -> Program:
+    g = top_down_grasp(arm, cfg, oth)
+    up = jnp.maximum(_transit_z(arm, cfg, toy, oth), g.tcp_z + 0.05)
+    z = jnp.array([0.0, 0.0, 1.0])
+    end = g.xy + direction * distance
+    targets = [top_down(g.xy + z * up, g.closing), top_down(g.xy + z * g.tcp_z, g.closing),
+               top_down(g.xy + z * (g.tcp_z + raise_by), g.closing),
+               top_down(end + z * (g.tcp_z + raise_by), g.closing), top_down(end + z * g.tcp_z, g.closing),
+               top_down(end + z * (g.tcp_z + 0.10), g.closing)]
+    return Program(stack_targets(targets), g.opening, g.fits, direction)
+
+
+def exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax.Array:
+    """Smallest s >= 0 such that ``p - s * d`` (xy) lies outside the body's footprint
+    rectangle grown by ``margin`` (0 if it is outside already). p, d: (3,) horizontal."""
+    ax = unit_xy(body.mat[:, 0])
+    ay = perp(ax)
+    half = jnp.stack([body.half_width(ax), body.half_width(ay)]) + margin
+    rel = p - body.centre
+    o = jnp.stack([rel @ ax, rel @ ay])  # start in the box frame
+    v = -jnp.stack([d @ ax, d @ ay])  # walking direction in the box frame
+    safe = jnp.where(jnp.abs(v) > 1e-6, v, 1e-6)
+    t_out = jnp.min(jnp.maximum((-half - o) / safe, (half - o) / safe))  # leaves the last slab
+    inside = jnp.all(jnp.abs(o) < half)
+    return jnp.where(inside, jnp.maximum(t_out, 0.0), 0.0)
+
+
+def _program_move(arm, cfg, toy, oth) -> Program:
+    """Sweep the toy aside along the table: the closed gripper comes down on free table
+    beside the toy, fingertips just above the table, and sweeps across the toy's place to
+    ``cfg.move_distance`` beyond that start (further if the start had to step back), at right angles to the line from the toy to the other object (across the
+    robot's line of sight if their centres nearly coincide), towards the robot's side.
+
+    The program knows where the toy is, not what it stands on: if the toy's side lies over
+    the other object, the descent point moves out along the sweep line until it is over free
+    table, and the sweep then meets the other object first."""
+    c = toy.centre
+    c = jnp.array([c[0], c[1], 0.0])
+    towards = oth.centre - toy.centre
+    far = jnp.linalg.norm(towards[:2]) > 0.02
+    d = perp(jnp.where(far, unit_xy(towards), unit_xy(c)))
+    d = jnp.where(jnp.dot(d, c) > 0, -d, d)  # the end nearer the robot
+    reach = toy.half_width(d) + arm.pad_thickness + cfg.rake_gap
+    finger = arm.pad_thickness + cfg.rake_gap  # half the closed fingers' footprint, plus a gap
+    start = c - d * reach
+    start = start - d * exit_distance(start, d, oth, finger)
+    tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
+    up = _transit_z(arm, cfg, toy, oth)
+    z = jnp.array([0.0, 0.0, 1.0])
+    end = c + d * (cfg.move_distance - reach)
+    targets = [top_down(start + z * up, d), top_down(start + z * tcp_z, d), top_down(end + z * tcp_z, d),
+               top_down(end + z * (tcp_z + 0.10), d)]
+    return Program(stack_targets(targets), jnp.asarray(0.0), jnp.asarray(True), d)
+
+
+def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
+    """Put the rake head behind the toy (seen from the robot), beside the handle, and pull."""
+    radial = unit_xy(toy.centre)
+    side = perp(radial)
+    tool_mat = jnp.stack([radial, side, jnp.array([0.0, 0.0, 1.0])], axis=1)
+    # toy centre in the tool frame: in front of the head's near face, beside the handle
+    x_t = geo_head_x0 - toy.half_width(radial) - cfg.rake_gap
+    handle_half = 0.0125
+    y_t = handle_half + cfg.rake_gap + toy.half_width(side)
+    c = toy.centre
+    origin = jnp.array([c[0], c[1], 0.0]) - radial * x_t - side * y_t
+    low = origin + jnp.array([0.0, 0.0, 0.003])
+    above = origin + jnp.array([0.0, 0.0, toy.z_range()[1] + cfg.clearance])
+    pulled = low - radial * cfg.rake_pull
+    raised = pulled + jnp.array([0.0, 0.0, 0.10])
+    targets = [A.tool_tcp_target(p, tool_mat) for p in (above, low, pulled, raised)]
+    # the toy must lie within the head's lateral extent to be caught at all
+    covers = y_t - toy.half_width(side) < geo_head_y[1]
+    return Program(stack_targets(targets), jnp.asarray(0.0), covers, -radial)
+
+
+def _corridor_blocked(cfg: ActionConfig, toy: Body, obst: Body, min_radius: float) -> jax.Array:
+    """Is the straight approach from the robot to the toy blocked by the obstacle?
+
+    The corridor is the segment from the robot (at ``min_radius`` on the line to the toy) to
+    the toy's centre, widened by the toy's half width plus ``cfg.corridor``; blocked when the
+    obstacle's footprint rectangle comes closer to the segment than that.
+    """
+    radial = unit_xy(toy.centre)
+    c = toy.centre
+    p1 = jnp.array([c[0], c[1]])
+    p0 = radial[:2] * min_radius
+    s = jnp.linspace(0.0, 1.0, 24)[:, None]
+    pts = p0 + s * (p1 - p0)
+    ax = unit_xy(obst.mat[:, 0])[:2]
+    ay = jnp.array([-ax[1], ax[0]])
+    oc = obst.centre[:2]
+    local = jnp.stack([(pts - oc) @ ax, (pts - oc) @ ay], -1)
+    half = jnp.stack([obst.half_width(jnp.array([ax[0], ax[1], 0.0])),
+                      obst.half_width(jnp.array([ay[0], ay[1], 0.0]))])
+    dist = jnp.linalg.norm(jnp.maximum(jnp.abs(local) - half, 0.0), axis=-1)
+    width = toy.half_width(jnp.array([-radial[1], radial[0], 0.0])) + cfg.corridor
+    return jnp.min(dist) < width
+
+
+def toy_reachable(arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax.Array, qpos: jax.Array) -> jax.Array:
+    """Unobstruct's reachability of the toy (one scene): a top-down grasp of the toy is
+    reachable by the IK **and** the approach corridor from the robot is clear of the obstacle."""
+    toy, obst = bodies(geo, pair, qpos)
+    g = top_down_grasp(arm, cfg, toy)
+    res = A.solve_ik(arm, cfg.arm, top_down(g.xy + jnp.array([0.0, 0.0, 1.0]) * g.tcp_z, g.closing),
+                     jnp.zeros(6))
+    return res.reachable & g.fits & ~_corridor_blocked(cfg, toy, obst, cfg.scene.min_radius)
+
+
+def program(action: str, arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax.Array,
+            qpos: jax.Array) -> Program:
+    """The per-scene motor program of ``action`` from the settled ``qpos`` (nq,) (one scene);
+    its targets padded to ``N_TARGETS`` by repeating the last one."""
+    toy, oth = bodies(geo, pair, qpos)
+    if action in ("lift", "take", "pour", "slide"):
+        prog = _program_lift(arm, cfg, toy, oth, grasp_toy=action == "take",
+                             tilt=action in ("pour", "slide"))
+    elif action in ("pull", "push"):
+        radial = unit_xy(oth.centre)
+        sign = -1.0 if action == "pull" else 1.0
+        dist = cfg.pull_distance if action == "pull" else cfg.push_distance
+        prog = _program_drag(arm, cfg, toy, oth, direction=sign * radial, distance=dist,
+                             raise_by=cfg.drag_raise)
+    elif action == "unobstruct":
+        side = perp(unit_xy(toy.centre))
+        d = jnp.where(jnp.dot(oth.centre, side) >= jnp.dot(toy.centre, side), 1.0, -1.0) * side
+        prog = _program_drag(arm, cfg, toy, oth, direction=d, distance=cfg.unobstruct_distance,
+                             raise_by=cfg.drag_raise + 0.01)
+    elif action == "move":
+        prog = _program_move(arm, cfg, toy, oth)
+    elif action == "rake":
+        prog = _program_rake(arm, cfg, toy, jnp.asarray(geo.head_x0)[pair], jnp.asarray(geo.head_y)[pair])
+    else:
+        raise ValueError(f"unknown action {action!r}; valid actions: {', '.join(ACTIONS)}")
+    k = prog.targets.pos.shape[0]
+    pad = lambda x: jnp.concatenate([x, jnp.repeat(x[-1:], N_TARGETS - k, axis=0)])
+    return prog._replace(targets=jax.tree_util.tree_map(pad, prog.targets))

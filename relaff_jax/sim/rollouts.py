@@ -1,0 +1,169 @@
+"""The nine actions end to end: action functions for any batch, and dataset rollouts.
+
+Takes an ``ActionConfig`` (and, for rollouts, an action name and batch size); gives
+``make_action_fn`` / ``jitted_action_fn`` (plan, simulate and label settled scenes; two compiled
+programs per batch shape, plan and simulate, shared by all nine actions: the action index is
+traced) and ``make_rollout_fn(action, batch, config)``, the sampler of
+``dataset.generate_dataset``: sample pairs of the action's pairing (``allowed_pairs``), place
+and settle them (``scenes.py`` on the arm-less world), plan, simulate the feasible programs,
+label.
+
+Pipeline of one batch: ``planning.make_plan_fn`` (tcp waypoints from the settled poses, batched
+IK; infeasible programs keep the arm home), ``simulate.make_simulate_fn`` (MJX, ``lax.scan``
+over time), ``labels.goals`` (outcome rules of Table I on the objects' centres of mass).
+Motor programs: docs/actions.md.
+"""
+from __future__ import annotations
+
+import functools
+from typing import Callable
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import scenes as sc
+from . import world as wd
+from .bodies import geometry
+from .planning import Plan
+from .simulate import make_prepare_fn, make_simulate_fn
+from .templates import ActionConfig
+
+from relaff_jax.constants import PAIRING, action_id
+from relaff_jax.errors import UserError
+
+
+def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``action_fn(action_id (), pair (B,), qpos (B, 14), qvel (B, 12)) -> dict`` of per-scene
+    results for any of the nine actions (pure; the caller jits; one compile per batch shape
+    for all actions). ``qpos``/``qvel``: settled object states in the arm-less layout
+    (``scenes.Scenes.qpos``/``qvel``). Composes ``make_prepare_fn`` and ``make_simulate_fn``.
+
+    Returns ``label`` (B,) bool, ``feasible``, ``ik_error``, ``com0``/``com_m``/``com_end``
+    (B, 2, 3) centres of mass of (toy, other), ``reach_before``/``reach_after`` (unobstruct),
+    ``qpos_final`` (B, 14) and the plan (``q_way``, ``grip_way``, ``seg_steps``).
+    """
+    prepare_fn, simulate_fn = make_prepare_fn(cfg), make_simulate_fn(cfg)
+
+    def action_fn(action_id, pair, qpos, qvel):
+        plan, before = prepare_fn(action_id, pair, qpos)
+        return simulate_fn(action_id, pair, qpos, qvel, plan, before)
+
+    return action_fn
+
+
+@functools.lru_cache(maxsize=4)
+def jitted_stage_fns(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
+    """The jitted ``make_prepare_fn(cfg)`` and ``make_simulate_fn(cfg)``, cached: each compiles
+    once per batch shape and serves all nine actions (the action index is traced)."""
+    return jax.jit(make_prepare_fn(cfg)), jax.jit(make_simulate_fn(cfg))
+
+
+def jitted_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``action_fn`` built from the two cached jitted stages (``jitted_stage_fns``), so that
+    it shares its compiled programs with ``make_rollout_fn``: two programs per batch shape
+    (plan, simulate), for all actions."""
+    prepare_fn, simulate_fn = jitted_stage_fns(cfg)
+
+    def action_fn(action_id, pair, qpos, qvel):
+        plan, before = prepare_fn(action_id, pair, qpos)
+        return simulate_fn(action_id, pair, qpos, qvel, plan, before)
+
+    return action_fn
+
+
+# ----------------------------------------------------------------- dataset rollouts
+
+
+def allowed_pairs(world: wd.World, action: str) -> np.ndarray:
+    """Pair indices whose pairing the action uses (toy+base, toy+obstacle or toy+rake)."""
+    return np.nonzero(geometry(world).pairing == PAIRING[action])[0]
+
+
+def default_sim_batch(batch: int) -> int:
+    """Scenes per simulation call in ``make_rollout_fn``: 16 (or ``batch`` if smaller).
+
+    MJX on the CPU simulates about the same number of scenes per second at 16 and 32 (2.6
+    scenes/s, docs/actions.md) and fewer at 8, so 16 keeps the padding of a chunk's last call
+    small (about 40 % of a chunk is feasible: a chunk of 32 needs one call)."""
+    return min(int(batch), 16)
+
+
+def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
+                    sim_batch: int | None = None) -> Callable:
+    """``rollout_fn(key, batch_size) -> dict`` of numpy arrays per sample, for
+    ``dataset.generate_dataset``: samples pairs of the action's pairing, places and settles
+    the scenes (``scenes.jitted_scene_fns`` on the arm-less world), plans the action, runs the
+    feasible programs, labels.
+
+    Only feasible programs are simulated, in calls of ``sim_batch`` scenes (default
+    ``default_sim_batch(batch)`` = 16; the last call is padded with repeats of its scenes). An
+    infeasible program is not executed (the arm stays home, ``make_plan_fn``) and its label is
+    False by definition, so skipping its simulation changes no label; its ``qpos_final`` is
+    the settled state and ``reach_after`` equals ``reach_before``. About 60 % of the sampled
+    scenes are infeasible (out of the arm's 1.2 m reach in the 1.8 m workspace), so this
+    simulates ~2.5x fewer scenes. ``tests/test_actions.py`` checks the labels against running
+    every scene.
+
+    Fields: ``label``, ``relation`` (int codes into ``scenes.RELATIONS``), ``cog_distance``,
+    ``toy``, ``other`` (names), ``pair`` (int32), ``qpos0`` / ``qpos_settled`` (float32 (14,),
+    arm-less layout), ``qpos_final``, ``rollout_id`` (int64), ``intended``, ``at_rest``,
+    ``feasible``, ``ik_error``, ``reach_before``/``reach_after``, ``simulated`` (bool: the
+    program ran in MJX).
+    ``batch`` is the batch size the caller will use (compiled on the first call).
+    """
+    aid = action_id(action)
+    if int(batch) < 1:
+        raise UserError(f"batch must be >= 1, got {batch}")
+    sim_batch = default_sim_batch(batch) if sim_batch is None else int(sim_batch)
+    if sim_batch < 1:
+        raise UserError(f"sim_batch must be >= 1, got {sim_batch}")
+    cfg = config or ActionConfig()
+    scene_world = wd.build_world(cfg.phys)
+    place_fn, settle_fn, _ = sc.jitted_scene_fns(scene_world, cfg.scene)
+    prepare_fn, simulate_fn = jitted_stage_fns(cfg)
+    allowed = allowed_pairs(scene_world, action)
+    names = np.asarray([(t, o) for t, o, _ in scene_world.pairs])
+
+    def rollout_fn(key, batch_size: int) -> dict[str, np.ndarray]:
+        kp, ks, kid = jax.random.split(key, 3)
+        pair = sc.sample_pairs(kp, allowed, scene_world, int(batch_size))
+        qpos0, intended = place_fn(ks, pair)
+        scenes = settle_fn(pair, qpos0, intended)
+        plan, before = prepare_fn(aid, pair, scenes.qpos)
+        s, plan, before = jax.device_get((scenes, plan, before))
+        p = np.asarray(pair)
+        qpos = np.asarray(s.qpos, np.float32)
+        # not executed: label False, objects where they settled
+        label = np.zeros(len(p), bool)
+        qpos_final = qpos.copy()
+        after = np.asarray(before, bool).copy()
+        run = np.flatnonzero(plan.feasible)
+        for lo in range(0, len(run), sim_batch):
+            rows = run[lo:lo + sim_batch]
+            idx = np.resize(rows, sim_batch)  # pad with repeats: one compiled shape
+            sub = Plan(plan.q_way[idx], plan.grip_way[idx], plan.seg_steps, plan.feasible[idx],
+                       plan.direction[idx], plan.ik_error[idx])
+            out = jax.device_get(simulate_fn(aid, p[idx], qpos[idx], np.asarray(s.qvel)[idx], sub,
+                                             np.asarray(before)[idx]))
+            k = len(rows)
+            label[rows] = out["label"][:k]
+            qpos_final[rows] = out["qpos_final"][:k]
+            after[rows] = out["reach_after"][:k]
+        simulated = np.zeros(len(p), bool)
+        simulated[run] = True
+        base = int(jax.random.bits(kid, (), jnp.uint32))
+        return dict(
+            label=label,
+            relation=np.asarray(s.relation, np.int32),
+            cog_distance=np.asarray(s.cog_distance, np.float32),
+            toy=names[p, 0], other=names[p, 1], pair=p.astype(np.int32),
+            qpos0=np.asarray(s.qpos0, np.float32), qpos_settled=qpos,
+            qpos_final=np.asarray(qpos_final, np.float32),
+            rollout_id=np.int64(base) * int(batch_size) + np.arange(int(batch_size), dtype=np.int64),
+            intended=np.asarray(s.intended, np.int32), at_rest=np.asarray(s.at_rest, bool),
+            feasible=np.asarray(plan.feasible, bool), ik_error=np.asarray(plan.ik_error, np.float32),
+            reach_before=np.asarray(before, bool), reach_after=after, simulated=simulated,
+        )
+
+    return rollout_fn

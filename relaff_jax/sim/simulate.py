@@ -1,0 +1,166 @@
+"""Execution of planned motor programs in MJX, with grasp locks, and their labels.
+
+Takes an ``ActionConfig`` and plans (``planning.Plan``); gives ``make_prepare_fn`` (plan plus
+unobstruct's reachability before the action) and ``make_simulate_fn`` (the waypoints become
+actuator commands, ``arm.program_ctrl``, executed with ``lax.scan`` over ``N_STEPS`` control
+steps, vmapped over scenes with per-pair models; then the outcome rules of ``labels.py``).
+Also ``initial_data`` (the action world's data of one settled scene, arm at home) and
+``welds`` (the hand's equality rows), shared with the MuJoCo C replay (``native.py``).
+
+Settled scenes map into the action world one to one: both worlds put the toy's and the other
+object's free joints first (qpos 0..13), the arm's joints follow. The arm starts at its home
+pose holding the rake's grip point (``PhysicsConfig.held_rake_pos``); in rake scenes the rake is
+attached to the hand by the weld ``tool_grip`` (the paper: rakes are "attached to the robot arm
+as a tool"); every other grasp is the pads' friction plus a grasp lock that engages only while
+the fingers close with both pads' faces on the grasped body (``run_program_locked``). The toy is
+never moved by script, only by contacts.
+"""
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from . import arm as A
+from . import world as wd
+from .labels import Outcome, goals
+from .planning import Setup, home_grip, make_plan_fn, setup
+from .programs import toy_reachable
+from .templates import GRASPS, N_STEPS, RAKE_ID, TPL_CLOSED, TPL_MEASURE, UNOBSTRUCT_ID, ActionConfig
+
+
+def _finger_home(action_id: jax.Array) -> jax.Array:
+    """Finger joint value at the start: on the 2.5 cm handle for the rake, else 6 cm."""
+    return jnp.where(action_id == RAKE_ID, 0.0125, 0.06)
+
+
+def initial_data(st: Setup, cfg: ActionConfig, action_id: jax.Array, qpos_obj: jax.Array,
+                  qvel_obj: jax.Array):
+    """Action-world data of one scene: settled objects (qpos[:14], qvel[:12]), arm at home."""
+    d0 = mjx.make_data(st.world.mj_model)
+    nqo, nvo = qpos_obj.shape[-1], qvel_obj.shape[-1]
+    q_home = jnp.asarray(st.q_home, jnp.float32)
+    qpos = A.set_arm_qpos(st.arm, d0.qpos.at[:nqo].set(qpos_obj), q_home, _finger_home(action_id))
+    qvel = d0.qvel.at[:nvo].set(qvel_obj)
+    ctrl = A.make_ctrl(st.arm, q_home, jnp.asarray(home_grip(cfg))[action_id])
+    # the rake is attached to the hand (weld "tool_grip") only in rake scenes
+    eq = jnp.zeros(d0.eq_active.shape, bool).at[welds(st.world).tool].set(action_id == RAKE_ID)
+    return d0.replace(qpos=qpos, qvel=qvel, ctrl=ctrl, eq_active=eq)
+
+
+class Welds(NamedTuple):
+    """Equality rows of the action world's hand welds and the geoms the grasp test uses."""
+
+    tool: int
+    obj: int
+    toy: int
+    hand_body: int
+    toy_geoms: np.ndarray
+    obj_geoms: np.ndarray
+
+
+def welds(world: wd.World) -> Welds:
+    m = world.mj_model
+    eq = lambda n: mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_EQUALITY, n)
+    geoms = lambda b: np.nonzero(np.asarray(m.geom_bodyid) == b)[0]
+    return Welds(eq("tool_grip"), eq("grasp_obj"), eq("grasp_toy"),
+                 mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "arm_hand"),
+                 geoms(world.toy_body), geoms(world.obj_body))
+
+
+def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array, mx, d, q_way, grip_way,
+              seg_steps, closed, observe):
+    """Run a program on one scene (``lax.scan`` over ``N_STEPS`` control steps) with grasp locks.
+
+    A grasp lock is the weld ``grasp_obj``/``grasp_toy`` (``grasp`` 1/2 selects which, 0 none):
+    it engages only during a segment that closes the fingers and only once *both* finger pads
+    touch the grasped body (``arm.finger_contacts``), with the relative pose the two bodies
+    have at that moment; it releases when a segment opens the fingers. A closed gripper that
+    misses holds nothing. Returns the final data and ``observe(d)`` per control step.
+    """
+    arm = st.arm
+    toy_b, obj_b = st.world.toy_body, st.world.obj_body
+
+    def control_step(carry, t):
+        d, eq_data = carry
+        closing = jnp.asarray(closed)[A.segment_index(seg_steps, t)]
+        touch_obj = jnp.all(A.finger_contacts(arm, cfg.arm, d, w.obj_geoms))
+        touch_toy = jnp.all(A.finger_contacts(arm, cfg.arm, d, w.toy_geoms))
+        active = d.eq_active
+        lock_obj = closing & (grasp == 1) & (active[w.obj] | touch_obj)
+        lock_toy = closing & (grasp == 2) & (active[w.toy] | touch_toy)
+        new_obj = lock_obj & ~active[w.obj]
+        new_toy = lock_toy & ~active[w.toy]
+        rel_obj = A.weld_relpose(d.xpos[w.hand_body], d.xquat[w.hand_body], d.xpos[obj_b], d.xquat[obj_b])
+        rel_toy = A.weld_relpose(d.xpos[w.hand_body], d.xquat[w.hand_body], d.xpos[toy_b], d.xquat[toy_b])
+        eq_data = eq_data.at[w.obj, 3:10].set(jnp.where(new_obj, rel_obj, eq_data[w.obj, 3:10]))
+        eq_data = eq_data.at[w.toy, 3:10].set(jnp.where(new_toy, rel_toy, eq_data[w.toy, 3:10]))
+        active = active.at[w.obj].set(lock_obj).at[w.toy].set(lock_toy)
+        d = d.replace(ctrl=A.program_ctrl(arm, q_way, grip_way, seg_steps, t), eq_active=active)
+        d = mjx.step(mx.replace(eq_data=eq_data), d)
+        return (d, eq_data), observe(d)
+
+    (d, _), trace = jax.lax.scan(control_step, (d, jnp.asarray(mx.eq_data)), jnp.arange(N_STEPS))
+    return d, trace
+
+
+def make_prepare_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``prepare_fn(action_id (), pair (B,), qpos (B, 14)) -> (Plan, reach_before (B,))``: the
+    motor program of every scene and, for unobstruct, whether the toy is reachable in the
+    settled scene (False for the other actions). Pure; the caller jits."""
+    st = setup(cfg)
+    plan_fn = make_plan_fn(cfg)
+    reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
+
+    def prepare_fn(action_id, pair, qpos):
+        action_id = jnp.asarray(action_id, jnp.int32)
+        before = jax.lax.cond(action_id == UNOBSTRUCT_ID, lambda: reach(pair, qpos),
+                              lambda: jnp.zeros(pair.shape, bool))
+        return plan_fn(action_id, pair, qpos), before
+
+    return prepare_fn
+
+
+def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``simulate_fn(action_id (), pair (B,), qpos (B, 14), qvel (B, 12), plan, reach_before)
+    -> dict``: execute planned programs in MJX and label the outcomes. Pure; caller jits.
+
+    See ``make_action_fn`` for the inputs and the returned fields.
+    """
+    st = setup(cfg)
+    world, arm = st.world, st.arm
+    toy_b, obj_b = world.toy_body, world.obj_body
+    observe = lambda d: jnp.stack([d.xipos[toy_b], d.xipos[obj_b]])
+    forward = jax.vmap(mjx.forward, in_axes=(world.model_axes, 0))
+    reach = jax.vmap(lambda p, q: toy_reachable(arm, cfg, st.geo, p, q))
+    wl = welds(world)
+
+    def simulate_fn(action_id, pair, qpos, qvel, plan, before):
+        action_id = jnp.asarray(action_id, jnp.int32)
+        models = wd.scene_models(world, pair)
+        data = jax.vmap(lambda q, v: initial_data(st, cfg, action_id, q, v))(qpos, qvel)
+        data = forward(models, data)
+        com0 = jnp.stack([data.xipos[:, toy_b], data.xipos[:, obj_b]], 1)
+        grasp = jnp.asarray(GRASPS)[action_id]
+        closed = jnp.asarray(TPL_CLOSED)[action_id]
+        run = lambda mx, d, qw, gw: run_program_locked(st, cfg, wl, grasp, mx, d, qw, gw, plan.seg_steps,
+                                                         closed, observe)
+        final, trace = jax.vmap(run, in_axes=(world.model_axes, 0, 0, 0))(
+            models, data, plan.q_way, plan.grip_way)
+        nqo = qpos.shape[-1]
+        qpos_final = final.qpos[:, :nqo]
+        after = jax.lax.cond(action_id == UNOBSTRUCT_ID, lambda: reach(pair, qpos_final),
+                             lambda: jnp.zeros(pair.shape, bool))
+        com_m = trace[:, jnp.asarray(TPL_MEASURE)[action_id]]
+        out = Outcome(com0, com_m, trace[:, -1], plan.direction, before, after)
+        labels = jax.vmap(lambda o: goals(cfg, o))(out)[:, action_id] & plan.feasible
+        return dict(label=labels, feasible=plan.feasible, ik_error=plan.ik_error, com0=com0,
+                    com_m=com_m, com_end=out.com_end, reach_before=before, reach_after=after,
+                    qpos_final=qpos_final, q_way=plan.q_way, grip_way=plan.grip_way,
+                    seg_steps=plan.seg_steps)
+
+    return simulate_fn

@@ -1,0 +1,114 @@
+"""Settings and timing of the nine motor programs: ``ActionConfig`` and the templates.
+
+Takes nothing; gives ``ActionConfig`` (static settings of the motor programs and of the
+outcome rules), ``TEMPLATES`` (per action a ``Template``: segment lengths, IK target per
+segment, fingers closed or open, the measuring step) and the same as (9, ...) tables in
+``ACTIONS`` order (``TPL_STEPS``, ``TPL_TARGET``, ``TPL_CLOSED``, ``TPL_MEASURE``, ``GRASPS``)
+that the compiled programs index with the traced action id. Motor programs: docs/actions.md.
+"""
+from __future__ import annotations
+
+import dataclasses
+from typing import NamedTuple
+
+import numpy as np
+
+from . import arm as A
+from . import scenes as sc
+from . import world as wd
+
+from relaff_jax.constants import ACTIONS
+
+
+@dataclasses.dataclass(frozen=True)
+class ActionConfig:
+    """Static settings of the motor programs and of the outcome rules (lengths in metres)."""
+
+    lift_height: float = 0.25  # lift/take/pour/slide raise the tcp this much
+    tilt_deg: float = 60.0  # pour/slide tilt (tan 60 deg > every friction coefficient)
+    drag_raise: float = 0.02  # pull/push/unobstruct carry the object this high
+    pull_distance: float = 0.25
+    push_distance: float = 0.25
+    unobstruct_distance: float = 0.30
+    move_distance: float = 0.25  # move: the fingers end this far beyond their start beside the toy
+    rake_pull: float = 0.30
+    clearance: float = 0.10  # transit height of the fingertips above the highest object
+    grip_margin: float = 0.02  # pre-grasp opening beyond the object's half width, per finger
+    tip_clearance: float = 0.005  # fingertips this far above the grasped object's bottom
+    rake_gap: float = 0.02  # gap between the toy and the rake head / the sweeping fingers
+    # outcome thresholds
+    lifted: float = 0.05  # "lifted": the centre of mass rose at least this much
+    moved: float = 0.03  # slide: the toy moved at least this much (and was not lifted)
+    closer: float = 0.10  # pull, rake: horizontal distance to the robot shrank this much
+    farther: float = 0.10  # push: grew this much
+    aside: float = 0.08  # move: the toy displaced along the sweep, relative to the base, this much
+    move_rule: str = "apart"  # "apart": toy moved aside from the base; "both": both moved aside
+    take_opening: float = 0.05  # take: fixed pre-grasp half opening (10 cm between the pads)
+    take_align: bool = False  # take: turn the wrist to the toy's narrow side (False: closing
+    # axis across the robot's line of sight, whatever the toy's yaw)
+    corridor: float = 0.05  # unobstruct: clearance of the approach corridor (see docs)
+    arm: A.ArmConfig = A.ArmConfig()
+    phys: wd.PhysicsConfig = wd.PhysicsConfig()
+    scene: sc.SceneConfig = sc.SceneConfig()
+
+
+class Template(NamedTuple):
+    """Static part of a motor program: per segment its length (control steps of one physics
+    step), the IK target it ends at (index into the planned targets) and whether the fingers
+    close (True) or open to the pre-grasp width (False) during it; ``measure``: the control
+    step at which lift-type goals are read (the end of the action's own program).
+
+    Every template is padded to ``N_SEGMENTS`` segments and ``N_STEPS`` control steps (a final
+    rest), so one compiled simulation serves all nine actions."""
+
+    seg_steps: tuple[int, ...]
+    target: tuple[int, ...]
+    closed: tuple[bool, ...]
+    measure: int
+
+
+N_SEGMENTS = 11
+N_STEPS = 815  # 3.26 s at the 4 ms step (the longest template, pour/slide, plus padding)
+N_TARGETS = 6
+
+
+def _template(rows) -> Template:
+    steps, target, closed = (list(c) for c in zip(*rows))
+    measure = sum(steps) - 1
+    while len(steps) < N_SEGMENTS:  # 1-step dwells, then the last one rests until N_STEPS
+        steps.append(1)
+        target.append(target[-1])
+        closed.append(closed[-1])
+    steps[-1] += N_STEPS - sum(steps)
+    assert len(steps) == N_SEGMENTS and min(steps) >= 1, rows
+    return Template(tuple(steps), tuple(target), tuple(closed), measure)
+
+
+# Grasp-and-lift: home -> above (0), down to the grasp (1), dwell, close, lift (2), hold.
+_LIFT = [(150, 0, False), (100, 1, False), (40, 1, False), (60, 1, True), (25, 1, True),
+         (125, 2, True), (60, 2, True)]
+# Pour/slide: the same, then tilt (3) and hold while a loose toy slides off and lands.
+_TILT = _LIFT + [(100, 3, True), (150, 3, True)]
+# Carry along the table: grasp, raise a little (2), carry (3), lower (4), open, retreat (5).
+_DRAG = _LIFT[:5] + [(40, 2, True), (150, 3, True), (40, 4, True), (40, 4, False), (60, 5, False),
+                     (50, 5, False)]
+# Rake: with the held rake above the start (0), down (1), pull (2), retreat (3); slow enough
+# that the head drags the toy instead of tipping it over.
+_SWEEP = [(150, 0, True), (100, 1, True), (30, 1, True), (250, 2, True), (30, 2, True),
+          (60, 3, True), (30, 3, True)]
+# Move: the same with the closed gripper and a slower sweep (1.6 s), a push rather than a blow.
+_MOVE = _SWEEP[:3] + [(400, 2, True)] + _SWEEP[4:]
+TEMPLATES = {
+    "lift": _template(_LIFT), "move": _template(_MOVE), "pull": _template(_DRAG),
+    "push": _template(_DRAG), "rake": _template(_SWEEP), "take": _template(_LIFT),
+    "pour": _template(_TILT), "slide": _template(_TILT), "unobstruct": _template(_DRAG),
+}
+TPL_STEPS = np.asarray([TEMPLATES[a].seg_steps for a in ACTIONS], np.int32)  # (9, S)
+TPL_TARGET = np.asarray([TEMPLATES[a].target for a in ACTIONS], np.int32)
+TPL_CLOSED = np.asarray([TEMPLATES[a].closed for a in ACTIONS], bool)
+TPL_MEASURE = np.asarray([TEMPLATES[a].measure for a in ACTIONS], np.int32)
+RAKE_ID = ACTIONS.index("rake")
+UNOBSTRUCT_ID = ACTIONS.index("unobstruct")
+# Which body a closed gripper locks onto (0 none, 1 the other object, 2 the toy); see
+# simulate.run_program_locked.
+GRASPS = np.asarray([{"take": 2, "move": 0, "rake": 0}.get(a, 1) for a in ACTIONS], np.int32)
