@@ -316,7 +316,7 @@ def test_cli_experiment_and_report(tmp_path):
     cli_learn.register(parser.add_subparsers(dest="command"))
     sets = []
     for k, v in dict(TINY, reps_pca=1, sizes=[2, 10]).items():
-        sets += ["--set", f"{k}={list(v) if isinstance(v, tuple) else v}".replace(" ", "")]
+        sets += ["--set", f"experiment.{k}={list(v) if isinstance(v, tuple) else v}".replace(" ", "")]
     args = parser.parse_args(["experiment", "--synthetic", "150", "--out", str(tmp_path / "res"), "--space", "both",
                               "--jobs", "1", "--seed", "1", "--no-progress"] + sets)
     assert args.func(args) == 0

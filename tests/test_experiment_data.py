@@ -48,8 +48,8 @@ def test_experiment_reads_dataset_folders(tmp_path):
 
     parser = argparse.ArgumentParser()
     cli_learn.register(parser.add_subparsers(dest="command"))
-    sets = ["--set", "sizes=[2,10]", "--set", "reps_pca=1", "--set", "reps_rhf=1",
-            "--set", "forest.base_trees=5", "--set", "forest.max_trees=5"]
+    sets = ["--set", "experiment.sizes=[2,10]", "--set", "experiment.reps_pca=1", "--set", "experiment.reps_rhf=1",
+            "--set", "experiment.forest.base_trees=5", "--set", "experiment.forest.max_trees=5"]
     args = parser.parse_args(["experiment", "--data", *dirs, "--out", str(tmp_path / "res"), "--jobs", "1",
                               "--no-progress"] + sets)
     assert args.func(args) == 0

@@ -51,8 +51,8 @@ def scene_run(tmp_path_factory, scene_world, settle):
                                      progress=False, dataset_config=dataset.DatasetConfig(borrow_fraction=1.0))
             features.add_features(path, batch=B, progress=False)
         argv = ["experiment", "--synthetic", "150", "--out", str(root / "results"), "--jobs", "2", "--no-progress",
-                "--set", "sizes=[4,10]", "--set", "reps_pca=1", "--set", "reps_rhf=1",
-                "--set", "forest.base_trees=4", "--set", "forest.max_trees=4"]
+                "--set", "experiment.sizes=[4,10]", "--set", "experiment.reps_pca=1", "--set", "experiment.reps_rhf=1",
+                "--set", "experiment.forest.base_trees=4", "--set", "experiment.forest.max_trees=4"]
         assert cli.main(argv) == 0
         _CACHE["root"] = root
     return _CACHE["root"]

@@ -11,8 +11,8 @@ from __future__ import annotations
 import argparse
 import os
 
+from relaff_jax.cli import options
 from relaff_jax.cli.options import check_out_dir
-from relaff_jax.config import override, parse_set
 from relaff_jax.constants import SPACES
 from relaff_jax.errors import UserError
 
@@ -22,7 +22,10 @@ EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bo
 def cmd_experiment(args: argparse.Namespace) -> int:
     from relaff_jax import learn
 
-    cfg = override(learn.experiment_preset(args.preset), parse_set(args.set or []))
+    from relaff_jax.runconfig import RunConfig
+
+    tree = options.config(args, base=RunConfig(experiment=learn.experiment_preset(args.preset)))
+    cfg = tree.experiment
     spaces = list(SPACES) if args.space == "both" else [args.space]
     if args.synthetic and args.data:
         raise UserError("give either --data or --synthetic, not both")
@@ -36,6 +39,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
     paths = learn.run_experiment(datasets, args.out, cfg, spaces, seed=args.seed, jobs=jobs,
                                  progress=not args.no_progress, data_desc=desc)
+    options.record_config(args.out, tree, "experiment")
     for space, p in paths.items():
         print(f"{space}: {p}")
     return 0
@@ -62,8 +66,7 @@ def register(subparsers) -> None:
     p.add_argument("--space", choices=("pca", "rhf", "both"), default="both")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a config field, e.g. --set reps_pca=5 --set 'sizes=[2,10,25]'")
+    options.add_set(p, "experiment.reps_pca=5 --set 'experiment.sizes=[2,10,25]'")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_experiment)
     r = subparsers.add_parser("report", help="Table II, findings, figures and report.html from an experiment folder")

@@ -17,11 +17,12 @@ def add_set(p: argparse.ArgumentParser, example: str = "perception.voxel.size=0.
                         "an unknown key lists the valid ones")
 
 
-def config(args: argparse.Namespace, base: Any = None) -> Any:
-    """The resolved ``RunConfig``: ``base`` (default: the paper's settings) plus ``--set``."""
+def config(args: argparse.Namespace, base: Any = None, extra: list[str] = ()) -> Any:
+    """The resolved ``RunConfig``: ``base`` (default: the paper's settings), then the
+    command's own options given as ``extra`` ``KEY=VALUE`` items, then ``--set`` (which wins)."""
     from relaff_jax.runconfig import resolve
 
-    return resolve(base, parse_set(args.set or []))
+    return resolve(base, {**parse_set(extra), **parse_set(args.set or [])})
 
 
 def check_out_dir(path: Path, what: str = "--out") -> None:
@@ -36,3 +37,19 @@ def check_out_file(path: Path, what: str = "--out") -> None:
     if path.is_dir():
         raise UserError(f"{what} {path} is a folder; give a file name")
     check_out_dir(path.parent, what=f"{what} {path}: folder")
+
+
+CONFIG_RECORD = "relaff_config.json"
+
+
+def record_config(folder: Path, cfg: Any, command: str, argv: list[str] | None = None) -> Path:
+    """Write the whole resolved config tree that made ``folder`` into ``folder/relaff_config.json``
+    (atomically, after the command finished): the stage's own sidecars record the settings that
+    decide its output and its resume checks; this file says how the folder was made in full."""
+    from relaff_jax import io as rio
+    from relaff_jax.config import to_dict
+    from relaff_jax.provenance import versions
+
+    path = Path(folder) / CONFIG_RECORD
+    rio.atomic_write_json(path, {"command": command, "argv": argv, "config": to_dict(cfg), "versions": versions()})
+    return path

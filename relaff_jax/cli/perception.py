@@ -16,7 +16,8 @@ from pathlib import Path
 
 from relaff_jax.errors import UserError
 
-from .options import check_out_file
+from relaff_jax.cli import options
+from relaff_jax.cli.options import check_out_file
 
 
 def register(subparsers) -> None:
@@ -26,6 +27,7 @@ def register(subparsers) -> None:
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--seed", type=int, default=0, help="depth-noise seed")
     p.add_argument("--overwrite", action="store_true", help="recompute features of another config")
+    options.add_set(p, "perception.voxel.size=0.02")
     p.set_defaults(func=cmd_features)
 
     p = subparsers.add_parser("show", help="draw what the robot saw in one sample of a dataset")
@@ -39,7 +41,10 @@ def cmd_features(args) -> int:
     """``relaff features``: attach features, print their shapes."""
     from relaff_jax.perception import from_sim
 
-    out = from_sim.add_features(args.dir, args.batch, args.seed, overwrite=args.overwrite)
+    tree = options.config(args, extra=[f"dataset.feature_batch={args.batch}"])
+    out = from_sim.add_features(args.dir, tree.dataset.feature_batch, args.seed, config=tree.perception,
+                                overwrite=args.overwrite)
+    options.record_config(args.dir, tree, "features")
     print(f"{args.dir}: features for {out['n']} samples: "
           + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))
     return 0

@@ -8,9 +8,9 @@ The heavy modules (JAX, MJX, the dataset store) are imported when a command runs
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
+from relaff_jax.cli import options
 from relaff_jax.constants import ACTIONS, RELATIONS
 from relaff_jax.errors import UserError
 
@@ -26,6 +26,7 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--batch", type=int, default=1024, help="scenes per compiled batch (memory bound)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    options.add_set(p, "action.scene.p_stacked=0.8")
     p.set_defaults(func=cmd_scenes)
 
     p = subparsers.add_parser(
@@ -42,6 +43,7 @@ def register(subparsers) -> None:
     p.add_argument("--batch", type=int, default=256, help="scenes per simulated chunk")
     p.add_argument("--max-rollouts", type=int, default=None, help="stop after this many rollouts")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    options.add_set(p, "action.lift_height=0.3")
     p.set_defaults(func=cmd_generate)
 
 
@@ -66,8 +68,10 @@ def cmd_scenes(args) -> int:
     from relaff_jax.sim import scenes as sc
     from relaff_jax.sim import world as wd
 
-    world = wd.build_world()
-    scenes, stats = sc.run_scenes(args.n, args.seed, args.batch, world=world, progress=not args.json)
+    cfg = options.config(args)
+    world = wd.build_world(cfg.action.phys)
+    scenes, stats = sc.run_scenes(args.n, args.seed, args.batch, world=world, cfg=cfg.action.scene,
+                                  progress=not args.json)
     s = sc.summary(world, scenes, stats)
     if args.json:
         print(json.dumps(s))
@@ -81,26 +85,6 @@ def cmd_scenes(args) -> int:
     return 0
 
 
-def check_out_dir(out: str | os.PathLike) -> None:
-    """Raise ``UserError`` at once if ``out`` cannot become a dataset folder: it exists and is
-    not a folder, or its nearest existing ancestor is not a writable folder (so the folder
-    cannot be created). Creates nothing."""
-    path = Path(out)
-    if path.exists():
-        if not path.is_dir():
-            raise UserError(f"--out {str(out)!r} exists and is not a folder")
-        if not os.access(path, os.W_OK | os.X_OK):
-            raise UserError(f"--out {str(out)!r} is a folder this user cannot write to")
-        return
-    parent = path.absolute().parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir():
-        raise UserError(f"--out {str(out)!r} cannot be created: {str(parent)!r} is not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise UserError(f"--out {str(out)!r} cannot be created: {str(parent)!r} is not writable")
-
-
 def cmd_generate(args) -> int:
     if args.action not in ACTIONS:
         raise UserError(f"unknown action {args.action!r}; valid actions: {', '.join(ACTIONS)}")
@@ -108,24 +92,27 @@ def cmd_generate(args) -> int:
         raise UserError(f"--samples must be >= 2, got {args.samples}")
     if args.batch < 1:
         raise UserError(f"--batch must be >= 1, got {args.batch}")
-    check_out_dir(args.out)  # before any simulation (minutes) or world building
+    options.check_out_dir(Path(args.out))  # before any simulation (minutes) or world building
+    sets = ["dataset.n_samples=%d" % args.samples, "dataset.rollout_batch=%d" % args.batch]
+    if args.max_rollouts is not None:
+        sets.append("dataset.max_rollouts=%d" % args.max_rollouts)
+    tree = options.config(args, extra=sets)
 
     from relaff_jax import config as rc
     from relaff_jax import data as ds
     from relaff_jax.sim.rollouts import make_rollout_fn
-    from relaff_jax.sim.templates import ActionConfig
 
-    cfg = ActionConfig()
-    dcfg = ds.DatasetConfig() if args.max_rollouts is None else ds.DatasetConfig(max_rollouts=args.max_rollouts)
+    cfg = tree.action
     try:
         summary = ds.generate_dataset(
             args.out, args.action, args.samples, make_rollout_fn(args.action, args.batch, cfg),
             args.seed, args.batch, {"action": rc.to_dict(cfg)}, progress=not args.json,
-            dataset_config=dcfg)
+            dataset_config=tree.dataset)
     except ds.DatasetError as e:
         if isinstance(e, UserError):
             raise
         raise UserError(str(e)) from e
+    options.record_config(Path(args.out), tree, "generate")
     if args.json:
         print(json.dumps(summary, default=str))
     else:

@@ -116,11 +116,13 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
 
 
 def add_features(path, batch: int = 32, seed: int = 0, overrides: dict | None = None,
-                 progress: bool = True, overwrite: bool = False) -> dict:
-    """Attach PCA and RHF features to the dataset at ``path`` (resumable)."""
+                 progress: bool = True, overwrite: bool = False, config: pc.PerceptionConfig | None = None) -> dict:
+    """Attach PCA and RHF features to the dataset at ``path`` (resumable); ``config`` (default
+    the paper's ``PerceptionConfig``) with ``overrides`` applied."""
     from relaff_jax import data
 
-    cfg = rconfig.override(pc.PerceptionConfig(), overrides or {})
+    cfg = rconfig.override(config or pc.PerceptionConfig(), overrides or {})
+    pc.validate_config(cfg)
     world = wd.build_world()
     fn = make_feature_fn(world, cfg, seed)
     return data.add_features(path, fn, batch, progress,
