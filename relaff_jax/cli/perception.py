@@ -33,7 +33,10 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("show", help="draw what the robot saw in one sample of a dataset")
     p.add_argument("dir", type=Path)
     p.add_argument("--index", type=int, default=0)
-    p.add_argument("--out", type=Path, default=Path("scene.png"))
+    p.add_argument("--out", type=Path, default=None, help="scene.png (default), or action.gif with --rollout")
+    p.add_argument("--rollout", action="store_true",
+                   help="animate the sample's motor program (replayed in MuJoCo C) as a GIF instead")
+    options.add_set(p, "action.lift_height=0.3")
     p.set_defaults(func=cmd_show)
 
 
@@ -56,7 +59,11 @@ def cmd_show(args) -> int:
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import world as wd
 
+    args.out = args.out or Path("action.gif" if args.rollout else "scene.png")
     check_out_file(args.out)
+    if args.rollout and args.out.suffix.lower() != ".gif":
+        raise UserError(f"--rollout writes a GIF; give --out a .gif name, not {args.out.name}")
+    tree = options.config(args)
     ds = data.load_dataset(args.dir, features=False)
     n = len(ds["label"])
     if not 0 <= args.index < n:
@@ -64,7 +71,15 @@ def cmd_show(args) -> int:
     i = args.index
     title = (f"{ds['action']} sample {i}: {ds['toy'][i]} + {ds['other'][i]}, {ds['relation'][i]}, "
              f"label {bool(ds['label'][i])}")
-    out = from_sim.show_scene(wd.build_world(), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
-                              from_sim.show_key(int(ds["rollout_id"][i])), title=title)
+    if args.rollout:
+        from relaff_jax.sim.animate import animate_sample
+
+        frames = animate_sample(str(ds["action"]), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
+                                title=title, cfg=tree.action)
+        print(f"wrote {args.out}: {len(frames['frames_xpos'])} frames; feasible {frames['feasible']}, "
+              f"label in the MuJoCo C replay {frames['label']} (dataset: {bool(ds['label'][i])}, MJX)")
+        return 0
+    out = from_sim.show_scene(wd.build_world(tree.action.phys), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
+                              from_sim.show_key(int(ds["rollout_id"][i])), cfg=tree.perception, title=title)
     print(f"wrote {out}")
     return 0

@@ -92,14 +92,16 @@ def both_pads(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bo
 
 
 def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray,
-                  qvel: np.ndarray, result: dict) -> dict[str, np.ndarray]:
+                  qvel: np.ndarray, result: dict, record_every: int = 0) -> dict[str, np.ndarray]:
     """Replay the planned programs of an ``action_fn`` result in native MuJoCo C (``mj_step``,
     float64), scene by scene, with the same actuator commands; label them with the same rules.
 
     Args: pair (B,), qpos (B, 14), qvel (B, 12) settled object states; ``result``: the action
     fn's output for these scenes (uses ``q_way``, ``grip_way``, ``feasible``; directions come
-    from a re-plan).
-    Returns ``label``, ``com_m``, ``com_end``, ``qpos_final`` as numpy arrays.
+    from a re-plan). ``record_every`` > 0 also records every geom's pose before the first step
+    and after every ``record_every``-th step (for animations).
+    Returns ``label``, ``com_m``, ``com_end``, ``qpos_final`` as numpy arrays, and with
+    ``record_every`` ``frames_xpos`` (B, F, G, 3) and ``frames_xmat`` (B, F, G, 9).
     """
     aid = action_id(action)
     st = setup(cfg)
@@ -110,7 +112,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     reach = jax.jit(lambda p, q: toy_reachable(arm, cfg, st.geo, p, q))
     init = jax.jit(lambda q, v: initial_data(st, cfg, jnp.int32(aid), q, v))
     plan = jax.jit(make_plan_fn(cfg))(aid, jnp.asarray(pair), jnp.asarray(qpos, jnp.float32))
-    labels, com_m, com_end, finals = [], [], [], []
+    labels, com_m, com_end, finals, frames = [], [], [], [], []
     nqo = qpos.shape[-1]
     wl = welds(world)
     obj_geoms, toy_geoms = set(wl.obj_geoms.tolist()), set(wl.toy_geoms.tolist())
@@ -132,6 +134,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
                                   jnp.arange(N_STEPS)))
         eq_data0 = m.eq_data.copy()
         cm = None
+        shots = [(d.geom_xpos.copy(), d.geom_xmat.copy())] if record_every > 0 else []
         for t in range(N_STEPS):
             # the grasp lock of simulate.run_program_locked, on C contacts
             closing = bool(closed[segment[t]])
@@ -147,6 +150,8 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
             mujoco.mj_step(m, d)
             if t == measure:  # like MJX: the positions of the step's forward pass
                 cm = np.stack([d.xipos[world.toy_body], d.xipos[world.obj_body]]).copy()
+            if record_every > 0 and (t + 1) % record_every == 0:
+                shots.append((d.geom_xpos.copy(), d.geom_xmat.copy()))
         ce = np.stack([d.xipos[world.toy_body], d.xipos[world.obj_body]]).copy()
         qf = d.qpos[:nqo].astype(np.float32)
         if aid == UNOBSTRUCT_ID:
@@ -161,5 +166,10 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
         com_m.append(cm)
         com_end.append(ce)
         finals.append(qf)
-    return dict(label=np.asarray(labels), com_m=np.stack(com_m), com_end=np.stack(com_end),
-                qpos_final=np.stack(finals))
+        frames.append(shots)
+    out = dict(label=np.asarray(labels), com_m=np.stack(com_m), com_end=np.stack(com_end),
+               qpos_final=np.stack(finals))
+    if record_every > 0:
+        out["frames_xpos"] = np.stack([np.stack([x for x, _ in f]) for f in frames])
+        out["frames_xmat"] = np.stack([np.stack([r for _, r in f]) for f in frames])
+    return out
