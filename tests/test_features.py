@@ -123,3 +123,24 @@ def test_missing_fields_is_a_clear_error(scene_world):
     fn = features.make_feature_fn(scene_world)
     with pytest.raises(UserError, match="lack.*qpos_settled"):
         fn({"pair": np.zeros(2, np.int32), "rollout_id": np.zeros(2)})
+
+
+def test_voxel_size_set_from_the_cli_changes_the_features(small_dataset, tmp_path):
+    """--set reaches the perception config: the voxel size is recorded and changes the features."""
+    import json
+    import shutil
+
+    assert cli.main(["features", str(small_dataset), "--batch", "4"]) == 0
+    other = tmp_path / "lift"
+    shutil.copytree(small_dataset, other)
+    # features of another config on a featured dataset: refused without --overwrite
+    assert cli.main(["features", str(other), "--batch", "4", "--set", "perception.voxel.size=0.025"]) == 2
+    assert cli.main(["features", str(other), "--batch", "4", "--set", "perception.voxel.size=0.025",
+                     "--overwrite"]) == 0
+    a, b = load_dataset(small_dataset), load_dataset(other)
+    assert not np.array_equal(a["rhf"], b["rhf"]) and not np.array_equal(a["pca"], b["pca"])
+    side = json.loads((other / dataset.FEATURES_SIDECAR).read_text())
+    assert side["config"]["perception"]["voxel"]["size"] == 0.025
+    rec = json.loads((other / "relaff_config.json").read_text())
+    assert rec["command"] == "features" and rec["config"]["perception"]["voxel"]["size"] == 0.025
+    assert rec["config"]["dataset"]["feature_batch"] == 4

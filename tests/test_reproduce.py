@@ -224,6 +224,31 @@ def test_stale_results_are_recomputed(base, tmp_path):
         np.testing.assert_array_equal(a, results_of(out0)[s])
 
 
+def test_a_corrupt_feature_chunk_is_reported_and_recomputed(base, tmp_path, monkeypatch):
+    """One flipped byte in a feature chunk: the status names it, and both a plain rerun and
+    --force features recompute it (the forced rerun used to fail on the same error)."""
+    out0, *_ = base
+    # R.status rebuilds the run from run.json: give it the stand-in perception of this module
+    monkeypatch.setattr(stage_features, "factories_for", lambda cfg: (feature_factory, HOOKS["feature_config_fn"]))
+    for force in ((), ("features",)):
+        out = tmp_path / f"run{len(force)}"
+        shutil.copytree(out0, out)
+        for f in (out / "data" / "lift" / "features" / "chunk_000000" / "arrays").rglob("*"):
+            if f.is_file() and f.parent.name == "d":
+                b = bytearray(f.read_bytes())
+                b[len(b) // 2] ^= 0xFF
+                f.write_bytes(bytes(b))
+        st = R.status(out)
+        assert st["generate"].state == "complete"
+        assert st["features"].state == "corrupt" and "lift" in st["features"].why
+        log = run(out, force=force)
+        assert statuses(log)["features"] == "ran"
+        np.testing.assert_array_equal(D.load_dataset(out / "data" / "lift")["pca"],
+                                      D.load_dataset(out0 / "data" / "lift")["pca"])
+        for s, a in results_of(out).items():
+            np.testing.assert_array_equal(a, results_of(out0)[s])
+
+
 # ---------------------------------------------------------------------------- bad input
 
 

@@ -23,7 +23,8 @@ from relaff_jax.constants import ACTIONS, SPACES, STAGES
 from relaff_jax.reproduce import experiment, features, generate, report
 from relaff_jax.reproduce.folder import Paths, ReproduceError, now, open_log
 from relaff_jax.reproduce.progress import Progress, estimate_seconds
-from relaff_jax.reproduce.stage import Run
+from relaff_jax.errors import UserError
+from relaff_jax.reproduce.stage import Run, Status
 from relaff_jax.runconfig import PRESETS, RunConfig, from_json, preset
 
 STAGE_MODULES = {m.NAME: m for m in (generate, features, experiment, report)}
@@ -159,4 +160,10 @@ def status(out: str | os.PathLike) -> dict[str, Any]:
     cfg = from_json(log["config"])
     run = Run(paths, log["preset"], cfg, log["seed"], 1, (), Progress({}, enabled=False),
               generate.rollout_factory_for(cfg), *features.factories_for(cfg), log, {})
-    return {name: m.status(run) for name, m in STAGE_MODULES.items()}
+    out = {}
+    for name, m in STAGE_MODULES.items():
+        try:
+            out[name] = m.status(run)
+        except UserError as e:  # e.g. the experiment's inputs: a corrupt dataset upstream
+            out[name] = Status("stale", f"its inputs cannot be read ({e})")
+    return out
