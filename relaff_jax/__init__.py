@@ -37,7 +37,7 @@ __all__ = ["load_dataset", "__version__"]
 
 
 def load_dataset(path):
-    """Load a dataset directory as named numpy arrays (see ``relaff_jax.dataset.load_dataset``)."""
+    """Load a dataset directory as named numpy arrays (see ``relaff_jax.data.load_dataset``)."""
     from .data import load_dataset as _load
 
     return _load(path)
