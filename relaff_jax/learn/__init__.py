@@ -17,7 +17,7 @@ Files, in pipeline order:
 - ``blocks.py``: one (target, repetition, sizes) block of the sweep, saved and re-read;
 - ``parallel.py``: forest jobs over worker processes with a progress bar;
 - ``sweep.py``: ``run_experiment``, the resumable sweep of one or both spaces;
-- ``results.py``: ``load_results``, ``is_complete``;
+- ``results.py``: ``load_results`` (typed ``Results`` / ``SpaceResults``), ``is_complete``;
 - ``analysis.py``: curves, bootstrap factors, Table II, the threshold study.
 
 Nothing here imports the report or the command line (``relaff_jax.cli.learn``).
@@ -71,7 +71,9 @@ from relaff_jax.learn.protocol import (
 )
 from relaff_jax.learn.results import (
     FORMAT_VERSION,
+    Results,
     ResultsNotFound,
+    SpaceResults,
     is_complete,
     load_results,
 )
@@ -87,7 +89,7 @@ from relaff_jax.learn.synthetic import synthetic_datasets
 
 __all__ = [
     "ACTIONS", "FAMILIES", "SPACES", "FORMAT_VERSION", "PAPER_TABLE2", "SPACE_CODE", "TABLE2_ROWS", "TOY_MANIPULATED",
-    "ExperimentConfig", "ForestConfig", "ResultsNotFound",
+    "ExperimentConfig", "ForestConfig", "Results", "ResultsNotFound", "SpaceResults",
     "analyse", "augment", "average_bf", "block_fits", "bootstrap_factor", "categories_above", "categories_per_threshold",
     "category_allowed", "category_masks", "category_pairs", "check_action", "check_config", "check_datasets",
     "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep",

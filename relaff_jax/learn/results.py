@@ -1,15 +1,18 @@
 """Reading an experiment folder written by ``sweep.run_experiment``.
 
-``load_results(RESULTS)`` gives ``{"meta": experiment.json, "config": ExperimentConfig,
-<space>: {acc, sizes, actions, conditions, thresholds, corr, category_masks, test_size, ...}}``;
-``is_complete`` says whether every requested space has finished.
+``load_results(RESULTS)`` gives a typed ``Results``: ``meta`` (experiment.json), ``config``
+(``ExperimentConfig``) and per finished space a ``SpaceResults`` of arrays; both also read as
+mappings (``res["pca"]["acc"]``), as the report and notebooks use them. ``is_complete`` says
+whether every requested space has finished.
 """
 from __future__ import annotations
 
+import dataclasses
 import os
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Iterator, Mapping, Sequence
 
+import chex
 import numpy as np
 
 from relaff_jax import io as rio
@@ -25,6 +28,50 @@ class ResultsNotFound(UserError, FileNotFoundError):
     """A folder that is not a (finished) experiment folder."""
 
 
+@chex.dataclass(frozen=True)
+class SpaceResults:
+    """One state space's sweep (``results.npz``); T targets, C conditions, S sizes, R reps.
+
+    acc (T, C, S, R) test accuracy (NaN where a condition does not apply); sizes (S,);
+    actions (T,) names; conditions (C,) names; thresholds (K,) of the correlation heuristic;
+    corr (T, T) predictor correlation; category_masks (K, T, P) categories kept per threshold;
+    test_size (T,) test scenes per target; seconds, seconds_prep, new_fits: scalars of the run.
+    """
+
+    acc: np.ndarray
+    sizes: np.ndarray
+    actions: np.ndarray
+    conditions: np.ndarray
+    thresholds: np.ndarray
+    corr: np.ndarray
+    category_masks: np.ndarray
+    test_size: np.ndarray
+    seconds: np.ndarray
+    seconds_prep: np.ndarray
+    new_fits: np.ndarray
+
+
+@dataclasses.dataclass(frozen=True)
+class Results(Mapping[str, Any]):
+    """An experiment folder's results: ``meta``, ``config`` and one ``SpaceResults`` per
+    finished space (``spaces``); ``res[name]`` reads any of them."""
+
+    meta: dict
+    config: ExperimentConfig
+    spaces: dict[str, SpaceResults]
+
+    def __getitem__(self, key: str) -> Any:
+        if key in ("meta", "config"):
+            return getattr(self, key)
+        return self.spaces[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(("meta", "config", *self.spaces))
+
+    def __len__(self) -> int:
+        return 2 + len(self.spaces)
+
+
 def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:
     """Whether ``out`` holds finished results for every one of ``spaces``."""
     out = Path(out)
@@ -37,18 +84,22 @@ def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:
     return all(s in done and (out / s / "results.npz").exists() for s in spaces)
 
 
-def load_results(results_dir: str | os.PathLike) -> dict[str, Any]:
-    """``{"meta": experiment.json, "config": ExperimentConfig, <space>: {arrays}}``."""
+def load_results(results_dir: str | os.PathLike) -> Results:
+    """The ``Results`` of an experiment folder (every space in its ``experiment.json``)."""
     root = Path(results_dir)
     meta_path = root / "experiment.json"
     if not meta_path.exists():
         raise ResultsNotFound(f"{root} is not an experiment folder (no experiment.json)")
     meta = rio.read_json(meta_path)
-    out: dict[str, Any] = {"meta": meta, "config": from_dict(ExperimentConfig, meta["config"])}
+    spaces: dict[str, SpaceResults] = {}
     for space in meta["spaces"]:
         p = root / space / "results.npz"
         if not p.exists():
             raise ResultsNotFound(f"{p} missing: the {space} sweep has not finished (rerun `relaff experiment`)")
         with np.load(p) as z:
-            out[space] = {k: z[k] for k in z.files}
-    return out
+            arrays = {k: z[k] for k in z.files}
+        missing = {f.name for f in dataclasses.fields(SpaceResults)} - set(arrays)
+        if missing:
+            raise ResultsNotFound(f"{p} lacks {sorted(missing)}: written by another version; rerun the experiment")
+        spaces[space] = SpaceResults(**{f.name: arrays[f.name] for f in dataclasses.fields(SpaceResults)})
+    return Results(meta=meta, config=from_dict(ExperimentConfig, meta["config"]), spaces=spaces)

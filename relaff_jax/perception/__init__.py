@@ -65,7 +65,7 @@ from .config import (
 )
 from .descriptors import fast_arccos, pca_frame, pca_object, rhf_bin, rhf_histograms, rhf_pair_values, rotation_to_rpy
 from .noise import NOISE_MODELS, add_depth_noise, depth_noise_sigma, pixel_radius
-from .pipeline import features, features_from_voxels, make_batched_features, point_cloud
+from .pipeline import SceneFeatures, features, features_from_voxels, make_batched_features, point_cloud
 from .plots import object_crop, render_scene_png, scene_view
 from .raycast import cast_rays, surface_normals
 from .render import active_tiles, compact_objects, render, render_objects
@@ -90,7 +90,7 @@ __all__ = [
     "fast_arccos", "pca_frame", "pca_object", "rhf_bin", "rhf_histograms", "rhf_pair_values",
     "rotation_to_rpy",
     "NOISE_MODELS", "add_depth_noise", "depth_noise_sigma", "pixel_radius",
-    "features", "features_from_voxels", "make_batched_features", "point_cloud",
+    "SceneFeatures", "features", "features_from_voxels", "make_batched_features", "point_cloud",
     "object_crop", "render_scene_png", "scene_view",
     "cast_rays", "surface_normals",
     "active_tiles", "compact_objects", "render", "render_objects",

@@ -7,6 +7,7 @@ Takes a ``SceneGeoms`` (or a geom layout plus batched sizes/poses), PRNG key(s) 
 """
 from __future__ import annotations
 
+import chex
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -39,7 +40,28 @@ def point_cloud(scene: SceneGeoms, key, cfg: PerceptionConfig) -> dict:
     return dict(pixels=pix, voxels=vox)
 
 
-def features_from_voxels(vox: dict, cfg: PerceptionConfig) -> dict:
+@chex.dataclass(frozen=True)
+class SceneFeatures:
+    """What perception gives for one scene (a pytree; batched, every field gains a leading
+    (B,) axis). Also a read-only mapping: ``f["pca"]`` is ``f.pca``.
+
+    pca (18,) float32, rhf (300,) float32, unseen (2,) bool, n_points (2,) int32 occupied
+    voxels, n_pixels (2,) int32, overflow () bool and its four causes (see ``features``).
+    """
+
+    pca: jax.Array
+    rhf: jax.Array
+    unseen: jax.Array
+    n_points: jax.Array
+    n_pixels: jax.Array
+    overflow: jax.Array
+    tile_overflow: jax.Array
+    pixel_overflow: jax.Array
+    voxel_overflow: jax.Array
+    range_overflow: jax.Array
+
+
+def features_from_voxels(vox: dict, cfg: PerceptionConfig) -> SceneFeatures:
     """Stages 4-5 on a ``point_cloud(...)["voxels"]`` result; see ``features`` for the outputs."""
     pca_t, un_t = pca_object(vox["points"][0], vox["mask"][0], cfg.min_points)
     pca_o, un_o = pca_object(vox["points"][1], vox["mask"][1], cfg.min_points)
@@ -50,7 +72,7 @@ def features_from_voxels(vox: dict, cfg: PerceptionConfig) -> dict:
     )
     overflow = (vox["tile_overflow"] | vox["pixel_overflow"] | jnp.any(vox["voxel_overflow"])
                 | vox["range_overflow"])
-    return dict(
+    return SceneFeatures(
         pca=jnp.concatenate([pca_t, pca_o]),
         rhf=rhf,
         unseen=unseen,
@@ -64,10 +86,10 @@ def features_from_voxels(vox: dict, cfg: PerceptionConfig) -> dict:
     )
 
 
-def features(scene: SceneGeoms, key, cfg: PerceptionConfig = PerceptionConfig()) -> dict:
+def features(scene: SceneGeoms, key, cfg: PerceptionConfig = PerceptionConfig()) -> SceneFeatures:
     """Whole chain for one scene (pure; vmap over scenes and jit at the caller).
 
-    Returns
+    Returns a ``SceneFeatures``:
       pca (18,) float32: toy [x y z roll pitch yaw eig1 eig2 eig3] then other object, robot
           frame, metres / radians / m^2; an unseen object's nine values are 0.
       rhf (300,) float32: six 50-bin histograms (RHF_NAMES order), each sums to 1, or all 0
@@ -85,7 +107,7 @@ def make_batched_features(geom_type, geom_seg, cfg: PerceptionConfig = Perceptio
     """Jitted batched ``features`` for one geom layout, built once.
 
     Returns f(size (B, G, 3), xpos (B, G, 3), xmat (B, G, 3, 3) or (B, G, 9), keys (B,) keys)
-    -> dict of (B, ...) arrays (see ``features``). Same shapes never retrace; ``f.jitted`` is
+    -> ``SceneFeatures`` of (B, ...) arrays (see ``features``). Same shapes never retrace; ``f.jitted`` is
     the underlying jitted function. ``wrap`` (optional) decorates the single-scene function
     before vmap, e.g. ``chex.assert_max_traces(n=1)`` in tests.
     """
