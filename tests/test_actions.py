@@ -203,9 +203,9 @@ def test_cli_generate_bad_input(tmp_path):
                       (["generate", "lift", "--samples", "8", "--batch", "0", "--out", str(tmp_path / "c")],
                        "--batch must be >= 1"),
                       # checked before any simulation: a file, or a folder below a file
-                      (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file")], "is not a folder"),
+                      (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file")], "is a file, not a folder"),
                       (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file" / "d")],
-                       "cannot be created")):
+                       "is a file, so no folder can be made under it")):
         args = parser.parse_args(argv)
         with pytest.raises(UserError, match=re.escape(msg)):
             args.func(args)

@@ -16,7 +16,8 @@ import pytest
 
 from relaff_jax import data as D
 from relaff_jax import learn as E
-from relaff_jax.reproduce import run as R
+from relaff_jax import reproduce as R
+from relaff_jax.cli import reproduce as cli_reproduce
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(5400)]
 
@@ -25,7 +26,7 @@ SEED = 5
 
 def cli_run(out, *extra):
     parser = argparse.ArgumentParser()
-    R.register_cli(parser.add_subparsers(dest="command"))
+    cli_reproduce.register(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["reproduce", "--preset", "tiny", "--out", str(out), "--seed", str(SEED),
                               "--no-progress", *extra])
     assert args.func(args) == 0
@@ -45,7 +46,7 @@ def test_tiny_end_to_end(tmp_path):
     # every expected file
     for a in R.ACTIONS:
         d = D.load_dataset(out / "data" / a)
-        n = cfg.n_samples
+        n = cfg.dataset.n_samples
         assert d["label"].shape == (n,) and d["label"].sum() == n // 2
         assert d["pca"].shape == (n, 18) and d["rhf"].shape == (n, 300) and np.isfinite(d["pca"]).all()
         assert d["qpos_settled"].shape == (n, 14)
@@ -61,10 +62,10 @@ def test_tiny_end_to_end(tmp_path):
               "fig08_db1_best.png", "fig09_db1_best_bf.png", "fig10_average_bf.png", "fig11_correlation.png",
               "fig12_thresholds.png", R.REPORT_STAMP):
         assert (rep / f).stat().st_size > 0, f
-    assert len(list((rep / "examples").glob("*.png"))) == 9 * cfg.examples_per_action
+    assert len(list((rep / "examples").glob("*.png"))) == 9 * cfg.reproduce.examples_per_action
     md = (rep / "report.md").read_text()
     for a in R.ACTIONS:
-        assert f"| {a} | {cfg.n_samples} |" in md
+        assert f"| {a} | {cfg.dataset.n_samples} |" in md
     assert len(json.loads((rep / "findings.json").read_text())["findings"]) == 5
     assert set(log["timings"]) == set(R.STAGES)
 
