@@ -102,6 +102,7 @@ def results(scenes):
     return res
 
 
+@pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 @pytest.mark.parametrize("action", ACTIONS)
 def test_obvious_outcomes(results, action):
     got = results[action]["label"]
@@ -111,6 +112,7 @@ def test_obvious_outcomes(results, action):
     assert got.dtype == bool and got.shape == (B,)
 
 
+@pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 def test_infeasible_programs_do_not_move_the_arm(results):
     # base row 4: the toy 1.55 m away cannot be grasped; the arm stays home, nothing moves
     r = results["take"]
@@ -119,6 +121,7 @@ def test_infeasible_programs_do_not_move_the_arm(results):
     assert not results["rake"]["feasible"][2]
 
 
+@pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 def test_lift_raises_both_and_release_after_drag(results):
     lift = results["lift"]
     assert np.all(lift["com_m"][[0, 3], :, 2] - lift["com0"][[0, 3], :, 2] > 0.15)  # cup/bowl and toy
@@ -129,6 +132,7 @@ def test_lift_raises_both_and_release_after_drag(results):
     assert r0 - r1 > 0.15 and abs(pull["com_end"][0, 1, 2] - pull["com0"][0, 1, 2]) < 0.01
 
 
+@pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 def test_unobstruct_reachability(results):
     r = results["unobstruct"]
     assert not r["reach_before"][0] and r["reach_after"][0]  # the brick blocked the way, then not
@@ -136,6 +140,7 @@ def test_unobstruct_reachability(results):
     assert not r["reach_before"][2] and not r["reach_after"][2]  # out of the arm's reach
 
 
+@pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 def test_toy_is_only_moved_by_contacts(results):
     # the actions that never touch the toy directly leave a toy beside the base where it was
     for action in ("lift", "pull", "push", "pour", "slide"):
@@ -143,6 +148,7 @@ def test_toy_is_only_moved_by_contacts(results):
         np.testing.assert_allclose(r["com_end"][7, 0], r["com0"][7, 0], atol=2e-3)
 
 
+@pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 @pytest.mark.parametrize("action", ["lift", "slide", "pull", "take"])
 def test_native_replay_agrees(scenes, results, action):
     pair, s = scenes["base"]
@@ -155,6 +161,7 @@ def test_native_replay_agrees(scenes, results, action):
     np.testing.assert_allclose(nat["com_m"][:, 1], results[action]["com_m"][idx, 1], atol=0.01)
 
 
+@pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 def test_rollout_fn_simulates_only_feasible_programs(scene_world):
     """The dataset path skips infeasible programs; its labels equal running every scene."""
     key = jax.random.PRNGKey(11)

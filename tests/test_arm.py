@@ -93,6 +93,7 @@ def test_ik_reaches_random_top_down_targets(model, arm, ik):
     check_against_c(model, arm, res, targets)
 
 
+@pytest.mark.slow  # a second IK compile; the fast tier keeps the top-down IK test
 def test_ik_reaches_tilted_targets_from_fk(model, arm, ik):
     # Targets made by FK of random configurations with the tcp within 60 deg of straight down
     # are reachable by construction; the solver must find a pose (maybe another branch).
@@ -114,6 +115,7 @@ def test_ik_reaches_tilted_targets_from_fk(model, arm, ik):
     check_against_c(model, arm, res, targets)
 
 
+@pytest.mark.slow  # a second IK compile; the fast tier keeps the top-down IK test
 def test_far_target_is_unreachable_and_limits_hold(arm, ik):
     pos = jnp.array([[1.6, 0.0, 0.05], [0.0, 1.6, 0.2], [1.25, 0.0, 0.05], [0.8, 0.0, 0.05]])
     targets = jax.vmap(A.top_down_target)(pos, jnp.zeros(4))

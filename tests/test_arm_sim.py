@@ -67,10 +67,12 @@ def sim():
                 out=out, out2=out2, trace=jax.device_get(trace), obj=obj, oq=oq)
 
 
+@pytest.mark.slow  # compiles the arm's MJX world
 def test_ik_waypoints_reachable(sim):
     assert np.asarray(sim["ik"].reachable).all()
 
 
+@pytest.mark.slow  # compiles the arm's MJX world
 def test_grasp_lifts_box_and_miss_holds_nothing(sim):
     obj_pos, _, touch = sim["trace"]
     ends = np.cumsum(SEG) - 1
@@ -84,6 +86,7 @@ def test_grasp_lifts_box_and_miss_holds_nothing(sim):
     np.testing.assert_allclose(obj_pos[~grasp, -1], np.c_[XS, YS, np.full(4, 0.04)][~grasp], atol=2e-3)
 
 
+@pytest.mark.slow  # compiles the arm's MJX world
 def test_arm_tracks_waypoints(sim):
     _, tcp, _ = sim["trace"]
     ends = np.cumsum(SEG) - 1
@@ -99,10 +102,12 @@ def test_arm_tracks_waypoints(sim):
     assert err_final[~miss].max() < 0.015, err_final
 
 
+@pytest.mark.slow  # compiles the arm's MJX world
 def test_no_retrace_and_deterministic(sim):
     np.testing.assert_array_equal(np.asarray(sim["out"].qpos), np.asarray(sim["out2"].qpos))
 
 
+@pytest.mark.slow  # compiles the arm's MJX world
 def test_native_c_replay_agrees(sim):
     m, arm = sim["m"], sim["arm"]
     total = int(sum(SEG))

@@ -311,6 +311,7 @@ def test_bad_inputs_are_clear_errors(data3, tmp_path):
 # ------------------------------------------------------------------------------- CLI
 
 
+@pytest.mark.slow  # a whole synthetic sweep and report through the CLI
 def test_cli_experiment_and_report(tmp_path):
     parser = argparse.ArgumentParser()
     cli_learn.register(parser.add_subparsers(dest="command"))

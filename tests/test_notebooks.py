@@ -45,6 +45,7 @@ def test_notebooks_use_only_the_public_api():
         assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code"), f"{path.name} is stored with outputs"
 
 
+@pytest.mark.slow  # runs a notebook kernel on a simulated run
 def test_02_features(scene_run, monkeypatch):
     nb = execute("02_features.ipynb", scene_run, monkeypatch)
     text = outputs(nb)
@@ -54,6 +55,7 @@ def test_02_features(scene_run, monkeypatch):
     assert images(nb) >= 4  # scenes, PCA bars, two RHF grids
 
 
+@pytest.mark.slow  # runs a notebook kernel on a simulated run
 def test_03_learning_and_bootstrapping(scene_run, monkeypatch):
     nb = execute("03_learning_and_bootstrapping.ipynb", scene_run, monkeypatch)
     text = outputs(nb)

@@ -168,6 +168,7 @@ KILL_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # a subprocess run killed with SIGKILL
 def test_interrupted_and_killed_run_continues_to_the_same_results(base, tmp_path):
     """Ctrl-C in the generate stage, then SIGKILL while the experiment writes its blocks:
     the third attempt finishes with the results of the uninterrupted run."""

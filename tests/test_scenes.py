@@ -123,6 +123,7 @@ def test_sampling_distribution_and_determinism(scene_world):
     assert between.mean() > 0.4
 
 
+@pytest.mark.slow  # compiles run_scenes at a second batch size
 def test_run_scenes_one_compile_and_bitwise_reproducible(scene_world):
     s1, st1 = sc.run_scenes(12, seed=5, batch=B, world=scene_world, progress=False)
     s2, st2 = sc.run_scenes(12, seed=5, batch=B, world=scene_world, progress=False)
@@ -186,6 +187,7 @@ HANG_SCRIPT = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow  # a batch of 1024 scenes
 def test_batch_1024_does_not_deadlock():
     """jax 0.10 deadlocked vmapped mjx.step at batch 1024 on this machine (REFERENCE 1).
     A separate process with a hard timeout: a deadlock cannot be interrupted in-process."""
