@@ -10,7 +10,7 @@ import pytest
 from relaff_jax.cli import sim as cli_sim
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.errors import UserError
-from relaff_jax.sim import bodies, geometry, labels, native, programs, rollouts, templates
+from relaff_jax.sim import bodies, geometry, labels, native, planning, programs, rollouts, templates
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
@@ -281,3 +281,28 @@ def test_grasp_needs_the_pads_faces_mjx_and_c():
     dx = NS(_impl=NS(contact=NS(geom=jnp.array([[pl, obj], [pr, obj]]), dist=jnp.array([0.0, 0.01]),
                                 frame=jnp.asarray(np.stack([side, side])))), geom_xmat=jnp.asarray(xmat))
     assert A.finger_contacts(arm, cfg.arm, dx, [obj]).tolist() == [True, False]
+
+
+def test_programs_on_hand_built_scenes():
+    """The motor programs' tcp targets, one scene at a time, without simulating: lift grasps
+    the base (the pair is lifted), take the toy; pull drags towards the robot, push away;
+    every target finite, padded to N_TARGETS (fast tier: no MJX step is compiled)."""
+    cfg = templates.ActionConfig()
+    st = planning.setup(cfg)
+    pair, qpos = hand_built(st.world, BASE_ROWS[1:2])  # block on a tray at (0.7, -0.3), yaw 0.2
+    p, q = pair[0], qpos[0][:14]
+    progs = {a: programs.program(a, st.arm, cfg, st.geo, p, q) for a in
+             ("lift", "take", "pull", "push", "pour", "slide", "move")}
+    for a, prog in progs.items():
+        assert prog.targets.pos.shape == (templates.N_TARGETS, 3) and bool(jnp.isfinite(prog.targets.pos).all()), a
+    toy, oth = bodies.bodies(st.geo, p, q)
+
+    def passes_over(prog, xy):
+        return float(jnp.min(jnp.linalg.norm(prog.targets.pos[:, :2] - xy, axis=1))) < 0.01
+
+    assert passes_over(progs["lift"], oth.centre[:2]) and passes_over(progs["take"], toy.centre[:2])
+    radial = np.asarray(oth.centre[:2]) / np.linalg.norm(np.asarray(oth.centre[:2]))
+    np.testing.assert_allclose(np.asarray(progs["pull"].direction[:2]), -radial, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(progs["push"].direction[:2]), radial, atol=1e-6)
+    with pytest.raises(ValueError, match="unknown action"):
+        programs.program("fly", st.arm, cfg, st.geo, p, q)
