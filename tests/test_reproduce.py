@@ -250,6 +250,18 @@ def test_a_corrupt_feature_chunk_is_reported_and_recomputed(base, tmp_path, monk
             np.testing.assert_array_equal(a, results_of(out0)[s])
 
 
+def test_stage_progress_comes_from_the_stage_packages(base, tmp_path):
+    from relaff_jax.learn.status import sweep_progress
+
+    out, *_ = base
+    cfg = override(R.preset("tiny"), FAST)
+    assert D.generation_progress(out / "data" / "lift", 32) == 1.0
+    assert D.features_progress(out / "data" / "lift", 32, cfg.dataset.feature_batch) == 1.0
+    assert sweep_progress(out / "results", cfg.experiment, len(ACTS), ("pca", "rhf")) == 1.0
+    assert D.generation_progress(tmp_path / "none", 32) == 0.0 and D.features_progress(tmp_path, 32, 8) == 0.0
+    assert sweep_progress(tmp_path / "none", cfg.experiment, len(ACTS), ("pca",)) == 0.0
+
+
 # ---------------------------------------------------------------------------- bad input
 
 

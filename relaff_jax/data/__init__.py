@@ -21,7 +21,7 @@ Files (one job each):
 * ``generate.py``  ``generate_dataset`` (resumable, deterministic);
 * ``load.py``      ``load_rollouts``, ``load_dataset``, feature-chunk reading;
 * ``features.py``  ``add_features`` (resumable, ``overwrite`` recomputes);
-* ``status.py``    ``dataset_status``, ``features_status``;
+* ``status.py``    ``dataset_status``, ``features_status``, and their progress fractions;
 * ``info.py``      ``info``, ``format_info``;
 * ``export.py``    ``export_dataset``: Parquet, JSON schema of the features, dataset card.
 
@@ -39,7 +39,7 @@ from relaff_jax.data.generate import generate_dataset
 from relaff_jax.data.info import format_info, info
 from relaff_jax.data.load import load_dataset, load_rollouts
 from relaff_jax.data.selection import Selection, select_balanced
-from relaff_jax.data.status import dataset_status, features_status
+from relaff_jax.data.status import dataset_status, features_progress, features_status, generation_progress
 
 __all__ = [
     "ACTIONS", "RELATIONS", "CHUNKS", "FEATURES", "FEATURES_SIDECAR", "FORMAT", "FORMAT_VERSION", "LOCK",
@@ -47,4 +47,5 @@ __all__ = [
     "DatasetError", "ForeignDirectoryError", "DatasetMismatchError", "CorruptDatasetError", "RolloutCapError",
     "export_dataset", "add_features", "generate_dataset", "format_info", "info", "load_dataset",
     "load_rollouts", "Selection", "select_balanced", "dataset_status", "features_status",
+    "generation_progress", "features_progress",
 ]

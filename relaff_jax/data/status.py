@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping
 
-from relaff_jax.data.config import FEATURES, LOCK, jsonable_config
+from relaff_jax.data.config import FEATURES, FEATURES_SIDECAR, LOCK, SIDECAR, jsonable_config
 from relaff_jax.data.errors import CorruptDatasetError
 from relaff_jax.data.load import load_dataset, load_feature_chunks, load_rollouts, read_features_sidecar
 from relaff_jax.data.store import chunk_indices, chunk_path, mismatch, read_chunk, read_sidecar
@@ -87,3 +87,24 @@ def features_status(path: str | os.PathLike, batch: int, config: Mapping[str, An
     except CorruptDatasetError as e:
         return "corrupt", str(e)
     return "complete", f"features of {n} samples in {fmeta['chunks']} chunks"
+
+
+def generation_progress(path: str | os.PathLike, n_samples: int) -> float:
+    """Fraction of a dataset's generation done, from its sidecar alone (cheap enough for a
+    progress line): 1 when complete, else positives found towards the N/2 it needs."""
+    path = Path(path)
+    if not (path / SIDECAR).exists():
+        return 0.0
+    meta = read_sidecar(path)
+    if meta.get("status") == "complete":
+        return 1.0
+    half = max(n_samples // 2, 1)
+    return min(meta["counts"]["positives"], half) / half
+
+
+def features_progress(path: str | os.PathLike, n_samples: int, batch: int) -> float:
+    """Fraction of a dataset's feature chunks written (from ``features.json``)."""
+    fmeta = read_features_sidecar(Path(path)) if (Path(path) / FEATURES_SIDECAR).exists() else None
+    if fmeta is None:
+        return 0.0
+    return min(fmeta["chunks"] / math.ceil(n_samples / batch), 1.0)

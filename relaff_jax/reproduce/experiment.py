@@ -2,11 +2,9 @@
 (``relaff_jax.learn.run_experiment``), in ``DIR/results/``."""
 from __future__ import annotations
 
-import math
 import time
 
 from relaff_jax import io as rio
-from relaff_jax.learn import forests_per_space
 from relaff_jax.reproduce.folder import ReproduceError
 from relaff_jax.reproduce.stage import Run, Status
 
@@ -38,17 +36,10 @@ def status(run: Run, datasets: dict | None = None) -> Status:
 
 
 def progress(run: Run) -> float:
-    """Blocks written, weighted by each space's number of forests."""
-    ec, res, a = run.cfg.experiment, run.paths.results, len(run.cfg.reproduce.actions)
-    n_chunks = math.ceil(len(ec.sizes) / ec.sizes_per_block)
-    done = total = 0.0
-    for s in run.cfg.reproduce.spaces:
-        w = forests_per_space(ec, a, s)
-        blocks = len(list((res / s / "blocks").glob("*.npz"))) if (res / s / "blocks").exists() else 0
-        frac = 1.0 if (res / s / "results.npz").exists() else \
-            0.1 * (res / s / "prep.npz").exists() + 0.9 * blocks / (ec.reps(s) * a * n_chunks)
-        done, total = done + w * frac, total + w
-    return done / total
+    from relaff_jax.learn.status import sweep_progress
+
+    c = run.cfg
+    return sweep_progress(run.paths.results, c.experiment, len(c.reproduce.actions), c.reproduce.spaces)
 
 
 def run(run: Run, forced: bool) -> dict:

@@ -3,12 +3,10 @@
 from __future__ import annotations
 
 import functools
-import math
 import time
 from typing import Any
 
 from relaff_jax import data as D
-from relaff_jax import io as rio
 from relaff_jax.config import to_dict
 from relaff_jax.reproduce.stage import Run, Status
 
@@ -48,14 +46,8 @@ def status(run: Run) -> Status:
 
 
 def progress(run: Run) -> float:
-    acts = run.cfg.reproduce.actions
-    chunks = math.ceil(run.cfg.dataset.n_samples / run.cfg.dataset.feature_batch)
-    done = 0.0
-    for a in acts:
-        side = run.paths.dataset(a) / D.FEATURES_SIDECAR
-        if side.exists():
-            done += min(rio.read_json(side)["chunks"] / chunks, 1.0)
-    return done / len(acts)
+    acts, d = run.cfg.reproduce.actions, run.cfg.dataset
+    return sum(D.features_progress(run.paths.dataset(a), d.n_samples, d.feature_batch) for a in acts) / len(acts)
 
 
 def run(run: Run, forced: bool) -> dict:

@@ -51,14 +51,7 @@ def status(run: Run) -> Status:
 
 def progress(run: Run) -> float:
     acts = run.cfg.reproduce.actions
-    half = run.cfg.dataset.n_samples // 2
-    done = 0.0
-    for a in acts:
-        side = run.paths.dataset(a) / D.SIDECAR
-        if side.exists():
-            meta = rio.read_json(side)
-            done += 1.0 if meta.get("status") == "complete" else min(meta["counts"]["positives"], half) / half
-    return done / len(acts)
+    return sum(D.generation_progress(run.paths.dataset(a), run.cfg.dataset.n_samples) for a in acts) / len(acts)
 
 
 def run(run: Run, forced: bool) -> dict:
