@@ -81,6 +81,16 @@ def test_export_file_path_and_pandas(dataset, tmp_path):
     assert df["relation"].tolist() == d["relation"].tolist()
 
 
+def test_polars_reads_the_feature_columns_as_fixed_size_arrays(dataset, tmp_path):
+    pl = pytest.importorskip("polars")
+    paths = D.export_dataset(dataset, tmp_path / "out")
+    df = pl.read_parquet(paths["data"])
+    d = D.load_dataset(dataset)
+    assert df.schema["pca"] == pl.Array(pl.Float32, 18) and df.schema["rhf"] == pl.Array(pl.Float32, 300)
+    np.testing.assert_array_equal(df["pca"].to_numpy(), d["pca"])
+    np.testing.assert_array_equal(df["rhf"].to_numpy(), d["rhf"])
+
+
 def test_export_bad_out_and_input(dataset, tmp_path):
     f = tmp_path / "file"
     f.write_text("x")
