@@ -84,7 +84,7 @@ def example_blocks(shown: Sequence[tuple[str, str, str]]) -> list[tuple]:
     if not shown:
         return []
     blocks: list[tuple] = [("h", 2, "Example scenes"),
-                           ("p", "What the robot saw (`features.show_scene`): the simulated Kinect depth image, its "
+                           ("p", "What the robot saw (`perception.from_sim.show_scene`): the simulated Kinect depth image, its "
                                  "colour segmentation into the toy and the other object, and the two objects' voxel clouds "
                                  "with their PCA frames.")]
     return blocks + [("img", path, cap) for _, path, cap in shown]
