@@ -8,7 +8,15 @@ Then projects the full paper protocol (sizes 2..100, 50 PCA / 25 RHF repetitions
 condition) and the quick preset from the measured all-core rates, plus the one-off source
 predictors and categories.
 
-    PYTHONPATH=. python benchmarks/sweep.py [--calls 2] [--jobs 0]
+Before that, per forest and in the same run, the two forest engines (``relaff_jax.learn.engine``):
+``sklearn`` (``RandomForestClassifier`` fit + ``predict`` on 4000 rows, one forest at a time)
+and ``fast`` (scikit-learn's Cython builder called directly + all forests of a block evaluated
+in one jitted program), their ratio, and the paper protocol's sweep projected on 2 cores from
+``learn.forests_per_space`` with each engine. ``--smoke`` measures PCA only with few forests
+(under 2 minutes); the last line is always ``speedup=<fast / sklearn forests per second, fit +
+evaluation, n = 25, PCA>``.
+
+    PYTHONPATH=. python benchmarks/sweep.py [--calls 2] [--jobs 0] [--smoke]
 
 The machine may be shared: numbers are wall-clock and include whatever else runs.
 """
@@ -22,6 +30,7 @@ import numpy as np
 
 from relaff_jax import learn as E
 from relaff_jax import learn as L
+from relaff_jax.learn import engine as G
 
 SIZES = (4, 25, 100)
 DIMS = {"pca": 18, "rhf": 318}
@@ -31,34 +40,38 @@ def _block_inputs(space: str, m: int = 4100 + 100, seed: int = 0):
     rng = np.random.default_rng(seed)
     X = rng.normal(size=(m, DIMS[space])).astype(np.float32)
     y = X[:, 0] + X[:, 1] > 0
-    boot = (rng.random((8, m)) < 0.5).astype(np.float32)
+    boot = (rng.random((40, m)) < 0.5).astype(np.float32)
     test_idx, order = np.arange(4000), np.arange(4000, 4100)
     return X, y, boot, test_idx, order
 
 
-def _one_call(space: str, n: int, k: int, seed: int) -> tuple[int, float]:
+def _one_call(space: str, n: int, k: int, seed: int, engine: str = "fast") -> tuple[int, float]:
     """k DB1-style learners (one bootstrap input each) at size n; returns (fits, CPU seconds)."""
+    os.environ[G.ENV] = engine  # set in the worker process itself (loky reuses its workers)
     cfg = E.ExperimentConfig()
     X, y, boot, test_idx, order = _block_inputs(space, seed=seed)
     plan = [(1 + s, (s,)) for s in range(k)]
     c = time.process_time()
-    E.run_block(X, y, boot, plan, order, test_idx, [n], cfg.repeats(space), 20, cfg.forest, (seed, n))
+    E.run_block(X, y, boot, plan, order, test_idx, [n], cfg.repeats(space), 1 + k, cfg.forest, (seed, n))
     return k, time.process_time() - c
 
 
-def measure(space: str, n: int, jobs: int, calls: int, k: int = 4) -> tuple[float, float]:
-    """(fits per wall second, CPU seconds per fit) with ``jobs`` processes (1: in-process)."""
+def measure(space: str, n: int, jobs: int, calls: int, k: int = 32, engine: str = "fast") -> tuple[float, float]:
+    """(fits per wall second, CPU seconds per fit) with ``jobs`` processes (1: in-process);
+    each call is a block of ``k`` forests (the sweep's blocks hold ~1000)."""
     from joblib import Parallel, delayed
 
     if jobs == 1:
-        _one_call(space, n, 1, 99)  # warm caches
+        for c in range(calls):
+            _one_call(space, n, k, c, engine)  # warm caches and compile the timed calls' shapes
         t = time.perf_counter()
-        out = [_one_call(space, n, k, c) for c in range(calls)]
+        out = [_one_call(space, n, k, c, engine) for c in range(calls)]
     else:
         with Parallel(n_jobs=jobs) as par:
-            par(delayed(_one_call)(space, n, 1, 99 + j) for j in range(jobs))  # start + warm the workers
+            # start and warm the workers, compiling the timed calls' shapes (a compile is ~0.3 s)
+            par(delayed(_one_call)(space, n, k, c, engine) for c in range(calls * jobs))
             t = time.perf_counter()
-            out = par(delayed(_one_call)(space, n, k, c) for c in range(calls * jobs))
+            out = par(delayed(_one_call)(space, n, k, c, engine) for c in range(calls * jobs))
     wall = time.perf_counter() - t
     fits = sum(f for f, _ in out)
     return fits / wall, sum(c for _, c in out) / fits
@@ -72,12 +85,12 @@ def prep_seconds(space: str, categories: bool) -> float:
     t = time.perf_counter()
     for n in (2000, 4000):
         X = rng.normal(size=(n, d)).astype(np.float32)
-        f = L.fit_forest(X, X[:, 0] > 0, seed=0)
-        L.predict_class(f, rng.normal(size=(9 * 7500, d)).astype(np.float32))
+        f = G.fit(X, X[:, 0] > 0, 0)
+        G.predict(f, rng.normal(size=(9 * 7500, d)).astype(np.float32))
     t_src_cat = time.perf_counter() - t  # one source + one category
     t = time.perf_counter()
     X = rng.normal(size=(2000, d)).astype(np.float32)
-    f = L.fit_forest(X, X[:, 0] > 0, seed=0)
+    f = G.fit(X, X[:, 0] > 0, 0)
     t_src = time.perf_counter() - t
     t_cat = max(t_src_cat - t_src, 0.0)
     return 9 * t_src + (36 * t_cat if categories else 0.0)
@@ -107,13 +120,103 @@ def project(cfg: E.ExperimentConfig, rates: dict, spaces=("pca", "rhf")) -> dict
     return out
 
 
+def engine_times(space: str, n: int, k_old: int, k_new: int, seed: int = 0) -> dict[str, tuple[float, float]]:
+    """Seconds per forest ``{engine: (fit, evaluation on 4000 rows)}`` in this process, for the
+    sweep's DB1 learners (one bootstrap input) at size n; checks both predict the same."""
+    cfg = E.ExperimentConfig()
+    rep = cfg.repeats(space)
+    X, y, boot, test_idx, order = _block_inputs(space, seed=seed)
+    tr, d0 = order[:n], X.shape[1]
+    ZT = np.concatenate([X[test_idx].T, boot[:, test_idx]])
+    maps = [np.concatenate([np.arange(d0), d0 + np.repeat([s % len(boot)], rep)]) for s in range(max(k_old, k_new))]
+    fits = [(E.augment(X[tr], boot[[s % len(boot)]][:, tr], rep), y[tr], 1000 + s) for s in range(max(k_old, k_new))]
+    out, preds = {}, {}
+    # sklearn: fit, then predict the forest's own 4000 x D test matrix (as the old sweep did)
+    tests = [np.ascontiguousarray(ZT[m].T) for m in maps[:k_old]]
+    t_fit = t_eval = 0.0
+    preds["sklearn"] = []
+    for (x, yy, sd), xt in zip(fits[:k_old], tests):
+        t = time.perf_counter()
+        f = G.fit(x, yy, sd, cfg.forest, engine="sklearn")
+        t_fit += time.perf_counter() - t
+        t = time.perf_counter()
+        preds["sklearn"].append(L.predict_class(f, xt))
+        t_eval += time.perf_counter() - t
+    out["sklearn"] = (t_fit / k_old, t_eval / k_old)
+    # fast: fit every forest, then evaluate them all at once (compiled in a first, untimed pass)
+    forests = [G.fit(x, yy, sd, cfg.forest, engine="fast") for x, yy, sd in fits[:k_new]]
+    G.predict_many(forests, ZT, maps[:k_new])
+    t = time.perf_counter()
+    forests = [G.fit(x, yy, sd, cfg.forest, engine="fast") for x, yy, sd in fits[:k_new]]
+    t_fit = time.perf_counter() - t
+    t = time.perf_counter()
+    pred = G.predict_many(forests, ZT, maps[:k_new])
+    t_eval = time.perf_counter() - t
+    out["fast"] = (t_fit / k_new, t_eval / k_new)
+    k = min(k_old, k_new)
+    if not np.array_equal(pred[:k], np.stack(preds["sklearn"])[:k]):
+        raise AssertionError(f"{space} n={n}: the engines predicted differently")
+    return out
+
+
+def engine_table(spaces, k_old: int, k_new: int) -> dict:
+    """Print the per-forest table; return {(space, n): {engine: (fit, eval)}}."""
+    print("| space (dims) | n | trees | sklearn fit ms | sklearn eval ms | fast fit ms | fast eval ms | "
+          "sklearn forests/s | fast forests/s | speed-up |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    res = {}
+    for s in spaces:
+        dims = DIMS[s] + E.ExperimentConfig().repeats(s)
+        for n in SIZES:
+            r = res[(s, n)] = engine_times(s, n, k_old, k_new)
+            (of, oe), (nf, ne) = r["sklearn"], r["fast"]
+            print(f"| {s.upper()} ({dims}) | {n} | {L.n_trees(n)} | {1e3 * of:.1f} | {1e3 * oe:.1f} | {1e3 * nf:.2f} | "
+                  f"{1e3 * ne:.2f} | {1 / (of + oe):.1f} | {1 / (nf + ne):.1f} | {(of + oe) / (nf + ne):.1f}x |", flush=True)
+    return res
+
+
+def project_engines(res: dict, spaces, cores: int = 2, measured: dict | None = None) -> None:
+    """The paper protocol's sweep on ``cores`` cores: forests_per_space x seconds per forest
+    (piecewise linear in n, averaged over the sizes) / cores (one process per core)."""
+    cfg = E.experiment_preset("paper")
+    print(f"| space | forests (forests_per_space) | sklearn, {cores} cores | fast, {cores} cores"
+          + (" | fast, measured on all cores |" if measured else " |"))
+    print("|---|---:|---:|---:|" + ("---:|" if measured else ""))
+    tot = {"sklearn": 0.0, "fast": 0.0, "measured": 0.0}
+    for s in spaces:
+        count = L.forests_per_space(cfg, 9, s)
+        row = f"| {s.upper()} | {count:,} |"
+        for eng in ("sklearn", "fast"):
+            spf = np.interp(cfg.sizes, SIZES, [sum(res[(s, n)][eng]) for n in SIZES]).mean()
+            tot[eng] += count * spf / cores
+            row += f" {_hms(count * spf / cores)} |"
+        if measured:
+            spf = np.interp(cfg.sizes, SIZES, [1.0 / measured[(s, n)] for n in SIZES]).mean()
+            tot["measured"] += count * spf
+            row += f" {_hms(count * spf)} |"
+        print(row)
+    print(f"| total | | **{_hms(tot['sklearn'])}** | **{_hms(tot['fast'])}** |" + (f" **{_hms(tot['measured'])}** |" if measured else ""))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--calls", type=int, default=2, help="calls of 4 fits per measurement and process")
+    ap.add_argument("--calls", type=int, default=2, help="blocks of 32 fits per measurement and process")
     ap.add_argument("--jobs", type=int, default=0, help="processes for 'all cores' (default: all)")
+    ap.add_argument("--smoke", action="store_true", help="PCA only, few forests, no all-core runs (< 2 min)")
     args = ap.parse_args()
     allj = args.jobs or os.cpu_count() or 1
-    print(f"# relaff sweep benchmark: {os.cpu_count()} cores, all-cores = {allj} processes; "
+    print(f"# forest engines, one process, {os.cpu_count()} cores; fit on n samples + evaluation on 4000 rows "
+          f"per forest (fast: evaluated together); load average before: {os.getloadavg()[0]:.2f}")
+    print()
+    spaces = ("pca",) if args.smoke else ("pca", "rhf")
+    eng = engine_table(spaces, k_old=6 if args.smoke else 10, k_new=128 if args.smoke else 256)
+    print()
+    if args.smoke:
+        project_engines(eng, spaces, cores=allj)
+        print()
+        _print_speedup(eng)
+        return
+    print(f"# relaff sweep benchmark (fast engine, blocks of 32 forests): {os.cpu_count()} cores, all-cores = {allj} processes; "
           "one fit = forest fit on n samples + predict 4000 test samples; "
           f"load average before: {os.getloadavg()[0]:.2f}")
     print()
@@ -154,6 +257,18 @@ def main() -> None:
           f"{_hms(sum(project(E.ExperimentConfig(categories_with_target=True), idle).values()) + sum(prep.values()))}.")
     print(f"Paper: ~1.5 weeks of random forest learning on a 32-process cluster. "
           f"Load average after: {os.getloadavg()[0]:.2f}")
+    print()
+    print("Paper protocol's sweep by engine (one-process seconds per forest / cores; measured: the "
+          "fast engine's all-core rates above):")
+    print()
+    project_engines(eng, ("pca", "rhf"), cores=allj, measured=rates)
+    print()
+    _print_speedup(eng)
+
+
+def _print_speedup(eng: dict) -> None:
+    (of, oe), (nf, ne) = eng[("pca", 25)]["sklearn"], eng[("pca", 25)]["fast"]
+    print(f"speedup={(of + oe) / (nf + ne):.2f}")
 
 
 def _hms(sec: float) -> str:

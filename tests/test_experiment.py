@@ -194,17 +194,17 @@ def test_forests_per_space_hand_worked():
 
 
 def _count_fits(monkeypatch):
-    from relaff_jax.learn import blocks, prep
+    from relaff_jax.learn import blocks, engine, prep
 
     n = {"fits": 0}
-    real = L.fit_forest
+    real = engine.fit  # what the sweep and prep fit with (either engine)
 
     def counting(*args, **kwargs):
         n["fits"] += 1
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(prep, "fit_forest", counting)
-    monkeypatch.setattr(blocks, "fit_forest", counting)
+    monkeypatch.setattr(prep, "fit", counting)
+    monkeypatch.setattr(blocks, "fit", counting)
     return n
 
 

@@ -2,7 +2,8 @@
 
 Takes a target pool's states ``X: (M, D)``, labels ``y: (M,)``, bootstrap inputs ``boot: (R,
 M)``, the target's condition plan and one repetition's draw; ``run_block`` fits one forest per
-distinct bootstrap input set and size and returns the test accuracies ``(C, sizes)``.
+distinct bootstrap input set and size (``engine.fit``), predicts the test set with all of
+them at once (``engine.predict_many``) and returns the test accuracies ``(C, sizes)``.
 ``run_block_to_file`` also saves them atomically; ``read_block`` reads a finished block back
 (None if missing or corrupt, so a killed sweep resumes with the finished blocks).
 """
@@ -14,9 +15,12 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.learn.forests import ForestConfig, fit_forest, predict_class
+from relaff_jax.learn.engine import Trees, fit, predict_many
+from relaff_jax.learn.forests import ForestConfig
 from relaff_jax.learn.states import augment
 from relaff_jax.provenance import derive_seed
+
+FLUSH = 256  # fast-engine forests evaluated together (bounds the trees held in memory)
 
 
 def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tuple[int, tuple[int, ...]]],
@@ -33,20 +37,39 @@ def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tup
     acc = np.full((n_conditions, len(sizes)), np.nan)
     first: dict[tuple[int, ...], int] = {}
     y = np.asarray(y).astype(bool)
+    X = np.asarray(X, dtype=np.float32)
+    d0 = X.shape[1]
+    boot = np.asarray(boot, dtype=np.float32)
+    y_test = y[test_idx]
+    # the test rows' columns, shared by every forest of the block: the state, then every
+    # bootstrap input row once; forest features map to them (augment repeats input columns)
+    ZT = np.concatenate([X[test_idx].T, boot[:, test_idx]])
+    forests, colmaps, slots = [], [], []
+
+    def flush():  # predict the fitted forests at once (the sklearn engine one by one)
+        for (c, si), p in zip(slots, predict_many(forests, ZT, colmaps)):
+            acc[c, si] = np.mean(p.astype(bool) == y_test)
+        forests.clear(), colmaps.clear(), slots.clear()
+
     for cond, rows in plan:
         if rows in first:
-            acc[cond] = acc[first[rows]]
             continue
         first[rows] = cond
         inputs = boot[list(rows)]
         if not np.all(np.isfinite(inputs)):
             raise ValueError(f"condition {cond}: bootstrap inputs {rows} were not computed for this space")
-        xc = augment(X, inputs, repeats)
-        x_test, y_test = xc[test_idx], y[test_idx]
+        colmap = np.concatenate([np.arange(d0), d0 + np.repeat(np.asarray(rows, dtype=np.intp), repeats)])
         for si, n in enumerate(sizes):
             tr = train_order[:n]
-            f = fit_forest(xc[tr], y[tr], derive_seed(*seed_keys, n, cond), forest)
-            acc[cond, si] = np.mean(predict_class(f, x_test).astype(bool) == y_test)
+            forests.append(fit(augment(X[tr], inputs[:, tr], repeats), y[tr], derive_seed(*seed_keys, n, cond), forest))
+            colmaps.append(colmap)
+            slots.append((cond, si))
+            if len(forests) >= (FLUSH if isinstance(forests[0], Trees) else 1):
+                flush()
+    flush()
+    for cond, rows in plan:
+        if first[rows] != cond:
+            acc[cond] = acc[first[rows]]
     return acc
 
 

@@ -4,7 +4,8 @@ Takes states ``X: (N, D)`` float32 and labels ``y: (N,)`` bool; gives fitted for
 (``fit_forest``) and their 0/1 predictions (``predict_class``). ``ForestConfig`` holds the
 paper's settings: trees from the sample count (``n_trees``), Gini, depth 200, min leaf 1,
 sqrt(M) features per split, Breiman's bootstrap. One forest runs in one process; the sweeps
-parallelise over forests (``sweep.py``), never inside one.
+parallelise over forests (``sweep.py``), never inside one. These estimators are the reference
+the fast engine (``engine.py``) is tested against bit for bit.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ class ForestConfig:
 
     ``max_samples`` is the reading of "each tree uses 2/3 of the samples": ``None`` (default)
     is Breiman's bootstrap of N draws with replacement, which leaves ~63 % distinct samples
-    per tree ("about two thirds"); a float f draws round(f N) with replacement instead
+    per tree ("about two thirds"); a float f draws max(1, floor(f N)) with replacement instead
     (f = 2/3 leaves only ~49 % distinct).
     """
 
@@ -36,6 +37,10 @@ class ForestConfig:
     max_features: str = "sqrt"
     bootstrap: bool = True
     max_samples: float | None = None
+    # "fast": the same trees built by scikit-learn's Cython builder without the estimator and
+    # evaluated in one jitted program (learn/engine.py), bit-identical to "sklearn", the
+    # RandomForestClassifier reference (tests/test_engine.py)
+    engine: str = "fast"
 
 
 def n_trees(n_samples: int, cfg: ForestConfig = ForestConfig()) -> int:
@@ -82,8 +87,13 @@ def predict_class(forest: RandomForestClassifier, X: np.ndarray) -> np.ndarray:
         return np.asarray(forest.predict(X), dtype=np.float32)
 
 
+ENGINES = ("fast", "sklearn")
+
+
 def check_forest_config(cfg: ForestConfig = ForestConfig()) -> None:
     """Let scikit-learn validate the forest parameters once (fits then skip re-validation)."""
+    if cfg.engine not in ENGINES:
+        raise UserError(f"forest.engine {cfg.engine!r}: expected one of {', '.join(ENGINES)}")
     try:
         make_forest(2, 0, cfg)._validate_params()
     except ValueError as e:

@@ -5,6 +5,7 @@ Takes ``{action: dataset}``, the space, the config and the seed; fits the A sour
 CBn, the A(A-1)/2 categories (each on the union of two source pools, canonical order), and
 returns (``prepare``) their 0/1 outputs on every target pool and the correlation matrix of
 the predictors on the held-out correlation scenes. Prep forests never see a target-pool scene.
+Forests are fitted and evaluated by the forest engine (``engine.py``).
 """
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ from relaff_jax.constants import ACTIONS
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig
 from relaff_jax.learn.correlation import category_pairs, correlation_matrix
 from relaff_jax.learn.datasets import check_datasets
-from relaff_jax.learn.forests import ForestConfig, fit_forest, predict_class
+from relaff_jax.learn.engine import fit, predict
+from relaff_jax.learn.forests import ForestConfig
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.protocol import split_pools
 from relaff_jax.learn.states import state_features
@@ -29,10 +31,10 @@ def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, a
     def states(b: str, idx: np.ndarray) -> np.ndarray:  # scenes of action b in this source's order
         return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space)
 
-    forest = fit_forest(states(action, src), labels[src], derive_seed(seed, 2, SPACE_CODE[space], ACTIONS.index(action)), fcfg)
+    forest = fit(states(action, src), labels[src], derive_seed(seed, 2, SPACE_CODE[space], ACTIONS.index(action)), fcfg)
 
     def on(b: str, idx: np.ndarray) -> np.ndarray:
-        return predict_class(forest, states(b, idx))
+        return predict(forest, states(b, idx))
 
     return [on(t, targets[t]) for t in actions], np.concatenate([on(b, corr_idx[b]) for b in actions])
 
@@ -47,8 +49,8 @@ def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, a
     x = np.concatenate([canon(a, src[a]), canon(b, src[b])])
     y = np.concatenate([labels[a][src[a]], labels[b][src[b]]])
     k = category_pairs(ACTIONS).index((ACTIONS.index(a), ACTIONS.index(b)))
-    forest = fit_forest(x, y, derive_seed(seed, 3, SPACE_CODE[space], k), fcfg)
-    return [predict_class(forest, canon(t, targets[t])) for t in actions]
+    forest = fit(x, y, derive_seed(seed, 3, SPACE_CODE[space], k), fcfg)
+    return [predict(forest, canon(t, targets[t])) for t in actions]
 
 
 def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: ExperimentConfig, seed: int,

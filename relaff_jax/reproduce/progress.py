@@ -23,7 +23,8 @@ COST = {
     "rollouts_per_s": 5.0,  # settle + plan + the feasible 3.3 s motor programs (docs/actions.md)
     "feature_compile": 40.0,
     "feature_scenes_per_s": 12.0,
-    "cpu_s_per_fit": 0.15,  # a forest of ~100 trees, fit + predict (docs/learning.md)
+    "cpu_s_per_fit": 0.01,  # a forest of ~100 trees, fit + predict, fast engine (docs/learning.md)
+    "cpu_s_per_fit_sklearn": 0.15,  # the same with experiment.forest.engine=sklearn
     "report_fixed": 60.0,
     "report_per_example": 1.5,
 }
@@ -46,7 +47,8 @@ def estimate_seconds(cfg: Any, jobs: int, cpus: int) -> dict[str, float]:
     gen = COST["sim_compile"] + a * n * COST["rollouts_per_sample"] / COST["rollouts_per_s"]
     feat = COST["feature_compile"] + a * n / COST["feature_scenes_per_s"]
     fits = sum(forests_per_space(cfg.experiment, a, s) for s in cfg.reproduce.spaces)
-    exp = fits * COST["cpu_s_per_fit"] / max(1, min(jobs, cpus))
+    per_fit = COST["cpu_s_per_fit_sklearn" if cfg.experiment.forest.engine == "sklearn" else "cpu_s_per_fit"]
+    exp = fits * per_fit / max(1, min(jobs, cpus))
     rep = COST["report_fixed"] + a * cfg.reproduce.examples_per_action * COST["report_per_example"]
     return {"generate": gen, "features": feat, "experiment": exp, "report": rep}
 

@@ -1,0 +1,201 @@
+"""The fast forest engine against RandomForestClassifier: the same trees, bit-identical
+predict_proba and classes (relaff_jax.learn.engine, engine_fit, engine_eval)."""
+import contextlib
+import inspect
+
+import numpy as np
+import pytest
+import sklearn
+from sklearn.ensemble import RandomForestClassifier
+
+from relaff_jax import learn as L
+from relaff_jax.config import override
+from relaff_jax.errors import UserError
+from relaff_jax.learn import blocks, engine
+from relaff_jax.learn.engine_eval import pack_forest, predict_block, predict_labels, predict_proba, round_down_f32
+from relaff_jax.learn.engine_fit import fit_trees
+
+SKLEARN_PIN = "1.9.1"
+
+
+def test_scikit_learn_is_the_pinned_version_and_its_private_api_unchanged():
+    """The engine calls scikit-learn's private tree API; an upgrade must fail here first."""
+    assert sklearn.__version__ == SKLEARN_PIN, (
+        f"scikit-learn {sklearn.__version__} is installed, the engine was checked against {SKLEARN_PIN}: "
+        "re-read sklearn/ensemble/_forest.py and sklearn/tree/_classes.py, update engine_fit.py and the pin")
+    from sklearn.ensemble import _base, _bootstrap, _forest
+    from sklearn.tree import _classes
+    from sklearn.tree._criterion import Gini
+    from sklearn.tree._splitter import BestSplitter
+    from sklearn.tree._tree import DepthFirstTreeBuilder, Tree
+
+    sig = lambda f: list(inspect.signature(f).parameters)  # noqa: E731
+    assert sig(_forest._generate_sample_indices) == ["random_state", "n_samples", "n_samples_bootstrap", "sample_weight"]
+    assert sig(_forest._parallel_build_trees)[:5] == ["tree", "bootstrap", "X", "y", "sample_weight"]
+    assert sig(_bootstrap._get_n_samples_bootstrap) == ["n_samples", "max_samples", "sample_weight"]
+    assert _forest.MAX_INT == np.iinfo(np.int32).max
+    assert "random_state.randint(np.iinfo(np.int32).max)" in inspect.getsource(_base._set_random_states)
+    assert "random_instance.randint(0, n_samples, n_samples_bootstrap)" in inspect.getsource(_forest._generate_sample_indices)
+    src = inspect.getsource(_classes.BaseDecisionTree._fit)
+    assert "DepthFirstTreeBuilder(" in src and "min_samples_split = max(min_samples_split, 2 * min_samples_leaf)" in src
+    # the Cython constructors take what engine_fit passes
+    crit = Gini(1, np.array([2], dtype=np.intp))
+    split = BestSplitter(crit, 1, 1, 0.0, np.random.RandomState(0), None)
+    DepthFirstTreeBuilder(split, 2, 1, 0.0, 200, 0.0).build(
+        Tree(2, np.array([2], dtype=np.intp), 1), np.asfortranarray(np.eye(2, dtype=np.float32)),
+        np.array([[0.0], [1.0]]), np.ones(2))
+
+
+def test_tree_seeds_are_the_forests():
+    X = np.random.default_rng(0).normal(size=(30, 18)).astype(np.float32)
+    y = X[:, 0] > 0
+    for seed in (0, 5, 2**31 - 2):
+        ref = L.fit_forest(X, y, seed)
+        rs = np.random.RandomState(seed)
+        assert [e.random_state for e in ref.estimators_] == [rs.randint(np.iinfo(np.int32).max) for _ in ref.estimators_]
+
+
+def test_round_down_f32_is_the_largest_float32_not_above():
+    t = np.array([0.1, -0.1, 1.0, 0.5 * (np.float32(0.1) + np.nextafter(np.float32(0.1), np.float32(1))), 3.4e38, -3.4e38, 1e-45])
+    r = round_down_f32(t)
+    assert r.dtype == np.float32
+    assert np.all(r.astype(np.float64) <= t)
+    assert np.all(np.nextafter(r, np.float32(np.inf)).astype(np.float64) > t)
+    assert r[2] == 1.0
+
+
+def _data(n, d, seed, kind="plain"):
+    rng = np.random.default_rng(1000 * n + d + seed)
+    X = rng.normal(size=(n, d)).astype(np.float32)
+    y = X[:, 0] + 0.5 * X[:, 1] + 0.3 * rng.normal(size=n) > 0
+    if kind == "one_class":
+        y = np.ones(n, bool)
+    elif kind == "duplicates":  # repeated rows, some with the other label: impure leaves
+        k = max(1, n // 3)
+        X[-k:] = X[:k]
+        y[-k:] = ~y[:k]
+    elif kind == "constant":
+        X[:, ::2] = 1.5
+    return X, y
+
+
+def _test_rows(X, forest_trees, m, seed):
+    """Random rows, the training rows, and rows sitting on the trees' thresholds (rounded
+    to float32 and one float32 step either side): where float32/float64 matter."""
+    rng = np.random.default_rng(seed)
+    d = X.shape[1]
+    rows = [rng.normal(size=(m, d)).astype(np.float32), X]
+    for tree in forest_trees[:5]:
+        inner = np.flatnonzero(tree.children_left != -1)[:8]
+        for i in inner:
+            t32 = np.float32(tree.threshold[i])
+            for v in (t32, np.nextafter(t32, np.float32(-np.inf)), np.nextafter(t32, np.float32(np.inf))):
+                r = X[rng.integers(len(X))].copy()
+                r[tree.feature[i]] = v
+                rows.append(r[None])
+    return np.concatenate(rows).astype(np.float32)
+
+
+def _check(X, y, seed, cfg=L.ForestConfig(), m=300):
+    ref = L.fit_forest(X, y, seed, cfg)
+    fast = fit_trees(X, y, seed, cfg)
+    assert len(fast.trees) == len(ref.estimators_) == L.n_trees(len(y), cfg)
+    np.testing.assert_array_equal(fast.classes, ref.classes_)
+    for a, b in zip(ref.estimators_, fast.trees):
+        assert a.tree_.node_count == b.node_count
+        np.testing.assert_array_equal(a.tree_.feature, b.feature)
+        np.testing.assert_array_equal(a.tree_.threshold, b.threshold)
+        np.testing.assert_array_equal(a.tree_.value, b.value)
+    Xt = _test_rows(X, fast.trees, m, seed)
+    p_ref = ref.predict_proba(Xt)
+    assert np.array_equal(predict_proba(fast, Xt), p_ref)  # bit for bit, not approx
+    labels = ref.predict(Xt)
+    np.testing.assert_array_equal(predict_labels(fast, Xt), labels)
+    np.testing.assert_array_equal(predict_block([fast], Xt.T, [np.arange(X.shape[1])])[0], labels)
+    np.testing.assert_array_equal(engine.predict(fast, Xt), labels.astype(np.float32))
+    return fast
+
+
+# fast tier: every n and every feature count at least once (the slow test runs the whole grid)
+FAST_GRID = [(2, 18), (3, 318), (10, 24), (25, 18), (25, 348), (100, 318), (100, 18), (400, 24)]
+
+
+@pytest.mark.parametrize("n, d", FAST_GRID)
+def test_same_forest_and_predictions_as_sklearn(n, d):
+    _check(*_data(n, d, 0), seed=n + d)
+
+
+@pytest.mark.parametrize("kind, n", [("one_class", 2), ("one_class", 25), ("duplicates", 25), ("duplicates", 100),
+                                     ("constant", 3), ("constant", 25)])
+def test_edge_cases_match_sklearn(kind, n):
+    fast = _check(*_data(n, 24, 1, kind), seed=7)
+    if kind == "one_class":
+        assert len(fast.classes) == 1 and pack_forest(fast) is None
+    if kind == "duplicates" and n >= 25:
+        assert pack_forest(fast) is None  # impure leaves: the exact float64 path
+
+
+@pytest.mark.parametrize("cfg", [
+    {"max_samples": 2 / 3}, {"max_samples": 0.05}, {"bootstrap": False},
+    {"base_trees": 3, "max_trees": 7, "samples_per_extra_tree": 5}, {"min_samples_leaf": 3},
+    {"max_depth": 2}, {"max_features": "log2"},
+])
+def test_parameters_match_sklearn(cfg):
+    # 0.05 x 40 = 2 draws per tree: scikit-learn warns, and so does the engine
+    with pytest.warns(UserWarning) if cfg.get("max_samples") == 0.05 else contextlib.nullcontext():
+        _check(*_data(40, 24, 2), seed=3, cfg=override(L.ForestConfig(), cfg))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["plain", "one_class", "duplicates", "constant"])
+@pytest.mark.parametrize("d", [18, 24, 318, 348])
+@pytest.mark.parametrize("n", [2, 3, 10, 25, 100, 400])
+def test_full_grid_several_seeds(n, d, kind):
+    for seed in (0, 1, 12345):
+        _check(*_data(n, d, seed, kind), seed=seed * 7 + n, m=1000)
+
+
+def test_block_of_many_forests_with_shared_columns():
+    """predict_block over forests of different sizes and feature maps = each forest alone."""
+    rng = np.random.default_rng(3)
+    Z = rng.normal(size=(400, 30)).astype(np.float32)
+    forests, maps, refs = [], [], []
+    for i, n in enumerate([2, 5, 25, 60, 100, 25, 3, 40, 80, 10]):
+        cols = rng.choice(30, size=12, replace=False)
+        X = rng.normal(size=(n, 12)).astype(np.float32)
+        y = X[:, 0] > 0 if i != 6 else np.zeros(n, bool)
+        forests.append(fit_trees(X, y, i))
+        maps.append(cols)
+        refs.append(L.fit_forest(X, y, i).predict(Z[:, cols]))
+    got = predict_block(forests, Z.T, maps, chunk=4)
+    for g, r in zip(got, refs):
+        np.testing.assert_array_equal(g, r)
+
+
+def test_run_block_same_accuracies_with_both_engines(monkeypatch):
+    rng = np.random.default_rng(0)
+    m = 500
+    X = rng.normal(size=(m, 18)).astype(np.float32)
+    y = X[:, 0] + X[:, 1] > 0
+    boot = (rng.random((4, m)) < 0.5).astype(np.float32)
+    boot[3] = np.nan  # a row this space did not compute: unused, so harmless
+    plan = [(0, ()), (1, (0,)), (2, (1,)), (3, (0, 1, 2)), (4, (0,))]
+    args = (X, y, boot, plan, np.arange(400, 430), np.arange(400), [2, 4, 25], 6, 6)
+    ref = blocks.run_block(*args, L.ForestConfig(engine="sklearn"), (1, 2))
+    got = blocks.run_block(*args, L.ForestConfig(engine="fast"), (1, 2))
+    assert np.array_equal(ref, got, equal_nan=True)
+    assert np.isnan(got[5]).all() and np.array_equal(got[4], got[1])
+
+
+def test_engine_setting():
+    from relaff_jax import runconfig
+
+    assert L.ForestConfig().engine == "fast"
+    cfg = runconfig.resolve(None, {"experiment.forest.engine": "sklearn"}).experiment.forest
+    assert isinstance(engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, cfg), RandomForestClassifier)
+    with pytest.raises(UserError, match="forest.engine 'turbo'"):
+        L.check_forest_config(L.ForestConfig(engine="turbo"))
+    with pytest.raises(UserError, match="forest engine 'turbo'"):
+        engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, L.ForestConfig(engine="turbo"))
+    with pytest.raises(ValueError, match="NaN"):
+        engine.fit(np.full((3, 2), np.nan, np.float32), np.array([0, 1, 1]), 0, engine="fast")
