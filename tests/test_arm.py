@@ -126,6 +126,7 @@ def test_far_target_is_unreachable_and_limits_hold(arm, ik):
     assert np.all(q >= arm.q_lo) and np.all(q <= arm.q_hi)  # float32 limits lie inside the model's
 
 
+@pytest.mark.slow  # another IK path compile
 def test_ik_path_is_continuous(arm):
     cfg = A.ArmConfig()
     pts = jnp.array([[0.7, 0.2, 0.3], [0.7, 0.2, 0.05], [0.7, 0.2, 0.4], [0.5, -0.2, 0.4]])

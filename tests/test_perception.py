@@ -345,6 +345,7 @@ def test_voxels_open3d_random_cloud():
         np.testing.assert_allclose(_lexsorted(np.asarray(vox["points"][o][:k])), _lexsorted(o3_p), atol=2e-6)
 
 
+@pytest.mark.slow  # compiles the chain at small capacities
 def test_voxel_and_pixel_overflow_are_flagged_not_silent(chain):
     ok = chain["feats"]
     assert not bool(jnp.any(ok["overflow"]))

@@ -157,6 +157,7 @@ def test_native_mujoco_cross_check(scene_world, settle):
     assert np.median(err) < 0.005 and np.mean(err < 0.02) >= 0.85, err
 
 
+@pytest.mark.slow  # settles scenes in a CLI run (a third compile)
 def test_cli_scenes_json(capsys):
     assert cli.main(["scenes", "8", "--batch", "8", "--seed", "3", "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
