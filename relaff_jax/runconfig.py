@@ -80,7 +80,7 @@ def preset(name: str) -> RunConfig:
     """The three presets of ``relaff reproduce``.
 
     ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
-    repetitions, 4000 test samples, the paper's forests): about 30 hours on two cores.
+    repetitions, 4000 test samples, the paper's forests): about 13 hours on two cores.
     ``quick``: the README's main job, a small but complete study (all nine actions, both
     spaces, every bootstrapping condition), 10-16 minutes on two cores (docs/reproduce.md):
     100 samples per action, n in {2, 4, 10, 25}, 2 repetitions, the paper's forests; the

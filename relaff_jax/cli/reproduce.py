@@ -18,7 +18,7 @@ def register(sub) -> None:
                     "(relaff_jax.runconfig); the run log records the whole resolved tree.")
     p.add_argument("--preset", choices=PRESETS, default="quick",
                    help="quick: 10-16 min on 2 cores (default, docs/reproduce.md); paper: the full protocol "
-                        "(~30 h here); tiny: for tests")
+                        "(~13 h here); tiny: for tests")
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="run folder (created, or continued)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
