@@ -22,7 +22,14 @@ import numpy as np
 
 
 def _umask() -> int:
-    mask = os.umask(0)  # the only portable way to read it; restored at once
+    """The process umask, read without changing it where Linux allows (``os.umask`` can only
+    set it: setting and restoring would open a window in which another thread's new file
+    gets umask 0)."""
+    with contextlib.suppress(OSError, ValueError):
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    mask = os.umask(0)  # elsewhere: set and restore at once
     os.umask(mask)
     return mask
 

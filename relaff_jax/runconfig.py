@@ -115,7 +115,7 @@ def resolve(base: RunConfig | None = None, overrides: Mapping[str, Any] | None =
 def from_json(d: Mapping[str, Any]) -> RunConfig:
     """Rebuild a tree from ``to_dict`` output (a run log's ``config``)."""
     try:
-        return from_dict(RunConfig, {k: v for k, v in d.items()})
+        return from_dict(RunConfig, d)
     except (TypeError, AttributeError) as e:
         raise ConfigError(f"not a relaff_jax config tree: {e}") from e
 

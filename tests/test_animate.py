@@ -12,7 +12,8 @@ def test_box_outline_side_and_top_views():
     eye = np.eye(3).reshape(1, 9)
     (poly, depth), = animate.geom_outlines(aabb, xpos, eye, animate.VIEWS["side (x-z)"])
     assert depth == 2.0 and len(poly) == 4
-    np.testing.assert_allclose(poly.min(0), [0.9, 2.7]) and np.testing.assert_allclose(poly.max(0), [1.1, 3.3])
+    np.testing.assert_allclose(poly.min(0), [0.9, 2.7])
+    np.testing.assert_allclose(poly.max(0), [1.1, 3.3])
     # turned 90 degrees about z: the side view sees the 0.2 half size along x
     rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).reshape(1, 9)
     (poly, _), = animate.geom_outlines(aabb, xpos, rz, animate.VIEWS["side (x-z)"])

@@ -122,7 +122,6 @@ def add_features(path, batch: int = 32, seed: int = 0, overrides: dict | None = 
     from relaff_jax import data
 
     cfg = rconfig.override(config or pc.PerceptionConfig(), overrides or {})
-    pc.validate_config(cfg)
     world = wd.build_world()
     fn = make_feature_fn(world, cfg, seed)
     return data.add_features(path, fn, batch, progress,
