@@ -39,10 +39,12 @@ class Status:
     def combine(parts: dict[str, "Status"]) -> "Status":
         """One status for a stage made of parts (e.g. one dataset per action): complete only
         if every part is; otherwise the first part that is not, named."""
+        started = any(p.state != "absent" for p in parts.values())
         for name, st in parts.items():
             if st.state != "complete":
-                return Status("partial" if st.state == "absent" and any(
-                    p.state != "absent" for p in parts.values()) else st.state, f"{name}: {st.why}")
+                # an action not begun while others are done: the stage as a whole is partial
+                state = "partial" if st.state == "absent" and started else st.state
+                return Status(state, f"{name}: {st.why}")
         return Status("complete", f"{len(parts)} of {len(parts)} complete")
 
 
