@@ -24,6 +24,7 @@ COMMAND_MODULES = (
     "relaff_jax.cli.perception",
     "relaff_jax.cli.learn",
     "relaff_jax.cli.reproduce",
+    "relaff_jax.cli.real",
 )
 
 

@@ -1,0 +1,215 @@
+"""The four experiments of paper section VI on relation data (beside = 0 vs on_top = 1).
+
+Takes real data ``{pca (Nr, 18), rhf (Nr, 300), y (Nr,)}`` (``real_data``) and simulated
+data ``{pca (Ns, 18), rhf (Ns, 300), relation (Ns,)}`` (``sim_relations``; ``inside`` scenes
+are left out here) and a ``RealExperimentConfig``; ``run_space(real, sim, space, cfg)`` gives,
+for one state space (``pca``: 18 values; ``rhf``: 318 = PCA + RHF, as ``learn.states``),
+accuracies over ``reps`` repetitions:
+
+1. SIM -> SIM: ``sim_fair (R,)`` trained on as many balanced sim samples as the real training
+   set, ``sim_full (R,)`` on ``n_full``; each tested on as many other balanced sim samples;
+2. REAL -> REAL: ``real (R,)``: per repetition a balanced pool of the real pairs (all of the
+   smaller class, as many drawn from the larger), ``train_fraction`` of it (balanced) to train
+   (the paper's 100 of 160), the rest to test;
+3. SIM -> REAL: ``fair_to_real``, ``full_to_real (R,)``: the same sim forests on every real
+   pair, scored by balanced accuracy (mean of the two per-class accuracies; chance 0.5), so the
+   unbalanced real pool counts as a balanced test set;
+4. REAL <- SIM: ``curve_sl``, ``curve_bl (S, R)`` over training sizes ``sizes`` (S,): the real
+   learner without / with the SIM_full forest's 0/1 prediction as a bootstrap input repeated
+   ``repeats[space]`` times (``learn.states.augment``), trained on the first n of the
+   repetition's training split in alternating class order, tested on its test split.
+
+``run_sim_only(sim, space, cfg)`` adds SIM -> SIM for each pair of the three relations
+(``inside`` exists in simulation only). Forests: the project's engine (``learn.engine``) with 100 trees for every training size
+(paper VI-A). Seeds: ``derive_seed(seed, 17, space, rep, experiment, n)``.
+``summarise`` gives mean, std and a percentile bootstrap interval over repetitions, and the
+bootstrap factor curve with the count of sizes where it is undefined (P_sl <= 0.5).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from relaff_jax.constants import BESIDE, ON_TOP, RELATIONS, SPACES
+from relaff_jax.errors import UserError
+from relaff_jax.learn.analysis import bootstrap_factor
+from relaff_jax.learn.engine import fit, predict
+from relaff_jax.learn.forests import ForestConfig
+from relaff_jax.learn.states import augment, state_features
+from relaff_jax.provenance import derive_seed
+
+
+@dataclasses.dataclass(frozen=True)
+class RealExperimentConfig:
+    """Section VI settings: 50 repetitions, forests of 100 trees, balanced sets."""
+
+    reps: int = 50
+    trees: int = 100
+    train_fraction: float = 0.625  # the paper's 100 of 160
+    n_full: int = 1000  # SIM_full training samples (paper: 6500), as many to test
+    repeats_pca: int = 6
+    repeats_rhf: int = 30
+    n_boot: int = 2000  # resamples of the bootstrap interval
+    seed: int = 0
+    engine: str = "fast"
+
+    def forest(self) -> ForestConfig:
+        return ForestConfig(base_trees=self.trees, max_trees=self.trees, engine=self.engine)
+
+    def repeats(self, space: str) -> int:
+        return self.repeats_pca if space == "pca" else self.repeats_rhf
+
+
+def states(data: dict, space: str) -> np.ndarray:
+    """(N, 18) PCA or (N, 318) PCA + RHF states, float32."""
+    if space not in SPACES:
+        raise UserError(f"unknown space {space!r}; valid: {', '.join(SPACES)}")
+    return state_features(data["pca"], data["rhf"] if space == "rhf" else None, None, space)
+
+
+def split_sizes(y: np.ndarray, train_fraction: float) -> dict:
+    """Per-class pool, train and test counts of the real data: the pool is the smaller class
+    count m, train round(train_fraction * m) per class (>= 1), test the rest (>= 1)."""
+    y = np.asarray(y)
+    m = int(min((y == 0).sum(), (y == 1).sum()))
+    if m < 2:
+        raise UserError(f"the real data need >= 2 pairs of each relation, have {int((y == 0).sum())} beside "
+                        f"and {int((y == 1).sum())} on_top")
+    train = int(min(max(1, round(train_fraction * m)), m - 1))
+    return dict(pool=m, train=train, test=m - train)
+
+
+def balanced_take(rng: np.random.Generator, idx0: np.ndarray, idx1: np.ndarray, k: int) -> np.ndarray:
+    """k indices of each class, interleaved (class 1, class 0, class 1, ...), shuffled within class."""
+    a, b = rng.permutation(idx1)[:k], rng.permutation(idx0)[:k]
+    if len(a) < k or len(b) < k:
+        raise UserError(f"need {k} samples of each class, have {len(idx1)} and {len(idx0)}")
+    return np.stack([a, b], axis=1).ravel()
+
+
+def balanced_accuracy(pred: np.ndarray, y: np.ndarray) -> float:
+    """Mean of the per-class accuracies (0.5 = chance)."""
+    y = np.asarray(y).astype(bool)
+    pred = np.asarray(pred) > 0.5
+    return float(np.mean([np.mean(pred[y] == y[y]), np.mean(pred[~y] == y[~y])]))
+
+
+def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = RealExperimentConfig(),
+              progress: bool = False) -> dict:
+    """The four experiments in one space (see the module docstring); arrays keyed by name."""
+    Xr, yr = states(real, space), np.asarray(real["y"]).astype(bool)
+    keep = np.isin(sim["relation"], [BESIDE, ON_TOP])
+    Xs, ys = states(sim, space)[keep], np.asarray(sim["relation"])[keep] == ON_TOP
+    sz = split_sizes(yr, cfg.train_fraction)
+    n_tr, n_fair = sz["train"], 2 * sz["train"]
+    sim0, sim1 = np.flatnonzero(~ys), np.flatnonzero(ys)
+    half_full = cfg.n_full // 2
+    if min(len(sim0), len(sim1)) < 2 * half_full:
+        raise UserError(f"SIM_full needs {2 * half_full} simulated scenes of each relation (train + test), "
+                        f"have {len(sim0)} beside and {len(sim1)} on_top: simulate more or lower n_full")
+    real0, real1 = np.flatnonzero(~yr), np.flatnonzero(yr)
+    sizes = np.arange(2, 2 * n_tr + 1)
+    fcfg, rep = cfg.forest(), cfg.repeats(space)
+    code = SPACES.index(space)
+    out = {k: np.zeros(cfg.reps) for k in ("sim_fair", "sim_full", "real", "fair_to_real", "full_to_real")}
+    out["curve_sl"] = np.zeros((len(sizes), cfg.reps))
+    out["curve_bl"] = np.zeros((len(sizes), cfg.reps))
+    for r in range(cfg.reps):
+        rng = np.random.default_rng(derive_seed(cfg.seed, 17, code, r))
+        # 1 + 3: simulation forests, tested in simulation and on every real pair
+        for name, n_half, e in (("fair", n_tr, 0), ("full", half_full, 1)):
+            idx = balanced_take(rng, sim0, sim1, 2 * n_half)
+            tr, te = idx[: 2 * n_half], idx[2 * n_half:]
+            forest = fit(Xs[tr], ys[tr], derive_seed(cfg.seed, 17, code, r, e), fcfg)
+            out[f"sim_{name}"][r] = float(np.mean(predict(forest, Xs[te]) == ys[te]))
+            pred_real = predict(forest, Xr)
+            out[f"{name}_to_real"][r] = balanced_accuracy(pred_real, yr)
+            if name == "full":
+                boot = pred_real
+        # 2: real forests on a balanced split
+        pool = balanced_take(rng, real0, real1, sz["pool"])
+        tr, te = pool[: 2 * n_tr], pool[2 * n_tr:]
+        forest = fit(Xr[tr], yr[tr], derive_seed(cfg.seed, 17, code, r, 2), fcfg)
+        out["real"][r] = float(np.mean(predict(forest, Xr[te]) == yr[te]))
+        # 4: learning curves without / with the SIM_full prediction
+        Xb = augment(Xr, boot[None], rep)
+        for s, n in enumerate(sizes):
+            sub = tr[:n]
+            f_sl = fit(Xr[sub], yr[sub], derive_seed(cfg.seed, 17, code, r, 3, n), fcfg)
+            f_bl = fit(Xb[sub], yr[sub], derive_seed(cfg.seed, 17, code, r, 4, n), fcfg)
+            out["curve_sl"][s, r] = float(np.mean(predict(f_sl, Xr[te]) == yr[te]))
+            out["curve_bl"][s, r] = float(np.mean(predict(f_bl, Xb[te]) == yr[te]))
+        if progress:
+            print(f"{space}: repetition {r + 1}/{cfg.reps}", end="\r", flush=True)
+    if progress:
+        print()
+    out["sizes"] = sizes
+    out["split"] = np.asarray([sz["pool"], sz["train"], sz["test"], n_fair, 2 * half_full])
+    return out
+
+
+SIM_PAIRS = (("beside", "on_top"), ("beside", "inside"), ("on_top", "inside"))
+
+
+def run_sim_only(sim: dict, space: str, cfg: RealExperimentConfig = RealExperimentConfig()) -> dict:
+    """SIM -> SIM for every pair of relations, ``inside`` included (no real data has it):
+    ``{"a_vs_b": (R,) accuracies}``, each forest trained on k balanced scenes per class and
+    tested on k others, k = min(n_full / 2, half the smaller class)."""
+    X, rel = states(sim, space), np.asarray(sim["relation"])
+    code = SPACES.index(space)
+    out = {}
+    for p, (a, b) in enumerate(SIM_PAIRS):
+        ia, ib = np.flatnonzero(rel == RELATIONS.index(a)), np.flatnonzero(rel == RELATIONS.index(b))
+        k = min(cfg.n_full // 2, len(ia) // 2, len(ib) // 2)
+        if k < 1:
+            raise UserError(f"SIM -> SIM {a} vs {b} needs >= 2 simulated scenes of each, have {len(ia)}, {len(ib)}")
+        acc = np.zeros(cfg.reps)
+        for r in range(cfg.reps):
+            rng = np.random.default_rng(derive_seed(cfg.seed, 18, code, p, r))
+            idx = balanced_take(rng, ia, ib, 2 * k)  # class 1 = b
+            tr, te = idx[: 2 * k], idx[2 * k:]
+            yb = rel == RELATIONS.index(b)
+            forest = fit(X[tr], yb[tr], derive_seed(cfg.seed, 18, code, p, r, 1), cfg.forest())
+            acc[r] = float(np.mean(predict(forest, X[te]) == yb[te]))
+        out[f"{a}_vs_{b}"] = acc
+        out[f"{a}_vs_{b}_n"] = np.asarray(2 * k)
+    return out
+
+
+def interval(x: np.ndarray, rng: np.random.Generator, n_boot: int, level: float = 0.95) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean of ``x`` (R,)."""
+    x = np.asarray(x, float)
+    means = x[rng.integers(0, len(x), (n_boot, len(x)))].mean(axis=1)
+    lo, hi = np.quantile(means, [(1 - level) / 2, (1 + level) / 2])
+    return float(lo), float(hi)
+
+
+def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> dict:
+    """Mean, std (ddof=1) and 95 % bootstrap interval of each accuracy; curves, bootstrap
+    factors per size and the sizes where bf is undefined (P_sl <= 0.5)."""
+    rng = np.random.default_rng(derive_seed(cfg.seed, 17, 9))
+    acc = {}
+    for k in ("sim_fair", "sim_full", "real", "fair_to_real", "full_to_real"):
+        x = np.asarray(res[k])
+        acc[k] = dict(mean=float(x.mean()), std=float(x.std(ddof=1)) if len(x) > 1 else 0.0,
+                      ci95=interval(x, rng, cfg.n_boot))
+    sl, bl = res["curve_sl"].mean(axis=1), res["curve_bl"].mean(axis=1)
+    bf = bootstrap_factor(bl, sl)
+    sizes = np.asarray(res["sizes"])
+    undefined = sizes[~np.isfinite(bf)]
+    early = sizes <= max(4, sizes[len(sizes) // 3])
+    with np.errstate(invalid="ignore"):
+        bf_early = float(np.nanmean(bf[early])) if np.isfinite(bf[early]).any() else float("nan")
+    sim_only = {k: dict(mean=float(np.mean(res[k])), std=float(np.std(res[k], ddof=1)) if len(res[k]) > 1 else 0.0,
+                        ci95=interval(res[k], rng, cfg.n_boot), n_train=int(res[k + "_n"]))
+                for k in (f"{a}_vs_{b}" for a, b in SIM_PAIRS) if k in res}
+    pool, train, test, n_fair, n_full = (int(v) for v in res["split"])
+    return dict(accuracy=acc, sizes=sizes.tolist(), curve_sl=sl.tolist(), curve_bl=bl.tolist(),
+                curve_sl_std=res["curve_sl"].std(axis=1, ddof=1).tolist(),
+                curve_bl_std=res["curve_bl"].std(axis=1, ddof=1).tolist(),
+                bf=[None if not np.isfinite(v) else float(v) for v in bf],
+                bf_undefined_sizes=undefined.tolist(), bf_early_sizes=sizes[early].tolist(), bf_early_mean=bf_early,
+                split=dict(real_pool_per_class=pool, real_train_per_class=train, real_test_per_class=test,
+                           sim_fair_train=n_fair, sim_full_train=n_full), reps=len(res["real"]),
+                sim_only=sim_only)

@@ -1,0 +1,200 @@
+"""Simulated relation data seen by a simulated sensor that matches the real one.
+
+Takes a ``SimSensor`` (camera height, tilt and vertical field of view, from the real scenes:
+``sensor_from_scenes``) and a ``SimRelationConfig``; gives, per settled simulated toy+base
+scene, ``pca (N, 18)`` (toy first: the upper object of an ``on_top`` pair, as in the real
+labels), ``rhf (N, 300)`` (normals from the ray hits), ``relation (N,)`` index into
+``constants.RELATIONS`` (beside, on_top, inside), ``pair (N,)``, ``scene_id (N,)``.
+
+Scenes: ``sim.scenes.run_scenes`` on the toy+base pairs (the only pairing that stacks) with
+the workspace radius of the config, settled by MJX; the camera is ``frame.sim_camera(height,
+tilt, TARGET)`` with the sensor's field of view and the project's depth noise (``robwork``);
+features by the project's jitted batched perception chain, compiled once per chunk shape.
+Kept: scenes at rest with both objects seen (>= ``min_points`` voxels) and no capacity
+overflow; dropped scenes are counted, never silently. ``build_sim_relations(folder, ...)``
+works chunk by chunk, each chunk an atomic ``chunk_XXXXX.npz`` in ``folder``, so a killed run
+resumes; it stops once every relation of ``need`` has enough scenes. ``load_sim_relations``
+concatenates the chunks.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from relaff_jax import io as rio
+from relaff_jax.constants import RELATIONS
+from relaff_jax.errors import UserError
+from relaff_jax.provenance import derive_seed
+
+from . import frame as rframe
+from .scene_source import TARGET
+
+
+@dataclasses.dataclass(frozen=True)
+class SimSensor:
+    """The simulated camera's pose over the table and its vertical field of view (degrees)."""
+
+    height: float
+    tilt_deg: float
+    vfov_deg: float = 43.0
+
+
+@dataclasses.dataclass(frozen=True)
+class SimRelationConfig:
+    """Simulated relation data: scenes per chunk, workspace radius (m, around the robot),
+    the least scenes of each relation in ``need`` to stop at, a cap on chunks, the seed."""
+
+    per_relation: int = 1000
+    need: tuple[str, ...] = ("beside", "on_top")
+    chunk: int = 256
+    workspace_radius: float = 1.1
+    max_chunks: int = 200
+    noise: str = "robwork"
+    feature_batch: int = 32  # scenes per perception call (memory: ~1 GB at these capacities)
+    max_tiles: int = 600  # of 1200 16 x 16 tiles: objects 0.6 m from the camera are large
+    max_object_pixels: int = 65536
+    seed: int = 0
+
+
+def perception_config(sensor: SimSensor, cfg: SimRelationConfig):
+    """The ``PerceptionConfig`` of the simulated sensor (camera pose, fov, noise, capacities)."""
+    from relaff_jax.perception.config import (
+        CameraConfig,
+        CullConfig,
+        NoiseConfig,
+        PerceptionConfig,
+        VoxelConfig,
+    )
+
+    cam = rframe.sim_camera(sensor.height, sensor.tilt_deg, TARGET, CameraConfig(vfov_deg=sensor.vfov_deg))
+    return PerceptionConfig(camera=cam, noise=NoiseConfig(cfg.noise),
+                            voxel=VoxelConfig(max_object_pixels=cfg.max_object_pixels),
+                            cull=CullConfig(max_tiles=cfg.max_tiles))
+
+
+def _chunk_fn(world, sensor: SimSensor, cfg: SimRelationConfig):
+    """``run(c) -> dict of arrays`` for chunk ``c``: settle, perceive, filter."""
+    from relaff_jax.perception import make_batched_features
+    from relaff_jax.perception.from_sim import _jitted_geoms, rollout_keys
+    from relaff_jax.sim import scenes as sc
+
+    pcfg = perception_config(sensor, cfg)
+    feats = make_batched_features(world.mj_model.geom_type, world.geom_seg, pcfg)
+    geoms = _jitted_geoms(world)
+    scfg = sc.SceneConfig(workspace_radius=cfg.workspace_radius)
+    allowed = np.asarray([i for i, p in enumerate(world.pairs) if p[2] == "toy+base"])
+    root = jax.random.PRNGKey(derive_seed(cfg.seed, 16, 1))
+
+    def run(c: int) -> dict:
+        scenes, _ = sc.run_scenes(cfg.chunk, seed=derive_seed(cfg.seed, 16, 0, c), batch=cfg.chunk,
+                                  allowed=allowed, world=world, cfg=scfg, progress=False)
+        ids = c * cfg.chunk + np.arange(cfg.chunk, dtype=np.int64)
+        size, xpos, xmat = geoms(jnp.asarray(scenes.pair, jnp.int32), jnp.asarray(scenes.qpos, jnp.float32))
+        keys = rollout_keys(root, ids)
+        fb = cfg.feature_batch
+        parts = [jax.device_get(feats(size[i:i + fb], xpos[i:i + fb], xmat[i:i + fb], keys[i:i + fb]))
+                 for i in range(0, cfg.chunk, fb)]
+        out = {k: np.concatenate([np.asarray(p[k]) for p in parts]) for k in ("pca", "rhf", "unseen", "overflow")}
+        ok_rest = np.asarray(scenes.at_rest)
+        seen = ~np.asarray(out["unseen"]).any(-1)
+        ok_cap = ~np.asarray(out["overflow"])
+        keep = ok_rest & seen & ok_cap
+        return dict(pca=np.asarray(out["pca"])[keep], rhf=np.asarray(out["rhf"])[keep],
+                    relation=np.asarray(scenes.relation)[keep], pair=np.asarray(scenes.pair)[keep],
+                    scene_id=ids[keep], dropped=np.array([(~ok_rest).sum(), (~seen).sum(), (~ok_cap).sum()]))
+
+    return run
+
+
+def _counts(folder: Path) -> tuple[list[Path], np.ndarray]:
+    files = sorted(folder.glob("chunk_*.npz"))
+    counts = np.zeros(len(RELATIONS), np.int64)
+    for f in files:
+        with np.load(f) as z:
+            counts += np.bincount(z["relation"], minlength=len(RELATIONS))
+    return files, counts
+
+
+def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRelationConfig(),
+                        progress: bool = True) -> dict:
+    """Fill ``folder`` with chunks until each relation of ``cfg.need`` has ``cfg.per_relation``
+    kept scenes (resumable; same sensor and config required). Returns a summary dict."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    meta = dict(sensor=dataclasses.asdict(sensor), config=dataclasses.asdict(cfg))
+    meta_path = folder / "sim_relations.json"
+    if meta_path.exists():
+        old = rio.read_json(meta_path)
+        if old["sensor"] != rio.jsonable(meta["sensor"]) or old["config"]["seed"] != cfg.seed or \
+                old["config"]["chunk"] != cfg.chunk or old["config"]["workspace_radius"] != cfg.workspace_radius:
+            raise UserError(f"{folder} holds simulated relation data of another sensor or config; "
+                            "use another folder or delete it")
+    if cfg.chunk % cfg.feature_batch:
+        raise UserError(f"chunk ({cfg.chunk}) must be a multiple of feature_batch ({cfg.feature_batch})")
+    bad = [r for r in cfg.need if r not in RELATIONS]
+    if bad:
+        raise UserError(f"unknown relations {bad}; valid: {', '.join(RELATIONS)}")
+    need = np.asarray([RELATIONS.index(r) for r in cfg.need])
+    files, counts = _counts(folder)
+    run, seconds, done_now = None, 0.0, 0
+    while (counts[need] < cfg.per_relation).any():
+        c = len(files)
+        if c >= cfg.max_chunks:
+            raise UserError(f"{c} chunks ({c * cfg.chunk} scenes) gave only {dict(zip(RELATIONS, counts.tolist()))}; "
+                            "raise max_chunks or lower per_relation")
+        if run is None:
+            from relaff_jax.sim import world as wd
+
+            run = _chunk_fn(wd.build_world(), sensor, cfg)
+        t0 = time.perf_counter()
+        out = run(c)
+        seconds += time.perf_counter() - t0
+        done_now += 1
+        rio.atomic_save_npz(folder / f"chunk_{c:05d}.npz", **out)
+        files, counts = _counts(folder)
+        if progress:
+            print(f"sim relations: chunk {c}: {dict(zip(RELATIONS, counts.tolist()))} "
+                  f"({seconds / done_now:.1f} s per chunk of {cfg.chunk})", flush=True)
+    prev = rio.read_json(meta_path) if meta_path.exists() else {}
+    timed_s = prev.get("seconds_timed", 0.0) + seconds  # over every run that built chunks
+    timed_c = prev.get("chunks_timed", 0) + done_now
+    summary = dict(meta, counts=dict(zip(RELATIONS, counts.tolist())), chunks=len(files),
+                   scenes=len(files) * cfg.chunk, dropped=_dropped(files),
+                   seconds_timed=round(timed_s, 2), chunks_timed=timed_c,
+                   seconds_per_scene=round(timed_s / max(timed_c * cfg.chunk, 1), 4))
+    rio.atomic_write_json(meta_path, summary)
+    return summary
+
+
+def _dropped(files) -> dict:
+    d = np.zeros(3, np.int64)
+    for f in files:
+        with np.load(f) as z:
+            d += z["dropped"]
+    return dict(not_at_rest=int(d[0]), unseen=int(d[1]), overflow=int(d[2]))
+
+
+def load_sim_relations(folder: str | Path) -> dict:
+    """All kept scenes of ``folder``: pca (N, 18), rhf (N, 300), relation, pair, scene_id (N,)."""
+    files = sorted(Path(folder).glob("chunk_*.npz"))
+    if not files:
+        raise UserError(f"{folder} holds no simulated relation chunks; run `relaff real sim` first")
+    parts = []
+    for f in files:
+        with np.load(f) as z:
+            parts.append({k: z[k] for k in ("pca", "rhf", "relation", "pair", "scene_id")})
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def describe(folder: str | Path) -> dict:
+    """The summary JSON ``build_sim_relations`` wrote."""
+    path = Path(folder) / "sim_relations.json"
+    if not path.exists():
+        raise UserError(f"{path} missing: not a simulated relation folder")
+    return json.loads(path.read_text())
