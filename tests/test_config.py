@@ -50,10 +50,11 @@ def test_unknown_or_ill_typed_keys_are_clear_errors():
 
 
 def test_presets():
-    tiny, quick, paper = (runconfig.preset(p) for p in runconfig.PRESETS)
+    tiny, quick, study, paper = (runconfig.preset(p) for p in runconfig.PRESETS)
+    assert study.dataset.n_samples == 1000 and study.experiment.sizes == tuple(range(2, 51))
     assert (tiny.dataset.n_samples, tiny.dataset.rollout_batch, tiny.dataset.feature_batch) == (24, 8, 8)
     assert (quick.dataset.n_samples, quick.dataset.rollout_batch, quick.dataset.feature_batch) == (100, 64, 16)
     assert paper.dataset.n_samples == 10_000 and paper.dataset.rollout_batch == 1024
-    assert tiny.experiment.forest.max_trees == 8 and quick.experiment.sizes == (2, 4, 10, 25)
+    assert tiny.experiment.forest.max_trees == 8 and quick.experiment.sizes == (2,) + tuple(range(4, 26))
     with pytest.raises(UserError, match="unknown preset"):
         runconfig.preset("fast")

@@ -16,6 +16,7 @@ from relaff_jax.provenance import derive_seed
 TINY = {
     "sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 1, "test_size": 60, "source_size": 60,
     "corr_scenes": 20, "forest.base_trees": 6, "forest.max_trees": 6, "sizes_per_block": 2,
+    "online_select": False,  # the leave-one-out forests are counted and checked in their own tests
 }
 ACTS3 = ("lift", "pull", "take")
 
@@ -82,7 +83,7 @@ def test_table2_from_hand_built_accuracies():
     res = {"acc": acc, "sizes": np.array(cfg.sizes), "actions": np.array(acts),
            "conditions": np.array(E.condition_names(acts, cfg.thresholds)),
            "category_masks": E.category_masks(np.eye(3), acts, cfg)}
-    an = E.analyse(res, cfg)
+    an = E.analyse(res, cfg, intervals=False)
     t2 = dict(zip(an["table2_rows"], an["table2"]))
     per = dict(zip(an["table2_rows"], an["table2_per_target"]))
     np.testing.assert_allclose(t2["NB"], [1, 1, 1])
@@ -112,12 +113,12 @@ def test_informative_source_bootstraps_and_noise_does_not():
     reps = 12
     acc = np.full((3, lay["n"], len(cfg.sizes), reps), np.nan)
     for r in range(reps):
-        test_idx, order = E.draw_rep(m, test, max(cfg.sizes), 0, 0, r)
+        test_idx, order = E.draw_rep(y, test, max(cfg.sizes), 0, 0, r)
         acc[0, :, :, r] = E.run_block(X, y, boot, plan, order, test_idx, cfg.sizes, 6, lay["n"], cfg.forest, (0, r))
     res = {"acc": acc, "sizes": np.array(cfg.sizes), "actions": np.array(acts),
            "conditions": np.array(E.condition_names(acts, cfg.thresholds)),
            "category_masks": E.category_masks(np.eye(3), acts, cfg)}
-    an = E.analyse(res, cfg)
+    an = E.analyse(res, cfg, intervals=False)
     bf_label, bf_noise = an["avg_bf"][0, lay["DB1"][1]], an["avg_bf"][0, lay["DB1"][2]]
     assert bf_label > 2.0, bf_label
     assert 0.6 < bf_noise < 1.3, bf_noise
@@ -156,8 +157,10 @@ def test_pools_are_disjoint_and_too_small_data_is_an_error():
         E.split_pools(5000, 2, cfg, seed=5)
     q = E.split_pools(1000, 2, override(cfg, {"shrink_to_data": True}), seed=5)
     assert len(q["source"]) == 400 and len(q["corr"]) == 100 and int(q["test_size"]) == 400
-    test, order = E.draw_rep(len(q["target"]), int(q["test_size"]), 100, 0, 2, 1)
+    labels = np.random.default_rng(0).random(len(q["target"])) < 0.5
+    test, order = E.draw_rep(labels, int(q["test_size"]), 100, 0, 2, 1)
     assert len(np.intersect1d(test, order)) == 0 and len(order) == 100
+    assert labels[test].sum() == len(test) // 2 and len(test) >= int(q["test_size"]) - 1
 
 
 def test_source_outputs_are_the_source_predictor_on_target_scenes_in_its_order(data3):
@@ -182,15 +185,16 @@ def test_source_outputs_are_the_source_predictor_on_target_scenes_in_its_order(d
 def test_forests_per_space_hand_worked():
     paper = E.experiment_preset("paper")  # 9 actions, 99 sizes, 50 PCA / 25 RHF repetitions
     # PCA: 9 sources + 36 categories, then per target NB + 8 DB1 + DBn + 28 CB1 + 3 CBn = 41 forests
-    assert E.forests_per_space(paper, 9, "pca") == 9 + 36 + 9 * 41 * 99 * 50 == 1_826_595
+    # per size, and per repetition 10 leave-one-out forests for each of the 8 + 28 candidates
+    assert E.forests_per_space(paper, 9, "pca") == 9 + 36 + 9 * (41 * 99 + 36 * 10) * 50 == 1_988_595
     # RHF runs NB and DB1 only: no categories
-    assert E.forests_per_space(paper, 9, "rhf") == 9 + 9 * 9 * 99 * 25 == 200_484
+    assert E.forests_per_space(paper, 9, "rhf") == 9 + 9 * (9 * 99 + 8 * 10) * 25 == 218_484
     with_t = override(paper, {"categories_with_target": True})
-    assert E.forests_per_space(with_t, 9, "pca") == 9 + 36 + 9 * (1 + 8 + 1 + 36 + 3) * 99 * 50
+    assert E.forests_per_space(with_t, 9, "pca") == 9 + 36 + 9 * ((1 + 8 + 1 + 36 + 3) * 99 + 44 * 10) * 50
     # with the correlations, CBn sets that repeat another condition's share its forest:
     # corr 0.3 keeps all 28 categories at T = 0 and 0.125 (one set) and none at 0.5 (NB's)
     corr = np.full((9, 9), 0.3)
-    assert E.forests_per_space(paper, 9, "pca", corr) == 9 + 36 + 9 * 39 * 99 * 50
+    assert E.forests_per_space(paper, 9, "pca", corr) == 9 + 36 + 9 * (39 * 99 + 36 * 10) * 50
 
 
 def _count_fits(monkeypatch):
@@ -209,9 +213,9 @@ def _count_fits(monkeypatch):
 
 
 def test_forests_per_space_is_the_number_of_fits_a_run_makes(data3, tmp_path, monkeypatch):
-    cfg = tiny_cfg(sizes=(2, 4, 10), conditions_rhf=("NB", "DB1", "CBn"))
     n = _count_fits(monkeypatch)
-    for space in ("pca", "rhf"):
+    for space, online in (("pca", True), ("rhf", False)):  # with and without the leave-one-out forests
+        cfg = tiny_cfg(sizes=(2, 4, 10), conditions_rhf=("NB", "DB1", "CBn"), online_select=online, reps_pca=1)
         n["fits"] = 0
         path = E.run_experiment(data3, tmp_path / space, cfg, [space], seed=1, jobs=1, progress=False)[space]
         res = np.load(path)
@@ -317,7 +321,8 @@ def test_cli_experiment_and_report(tmp_path):
     cli_learn.register(parser.add_subparsers(dest="command"))
     sets = []
     for k, v in dict(TINY, reps_pca=1, sizes=[2, 10]).items():
-        sets += ["--set", f"experiment.{k}={list(v) if isinstance(v, tuple) else v}".replace(" ", "")]
+        v = list(v) if isinstance(v, tuple) else str(v).lower() if isinstance(v, bool) else v
+        sets += ["--set", f"experiment.{k}={v}".replace(" ", "")]
     args = parser.parse_args(["experiment", "--synthetic", "150", "--out", str(tmp_path / "res"), "--space", "both",
                               "--jobs", "1", "--seed", "1", "--no-progress"] + sets)
     assert args.func(args) == 0
@@ -327,10 +332,12 @@ def test_cli_experiment_and_report(tmp_path):
     assert args.func(args) == 0
     with open(tmp_path / "rep" / "table2.csv", newline="") as f:
         rows = list(csv.reader(f))
-    assert rows[0] == ["method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max"]
+    assert rows[0] == ["method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max", "n_targets", "ci_low",
+                       "ci_high", "gain_avg", "gain_ci_low", "gain_ci_high"]
     assert [r[0] for r in rows[1:]] == list(E.TABLE2_ROWS)
-    assert rows[1][1:] == ["1.0000"] * 6  # NB is 1 by definition, in the paper too
-    assert rows[3][4:] == ["2.8190", "0.9760", "3.6570"]  # paper's DB1 best
+    assert rows[1][1:7] == ["1.0000"] * 6  # NB is 1 by definition, in the paper too
+    assert rows[3][4:7] == ["2.8190", "0.9760", "3.6570"]  # paper's DB1 best
+    assert rows[5][4:7] == ["nan"] * 3  # the online row is not in the paper
     assert (tmp_path / "rep" / "table2_rhf.csv").exists()
     md = (tmp_path / "rep" / "table2.md").read_text()
     assert "| DB1 best after ten |" in md and "Categories built per threshold" in md

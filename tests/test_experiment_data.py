@@ -49,7 +49,8 @@ def test_experiment_reads_dataset_folders(tmp_path):
     parser = argparse.ArgumentParser()
     cli_learn.register(parser.add_subparsers(dest="command"))
     sets = ["--set", "experiment.sizes=[2,10]", "--set", "experiment.reps_pca=1", "--set", "experiment.reps_rhf=1",
-            "--set", "experiment.forest.base_trees=5", "--set", "experiment.forest.max_trees=5"]
+            "--set", "experiment.forest.base_trees=5", "--set", "experiment.forest.max_trees=5",
+            "--set", "experiment.online_select=false"]
     args = parser.parse_args(["experiment", "--data", *dirs, "--out", str(tmp_path / "res"), "--jobs", "1",
                               "--no-progress"] + sets)
     assert args.func(args) == 0
@@ -58,6 +59,8 @@ def test_experiment_reads_dataset_folders(tmp_path):
     acc = res["pca"]["acc"]
     assert acc.shape == (3, E.layout(3, 3)["n"], 2, 1) and np.all(np.isfinite(acc[:, 0]))
     # shrink_to_data (quick preset): 120 samples -> 48 source, 12 correlation scenes, 50 test
-    assert list(res["pca"]["test_size"]) == [50, 50, 50]
+    # scenes asked for, balanced by class (fewer, and even, if the pool lacks one class)
+    n, pos = res["pca"]["test_size"], res["pca"]["test_positive"]
+    assert np.all(n <= 50) and np.all(n % 2 == 0) and np.all(n >= 40) and list(pos) == list(n // 2)
     with pytest.raises(ValueError, match="two datasets for action 'lift'"):
         E.load_datasets([dirs[0], dirs[0]])

@@ -320,11 +320,11 @@ def test_missing_actions_module_is_a_clear_error(tmp_path, monkeypatch):
 
 
 def test_presets():
-    tiny, quick, paper = (R.preset(p) for p in R.PRESETS)
-    for p in (tiny, quick, paper):
+    tiny, quick, study, paper = (R.preset(p) for p in R.PRESETS)
+    for p in (tiny, quick, study, paper):
         R.check_config(p, 0)
     assert paper.dataset.n_samples == 10_000 and paper.experiment == E.experiment_preset("paper")
     assert (paper.experiment.reps_pca, paper.experiment.reps_rhf) == (50, 25)
-    assert tiny.experiment.reps_pca == 2 and 2 <= len(tiny.experiment.sizes) <= 3 and tiny.dataset.n_samples < 100
+    assert tiny.experiment.reps_pca == 2 and set(range(4, 11)) <= set(tiny.experiment.sizes) and tiny.dataset.n_samples < 100
     assert quick.experiment.conditions_pca == FAMILIES  # every bootstrapping condition
     assert quick.reproduce.spaces == ("pca", "rhf")

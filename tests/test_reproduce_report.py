@@ -205,6 +205,9 @@ def test_full_report(scene_run, tmp_path):
     t2 = an["pca"]["table2"]
     row = lambda name: f"| {name} | " + " | ".join(R.fmt(v) for v in t2[E.TABLE2_ROWS.index(name)])
     assert row("DB1 best") in md and row("CBn") in md and "| 2.819 | 0.976 | 3.657 |" in md
+    for i, name in enumerate(E.TABLE2_ROWS):  # every row says how many affordances it averages
+        assert f"{row(name)} | {an['pca']['n_targets'][i]} of {len(an['pca']['actions'])} |" in md
+    assert f"Rests on {len(an['pca']['actions'])} affordances" in md and "percentile bootstrap" in md
     found = json.loads((out / "findings.json").read_text())["findings"]
     assert [f["id"] for f in found] == [f["id"] for f in R.findings(an, res["config"])]
     by_id = {f["id"]: f for f in found}

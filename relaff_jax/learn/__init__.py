@@ -14,14 +14,19 @@ Files, in pipeline order:
 - ``correlation.py``: the categories and the correlation heuristic;
 - ``synthetic.py``: synthetic datasets in ``load_dataset``'s layout (``--synthetic``, tests);
 - ``config.py``: ``ExperimentConfig``, ``experiment_preset``, ``check_config``, Table II rows;
-- ``protocol.py``: condition axis and plans, pools and draws, ``forests_per_space``;
+- ``protocol.py``: condition axis and plans, pools, ``forests_per_space``;
+- ``draws.py``: each target's (balanced) test set and each repetition's training order;
 - ``datasets.py``: loading, checking and fingerprinting the input datasets;
 - ``prep.py``: source predictors, categories and the correlation matrix of one space;
-- ``blocks.py``: one (target, repetition, sizes) block of the sweep, saved and re-read;
+- ``blocks.py``: one (target, repetition, sizes) block of the sweep (accuracies, outcomes per
+  test scene, leave-one-out accuracy at ``select_size``), saved and re-read;
 - ``parallel.py``: forest jobs over worker processes with a progress bar;
 - ``sweep.py``: ``run_experiment``, the resumable sweep of one or both spaces;
 - ``results.py``: ``load_results`` (typed ``Results`` / ``SpaceResults``), ``is_complete``;
-- ``analysis.py``: curves, bootstrap factors, Table II, the threshold study.
+- ``measures.py``: Table II rows (average bf with its defined sizes, accuracy gain), ties;
+- ``online.py``: the online "best after ten" (leave-one-out choice per repetition);
+- ``intervals.py``: bootstrap resamples over repetitions and test scenes, percentile intervals;
+- ``analysis.py``: curves, bootstrap factors, Table II with intervals, the threshold study.
 
 Nothing here imports the report or the command line (``relaff_jax.cli.learn``).
 """
@@ -29,15 +34,18 @@ from relaff_jax.constants import ACTIONS, FAMILIES, SPACES
 from relaff_jax.learn.analysis import (
     analyse,
     average_bf,
-    bootstrap_factor,
     categories_per_threshold,
     curves,
     select_at,
     select_best,
-    size_mask,
     threshold_study,
 )
-from relaff_jax.learn.blocks import read_block, run_block, run_block_to_file
+from relaff_jax.learn.blocks import (
+    block_outcomes,
+    read_block,
+    run_block,
+    run_block_to_file,
+)
 from relaff_jax.learn.config import (
     PAPER_TABLE2,
     SPACE_CODE,
@@ -45,6 +53,7 @@ from relaff_jax.learn.config import (
     ExperimentConfig,
     check_config,
     experiment_preset,
+    paper_row,
 )
 from relaff_jax.learn.correlation import (
     categories_above,
@@ -52,6 +61,7 @@ from relaff_jax.learn.correlation import (
     correlation_matrix,
 )
 from relaff_jax.learn.datasets import check_datasets, fingerprint, load_datasets
+from relaff_jax.learn.draws import draw_rep, draw_test, draw_train
 from relaff_jax.learn.forests import (
     ForestConfig,
     check_forest_config,
@@ -60,6 +70,16 @@ from relaff_jax.learn.forests import (
     n_trees,
     predict_class,
 )
+from relaff_jax.learn.intervals import percentile_interval, resampled_means
+from relaff_jax.learn.measures import (
+    bootstrap_factor,
+    size_mask,
+    summarise,
+    table2_rows,
+    tie_weights,
+    window_mean,
+)
+from relaff_jax.learn.online import extend, online_weights
 from relaff_jax.learn.prep import prepare
 from relaff_jax.learn.protocol import (
     block_fits,
@@ -67,7 +87,6 @@ from relaff_jax.learn.protocol import (
     category_masks,
     condition_names,
     condition_plan,
-    draw_rep,
     forests_per_space,
     layout,
     split_pools,
@@ -100,4 +119,6 @@ __all__ = [
     "load_results", "make_forest", "manipulated_first_order", "n_trees", "predict_class", "prepare", "read_block",
     "run_block", "run_block_to_file", "run_experiment", "run_space", "select_at", "select_best", "size_mask",
     "split_pools", "state_features", "synthetic_datasets", "threshold_study",
+    "block_outcomes", "draw_test", "draw_train", "extend", "online_weights", "paper_row", "percentile_interval",
+    "resampled_means", "summarise", "table2_rows", "tie_weights", "window_mean",
 ]

@@ -1,10 +1,13 @@
 """Step 3 of the protocol, one block: a (target, repetition, chunk of sizes) of the sweep.
 
 Takes a target pool's states ``X: (M, D)``, labels ``y: (M,)``, bootstrap inputs ``boot: (R,
-M)``, the target's condition plan and one repetition's draw; ``run_block`` fits one forest per
-distinct bootstrap input set and size (``engine.fit``), predicts the test set with all of
-them at once (``engine.predict_many``) and returns the test accuracies ``(C, sizes)``.
-``run_block_to_file`` also saves them atomically; ``read_block`` reads a finished block back
+M)``, the target's condition plan and one repetition's draw; ``block_outcomes`` fits one
+forest per distinct bootstrap input set and size (``engine.fit``), predicts the test set with
+all of them at once (``engine.predict_many``) and gives the test accuracies ``(C, sizes)``,
+every test scene's outcome ``(C, sizes, T)`` and, at the selection size, each candidate's
+leave-one-out accuracy on its own training samples ``(C,)`` (what an agent knows after n
+samples: the online "best after ten"). ``run_block`` is its accuracies alone.
+``run_block_to_file`` saves a block atomically; ``read_block`` reads a finished block back
 (None if missing or corrupt, so a killed sweep resumes with the finished blocks).
 """
 from __future__ import annotations
@@ -15,7 +18,7 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.learn.engine import Trees, fit, predict_many
+from relaff_jax.learn.engine import fit, predict_many
 from relaff_jax.learn.forests import ForestConfig
 from relaff_jax.learn.states import augment
 from relaff_jax.provenance import derive_seed
@@ -23,18 +26,25 @@ from relaff_jax.provenance import derive_seed
 FLUSH = 256  # fast-engine forests evaluated together (bounds the trees held in memory)
 
 
-def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tuple[int, tuple[int, ...]]],
-              train_order: np.ndarray, test_idx: np.ndarray, sizes: Sequence[int], repeats: int,
-              n_conditions: int, forest: ForestConfig, seed_keys: Sequence[int]) -> np.ndarray:
-    """Accuracies ``(C, len(sizes))`` of one (target, repetition) over a chunk of sizes.
+def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tuple[int, tuple[int, ...]]],
+                   train_order: np.ndarray, test_idx: np.ndarray, sizes: Sequence[int], repeats: int,
+                   n_conditions: int, forest: ForestConfig, seed_keys: Sequence[int],
+                   loo_size: int | None = None, loo_conditions: Sequence[int] = ()) -> dict[str, np.ndarray]:
+    """Outcomes of one (target, repetition) over a chunk of sizes.
 
     X: (M, D) target-pool states in the target's order; y: (M,) labels; boot: (R, M) 0/1
     bootstrap inputs on the same scenes; plan: ``[(condition, rows of boot)]``; train_order:
     (>= max(sizes),) training sample order (size n uses its first n); test_idx: (T,).
-    Conditions not in the plan stay NaN. Conditions with the same rows share one learner.
-    Forest seeds come from ``seed_keys`` + (n, first condition with these rows).
+    Returns ``acc: (C, S)`` test accuracy, ``correct: (C, S, T)`` bool per test scene and
+    ``loo: (C,)`` leave-one-out accuracy at ``loo_size`` of the ``loo_conditions`` (NaN
+    elsewhere, or everywhere when ``loo_size`` is not in ``sizes``). Conditions not in the
+    plan stay NaN (``correct`` False). Conditions with the same rows share one learner.
+    Forest seeds come from ``seed_keys`` + (n, first condition with these rows) and, for the
+    leave-one-out forests, + (held-out position + 1).
     """
     acc = np.full((n_conditions, len(sizes)), np.nan)
+    correct = np.zeros((n_conditions, len(sizes), len(test_idx)), bool)
+    loo = np.full(n_conditions, np.nan)
     first: dict[tuple[int, ...], int] = {}
     y = np.asarray(y).astype(bool)
     X = np.asarray(X, dtype=np.float32)
@@ -45,12 +55,27 @@ def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tup
     # bootstrap input row once; forest features map to them (augment repeats input columns)
     ZT = np.concatenate([X[test_idx].T, boot[:, test_idx]])
     forests, colmaps, slots = [], [], []
+    loo_n = int(loo_size) if loo_size is not None and loo_size in sizes else None
+    if loo_n is not None:
+        tr_loo = np.asarray(train_order[:loo_n])
+        ZL = np.concatenate([X[tr_loo].T, boot[:, tr_loo]])  # the n training scenes' columns
+    loo_forests, loo_maps, loo_slots = [], [], []
 
     def flush():  # predict the fitted forests at once (the sklearn engine one by one)
         for (c, si), p in zip(slots, predict_many(forests, ZT, colmaps)):
-            acc[c, si] = np.mean(p.astype(bool) == y_test)
+            correct[c, si] = p.astype(bool) == y_test
+            acc[c, si] = np.mean(correct[c, si])
         forests.clear(), colmaps.clear(), slots.clear()
 
+    def flush_loo():  # each leave-one-out forest predicts its held-out training scene
+        if loo_forests:
+            p = predict_many(loo_forests, ZL, loo_maps)
+            for k, (c, i) in enumerate(loo_slots):
+                loo_hits[c].append(bool(p[k, i]) == bool(y[tr_loo[i]]))
+        loo_forests.clear(), loo_maps.clear(), loo_slots.clear()
+
+    loo_hits: dict[int, list[bool]] = {}
+    batch = FLUSH if forest.engine == "fast" else 1
     for cond, rows in plan:
         if rows in first:
             continue
@@ -64,31 +89,60 @@ def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tup
             forests.append(fit(augment(X[tr], inputs[:, tr], repeats), y[tr], derive_seed(*seed_keys, n, cond), forest))
             colmaps.append(colmap)
             slots.append((cond, si))
-            if len(forests) >= (FLUSH if isinstance(forests[0], Trees) else 1):
+            if len(forests) >= batch:
                 flush()
+        if loo_n is not None and any(c in loo_conditions for c, r in plan if r == rows):
+            loo_hits[cond] = []
+            for i in range(loo_n):
+                keep = np.delete(tr_loo, i)
+                loo_forests.append(fit(augment(X[keep], inputs[:, keep], repeats), y[keep],
+                                       derive_seed(*seed_keys, loo_n, cond, i + 1), forest))
+                loo_maps.append(colmap)
+                loo_slots.append((cond, i))
+                if len(loo_forests) >= batch:
+                    flush_loo()
     flush()
+    flush_loo()
+    for c, hits in loo_hits.items():
+        loo[c] = np.mean(hits)
     for cond, rows in plan:
         if first[rows] != cond:
-            acc[cond] = acc[first[rows]]
-    return acc
+            acc[cond], correct[cond], loo[cond] = acc[first[rows]], correct[first[rows]], loo[first[rows]]
+    return {"acc": acc, "correct": correct, "loo": loo}
 
 
-def run_block_to_file(path: str, X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys):
-    """``run_block``, then its accuracies and sizes saved atomically to ``path`` (a finished block)."""
-    acc = run_block(X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys)
-    rio.atomic_save_npz(path, acc=acc, sizes=np.asarray(sizes))
-    return acc
+def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tuple[int, tuple[int, ...]]],
+              train_order: np.ndarray, test_idx: np.ndarray, sizes: Sequence[int], repeats: int,
+              n_conditions: int, forest: ForestConfig, seed_keys: Sequence[int]) -> np.ndarray:
+    """Accuracies ``(C, len(sizes))`` of one (target, repetition) over a chunk of sizes
+    (``block_outcomes``' ``acc``)."""
+    return block_outcomes(X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys)["acc"]
 
 
-def read_block(path: Path, n_conditions: int, sizes: Sequence[int]) -> np.ndarray | None:
-    """A finished block, or None if missing or unreadable (then it is recomputed)."""
+def run_block_to_file(path: str, X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys,
+                      loo_size=None, loo_conditions=(), keep_outcomes=True):
+    """``block_outcomes``, saved atomically to ``path`` (a finished block; the per scene
+    outcomes bit-packed, or left out (``correct: (C, S, 0)``) without ``keep_outcomes``)."""
+    out = block_outcomes(X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys,
+                         loo_size, loo_conditions)
+    if not keep_outcomes:
+        out["correct"] = out["correct"][..., :0]
+    rio.atomic_save_npz(path, acc=out["acc"], loo=out["loo"], sizes=np.asarray(sizes),
+                        correct=np.packbits(out["correct"], axis=-1), n_test=np.asarray(out["correct"].shape[-1]))
+    return out
+
+
+def read_block(path: Path, n_conditions: int, sizes: Sequence[int]) -> dict[str, np.ndarray] | None:
+    """A finished block (``acc``, ``correct``, ``loo`` as ``block_outcomes`` gives them), or
+    None if missing or unreadable (then it is recomputed)."""
     if not path.exists():
         return None
     try:
         with np.load(path) as z:
-            acc, s = z["acc"], z["sizes"]
-    except Exception:  # a corrupt file cannot be a finished block (writes are atomic)
+            acc, s, loo = z["acc"], z["sizes"], z["loo"]
+            correct = np.unpackbits(z["correct"], axis=-1, count=int(z["n_test"])).astype(bool)
+    except Exception:  # a corrupt file (or one of an older format) cannot be a finished block
         return None
-    if acc.shape != (n_conditions, len(sizes)) or list(s) != list(sizes):
+    if acc.shape != (n_conditions, len(sizes)) or list(s) != list(sizes) or correct.shape[:2] != acc.shape:
         return None
-    return acc
+    return {"acc": acc, "correct": correct, "loo": loo}

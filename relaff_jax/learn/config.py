@@ -1,7 +1,7 @@
 """Settings of the evaluation protocol (paper section V) and the paper's Table II.
 
 ``ExperimentConfig`` is the frozen protocol (defaults are the paper's, REFERENCE section 6);
-``experiment_preset`` gives the ``paper`` and ``quick`` presets; ``check_config`` fails early
+``experiment_preset`` gives the ``paper``, ``study`` and ``quick`` presets; ``check_config`` fails early
 on settings that cannot give a study. ``TABLE2_ROWS`` / ``PAPER_TABLE2`` are the rows of
 Table II and the paper's numbers (PCA, average bootstrap factor over n = 4..25: avg, min,
 max over the nine affordances).
@@ -19,9 +19,12 @@ from relaff_jax.learn.forests import ForestConfig, check_forest_config
 # Integer code of each state space in seed keys (part of every forest's seed: never change).
 SPACE_CODE = {"pca": 0, "rhf": 1}
 
+# "best after ten" is the paper's (offline: chosen by mean test accuracy at n = 10 over all
+# repetitions); "(online)" chooses per repetition by leave-one-out accuracy on the ten
+# training samples, what an agent has after ten samples; the paper has no such row
 TABLE2_ROWS = (
-    "NB", "DB1 average", "DB1 best", "DB1 best after ten", "DBn",
-    "CB1 average", "CB1 best", "CB1 best after ten", "CBn",
+    "NB", "DB1 average", "DB1 best", "DB1 best after ten", "DB1 best after ten (online)", "DBn",
+    "CB1 average", "CB1 best", "CB1 best after ten", "CB1 best after ten (online)", "CBn",
 )
 PAPER_TABLE2 = {
     "NB": (1.0, 1.0, 1.0),
@@ -34,6 +37,11 @@ PAPER_TABLE2 = {
     "CB1 best after ten": (2.802, 0.7702, 3.752),
     "CBn": (2.895, 0.9072, 3.888),
 }
+
+
+def paper_row(name: str) -> tuple[float, float, float]:
+    """The paper's avg/min/max of a Table II row (NaN for rows the paper has not)."""
+    return PAPER_TABLE2.get(name, (float("nan"),) * 3)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -56,8 +64,18 @@ class ExperimentConfig:
     conditions_rhf: tuple[str, ...] = ("NB", "DB1")  # the paper shows only NB and DB1 in RHF
     bf_sizes: tuple[int, int] = (4, 25)  # average bootstrap factor interval (paper V-C)
     best_sizes: tuple[int, int] = (2, 100)  # "best" = highest mean accuracy over these n
-    select_size: int = 10  # "best after ten"
+    select_size: int = 10  # "best after ten" (offline: mean test accuracy; online: leave-one-out)
+    online_select: bool = True  # fit the leave-one-out forests of the online choice (off: its rows are NaN)
     chance: float = 0.5
+    # test and training draws (draws.py): one test set per target, balanced by class; the
+    # training draws at random from what is left (the paper's reading) or alternating classes
+    balanced_test: bool = True
+    balanced_train: bool = False
+    # per test scene outcomes kept for intervals over test scenes too (not in the paper preset:
+    # 4000 scenes x 99 sizes x 50 reps would be ~1 GB; its intervals are over repetitions only)
+    keep_outcomes: bool = False
+    ci_level: float = 0.95  # bootstrap intervals (intervals.py)
+    ci_resamples: int = 1000
     sizes_per_block: int = 25
     forest: ForestConfig = ForestConfig()
 
@@ -71,16 +89,26 @@ class ExperimentConfig:
         return self.conditions_pca if space == "pca" else self.conditions_rhf
 
 
+WINDOW = tuple(range(4, 26))  # the paper's window of the average bootstrap factor, n = 4..25
+
+
 def experiment_preset(name: str) -> ExperimentConfig:
-    """``paper``: the full protocol. ``quick``: every condition at 5 sizes, 2 repetitions,
-    2000 test samples, shrunk to small datasets; ~4.5k forests, minutes on 2 cores."""
+    """``paper``: the full protocol. ``quick``: every condition at n = 2 and every n of the
+    window 4..25, 2 repetitions, shrunk to small datasets, outcomes per test scene kept.
+    ``study``: every n from 2 to 50, 10 repetitions, 500 balanced test scenes per action
+    and 300 source + 100 correlation scenes: 1,000 samples per action leave 100 training scenes."""
     if name == "paper":
         return ExperimentConfig()
     if name == "quick":
         return ExperimentConfig(
-            sizes=(2, 4, 10, 25, 50), reps_pca=2, reps_rhf=2, test_size=2000, shrink_to_data=True,
+            sizes=(2,) + WINDOW, reps_pca=2, reps_rhf=2, test_size=2000, shrink_to_data=True, keep_outcomes=True,
         )
-    raise UserError(f"unknown preset {name!r}; expected 'quick' or 'paper'")
+    if name == "study":
+        return ExperimentConfig(
+            sizes=tuple(range(2, 51)), reps_pca=10, reps_rhf=10, test_size=500, source_size=300, corr_scenes=100,
+            keep_outcomes=True,
+        )
+    raise UserError(f"unknown preset {name!r}; expected 'quick', 'study' or 'paper'")
 
 
 def check_config(cfg: ExperimentConfig) -> None:
@@ -99,5 +127,7 @@ def check_config(cfg: ExperimentConfig) -> None:
         if bad or "NB" not in cfg.conditions(space):
             raise UserError(f"conditions_{space} must include NB and be among {FAMILIES}, got {cfg.conditions(space)}")
     check_forest_config(cfg.forest)
+    if not 0.5 <= cfg.ci_level < 1 or cfg.ci_resamples < 10:
+        raise UserError(f"ci_level must be in [0.5, 1) and ci_resamples >= 10, got {cfg.ci_level}, {cfg.ci_resamples}")
     if min(cfg.reps_pca, cfg.reps_rhf, cfg.test_size, cfg.source_size, cfg.corr_scenes, cfg.sizes_per_block) < 1:
         raise UserError("reps, test_size, source_size, corr_scenes and sizes_per_block must be >= 1")

@@ -8,7 +8,7 @@ correlation matrix of the source predictors; gives
   bootstrap rows)]``; ``category_allowed`` / ``category_masks`` say which categories a
   target may use;
 * disjoint index pools of each action's dataset (``split_pools``: source, correlation
-  scenes, target pool) and each repetition's test set and training order (``draw_rep``);
+  scenes, target pool); each target's test set and training orders are ``draws.py``'s;
 * forest counts: ``block_fits`` (one block of sizes) and ``forests_per_space`` (a whole
   space: source predictors, categories and every condition's forests).
 """
@@ -109,23 +109,29 @@ def split_pools(n: int, action_index: int, cfg: ExperimentConfig, seed: int) -> 
     return {"source": perm[:s], "corr": perm[s : s + q], "target": perm[s + q :], "test_size": np.asarray(test)}
 
 
-def draw_rep(m: int, test_size: int, max_size: int, seed: int, target_index: int, rep: int) -> tuple[np.ndarray, np.ndarray]:
-    """Test indices ``(test_size,)`` and training order ``(max_size,)`` into a target pool of
-    size m for one repetition; the same in both spaces."""
-    perm = np.random.default_rng(derive_seed(seed, 4, target_index, rep)).permutation(m)
-    return perm[:test_size], perm[test_size : test_size + max_size]
-
-
-def block_fits(plan: Sequence[tuple[int, tuple[int, ...]]], n_sizes: int) -> int:
+def block_fits(plan: Sequence[tuple[int, tuple[int, ...]]], n_sizes: int, loo_size: int = 0,
+               loo_conditions: Sequence[int] = ()) -> int:
     """Forests one block fits: one per distinct set of bootstrap rows in ``plan`` and size
-    (conditions with the same rows share one learner, ``sweep.run_block``)."""
-    return len({rows for _, rows in plan}) * n_sizes
+    (conditions with the same rows share one learner, ``blocks.block_outcomes``), plus, when
+    the block holds the selection size, ``loo_size`` leave-one-out forests per distinct set
+    of rows among ``loo_conditions``."""
+    loo = len({rows for c, rows in plan if c in set(loo_conditions)}) * loo_size
+    return len({rows for _, rows in plan}) * n_sizes + loo
+
+
+def loo_conditions(n_actions: int, n_thresholds: int) -> tuple[int, ...]:
+    """The candidates of the online "best after ten": every DB1 and CB1 condition."""
+    lay = layout(n_actions, n_thresholds)
+    return tuple(int(c) for c in np.concatenate([lay["DB1"], lay["CB1"]]))
 
 
 def forests_per_space(cfg: ExperimentConfig, n_actions: int, space: str, corr: np.ndarray | None = None) -> int:
     """Forest fits of one space's whole run: the A source predictors, the A(A-1)/2 categories
     (when the space runs CB1 or CBn) and, per target, repetition and size, one forest per
     condition: NB, DB1 x (A-1), DBn, CB1 x (categories the target may use), CBn x thresholds.
+
+    At ``select_size`` every DB1 and CB1 candidate also fits ``select_size`` leave-one-out
+    forests per repetition (the online "best after ten"; not with ``online_select`` off).
 
     Without ``corr`` this is the count before the run (what a time estimate can know): every
     condition counted as its own forest. With the run's correlation matrix ``corr: (A, A)``
@@ -141,8 +147,13 @@ def forests_per_space(cfg: ExperimentConfig, n_actions: int, space: str, corr: n
         usable = k if cfg.categories_with_target else (a - 1) * (a - 2) // 2
         per_target = (1 + ("DB1" in fams) * (a - 1) + ("DBn" in fams) + ("CB1" in fams) * usable
                       + ("CBn" in fams) * len(cfg.thresholds))
-        sweep = a * per_target * len(cfg.sizes)
+        loo = (("DB1" in fams) * (a - 1) + ("CB1" in fams) * usable) * cfg.select_size * (cfg.select_size in cfg.sizes) \
+            * cfg.online_select
+        sweep = a * (per_target * len(cfg.sizes) + loo)
     else:
         names = list(range(a))  # the plan depends on the number of actions only
-        sweep = sum(block_fits(condition_plan(names, t, np.asarray(corr), cfg, space), len(cfg.sizes)) for t in range(a))
+        n_loo = cfg.select_size if cfg.select_size in cfg.sizes and cfg.online_select else 0
+        cands = loo_conditions(a, len(cfg.thresholds))
+        sweep = sum(block_fits(condition_plan(names, t, np.asarray(corr), cfg, space), len(cfg.sizes), n_loo, cands)
+                    for t in range(a))
     return prep + sweep * cfg.reps(space)

@@ -21,7 +21,7 @@ from relaff_jax.constants import SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn.config import ExperimentConfig
 
-FORMAT_VERSION = 1  # of experiment.json and results.npz
+FORMAT_VERSION = 2  # of experiment.json and results.npz (2: balanced test sets, outcomes, leave-one-out)
 
 
 class ResultsNotFound(UserError, FileNotFoundError):
@@ -35,7 +35,11 @@ class SpaceResults:
     acc (T, C, S, R) test accuracy (NaN where a condition does not apply); sizes (S,);
     actions (T,) names; conditions (C,) names; thresholds (K,) of the correlation heuristic;
     corr (T, T) predictor correlation; category_masks (K, T, P) categories kept per threshold;
-    test_size (T,) test scenes per target; seconds, seconds_prep, new_fits: scalars of the run.
+    test_size (T,) test scenes per target, test_positive (T,) how many of them are positive;
+    loo (T, C, R) leave-one-out accuracy at ``select_size`` of the DB1 and CB1 candidates;
+    correct (T, C, S, R, N) bool outcome per test scene (N = the largest ``n_test``; scenes
+    past a target's ``n_test`` are padding; N = 0 when the run kept no outcomes);
+    seconds, seconds_prep, new_fits: scalars of the run.
     """
 
     acc: np.ndarray
@@ -46,6 +50,10 @@ class SpaceResults:
     corr: np.ndarray
     category_masks: np.ndarray
     test_size: np.ndarray
+    test_positive: np.ndarray
+    loo: np.ndarray
+    correct: np.ndarray
+    n_test: np.ndarray
     seconds: np.ndarray
     seconds_prep: np.ndarray
     new_fits: np.ndarray
@@ -101,5 +109,7 @@ def load_results(results_dir: str | os.PathLike) -> Results:
         missing = {f.name for f in dataclasses.fields(SpaceResults)} - set(arrays)
         if missing:
             raise ResultsNotFound(f"{p} lacks {sorted(missing)}: written by another version; rerun the experiment")
+        n = int(arrays["n_test"].max(initial=0))
+        arrays["correct"] = np.unpackbits(arrays["correct"], axis=-1, count=n).astype(bool)
         spaces[space] = SpaceResults(**{f.name: arrays[f.name] for f in dataclasses.fields(SpaceResults)})
     return Results(meta=meta, config=from_dict(ExperimentConfig, meta["config"]), spaces=spaces)

@@ -14,11 +14,17 @@ Protocol (docs/learning.md has the full story):
    correlation heuristic, and a disjoint *target pool*.
 2. Prep, once per seed and space (``prep.prepare``): source predictors, categories, their
    outputs on every target pool, the correlation matrix.
-3. Sweep, one block per (target, repetition, chunk of sizes) (``blocks.run_block``): the
-   target pool is permuted (same permutation for PCA and RHF); the first ``test_size``
-   samples are the test set, the next ``max(sizes)`` the training order, and size n trains
-   on its first n (nested training sets, shared by every condition: paired comparisons).
+3. Sweep, one block per (target, repetition, chunk of sizes) (``blocks.block_outcomes``):
+   each target has one test set (``draws.draw_test``: balanced by class by default, the same
+   for every repetition and both spaces); each repetition draws a training order from the
+   rest of the pool (``draws.draw_train``) and size n trains on its first n (nested training
+   sets, shared by every condition: paired comparisons). At ``select_size`` every DB1 and CB1
+   candidate also gets its leave-one-out accuracy (the online "best after ten").
    Repetitions are the outer loop, so early blocks are representative for the ETA.
+
+``results.npz`` holds ``acc: (A, C, S, R)``, ``loo: (A, C, R)`` and, with
+``keep_outcomes``, every test scene's outcome ``correct: (A, C, S, R, ceil(T/8))`` bit-packed
+along the scenes (``n_test: (A,)`` scenes per target).
 """
 from __future__ import annotations
 
@@ -36,6 +42,7 @@ from relaff_jax.errors import UserError
 from relaff_jax.learn.blocks import read_block, run_block_to_file
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config
 from relaff_jax.learn.datasets import check_datasets, fingerprint
+from relaff_jax.learn.draws import draw_rep
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.prep import prepare
 from relaff_jax.learn.protocol import (
@@ -43,8 +50,8 @@ from relaff_jax.learn.protocol import (
     category_masks,
     condition_names,
     condition_plan,
-    draw_rep,
     layout,
+    loo_conditions,
 )
 from relaff_jax.learn.results import FORMAT_VERSION
 from relaff_jax.learn.states import state_features
@@ -113,6 +120,14 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     corr = prep["corr"]
     plans = [condition_plan(actions, ti, corr, cfg, space) for ti in range(a)]
     acc = np.full((a, n_cond, len(sizes), reps), np.nan)
+    loo = np.full((a, n_cond, reps), np.nan)
+    loo_conds = loo_conditions(a, len(cfg.thresholds))
+    loo_n = cfg.select_size if cfg.online_select else 0
+    labels_of = {t: np.asarray(datasets[t]["label"]).astype(bool)[prep[f"target:{t}"]] for t in actions}
+    tests = {t: draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), 0,
+                         cfg.balanced_test, cfg.balanced_train)[0] for t in actions}
+    n_test = np.asarray([len(tests[t]) if cfg.keep_outcomes else 0 for t in actions])
+    correct = np.zeros((a, n_cond, len(sizes), reps, int(n_test.max())), bool)
     calls, weights, done_fits, total_fits = [], [], 0, 0
     keys = []
     target_data: dict[str, tuple] = {}  # (X, y, boot) per target, built once, shared by all its blocks
@@ -122,12 +137,12 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
             draws = None
             for ci, chunk in enumerate(chunks):
                 path = sdir / "blocks" / f"{t}_r{r:03d}_c{ci:02d}.npz"
-                fits = block_fits(plans[ti], len(chunk))
+                fits = block_fits(plans[ti], len(chunk), loo_n if loo_n in chunk else 0, loo_conds)
                 total_fits += fits
                 s0 = sizes.index(chunk[0])
                 got = read_block(path, n_cond, chunk)
-                if got is not None:
-                    acc[ti, :, s0 : s0 + len(chunk), r] = got
+                if got is not None and got["correct"].shape[-1] == n_test[ti]:
+                    _store(acc, correct, loo, got, ti, s0, len(chunk), r)
                     done_fits += fits
                     continue
                 if t not in target_data:
@@ -138,18 +153,20 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                         prep[f"boot:{t}"],
                     )
                 if draws is None:
-                    draws = draw_rep(len(pool), int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), r)
+                    draws = draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), r,
+                                     cfg.balanced_test, cfg.balanced_train)
                 X, y, boot = target_data[t]
                 test_idx, train_order = draws
                 seed_keys = (seed, 5, SPACE_CODE[space], ACTIONS.index(t), r)
                 calls.append((run_block_to_file, (str(path), X, y, boot, plans[ti], train_order, test_idx, chunk,
-                                           cfg.repeats(space), n_cond, cfg.forest, seed_keys), {}))
+                                           cfg.repeats(space), n_cond, cfg.forest, seed_keys, loo_n or None, loo_conds,
+                                           cfg.keep_outcomes), {}))
                 weights.append(fits)
                 keys.append((ti, s0, len(chunk), r))
     results = run_parallel(calls, jobs, progress, total=total_fits, desc=f"{space} sweep", unit="fit",
                             weights=weights, initial=done_fits)
     for (ti, s0, n, r), got in zip(keys, results):
-        acc[ti, :, s0 : s0 + n, r] = got
+        _store(acc, correct, loo, got, ti, s0, n, r)
     masks = category_masks(corr, actions, cfg)
     res_path = sdir / "results.npz"
     rio.atomic_save_npz(
@@ -161,9 +178,22 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
         thresholds=np.asarray(cfg.thresholds, dtype=float),
         corr=corr,
         category_masks=masks,
-        test_size=np.asarray([int(prep[f"test_size:{t}"]) for t in actions]),
+        test_size=np.asarray([len(tests[t]) for t in actions]),
+        test_positive=np.asarray([int(labels_of[t][tests[t]].sum()) for t in actions]),
+        loo=loo,
+        correct=np.packbits(correct, axis=-1),
+        n_test=n_test,
         seconds=np.asarray(time.perf_counter() - t0),
         seconds_prep=np.asarray(t_prep),
         new_fits=np.asarray(sum(weights)),
     )
     return res_path
+
+
+def _store(acc, correct, loo, got, ti, s0, n, r) -> None:
+    """Put one block's outcomes (``blocks.block_outcomes``) into the space's arrays."""
+    acc[ti, :, s0 : s0 + n, r] = got["acc"]
+    k = got["correct"].shape[-1]
+    correct[ti, :, s0 : s0 + n, r, :k] = got["correct"]
+    finite = np.isfinite(got["loo"])
+    loo[ti, finite, r] = got["loo"][finite]

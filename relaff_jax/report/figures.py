@@ -2,7 +2,7 @@
 
 Takes the experiment (``load_results``) and its analysis ``{space: analyse(...)}``;
 ``write_figures`` writes ``fig06_nb_learning.png`` ... ``fig12_thresholds.png`` (those the run
-has data for) and returns their paths; ``dataset_figure`` writes ``fig_datasets.png`` from
+has data for) and returns their paths; accuracy curves carry their bootstrap intervals as bands; ``dataset_figure`` writes ``fig_datasets.png`` from
 ``relaff_jax.data.info`` dicts. Figures are ``matplotlib.figure.Figure`` objects rendered
 straight to PNG: no pyplot, no global backend change, so a notebook importing the package
 keeps its own backend.
@@ -54,9 +54,13 @@ def _logx(ax, sizes) -> None:
     ax.xaxis.set_minor_locator(NullLocator())
 
 
-def _curve(ax, sizes, mean, sem, label, **kw):
-    line, = ax.plot(sizes, mean, label=label, **kw)
-    ax.fill_between(sizes, mean - sem, mean + sem, alpha=0.2, color=line.get_color())
+def _curve(ax, a, ti, c, label, **kw):
+    """Mean accuracy curve of target ti, condition c, with its bootstrap interval as a band
+    (mean +- standard error when the analysis has no intervals)."""
+    mean = a["mean"][ti, c]
+    lo, hi = (a["mean_ci"][ti, c, :, 0], a["mean_ci"][ti, c, :, 1]) if "mean_ci" in a else (mean - a["sem"][ti, c], mean + a["sem"][ti, c])
+    line, = ax.plot(a["sizes"], mean, label=label, **kw)
+    ax.fill_between(a["sizes"], lo, hi, alpha=0.2, color=line.get_color())
 
 
 def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], out: Path) -> list[Path]:
@@ -74,7 +78,7 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
     fig = Figure(figsize=(7, 4.5))
     ax = fig.subplots()
     for ti, t in enumerate(a["actions"]):
-        _curve(ax, a["sizes"], a["mean"][ti, 0], a["sem"][ti, 0], t)
+        _curve(ax, a, ti, 0, t)
     ax.set(xlabel="training samples n", ylabel="accuracy", title=f"{s0.upper()} - non-bootstrapped (NB)")
     _logx(ax, a["sizes"])
     ax.legend(fontsize=7, ncol=3)
@@ -84,7 +88,7 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
     fig, axes = _grid(len(a["actions"]))
     for ti, t in enumerate(a["actions"]):
         for s in spaces:
-            _curve(axes[ti], an[s]["sizes"], an[s]["mean"][ti, 0], an[s]["sem"][ti, 0], f"{s.upper()} NB")
+            _curve(axes[ti], an[s], ti, 0, f"{s.upper()} NB")
         axes[ti].set(title=t, ylabel="accuracy")
         axes[ti].legend(fontsize=7)
     save(fig, "fig07_nb_spaces.png")
@@ -97,8 +101,8 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
             for s in db_spaces:
                 b = an[s]["best_db1"][ti]
                 src = an[s]["conditions"][b].split(":")[1]
-                _curve(axes[ti], an[s]["sizes"], an[s]["mean"][ti, 0], an[s]["sem"][ti, 0], f"{s.upper()} NB", linestyle="--")
-                _curve(axes[ti], an[s]["sizes"], an[s]["mean"][ti, b], an[s]["sem"][ti, b], f"{s.upper()} {t} <- ({src})")
+                _curve(axes[ti], an[s], ti, 0, f"{s.upper()} NB", linestyle="--")
+                _curve(axes[ti], an[s], ti, b, f"{s.upper()} {t} <- ({src})")
             axes[ti].set(title=t, ylabel="accuracy")
             axes[ti].legend(fontsize=6)
         save(fig, "fig08_db1_best.png")

@@ -2,7 +2,9 @@
 
 ``fmt`` (a float as text, ``nan`` for undefined), ``finite`` (a JSON-ready copy with NaN as
 None), ``curve_average`` (a bootstrap factor curve ``(S,)`` averaged over the config's bf
-interval), ``nanmean`` (mean of the finite values) and ``SHORT`` (short action names).
+interval), ``nanmean`` (mean of the finite values), ``ci_text`` (an interval as
+``[lo, hi]``), ``rests_on`` (what a Table II rests on: affordances, sizes, repetitions, test
+scenes, how the intervals were made) and ``SHORT`` (short action names).
 """
 from __future__ import annotations
 
@@ -17,6 +19,39 @@ SHORT = {"unobstruct": "unob"}
 
 def fmt(x: float, nd: int = 3) -> str:
     return "nan" if x is None or not np.isfinite(x) else f"{x:.{nd}f}"
+
+
+def rows_run(cfg: Any, space: str) -> list[int]:
+    """Indices of the Table II rows whose condition family the space ran (RHF: NB and DB1)."""
+    from relaff_jax.learn import TABLE2_ROWS
+
+    return [i for i, name in enumerate(TABLE2_ROWS) if name.split()[0] in cfg.conditions(space)]
+
+
+def ci_text(a: Any, key: str, i: int, nd: int = 3) -> str:
+    """Row ``i`` of the interval ``a[key] (rows, 2)`` as ``[lo, hi]``, ``-`` if not computed."""
+    if key not in a:
+        return "-"
+    lo, hi = a[key][i]
+    return f"[{fmt(lo, nd)}, {fmt(hi, nd)}]"
+
+
+def rests_on(a: Any, cfg: Any) -> str:
+    """One sentence: what the Table II of analysis ``a`` rests on."""
+    lo, hi = cfg.bf_sizes
+    ran = [n for n in a["sizes"] if lo <= n <= hi]
+    tests = a.get("test_size")
+    pos = a.get("test_positive")
+    t = (f"; test scenes per affordance {min(tests)}-{max(tests)}" + (f" ({min(pos)}-{max(pos)} positive)" if pos is not None else "")
+         if tests is not None else "")
+    ci = (f" Intervals: {100 * a['ci_level']:.0f} % percentile bootstrap, {a['ci_resamples']} resamples of the repetitions"
+          + (" and of each affordance's test scenes." if a["outcomes"] else " (test scenes not resampled: outcomes not kept).")
+          if "ci_level" in a else " No intervals computed.")
+    return (f"Rests on {len(a['actions'])} affordances; {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
+            f"({', '.join(map(str, ran)) if len(ran) <= 6 else f'{ran[0]}..{ran[-1]}'}); {a['reps']} repetitions{t}. "
+            "avg/min/max are over the affordances with a value (n); a bootstrap factor is averaged over the sizes "
+            "where it is defined (NB above chance); the gain is the mean accuracy difference to NB over the same window."
+            + ci)
 
 
 def curve_average(curve: np.ndarray, sizes: Sequence[int], cfg: Any) -> float:

@@ -2,8 +2,11 @@
 
 Takes the experiment (``load_results``) and its analysis ``{space: analyse(...)}``; gives the
 CSV of Table II (``table2_csv``: columns ``method, avg, min, max, paper_avg, paper_min,
-paper_max``; no paper numbers for RHF, the paper has no RHF table), the Markdown tables
-(``table2_markdown``) and the ``summary.json`` dict (``summary``).
+paper_max, n_targets, ci_low, ci_high, gain_avg, gain_ci_low, gain_ci_high``: ``n_targets``
+affordances have a value in the row (avg/min/max are over them), ``ci_*`` the bootstrap
+interval of ``avg``, ``gain_*`` the mean accuracy gain over the window and its interval; no
+paper numbers for RHF, the paper has no RHF table, nor for the online rows), the Markdown
+tables (``table2_markdown``) and the ``summary.json`` dict (``summary``).
 """
 from __future__ import annotations
 
@@ -13,20 +16,38 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from relaff_jax.learn import PAPER_TABLE2, TABLE2_ROWS, categories_per_threshold, layout
-from relaff_jax.report.formatting import SHORT, curve_average, finite, fmt
+from relaff_jax.learn import (
+    PAPER_TABLE2,
+    TABLE2_ROWS,
+    categories_per_threshold,
+    layout,
+    paper_row,
+)
+from relaff_jax.report.formatting import (
+    SHORT,
+    ci_text,
+    curve_average,
+    finite,
+    fmt,
+    rests_on,
+    rows_run,
+)
 
-CSV_COLUMNS = ("method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max")
+CSV_COLUMNS = ("method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max", "n_targets", "ci_low", "ci_high",
+               "gain_avg", "gain_ci_low", "gain_ci_high")
 
 
-def table2_csv(table: np.ndarray, paper: bool) -> str:
-    """CSV text of Table II: ``table (rows, 3)`` avg/min/max in ``TABLE2_ROWS`` order."""
+def table2_csv(a: Mapping[str, Any], paper: bool) -> str:
+    """CSV text of Table II from one space's ``analyse`` output, rows in ``TABLE2_ROWS`` order."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(CSV_COLUMNS)
-    for name, row in zip(TABLE2_ROWS, table):
-        ref = PAPER_TABLE2[name] if paper else (np.nan,) * 3
-        w.writerow([name] + [fmt(v, 4) for v in row] + [fmt(v, 4) for v in ref])
+    nan2 = np.full((len(TABLE2_ROWS), 2), np.nan)
+    ci, gci = a.get("table2_ci", nan2), a.get("gain_ci", nan2)
+    for i, (name, row) in enumerate(zip(TABLE2_ROWS, a["table2"])):
+        ref = paper_row(name) if paper else (np.nan,) * 3
+        w.writerow([name] + [fmt(v, 4) for v in row] + [fmt(v, 4) for v in ref] + [int(a["n_targets"][i])]
+                   + [fmt(v, 4) for v in ci[i]] + [fmt(a["gain"][i, 0], 4)] + [fmt(v, 4) for v in gci[i]])
     return buf.getvalue()
 
 
@@ -41,20 +62,27 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
         f"Seed {meta['seed']}; actions: {', '.join(meta['actions'])}; training sizes {list(cfg.sizes)[:3]}...{max(cfg.sizes)} "
         f"({len(cfg.sizes)} sizes); repetitions PCA {cfg.reps_pca}, RHF {cfg.reps_rhf}; "
         f"average bootstrap factor over n = {cfg.bf_sizes[0]}..{cfg.bf_sizes[1]}; 'best' = highest mean accuracy over "
-        f"n = {cfg.best_sizes[0]}..{cfg.best_sizes[1]}; 'best after ten' = highest accuracy at n = {cfg.select_size}.",
+        f"n = {cfg.best_sizes[0]}..{cfg.best_sizes[1]}; 'best after ten' = highest mean test accuracy at n = {cfg.select_size} "
+        "(offline, the paper's); '(online)' = per repetition, highest leave-one-out accuracy on its "
+        f"{cfg.select_size} training samples; tied candidates share the choice equally.",
         "",
     ]
     for space, a in an.items():
         r = res[space]
         paper = space == "pca"
-        lines += [f"## Table II ({space.upper()})", ""]
-        if paper:
-            lines += ["| method | avg | min | max | paper avg | paper min | paper max |", "|---|---|---|---|---|---|---|"]
-        else:
-            lines += ["| method | avg | min | max |", "|---|---|---|---|"]
-        for name, row in zip(TABLE2_ROWS, a["table2"]):
-            cells = [fmt(v) for v in row] + ([fmt(v) for v in PAPER_TABLE2[name]] if paper else [])
+        n_aff = len(a["actions"])
+        lines += [f"## Table II ({space.upper()})", "", rests_on(a, cfg), ""]
+        head = "| method | avg | min | max | n | interval of avg | gain (accuracy) | interval of gain |"
+        lines += [head + (" paper avg | paper min | paper max |" if paper else ""), "|---" * (8 + 3 * paper) + "|"]
+        for i, (name, row) in enumerate(zip(TABLE2_ROWS, a["table2"])):
+            if i not in rows_run(cfg, space):
+                continue
+            cells = [fmt(v) for v in row] + [f"{int(a['n_targets'][i])} of {n_aff}", ci_text(a, "table2_ci", i),
+                                             fmt(a["gain"][i, 0]), ci_text(a, "gain_ci", i)]
+            cells += [fmt(v) for v in paper_row(name)] if paper else []
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines += ["", "Sizes of the window with a bootstrap factor (NB above chance), per affordance: "
+                  + ", ".join(f"{t} {int(d)} of {a['window_sizes']}" for t, d in zip(a["actions"], a["defined"])) + "."]
         lines += ["", f"### Average bootstrap factor per affordance ({space.upper()}, paper Fig. 10)", ""]
         acts = a["actions"]
         lines += ["| method | " + " | ".join(acts) + " |", "|---|" + "---|" * len(acts)]
@@ -88,13 +116,24 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
 
 
 def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures: Sequence[str]) -> dict[str, Any]:
-    """``summary.json``: Table II per space (avg/min/max and per affordance), the chosen
+    """``summary.json``: Table II per space (avg/min/max, n_targets, intervals, the gain, per
+    affordance values and intervals, the window sizes with a bf per affordance), the chosen
     sources, the correlation matrix and categories per threshold, the paper's Table II and
     the figure file names; NaN as None."""
     out = {
         s: {
             "actions": x["actions"],
-            "table2": {name: dict(zip(("avg", "min", "max"), row)) for name, row in zip(TABLE2_ROWS, x["table2"])},
+            "table2": {name: dict(zip(("avg", "min", "max"), row), n_targets=int(n),
+                                  ci=list(x["table2_ci"][i]) if "table2_ci" in x else None,
+                                  gain=float(x["gain"][i, 0]), gain_ci=list(x["gain_ci"][i]) if "gain_ci" in x else None)
+                       for i, (name, row, n) in enumerate(zip(TABLE2_ROWS, x["table2"], x["n_targets"]))},
+            "table2_per_affordance_ci": ({name: dict(zip(x["actions"], (list(v) for v in ci)))
+                                          for name, ci in zip(TABLE2_ROWS, x["per_target_ci"])} if "per_target_ci" in x else None),
+            "gain_per_affordance": {name: dict(zip(x["actions"], row)) for name, row in zip(TABLE2_ROWS, x["gain_per_target"])},
+            "window_sizes_defined": dict(zip(x["actions"], (int(d) for d in x["defined"]))),
+            "window_sizes": x["window_sizes"],
+            "test_size": x["test_size"], "test_positive": x["test_positive"],
+            "ci": {"level": x.get("ci_level"), "resamples": x.get("ci_resamples"), "test_scenes_resampled": x["outcomes"]},
             "table2_per_affordance": {name: dict(zip(x["actions"], row)) for name, row in zip(TABLE2_ROWS, x["table2_per_target"])},
             "db1_best": {t: x["conditions"][i] for t, i in zip(x["actions"], x["best_db1"])},
             "db1_best_after_ten": {t: x["conditions"][i] for t, i in zip(x["actions"], x["ten_db1"])},

@@ -43,15 +43,15 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     res = load_results(results_dir)
     cfg = res["config"]
     spaces = list(res["meta"]["spaces"])
-    an = {s: analyse(res[s], cfg) for s in spaces}
+    an = {s: analyse(res[s], cfg, seed=int(res["meta"]["seed"])) for s in spaces}
     main = "pca" if "pca" in an else spaces[0]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
 
     # tables, figures and the summary
-    rio.atomic_write_text(out / "table2.csv", table2_csv(an[main]["table2"], paper=main == "pca"))
+    rio.atomic_write_text(out / "table2.csv", table2_csv(an[main], paper=main == "pca"))
     if main == "pca" and "rhf" in an:
-        rio.atomic_write_text(out / "table2_rhf.csv", table2_csv(an["rhf"]["table2"], paper=False))
+        rio.atomic_write_text(out / "table2_rhf.csv", table2_csv(an["rhf"], paper=False))
     rio.atomic_write_text(out / "table2.md", table2_markdown(res, an))
     figs = write_figures(res, an, out)
     rio.atomic_write_json(out / "summary.json", summary(res, an, [p.name for p in figs]))
@@ -69,7 +69,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     # the document
     found = findings(an, cfg, rules)
     blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + data_blocks
-              + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out) + S.best_after_ten_blocks(an[main], cfg, main)
+              + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset")) + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
               + S.run_blocks(info))
     rio.atomic_write_json(out / "findings.json", finite({"findings": found, "rules": dataclasses.asdict(rules)}))

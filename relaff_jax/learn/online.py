@@ -1,0 +1,54 @@
+"""The online "best after ten": per repetition, the candidate an agent would keep after ten samples.
+
+Takes one space's results (``acc: (A, C, S, R)``, ``loo: (A, C, R)`` the leave-one-out
+accuracy of every DB1 and CB1 candidate on its own ``select_size`` training samples,
+``correct: (A, C, S, R, N)``) and the condition layout; ``online_weights`` gives per family,
+target and repetition the weight of each candidate ``(A, K, R)``: the candidates tied at the
+highest leave-one-out accuracy share it equally (``measures.tie_weights``: a tie is a uniform
+random choice; with ten samples the accuracy moves in steps of 0.1, so ties are common).
+``extend`` appends the two chosen learners (DB1, CB1) to the condition axis as the
+weighted mix of the candidates' accuracies and test outcomes, ``(A, C + 2, S, R)`` and
+``(A, C + 2, S, R, N)`` float, so that every later step (means, intervals, Table II) treats
+them like conditions. The choice never looks at a test scene, unlike the paper's (offline)
+"best after ten", which picks the candidate with the highest mean test accuracy at n = 10.
+"""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from relaff_jax.learn.measures import tie_weights
+
+FAMILIES = ("DB1", "CB1")  # in the order of the extra conditions
+
+
+def online_weights(loo: np.ndarray, lay: Mapping) -> dict[str, np.ndarray]:
+    """``{family: (A, K, R)}`` weights of the online choice from ``loo: (A, C, R)``."""
+    loo = np.asarray(loo, dtype=float)
+    return {fam: np.moveaxis(tie_weights(np.moveaxis(loo[:, lay[fam]], 1, -1)), -1, 1) for fam in FAMILIES}
+
+
+def _mix(x: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``x (A, C, S, R, ...)``, weights ``w (A, K, R)`` over conditions ``idx`` -> ``(A, S, R, ...)``."""
+    xs = np.nan_to_num(np.asarray(x)[:, idx].astype(float))  # (A, K, S, R, ...)
+    ww = w.reshape(w.shape[:2] + (1,) + w.shape[2:] + (1,) * (xs.ndim - 4))
+    total = w.sum(1)  # (A, R): 1 where a choice was made, 0 where the family did not run
+    out = (xs * ww).sum(1)
+    ok = total.reshape(total.shape[:1] + (1,) + total.shape[1:] + (1,) * (xs.ndim - 4)) > 0
+    return np.where(ok, out, np.nan)
+
+
+def extend(acc: np.ndarray, correct: np.ndarray, loo: np.ndarray, lay: Mapping) -> tuple[np.ndarray, np.ndarray, dict]:
+    """``acc (A, C + 2, S, R)``, ``correct (A, C + 2, S, R, N)`` float32 with the online
+    learners appended (NaN / 0 where a family did not run), and the weights."""
+    w = online_weights(loo, lay)
+    acc_on = np.stack([_mix(acc, lay[f], w[f]) for f in FAMILIES], 1)
+    acc_x = np.concatenate([np.asarray(acc, dtype=float), acc_on], 1)
+    corr = np.asarray(correct)
+    if corr.shape[-1]:
+        corr_on = np.stack([np.nan_to_num(_mix(corr, lay[f], w[f])) for f in FAMILIES], 1)
+        corr_x = np.concatenate([corr.astype(np.float32), corr_on.astype(np.float32)], 1)
+    else:
+        corr_x = np.zeros(acc_x.shape + (0,), np.float32)
+    return acc_x, corr_x, w
