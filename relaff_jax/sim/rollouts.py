@@ -3,10 +3,12 @@
 Takes an ``ActionConfig`` (and, for rollouts, an action name and batch size); gives
 ``make_action_fn`` / ``jitted_action_fn`` (plan, simulate and label settled scenes; two compiled
 programs per batch shape, plan and simulate, shared by all nine actions: the action index is
-traced) and ``make_rollout_fn(action, batch, config)``, the sampler of
+traced) and ``make_rollout_fn(action, batch, config, engine=...)``, the sampler of
 ``dataset.generate_dataset``: sample pairs of the action's pairing (``allowed_pairs``), place
 and settle them (``scenes.py`` on the arm-less world), plan, simulate the feasible programs,
-label.
+label. Two engines execute the programs (``ENGINES``): ``"mjx"`` (default; it also runs on an
+accelerator) and ``"native"`` (MuJoCo C on a thread pool, ``native_batch.execute_native``);
+sampling, settling and planning are the same JAX code for both.
 
 Pipeline of one batch: ``planning.make_plan_fn`` (tcp waypoints from the settled poses, batched
 IK; infeasible programs keep the arm home), ``simulate.make_simulate_fn`` (MJX, ``lax.scan``
@@ -25,12 +27,15 @@ import numpy as np
 from . import scenes as sc
 from . import world as wd
 from .bodies import geometry
+from .native_batch import execute_native
 from .planning import Plan
 from .simulate import make_prepare_fn, make_simulate_fn
 from .templates import ActionConfig
 
 from relaff_jax.constants import PAIRING, action_id
 from relaff_jax.errors import UserError
+
+ENGINES = ("mjx", "native")  # executors of the planned programs in make_rollout_fn
 
 
 def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
@@ -90,7 +95,8 @@ def default_sim_batch(batch: int) -> int:
 
 
 def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
-                    sim_batch: int | None = None) -> Callable:
+                    sim_batch: int | None = None, engine: str = "mjx",
+                    nthread: int | None = None) -> Callable:
     """``rollout_fn(key, batch_size) -> dict`` of numpy arrays per sample, for
     ``dataset.generate_dataset``: samples pairs of the action's pairing, places and settles
     the scenes (``scenes.jitted_scene_fns`` on the arm-less world), plans the action, runs the
@@ -109,8 +115,13 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     ``toy``, ``other`` (names), ``pair`` (int32), ``qpos0`` / ``qpos_settled`` (float32 (14,),
     arm-less layout), ``qpos_final``, ``rollout_id`` (int64), ``intended``, ``at_rest``,
     ``feasible``, ``ik_error``, ``reach_before``/``reach_after``, ``simulated`` (bool: the
-    program ran in MJX).
+    program was executed, by either engine).
     ``batch`` is the batch size the caller will use (compiled on the first call).
+
+    ``engine``: ``"mjx"`` runs the programs in MJX in calls of ``sim_batch`` scenes;
+    ``"native"`` runs all feasible programs of the batch in one ``mujoco.batch`` on ``nthread``
+    C threads (default: every CPU of the process; ``sim_batch`` unused). Only the execution
+    differs: the same scenes, plans and outcome rules (``docs/actions.md``, "Engines").
     """
     aid = action_id(action)
     if int(batch) < 1:
@@ -118,6 +129,10 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     sim_batch = default_sim_batch(batch) if sim_batch is None else int(sim_batch)
     if sim_batch < 1:
         raise UserError(f"sim_batch must be >= 1, got {sim_batch}")
+    if engine not in ENGINES:
+        raise UserError(f"unknown engine {engine!r}; valid: {', '.join(ENGINES)}")
+    if nthread is not None and int(nthread) < 1:
+        raise UserError(f"nthread must be >= 1, got {nthread}")
     cfg = config or ActionConfig()
     scene_world = wd.build_world(cfg.phys)
     place_fn, settle_fn, _ = sc.jitted_scene_fns(scene_world, cfg.scene)
@@ -139,7 +154,13 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
         qpos_final = qpos.copy()
         after = np.asarray(before, bool).copy()
         run = np.flatnonzero(plan.feasible)
-        for lo in range(0, len(run), sim_batch):
+        if engine == "native" and len(run):
+            sub = Plan(plan.q_way[run], plan.grip_way[run], plan.seg_steps, plan.feasible[run],
+                       plan.direction[run], plan.ik_error[run])
+            out = execute_native(action, cfg, p[run], qpos[run], np.asarray(s.qvel)[run], sub,
+                                 np.asarray(before)[run], nthread=nthread)
+            label[run], qpos_final[run], after[run] = out["label"], out["qpos_final"], out["reach_after"]
+        for lo in range(0, len(run) if engine == "mjx" else 0, sim_batch):
             rows = run[lo:lo + sim_batch]
             idx = np.resize(rows, sim_batch)  # pad with repeats: one compiled shape
             sub = Plan(plan.q_way[idx], plan.grip_way[idx], plan.seg_steps, plan.feasible[idx],

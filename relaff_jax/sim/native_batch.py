@@ -1,0 +1,167 @@
+"""The native engine: planned motor programs executed by ``mujoco.batch`` on a C thread pool.
+
+Takes an ``ActionConfig``, an action name, settled scenes (the arm-less layout of
+``scenes.Scenes``) and their JAX plans (``planning.Plan``) with unobstruct's reachability
+before the action; gives ``execute_native``, the same per-scene fields as MJX's
+``simulate.make_simulate_fn`` (labels, centres of mass, final states), computed by MuJoCo C
+(``mj_step``, float64) with the same grasp-lock rule, weld relpose, measuring step and outcome
+rules. It equals ``native.replay_native`` (one ``MjData`` per scene) bit for bit, at any
+thread count and chunk size (``tests/test_native_engine.py``).
+
+How the grasp lock is read: ``mujoco.batch`` cannot bind contacts, so every scene's model
+carries four contact sensors (``sensor_models``: each finger pad against the toy body and
+against the other body, every matching contact's distance and normal, ``reduce="none"``) and
+the lock test (``native_program.pad_hit``) reads ``sensordata``. The weld's relative pose is
+written into the scene's own copy of its pair's model (``set_models`` forbids ``expand``), at
+the step the lock engages.
+"""
+from __future__ import annotations
+
+import copy
+import functools
+import os
+
+import mujoco
+import mujoco.batch
+import numpy as np
+
+from . import objects as lib
+from . import world as wd
+from .native_program import native_labels, pad_hit, program_inputs, weld_relpose_np
+from .planning import Plan, setup
+from .simulate import welds
+from .templates import N_STEPS, ActionConfig
+
+from relaff_jax.constants import action_id
+from relaff_jax.errors import UserError
+
+# Contact slots per sensor: a box pad against the toy (a box and a sphere) or the other object
+# (five boxes). MuJoCo's box-box test gives at most 8 contacts, so these never overflow; an
+# overflow would still raise (``_touching``) rather than drop a contact silently.
+SLOTS = {"toy": 16, "obj": 48}
+PAD_SENSORS = tuple((pad, body) for body in ("toy", "obj") for pad in ("arm_pad_l", "arm_pad_r"))
+
+
+def sensor_xml() -> str:
+    """The ``<sensor>`` section of the engine's models: pad-vs-body contact sensors."""
+    rows = [f'<contact name="{pad}_{body}" geom1="{pad}" body2="{body}" num="{SLOTS[body]}" '
+            'data="found dist normal" reduce="none"/>' for pad, body in PAD_SENSORS]
+    return "<sensor>\n    " + "\n    ".join(rows) + "\n  </sensor>\n"
+
+
+@functools.lru_cache(maxsize=None)
+def sensor_model(toy: str, other: str, phys: wd.PhysicsConfig = wd.PhysicsConfig()) -> mujoco.MjModel:
+    """The action-world model of one pair (``world.pair_xml(..., arm=True)``, the physics of
+    ``World.mj_models``) plus the contact sensors of ``sensor_xml``; compiled once."""
+    head, tag, tail = wd.pair_xml(toy, other, phys, arm=True).rpartition("</mujoco>")
+    return mujoco.MjModel.from_xml_string(head + sensor_xml() + tag + tail)
+
+
+def sensor_models(phys: wd.PhysicsConfig, pair: np.ndarray) -> list[mujoco.MjModel]:
+    """The ``sensor_model`` of each pair index in ``pair`` (B,) (``World.pairs`` order)."""
+    names = lib.pairs()
+    return [sensor_model(names[int(p)][0], names[int(p)][1], phys) for p in pair]
+
+
+def default_threads() -> int:
+    """Threads of the batch: the CPUs this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def _touching(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel, body: str, cfg: ActionConfig) -> np.ndarray:
+    """(n,) bool: do both pads grip ``body`` ("toy" / "obj"), from ``sensordata`` (n, S) and
+    ``geom_xmat`` (n, G, 9) of the same forward pass?"""
+    n, hits = sd.shape[0], []
+    for pad in ("arm_pad_l", "arm_pad_r"):
+        s = m.sensor(f"{pad}_{body}")
+        k = SLOTS[body]
+        block = sd[:, s.adr[0]:s.adr[0] + 5 * k].reshape(n, k, 5)  # found, dist, normal (3)
+        found = block[:, 0, 0]
+        if np.any(found > k):
+            raise RuntimeError(f"contact sensor {pad}_{body}: {int(found.max())} contacts > {k} slots")
+        valid = np.arange(k)[None, :] < found[:, None]
+        axis = gxmat[:, m.geom(pad).id].reshape(n, 3, 3)[:, :, 1]
+        hits.append(pad_hit(block[:, :, 1], block[:, :, 2:5], axis, valid, cfg))
+    return hits[0] & hits[1]
+
+
+def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: int, nqo: int) -> dict:
+    """Execute programs ``rows`` of ``inp`` (``native_program.ProgramInputs``) in one batch."""
+    world = setup(cfg).world
+    wl = welds(world)
+    bodies = [world.toy_body, world.obj_body]
+    own = [copy.copy(models[r]) for r in rows]  # each simulation owns its model: the lock's eq_data
+    batch = mujoco.batch.Batch(own[0], nsim=len(rows), nthread=nthread)
+    batch.set_models(own)
+    qpos, qvel, ctrl, eq = (batch.bind(f) for f in ("qpos", "qvel", "ctrl", "eq_active"))
+    xipos, xpos, xquat, gxmat, sd = (batch.bind(f) for f in ("xipos", "xpos", "xquat", "geom_xmat", "sensordata"))
+    qpos[:], qvel[:], eq[:] = inp.qpos[rows], inp.qvel[rows], inp.eq_active[rows]
+    batch.forward()
+    com0 = xipos[:, bodies].copy()
+    com_m = None
+    grasp = {1: (wl.obj, world.obj_body, "obj"), 2: (wl.toy, world.toy_body, "toy")}.get(inp.grasp)
+    for t in range(N_STEPS):
+        # the grasp lock of simulate.run_program_locked, on the pads' contact sensors (the
+        # other hand weld stays off: initial_data leaves it off and only the grasp row moves)
+        if grasp is not None:
+            row, body, name = grasp
+            if inp.closing[t]:
+                active = eq[:, row] != 0
+                lock = active | _touching(sd, gxmat, own[0], name, cfg)
+                new = np.flatnonzero(lock & ~active)
+                if len(new):
+                    rel = weld_relpose_np(xpos[new, wl.hand_body], xquat[new, wl.hand_body], xpos[new, body],
+                                          xquat[new, body])
+                    for i, r in zip(new, rel):
+                        own[i].eq_data[row, 3:10] = r
+                    batch.set_models(own)
+                eq[:, row] = lock
+            else:
+                eq[:, row] = 0.0
+        ctrl[:] = inp.ctrl[rows, t]
+        batch.step()
+        if t == inp.measure:  # like MJX: the positions of the step's forward pass
+            com_m = xipos[:, bodies].copy()
+    return dict(com0=com0, com_m=com_m, com_end=xipos[:, bodies].copy(),
+                qpos_final=qpos[:, :nqo].astype(np.float32))
+
+
+def execute_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
+                   plan: Plan, before: np.ndarray, nthread: int | None = None,
+                   chunk: int | None = None) -> dict[str, np.ndarray]:
+    """Execute B planned programs in MuJoCo C on a thread pool and label them.
+
+    Args:
+      pair: (B,) pair indices; qpos (B, 14), qvel (B, 12): settled object states.
+      plan: the scenes' ``Plan`` (``q_way`` (B, W, 6), ``grip_way`` (B, W), ``feasible``,
+        ``direction`` (B, 3), ``ik_error``); before: (B,) unobstruct's reachability before.
+      nthread: C threads (default: every CPU of the process); chunk: simulations per batch
+        (default all B). Neither changes a bit of the results.
+    Returns the fields of ``make_simulate_fn`` as numpy arrays: ``label``, ``feasible``,
+    ``ik_error``, ``com0``/``com_m``/``com_end`` (B, 2, 3) float64, ``reach_before``,
+    ``reach_after``, ``qpos_final`` (B, 14) float32, ``q_way``, ``grip_way``, ``seg_steps``.
+    """
+    aid = action_id(action)
+    nthread = default_threads() if nthread is None else int(nthread)
+    pair = np.asarray(pair)
+    n = len(pair)
+    chunk = max(n, 1) if chunk is None else int(chunk)
+    if nthread < 1 or chunk < 1:
+        raise UserError(f"nthread and chunk must be >= 1, got {nthread} and {chunk}")
+    qpos, qvel = np.asarray(qpos), np.asarray(qvel)
+    models = sensor_models(cfg.phys, pair)
+    outs = []
+    if n:
+        inp = program_inputs(cfg, aid, qpos, qvel, np.asarray(plan.q_way), np.asarray(plan.grip_way))
+        outs = [_run_chunk(cfg, models, inp, np.arange(lo, min(lo + chunk, n)), nthread, qpos.shape[-1])
+                for lo in range(0, n, chunk)]
+    cat = lambda k, shape, dt: np.concatenate([o[k] for o in outs]) if outs else np.zeros(shape, dt)
+    com0, com_m, com_end = (cat(k, (0, 2, 3), np.float64) for k in ("com0", "com_m", "com_end"))
+    qf = cat("qpos_final", (0, qpos.shape[-1]), np.float32)
+    feasible = np.asarray(plan.feasible, bool)
+    label, after = native_labels(cfg, aid, pair, com0, com_m, com_end, qf, np.asarray(plan.direction),
+                                 np.asarray(before, bool), feasible) if n else (np.zeros(0, bool),) * 2
+    return dict(label=label, feasible=feasible, ik_error=np.asarray(plan.ik_error), com0=com0, com_m=com_m,
+                com_end=com_end, reach_before=np.asarray(before, bool), reach_after=after, qpos_final=qf,
+                q_way=np.asarray(plan.q_way), grip_way=np.asarray(plan.grip_way),
+                seg_steps=np.asarray(plan.seg_steps))

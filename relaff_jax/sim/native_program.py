@@ -1,0 +1,167 @@
+"""What the MuJoCo C executions of planned programs share: inputs, the weld relpose, labels.
+
+Takes an ``ActionConfig``, an action id and a batch of settled scenes with their plans; gives
+the pieces that both C executions (``native.replay_native``, one ``MjData`` per scene, and
+``native_batch.execute_native``, ``mujoco.batch``) use, so that they differ only in how they
+step and read contacts:
+
+- ``program_inputs``: initial state (objects settled, arm at home) and the actuator command of
+  every control step (``ProgramInputs``), computed by the same JAX code as MJX
+  (``simulate.initial_data``, ``arm.program_ctrl``);
+- ``weld_relpose_np``: ``arm.weld_relpose`` in float64 numpy (the grasp lock's relative pose);
+- ``pad_hit``: the grasp test of one pad from contact distances and normals (the rule of
+  ``arm.finger_contacts``);
+- ``native_labels``: unobstruct's reachability after the action and the outcome rules
+  (``labels.goals``), on the centres of mass the C run recorded.
+"""
+from __future__ import annotations
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import arm as A
+from .labels import Outcome, goals
+from .planning import setup
+from .programs import toy_reachable
+from .simulate import initial_data
+from .templates import GRASPS, N_STEPS, TPL_CLOSED, TPL_MEASURE, TPL_STEPS, UNOBSTRUCT_ID, ActionConfig
+
+
+class ProgramInputs(NamedTuple):
+    """Everything a C execution of a batch of B programs starts from (float64 arrays).
+
+    qpos (B, nq), qvel (B, nv), eq_active (B, neq): the action world's initial state;
+    ctrl (B, T, nu): the command of every control step (T = ``N_STEPS``); closing (T,) bool:
+    does step t belong to a segment that closes the fingers; grasp: 0 none, 1 the other
+    object, 2 the toy (``templates.GRASPS``); measure: the control step of the lift-type goals.
+    """
+
+    qpos: np.ndarray
+    qvel: np.ndarray
+    eq_active: np.ndarray
+    ctrl: np.ndarray
+    closing: np.ndarray
+    grasp: int
+    measure: int
+
+
+@functools.lru_cache(maxsize=4)
+def _jitted(cfg: ActionConfig):
+    """The jitted JAX pieces (compiled once per batch shape): initial data, commands, reach."""
+    st = setup(cfg)
+
+    def init(aid, qpos, qvel):
+        d = jax.vmap(lambda q, v: initial_data(st, cfg, aid, q, v))(qpos, qvel)
+        return d.qpos, d.eq_active
+
+    def ctrl(aid, q_way, grip_way):
+        seg = jnp.asarray(TPL_STEPS)[aid]
+        one = lambda qw, gw: jax.vmap(lambda t: A.program_ctrl(st.arm, qw, gw, seg, t))(jnp.arange(N_STEPS))
+        return jax.vmap(one)(q_way, grip_way)
+
+    reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
+    rules = jax.vmap(lambda o: goals(cfg, o))
+    return jax.jit(init), jax.jit(ctrl), jax.jit(reach), jax.jit(rules)
+
+
+def _padded(fn, *arrays):
+    """``fn(*arrays)`` on the rows padded (with repeats of the last) to a power of two >= 8,
+    then cut back: a few compiled shapes serve every batch size. Rows do not interact."""
+    n = len(arrays[0])
+    size = max(8, 1 << (n - 1).bit_length())
+    idx = np.minimum(np.arange(size), n - 1)
+    out = jax.device_get(fn(*(jnp.asarray(np.asarray(a)[idx]) for a in arrays)))
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], out)
+
+
+def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarray,
+                   q_way: np.ndarray, grip_way: np.ndarray) -> ProgramInputs:
+    """Initial states and commands of B planned programs.
+
+    Args: qpos (B, 14), qvel (B, 12) settled object states (arm-less layout); q_way (B, W, 6),
+    grip_way (B, W) the plan's waypoints. The objects start at ``qpos``/``qvel`` exactly (in
+    float64), the arm and the hand welds as ``simulate.initial_data`` sets them.
+    """
+    init, ctrl, _, _ = _jitted(cfg)
+    a = jnp.int32(aid)
+    qpos = np.asarray(qpos, np.float64)
+    qvel = np.asarray(qvel, np.float64)
+    q0, eq0 = _padded(lambda q, v: init(a, q, v), qpos.astype(np.float32), qvel.astype(np.float32))
+    nqo, nvo = qpos.shape[-1], qvel.shape[-1]
+    full_q = np.concatenate([qpos, np.asarray(q0[:, nqo:], np.float64)], axis=1)
+    nv = setup(cfg).world.mj_model.nv
+    full_v = np.zeros((len(qpos), nv))
+    full_v[:, :nvo] = qvel
+    u = np.asarray(_padded(lambda qw, gw: ctrl(a, qw, gw), q_way, grip_way), np.float64)
+    seg = np.asarray(A.segment_index(TPL_STEPS[aid], jnp.arange(N_STEPS)))
+    return ProgramInputs(full_q, full_v, np.asarray(eq0, np.float64), u, np.asarray(TPL_CLOSED[aid])[seg],
+                         int(GRASPS[aid]), int(TPL_MEASURE[aid]))
+
+
+def weld_relpose_np(xpos1: np.ndarray, xquat1: np.ndarray, xpos2: np.ndarray,
+                    xquat2: np.ndarray) -> np.ndarray:
+    """(..., 7) pose of body 2 in body 1's frame (pos, quat), float64: ``arm.weld_relpose``.
+
+    Args: xpos1/xpos2 (..., 3) world positions, xquat1/xquat2 (..., 4) world quaternions
+    (w, x, y, z) of body 1 (the hand) and body 2 (the grasped body). Written component by
+    component (no reductions), so one scene gives the same bits alone or in a batch.
+    """
+    n1 = np.sqrt(xquat1[..., 0] ** 2 + xquat1[..., 1] ** 2 + xquat1[..., 2] ** 2 + xquat1[..., 3] ** 2)
+    w, x, y, z = (xquat1[..., i] / n1 for i in range(4))
+    a, b, c, e = w, -x, -y, -z  # the conjugate of q1, times q2
+    p, q, r, s = (xquat2[..., i] for i in range(4))
+    quat = [a * p - (b * q + c * r + e * s), a * q + p * b + (c * s - e * r),
+            a * r + p * c + (e * q - b * s), a * s + p * e + (b * r - c * q)]
+    nq = np.sqrt(quat[0] ** 2 + quat[1] ** 2 + quat[2] ** 2 + quat[3] ** 2)
+    rot = [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+           [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+           [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]]
+    dv = [xpos2[..., i] - xpos1[..., i] for i in range(3)]
+    pos = [rot[0][i] * dv[0] + rot[1][i] * dv[1] + rot[2][i] * dv[2] for i in range(3)]  # rot1.T @ dv
+    return np.stack(pos + [v / nq for v in quat], axis=-1)
+
+
+def pad_hit(dist: np.ndarray, normal: np.ndarray, axis: np.ndarray, valid: np.ndarray,
+            cfg: ActionConfig) -> np.ndarray:
+    """Does a pad grip (the rule of ``arm.finger_contacts``)? Any valid contact nearer than
+    ``cfg.arm.contact_dist`` whose normal is within ``arccos(contact_face_cos)`` of the pad's
+    closing axis.
+
+    Args: dist (..., K) contact distances, normal (..., K, 3), axis (..., 3) the pad's closing
+    axis (its local y in the world), valid (..., K) bool. Returns (...) bool. The dot product
+    is summed in a fixed order, so one contact gives the same answer in every caller.
+    """
+    a = axis[..., None, :]
+    dot = normal[..., 0] * a[..., 0] + normal[..., 1] * a[..., 1] + normal[..., 2] * a[..., 2]
+    return np.any(valid & (dist < cfg.arm.contact_dist) & (np.abs(dot) >= cfg.arm.contact_face_cos), axis=-1)
+
+
+def reachable(cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray) -> np.ndarray:
+    """(B,) bool: is the toy reachable (``programs.toy_reachable``) in scenes ``qpos`` (B, 14)?"""
+    return np.asarray(_padded(_jitted(cfg)[2], pair, np.asarray(qpos, np.float32)), bool)
+
+
+def native_labels(cfg: ActionConfig, aid: int, pair: np.ndarray, com0: np.ndarray, com_m: np.ndarray,
+                  com_end: np.ndarray, qpos_final: np.ndarray, direction: np.ndarray,
+                  before: np.ndarray, feasible: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Labels of B executed programs and unobstruct's reachability after them.
+
+    Args: pair (B,); com0/com_m/com_end (B, 2, 3) centres of mass of (toy, other) before, at
+    the measuring step and at the end; qpos_final (B, 14) float32 final object states;
+    direction (B, 3) the plan's; before (B,) reachability before; feasible (B,).
+    Returns label (B,) bool (False where infeasible) and reach_after (B,) bool (False unless
+    the action is unobstruct).
+    """
+    rules = _jitted(cfg)[3]
+    if aid == UNOBSTRUCT_ID:
+        after = reachable(cfg, pair, qpos_final)
+    else:
+        after = np.zeros(len(pair), bool)
+    f32 = lambda x: np.asarray(x, np.float32)
+    o = (f32(com0), f32(com_m), f32(com_end), f32(direction), np.asarray(before, bool), after)
+    label = _padded(lambda *x: rules(Outcome(*x)), *o)[:, aid] & np.asarray(feasible, bool)
+    return label, after
