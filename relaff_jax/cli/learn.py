@@ -37,8 +37,11 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     else:
         datasets, desc = learn.load_datasets(args.data), list(args.data)
     jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
-    paths = learn.run_experiment(datasets, args.out, cfg, spaces, seed=args.seed, jobs=jobs,
-                                 progress=not args.no_progress, data_desc=desc)
+    from relaff_jax.cluster import active
+
+    with options.cluster(args, args.out) as client, active(client):  # sweep blocks as cluster tasks
+        paths = learn.run_experiment(datasets, args.out, cfg, spaces, seed=args.seed, jobs=jobs,
+                                     progress=not args.no_progress, data_desc=desc)
     options.record_config(args.out, tree, "experiment")
     for space, p in paths.items():
         print(f"{space}: {p}")
@@ -62,10 +65,11 @@ def register(subparsers) -> None:
     p.add_argument("--synthetic", type=int, metavar="N", default=0,
                    help="use N synthetic samples per action instead of --data (a dry run of the stage)")
     p.add_argument("--out", required=True, metavar="RESULTS", help="results folder (resumed if it exists)")
-    p.add_argument("--preset", choices=("quick", "paper"), default="quick")
+    p.add_argument("--preset", choices=("quick", "study", "paper"), default="quick")
     p.add_argument("--space", choices=("pca", "rhf", "both"), default="both")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
+    options.add_cluster(p)
     options.add_set(p, "experiment.reps_pca=5 --set 'experiment.sizes=[2,10,25]'")
     p.add_argument("--no-progress", action="store_true")
     p.set_defaults(func=cmd_experiment)

@@ -53,3 +53,34 @@ def record_config(folder: Path, cfg: Any, command: str, argv: list[str] | None =
     path = Path(folder) / CONFIG_RECORD
     rio.atomic_write_json(path, {"command": command, "argv": argv, "config": to_dict(cfg), "versions": versions()})
     return path
+
+
+def add_cluster(p: argparse.ArgumentParser) -> None:
+    """``--cluster ADDRESS``: run the command's pieces as tasks on a Dask cluster."""
+    p.add_argument("--cluster", metavar="ADDRESS", default=None,
+                   help="run the pieces as tasks on a Dask cluster: local:N (N worker processes here) or "
+                        "tcp://HOST:PORT (a running scheduler); the output folder must be shared with the "
+                        "workers (docs/cluster.md). Results are bit-identical to a run without it")
+
+
+def cluster(args: argparse.Namespace, folder: Path):
+    """Context manager: None without ``--cluster``, else a checked ``distributed.Client`` (the
+    address parsed and the scheduler reached, versions and ``folder`` checked on every worker,
+    before any work); prints the cluster and its dashboard address on stderr."""
+    import contextlib
+    import sys
+
+    address = getattr(args, "cluster", None)
+    if address is None:
+        return contextlib.nullcontext(None)
+    from relaff_jax import cluster as C
+
+    addr = C.parse_address(address)
+
+    @contextlib.contextmanager
+    def run():
+        with C.connect(addr, folder=folder) as client:
+            print(f"relaff {args.command}: {C.describe(client)}", file=sys.stderr)
+            yield client
+
+    return run()

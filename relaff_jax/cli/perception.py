@@ -27,6 +27,7 @@ def register(subparsers) -> None:
     p.add_argument("--batch", type=int, default=32)
     p.add_argument("--seed", type=int, default=0, help="depth-noise seed")
     p.add_argument("--overwrite", action="store_true", help="recompute features of another config")
+    options.add_cluster(p)
     options.add_set(p, "perception.voxel.size=0.02")
     p.set_defaults(func=cmd_features)
 
@@ -45,8 +46,18 @@ def cmd_features(args) -> int:
     from relaff_jax.perception import from_sim
 
     tree = options.config(args, extra=[f"dataset.feature_batch={args.batch}"])
-    out = from_sim.add_features(args.dir, tree.dataset.feature_batch, args.seed, config=tree.perception,
-                                overwrite=args.overwrite)
+    with options.cluster(args, args.dir) as client:
+        if client is None:
+            out = from_sim.add_features(args.dir, tree.dataset.feature_batch, args.seed, config=tree.perception,
+                                        overwrite=args.overwrite)
+        else:  # the same compute function and config record, built once per worker
+            from relaff_jax import data
+            from relaff_jax.cluster import Remote
+            from relaff_jax.reproduce.features import default_feature_factory, feature_config
+
+            fn = Remote(default_feature_factory, args.seed, config=tree.perception, pick=0)
+            out = data.add_features(args.dir, fn, tree.dataset.feature_batch, True,
+                                    feature_config(args.seed, tree.perception), overwrite=args.overwrite, client=client)
     options.record_config(args.dir, tree, "features")
     print(f"{args.dir}: features for {out['n']} samples: "
           + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))

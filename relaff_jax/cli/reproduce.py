@@ -24,6 +24,7 @@ def register(sub) -> None:
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
                    help=f"redo a stage ({', '.join(STAGES)}); may be repeated")
     p.add_argument("--jobs", type=int, default=0, help="experiment worker processes (default: all cores)")
+    options.add_cluster(p)
     options.add_set(p, "dataset.n_samples=400 --set experiment.reps_pca=5")
     p.add_argument("--status", action="store_true", help="print each stage's status in OUT and exit")
     p.add_argument("--no-progress", action="store_true", help="no progress line")
@@ -42,8 +43,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     command = ["relaff", "reproduce", "--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
     command += [x for f in args.force or () for x in ("--force", f)] + (["--jobs", str(args.jobs)] if args.jobs else [])
     command += [x for s in args.set or () for x in ("--set", s)] + (["--no-progress"] if args.no_progress else [])
-    log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
-                      progress=not args.no_progress, overrides=parse_set(args.set or []), argv=command)
+    command += ["--cluster", args.cluster] if args.cluster else []
+    with options.cluster(args, args.out) as client:
+        log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
+                          progress=not args.no_progress, overrides=parse_set(args.set or []), argv=command,
+                          client=client)
     run = log["runs"][-1]
     for stage in STAGES:
         st = run["stages"][stage]

@@ -43,6 +43,7 @@ def register(subparsers) -> None:
     p.add_argument("--batch", type=int, default=256, help="scenes per simulated chunk")
     p.add_argument("--max-rollouts", type=int, default=None, help="stop after this many rollouts")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    options.add_cluster(p)
     options.add_set(p, "action.lift_height=0.3")
     p.set_defaults(func=cmd_generate)
 
@@ -103,15 +104,21 @@ def cmd_generate(args) -> int:
     from relaff_jax.sim.rollouts import make_rollout_fn
 
     cfg = tree.action
-    try:
-        summary = ds.generate_dataset(
-            args.out, args.action, args.samples, make_rollout_fn(args.action, args.batch, cfg),
-            args.seed, args.batch, {"action": rc.to_dict(cfg)}, progress=not args.json,
-            dataset_config=tree.dataset)
-    except ds.DatasetError as e:
-        if isinstance(e, UserError):
-            raise
-        raise UserError(str(e)) from e
+    with options.cluster(args, Path(args.out)) as client:
+        if client is None:
+            fn = make_rollout_fn(args.action, args.batch, cfg)
+        else:  # each worker builds and compiles the rollout function once
+            from relaff_jax.cluster import Remote
+
+            fn = Remote(make_rollout_fn, args.action, args.batch, cfg)
+        try:
+            summary = ds.generate_dataset(
+                args.out, args.action, args.samples, fn, args.seed, args.batch, {"action": rc.to_dict(cfg)},
+                progress=not args.json, dataset_config=tree.dataset, client=client)
+        except ds.DatasetError as e:
+            if isinstance(e, UserError):
+                raise
+            raise UserError(str(e)) from e
     options.record_config(Path(args.out), tree, "generate")
     if args.json:
         print(json.dumps(summary, default=str))

@@ -3,6 +3,12 @@
 Takes a dataset directory and ``compute_fn(samples) -> dict of (batch, ...) arrays``; gives
 ``features/chunk_*`` orbax chunks and ``features.json`` (batch, config, sample count, the
 selection's checksum, status), which ``load_dataset`` then serves as extra (N, ...) arrays.
+
+With a Dask ``client`` (docs/cluster.md) each feature chunk is a task (``tasks.feature_chunk``,
+shipped only its own ``batch`` samples) written to ``features/.pending``; this driver moves
+chunks into place in index order and alone writes ``features.json``, so the result is the
+run without a cluster's, bit for bit. ``compute_fn`` must then be picklable, best a
+``relaff_jax.cluster.Remote`` (built once per worker).
 """
 from __future__ import annotations
 
@@ -16,13 +22,14 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax import provenance
+from relaff_jax.cluster.tasks import Ordered
 from relaff_jax.data.config import FEATURES, FEATURES_SIDECAR, check_int, jsonable_config
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError
 from relaff_jax.data.load import load_dataset, load_feature_chunks, read_features_sidecar
 from relaff_jax.data.progress import progress_bar
-from relaff_jax.data.store import (chunk_indices, chunk_path, clean_tmp, mismatch, read_chunk, read_sidecar,
-                                   writer_lock, write_chunk)
-from relaff_jax.data.validate import check_schema, schema_of, standardize_features
+from relaff_jax.data.store import chunk_indices, chunk_path, clean_tmp, mismatch, read_chunk, read_sidecar, writer_lock
+from relaff_jax.data.tasks import PENDING, discard_pending, feature_chunk, promote
+from relaff_jax.data.validate import check_schema
 
 
 def add_features(
@@ -33,6 +40,7 @@ def add_features(
     config_dict: Mapping[str, Any] | None = None,
     *,
     overwrite: bool = False,
+    client: Any = None,
 ) -> dict[str, Any]:
     """Compute per-sample features of a finished dataset in resumable chunks and store them.
 
@@ -44,7 +52,8 @@ def add_features(
     ``[f * batch, (f + 1) * batch)``. ``config_dict`` (e.g. the perception config) is stored
     and compared on resume; a mismatch is an error unless ``overwrite`` removes the old features.
     ``overwrite`` never reads the old feature chunks, so it also recovers corrupt ones
-    (``status.features_status`` tells which state the features are in).
+    (``status.features_status`` tells which state the features are in). ``client``: a
+    ``distributed.Client`` to compute the chunks on (None: in this process).
     Returns ``{"n", "chunks", "new_chunks", "features": {name: shape}}``.
     """
     path = Path(path)
@@ -92,21 +101,33 @@ def add_features(
         n_chunks = math.ceil(n / batch)
         bar = progress_bar(progress, n, "features", unit="sample")
         bar.update(min(len(done) * batch, n))
+        pending = fdir / PENDING
+        clean_tmp(pending)
+        # without a cluster chunks are written in place, as always (unless a cluster run left some pending)
+        stage = pending if client is not None or pending.is_dir() else fdir
+
+        def task(f: int) -> tuple:
+            lo, hi = f * batch, min((f + 1) * batch, n)
+            idx = np.minimum(np.arange(lo, lo + batch), hi - 1)  # pad by repeating the last sample
+            return feature_chunk, (compute_fn, {k: v[idx] for k, v in samples.items()}, f, batch, lo, hi, str(stage), schema)
+
+        runner = Ordered(client, task, n_chunks)
         try:
             for f in range(len(done), n_chunks):
-                lo, hi = f * batch, min((f + 1) * batch, n)
-                idx = np.minimum(np.arange(lo, lo + batch), hi - 1)  # pad by repeating the last sample
-                out = compute_fn({k: v[idx] for k, v in samples.items()})
-                arrays = standardize_features(out, batch, set(samples))
-                arrays = {k: a[: hi - lo] for k, a in arrays.items()}
-                check_schema(f"feature chunk {f}", schema_of(arrays), schema)
-                schema = schema or schema_of(arrays)
-                write_chunk(chunk_path(fdir, f), arrays, {"chunk": f, "batch": batch, "start": lo, "stop": hi})
+                got = runner.get(f)
+                check_schema(f"feature chunk {f}", got["schema"], schema)
+                schema = schema or got["schema"]
+                if stage != fdir:
+                    promote(stage, fdir, f)
                 fmeta["chunks"] = f + 1
                 rio.atomic_write_json(fside, fmeta)
-                bar.update(hi - lo)
+                bar.update(min((f + 1) * batch, n) - f * batch)
+        except BaseException:
+            runner.cancel()  # tasks already running still finish into features/.pending, kept for a rerun
+            raise
         finally:
             bar.close()
+        discard_pending(pending)
         feats = load_feature_chunks(path, fmeta, n)
         fmeta["status"] = "complete"
         fmeta["features"] = {k: {"shape": list(a.shape), "dtype": a.dtype.str} for k, a in feats.items()}

@@ -18,6 +18,13 @@ generator stops after the first chunk count at which a balanced selection exists
 selection is a function of the stored labels/distances and ``seed`` only; so a run that is
 killed and rerun gives the same chunks and the same dataset as one that never stopped.
 Layout, selection scheme and error cases: ``docs/datasets.md``.
+
+With a Dask ``client`` (docs/cluster.md) chunks are tasks (``tasks.rollout_chunk``), one per
+worker thread in flight, written to ``chunks/.pending`` and moved into place by this driver
+in index order, so the stopping point and the selection are those of the run without a
+cluster; chunks simulated past the stopping point are waited for and discarded (counted in
+the summary's ``discarded_chunks``). ``rollout_fn`` must then be picklable, best a
+``relaff_jax.cluster.Remote`` (built once per worker).
 """
 from __future__ import annotations
 
@@ -32,6 +39,7 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax import provenance
+from relaff_jax.cluster.tasks import Ordered
 from relaff_jax.config import to_dict
 from relaff_jax.data.config import (CHUNKS, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, DatasetConfig,
                                     check_action, check_dataset_config, check_int, jsonable_config)
@@ -41,8 +49,9 @@ from relaff_jax.data.progress import progress_bar
 from relaff_jax.data.selection import select_balanced
 from relaff_jax.data.store import (check_rollout_ids, chunk_dirs_exist, chunk_indices, chunk_path, clean_tmp,
                                    mismatch, prepare_dir, read_chunk, read_sidecar, remove_created, sha256,
-                                   writer_lock, write_chunk)
-from relaff_jax.data.validate import check_schema, schema_of, standardize_rollouts
+                                   writer_lock)
+from relaff_jax.data.tasks import PENDING, discard_pending, promote, rollout_chunk
+from relaff_jax.data.validate import check_schema, schema_of
 
 
 def generate_dataset(
@@ -57,6 +66,8 @@ def generate_dataset(
     *,
     dataset_config: DatasetConfig | None = None,
     object_names: Sequence[str] | None = None,
+    client: Any = None,
+    window: int | None = None,
 ) -> dict[str, Any]:
     """Simulate rollouts in chunks until ``n_samples`` balanced samples exist; write the dataset.
 
@@ -66,8 +77,11 @@ def generate_dataset(
         ``batch`` as its second argument (static shapes: one compile).
     config_dict: the action/physics config, stored in the sidecar and compared on resume.
     object_names: table for int ``toy``/``other`` ids, if the rollout_fn returns ids.
+    client: a ``distributed.Client`` to simulate chunks on (None: in this process); ``window``:
+        chunks in flight at once (default: the cluster's task slots).
     Returns a summary: ``rollouts`` simulated, ``chunks``, ``positives``/``positive_rate``
-    over all rollouts, ``borrowed`` negatives, ``new_chunks`` simulated by this call.
+    over all rollouts, ``borrowed`` negatives, ``new_chunks`` simulated by this call,
+    ``discarded_chunks`` simulated past the stopping point (with a cluster) and dropped.
     """
     check_action(action)
     n_samples = check_int("n_samples", n_samples, 2)
@@ -94,15 +108,16 @@ def generate_dataset(
     # Losing the lock race leaves the folder to the winner, even if this call created it.
     with writer_lock(path):
         try:
-            return _generate_locked(path, header, rollout_fn, dcfg, object_names, progress)
+            return _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, client, window)
         except BaseException:
             # A dataset this call created but never gave a chunk leaves nothing behind.
             if created and not chunk_dirs_exist(path):
+                discard_pending(path / CHUNKS / PENDING)
                 remove_created(path)
             raise
 
 
-def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress) -> dict[str, Any]:
+def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, client, window) -> dict[str, Any]:
     cdir = path / CHUNKS
     clean_tmp(path, cdir)
     if (path / SIDECAR).exists():
@@ -140,6 +155,12 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress) -> 
     bar = progress_bar(progress, n // 2, f"{action} positives")
     bar.update(min(int(sum(l.sum() for l in labels)), n // 2))
     k = k0
+    pending = cdir / PENDING
+    clean_tmp(pending)
+    # without a cluster chunks are written in place, as always (unless a cluster run left some pending)
+    stage = pending if client is not None or pending.is_dir() else cdir
+    runner = Ordered(client, lambda j: (rollout_chunk, (rollout_fn, seed, j, batch, object_names, str(stage), schema)),
+                     max_chunks, window)
     try:
         while True:
             lab = np.concatenate(labels) if labels else np.zeros(0, bool)
@@ -156,24 +177,26 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress) -> 
                     f"positive rate {rate:.2%}; {n} samples need {n // 2} positives and {n - n // 2} "
                     f"negatives. Rerun with a larger max_rollouts to continue from the chunks kept in {cdir}."
                 )
-            import jax
-
-            key = jax.random.fold_in(jax.random.PRNGKey(seed), k)
-            arrays = standardize_rollouts(rollout_fn(key, batch), batch, object_names)
-            check_schema(f"chunk {k} from rollout_fn", schema_of(arrays), schema)
-            schema = schema or schema_of(arrays)
-            arrays["rollout"] = k * batch + np.arange(batch, dtype=np.int64)
-            write_chunk(chunk_path(cdir, k), arrays, {"chunk": k, "batch": batch, "positives": int(arrays["label"].sum())})
-            labels.append(arrays["label"])
-            dists.append(arrays["cog_distance"])
+            got = runner.get(k)
+            check_schema(f"chunk {k} from rollout_fn", got["schema"], schema)
+            schema = schema or got["schema"]
+            if stage != cdir:
+                promote(stage, cdir, k)
+            labels.append(got["label"])
+            dists.append(got["cog_distance"])
             k += 1
             npos = int(sum(l.sum() for l in labels))
             meta["counts"] = {"chunks": k, "rollouts": k * batch, "positives": npos}
             rio.atomic_write_json(path / SIDECAR, meta)
             bar.update(min(npos, n // 2) - bar.n)
             bar.set_postfix(rollouts=k * batch, pos_rate=f"{npos / (k * batch):.1%}")
+    except BaseException:
+        runner.cancel()  # tasks already running still finish into chunks/.pending, kept for a rerun
+        raise
     finally:
         bar.close()
+    runner.finish()  # chunks past the stopping point: wait until written, then drop them
+    discarded = discard_pending(pending)
     if sel.borrowed > dcfg.borrow_fraction * sel.n_negative:
         warnings.warn(
             f"{action}: rollout cap reached; {sel.borrowed} of {sel.n_negative} negatives come from "
@@ -199,12 +222,13 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress) -> 
     meta["selection"] = {key: index[key] for key in ("n", "n_positive", "n_negative", "chunks", "rollouts", "borrowed", "at_cap")}
     meta["selection"]["sha256"] = sha256(sel.selected.astype(np.int64))
     rio.atomic_write_json(path / SIDECAR, meta)
-    summary = _summary(meta, new_chunks=k - k0)
+    summary = dict(_summary(meta, new_chunks=k - k0), discarded_chunks=discarded)
     if progress:
+        extra = f"; {discarded} chunks simulated past the stopping point discarded" if discarded else ""
         print(
             f"{action}: {n} samples selected from {summary['rollouts']} rollouts ({k} chunks, "
             f"{k - k0} new), positive rate {summary['positive_rate']:.2%}, "
-            f"{sel.borrowed} negatives borrowed across distance bins",
+            f"{sel.borrowed} negatives borrowed across distance bins{extra}",
             file=sys.stderr,
         )
     return summary
@@ -221,4 +245,5 @@ def _summary(meta: Mapping[str, Any], new_chunks: int) -> dict[str, Any]:
         "positive_rate": c["positives"] / c["rollouts"] if c["rollouts"] else float("nan"),
         "borrowed": meta.get("selection", {}).get("borrowed"),
         "new_chunks": new_chunks,
+        "discarded_chunks": 0,
     }

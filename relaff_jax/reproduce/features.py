@@ -64,9 +64,10 @@ def run(run: Run, forced: bool) -> dict:
             continue
         t0 = time.perf_counter()
         if compute is None:
-            compute, config_dict = run.feature_factory(fseed)
+            compute, config_dict = run.feature_factory(fseed) if run.client is None else \
+                (run.remote(run.feature_factory, fseed), run.feature_config(fseed))
         D.add_features(run.paths.dataset(action), compute, cfg.dataset.feature_batch, False, config_dict,
-                       overwrite=forced or st.state in ("stale", "corrupt"))
+                       overwrite=forced or st.state in ("stale", "corrupt"), client=run.client)
         dt = time.perf_counter() - t0
         items[action] = {"status": "ran", "seconds": round(dt, 2), "was": st.state}
         run.progress.message(f"features {action}: {cfg.dataset.n_samples} scenes in {dt:.0f} s")

@@ -54,29 +54,74 @@ def progress(run: Run) -> float:
     return sum(D.generation_progress(run.paths.dataset(a), run.cfg.dataset.n_samples) for a in acts) / len(acts)
 
 
+def _one(run: Run, action: str, window: int | None) -> dict:
+    """Generate one action's dataset (resuming); what the run log records for it."""
+    cfg = run.cfg
+    t0 = time.perf_counter()
+    fn, config_dict, names = run.rollout_factory(action, cfg.dataset.rollout_batch)
+    if run.client is not None:  # the workers build (and compile) it themselves, once each
+        fn = run.remote(run.rollout_factory, action, cfg.dataset.rollout_batch)
+    s = D.generate_dataset(run.paths.dataset(action), action, cfg.dataset.n_samples, fn,
+                           run.log["seeds"]["datasets"][action], cfg.dataset.rollout_batch, config_dict,
+                           progress=False, dataset_config=cfg.dataset, object_names=names, client=run.client,
+                           window=window)
+    dt = time.perf_counter() - t0
+    item = {"status": "ran", "seconds": round(dt, 2), "rollouts": s["rollouts"],
+            "new_rollouts": s["new_chunks"] * cfg.dataset.rollout_batch,
+            "positive_rate": s["positive_rate"], "borrowed": s["borrowed"]}
+    extra = ""
+    if s.get("discarded_chunks"):
+        item["discarded_chunks"] = s["discarded_chunks"]
+        extra = f"; {s['discarded_chunks']} chunks simulated past the stopping point discarded"
+    run.progress.message(f"generate {action}: {cfg.dataset.n_samples} samples from {s['rollouts']} rollouts "
+                         f"(positive rate {s['positive_rate']:.1%}) in {dt:.0f} s{extra}")
+    return item
+
+
 def run(run: Run, forced: bool) -> dict:
+    """Every action's dataset: one after another, or on a cluster all at once (one driver
+    thread per action, the cluster's task slots shared between them, so that a few chunks per
+    action keep many workers busy and each action overshoots its stopping point by little)."""
     cfg, paths = run.cfg, run.paths
     if forced:
         rio.remove_tree(paths.data)
     acts = cfg.reproduce.actions
     items: dict[str, Any] = {}
-    for i, action in enumerate(acts):
-        run.progress.set(f"{action} ({i + 1}/{len(acts)})")
+    todo = []
+    for action in acts:
         st = action_status(run, action)
         if st.state == "complete":
             items[action] = {"status": "skipped"}
-            continue
-        if st.state in ("stale", "corrupt"):
+        elif st.state in ("stale", "corrupt"):
             raise ReproduceError(f"{paths.dataset(action)}: {st.why}; remove it or run with --force generate")
-        t0 = time.perf_counter()
-        fn, config_dict, names = run.rollout_factory(action, cfg.dataset.rollout_batch)
-        s = D.generate_dataset(paths.dataset(action), action, cfg.dataset.n_samples, fn,
-                               run.log["seeds"]["datasets"][action], cfg.dataset.rollout_batch, config_dict,
-                               progress=False, dataset_config=cfg.dataset, object_names=names)
-        dt = time.perf_counter() - t0
-        items[action] = {"status": "ran", "seconds": round(dt, 2), "rollouts": s["rollouts"],
-                         "new_rollouts": s["new_chunks"] * cfg.dataset.rollout_batch,
-                         "positive_rate": s["positive_rate"], "borrowed": s["borrowed"]}
-        run.progress.message(f"generate {action}: {cfg.dataset.n_samples} samples from {s['rollouts']} rollouts "
-                             f"(positive rate {s['positive_rate']:.1%}) in {dt:.0f} s")
-    return items
+        else:
+            todo.append(action)
+    if run.client is None or len(todo) < 2:
+        for action in todo:
+            run.progress.set(f"{action} ({acts.index(action) + 1}/{len(acts)})")
+            items[action] = _one(run, action, None)
+        return dict(sorted(items.items(), key=lambda kv: acts.index(kv[0])))
+    from concurrent.futures import ThreadPoolExecutor
+
+    from relaff_jax.cluster import cancel_all, nthreads
+
+    window = max(1, -(-nthreads(run.client) // len(todo)))
+    run.progress.set(f"{len(todo)} actions at once on the cluster")
+    with ThreadPoolExecutor(len(todo), thread_name_prefix="generate") as pool:
+        futures = {a: pool.submit(_in_context, run, a, window) for a in todo}
+        try:
+            for a in todo:
+                items[a] = futures[a].result()
+        except BaseException:
+            # stop the other actions too: their pending tasks are cancelled, their drivers unwind
+            # (chunks already written are kept for the rerun)
+            cancel_all(run.client)
+            raise
+    return dict(sorted(items.items(), key=lambda kv: acts.index(kv[0])))
+
+
+def _in_context(run: Run, action: str, window: int) -> dict:
+    from relaff_jax.cluster import active
+
+    with active(run.client):
+        return _one(run, action, window)

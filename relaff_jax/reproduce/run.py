@@ -18,6 +18,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from relaff_jax import io as rio
+from relaff_jax.cluster import active, nthreads
 from relaff_jax.config import override
 from relaff_jax.constants import ACTIONS, SPACES, STAGES
 from relaff_jax.reproduce import experiment, features, generate, report
@@ -72,7 +73,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
               overrides: Mapping[str, Any] | None = None, cfg: RunConfig | None = None,
               rollout_factory: Callable | None = None, feature_factory: Callable | None = None,
               feature_config_fn: Callable | None = None, argv: Sequence[str] | None = None,
-              stream=None) -> dict[str, Any]:
+              stream=None, client: Any = None) -> dict[str, Any]:
     """Run (or continue) the whole study in ``out``; return the run log.
 
     preset_name: ``tiny``, ``quick`` or ``paper`` (``cfg`` replaces it); ``overrides``: dotted
@@ -81,6 +82,9 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
     rollout_factory(action, batch) -> (rollout_fn, config_dict, object_names) and
     feature_factory(seed) -> (compute_fn, config_dict) replace the simulation and the
     perception (tests); ``feature_config_fn(seed)`` must then give the factory's config_dict.
+    client: a ``distributed.Client`` (``relaff_jax.cluster.connect``): dataset chunks, feature
+    chunks and sweep blocks run as tasks on its cluster (the factories must be picklable);
+    the results are those of the run without it, bit for bit.
     """
     if preset_name not in PRESETS:
         raise ReproduceError(f"unknown preset {preset_name!r}; expected one of {', '.join(PRESETS)}")
@@ -100,12 +104,14 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
     rio.clean_leftovers(paths.root)
     entry = {"started": now(), "argv": list(argv) if argv is not None else None, "jobs": jobs,
              "force": list(force), "status": "running", "stages": {}}
+    if client is not None:
+        entry["cluster"] = {"scheduler": client.scheduler.address, "threads": nthreads(client)}
     log["runs"].append(entry)
     prog = Progress(estimate_seconds(cfg, jobs, cpus), enabled=progress, stream=stream)
     default_features, default_feature_config = features.factories_for(cfg)
     run = Run(paths, preset_name, cfg, int(seed), jobs, tuple(force), prog,
               rollout_factory or generate.rollout_factory_for(cfg), feature_factory or default_features,
-              feature_config_fn or default_feature_config, log, entry)
+              feature_config_fn or default_feature_config, log, entry, client)
     run.save()
     prog.start()
     t_run = time.perf_counter()
@@ -115,26 +121,27 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
     for stage in run.force:
         log["timings"].pop(stage, None)
     try:
-        for stage, module in STAGE_MODULES.items():
-            t0 = time.perf_counter()
-            forced = stage in run.force
-            prog.begin(stage, lambda m=module: m.progress(run))
-            st = None if forced else module.status(run)
-            if st is not None and st.state == "complete":
-                entry["stages"][stage] = {"status": "skipped", "seconds": round(time.perf_counter() - t0, 2), "why": st.why}
-                prog.message(f"{stage}: complete, skipped")
+        with active(client):  # the sweeps' run_parallel sends its blocks to the cluster
+            for stage, module in STAGE_MODULES.items():
+                t0 = time.perf_counter()
+                forced = stage in run.force
+                prog.begin(stage, lambda m=module: m.progress(run))
+                st = None if forced else module.status(run)
+                if st is not None and st.state == "complete":
+                    entry["stages"][stage] = {"status": "skipped", "seconds": round(time.perf_counter() - t0, 2), "why": st.why}
+                    prog.message(f"{stage}: complete, skipped")
+                    run.save()
+                    continue
+                result = module.run(run, forced)
+                dt = time.perf_counter() - t0
+                items = result if stage in ("generate", "features") else None
+                ran = any(v.get("status") == "ran" for v in items.values()) if items is not None else result["status"] == "ran"
+                entry["stages"][stage] = {"status": "ran" if ran else "skipped", "seconds": round(dt, 2),
+                                          **({"actions": items} if items is not None else
+                                             {k: v for k, v in result.items() if k != "status"})}
+                if ran:
+                    log["timings"][stage] = round(log["timings"].get(stage, 0.0) + dt, 2)
                 run.save()
-                continue
-            result = module.run(run, forced)
-            dt = time.perf_counter() - t0
-            items = result if stage in ("generate", "features") else None
-            ran = any(v.get("status") == "ran" for v in items.values()) if items is not None else result["status"] == "ran"
-            entry["stages"][stage] = {"status": "ran" if ran else "skipped", "seconds": round(dt, 2),
-                                      **({"actions": items} if items is not None else
-                                         {k: v for k, v in result.items() if k != "status"})}
-            if ran:
-                log["timings"][stage] = round(log["timings"].get(stage, 0.0) + dt, 2)
-            run.save()
         entry["status"] = "complete"
     except BaseException as e:
         dt = time.perf_counter() - t0

@@ -64,6 +64,14 @@ class Run:
     feature_config: Callable  # (seed) -> config_dict of feature_factory
     log: dict
     entry: dict
+    client: Any = None  # a distributed.Client: chunks and sweep blocks run on its cluster
+
+    def remote(self, factory: Callable, *args: Any) -> Callable:
+        """The function ``factory(*args)[0]`` shipped to the cluster's workers as its recipe
+        (``cluster.Remote``: each worker builds and compiles it once)."""
+        from relaff_jax.cluster import Remote
+
+        return Remote(factory, *args, pick=0)
 
     def save(self) -> None:
         rio.atomic_write_json(self.paths.log, self.log)

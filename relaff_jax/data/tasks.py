@@ -1,0 +1,94 @@
+"""One dataset chunk or one feature chunk as a task: computed, written, summarised.
+
+Takes the chunk's recipe (the rollout or feature function, its index, seed/batch and, for
+features, the chunk's own samples) and the *pending* folder; writes the chunk there
+atomically (``store.write_chunk``) and returns only what the driver needs to go on: labels
+``(batch,) bool`` and COG distances ``(batch,) metres`` of a dataset chunk (the selection),
+the schema of its arrays. The same functions run in the driver (no cluster) or on a Dask
+worker (``relaff_jax.cluster.Ordered``).
+
+Pending chunks (``chunks/.pending/chunk_K``, ``features/.pending/chunk_F``) may finish in any
+order; the driver alone moves them into place (``promote``, one ``os.replace``) in index
+order and writes the sidecar, so ``chunks/`` stays a contiguous prefix, exactly what a run
+without a cluster leaves. A pending chunk found on a rerun (the driver was killed while it
+ran) is taken as it is: it holds the same bits a new simulation would give. A task run twice
+(a retry after a lost worker) finds its chunk already there and only reads it.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from relaff_jax.data.store import CHUNK_RE, check_rollout_ids, chunk_path, read_chunk, write_chunk
+from relaff_jax.data.validate import check_schema, schema_of, standardize_features, standardize_rollouts
+
+PENDING = ".pending"
+
+
+def _write_once(path: Path, arrays: Mapping[str, np.ndarray], extra: Mapping[str, Any]) -> None:
+    try:
+        write_chunk(path, arrays, extra)
+    except OSError:
+        if not path.is_dir():  # not a twin of this task that finished first
+            raise
+
+
+def rollout_chunk(rollout_fn: Callable, seed: int, k: int, batch: int, object_names: Sequence[str] | None,
+                  pending: str, ref: Mapping[str, list] | None = None) -> dict[str, Any]:
+    """Simulate dataset chunk ``k`` (key ``fold_in(PRNGKey(seed), k)``) into ``pending``;
+    returns ``label``, ``cog_distance`` and ``schema`` (arrays without ``rollout``). A chunk
+    whose schema differs from ``ref`` (the earlier chunks', when known) is not written."""
+    path = chunk_path(Path(pending), k)
+    if path.is_dir():
+        return read_rollout_chunk(path, k, batch)
+    import jax
+
+    key = jax.random.fold_in(jax.random.PRNGKey(seed), k)
+    arrays = standardize_rollouts(rollout_fn(key, batch), batch, object_names)
+    schema = schema_of(arrays)
+    check_schema(f"chunk {k} from rollout_fn", schema, ref)
+    arrays["rollout"] = k * batch + np.arange(batch, dtype=np.int64)
+    _write_once(path, arrays, {"chunk": k, "batch": batch, "positives": int(arrays["label"].sum())})
+    return {"label": arrays["label"], "cog_distance": arrays["cog_distance"], "schema": schema}
+
+
+def read_rollout_chunk(path: Path, k: int, batch: int) -> dict[str, Any]:
+    """``rollout_chunk``'s summary of a chunk already on disk (verified)."""
+    arrays, _ = read_chunk(path)
+    check_rollout_ids(path, arrays, k, batch)
+    arrays.pop("rollout")
+    return {"label": arrays["label"], "cog_distance": arrays["cog_distance"], "schema": schema_of(arrays)}
+
+
+def feature_chunk(compute_fn: Callable, samples: Mapping[str, np.ndarray], f: int, batch: int, lo: int, hi: int,
+                  pending: str, ref: Mapping[str, list] | None = None) -> dict[str, Any]:
+    """Features of selected samples ``[lo, hi)`` (``samples``: their ``batch`` padded rows) into
+    ``pending`` as feature chunk ``f``; returns its ``schema`` (not written if it differs
+    from ``ref``)."""
+    path = chunk_path(Path(pending), f)
+    if path.is_dir():
+        arrays, _ = read_chunk(path)
+        return {"schema": schema_of(arrays)}
+    arrays = standardize_features(compute_fn(dict(samples)), batch, set(samples))
+    arrays = {k: a[: hi - lo] for k, a in arrays.items()}
+    check_schema(f"feature chunk {f}", schema_of(arrays), ref)
+    _write_once(path, arrays, {"chunk": f, "batch": batch, "start": lo, "stop": hi})
+    return {"schema": schema_of(arrays)}
+
+
+def promote(pending: Path, cdir: Path, k: int) -> None:
+    """Move pending chunk ``k`` into ``cdir`` (the driver, in index order)."""
+    os.replace(chunk_path(pending, k), chunk_path(cdir, k))
+
+
+def discard_pending(pending: Path) -> int:
+    """Remove the pending folder; the number of finished chunks it held (extra chunks)."""
+    if not pending.is_dir():
+        return 0
+    n = sum(1 for p in pending.iterdir() if CHUNK_RE.match(p.name))
+    shutil.rmtree(pending, ignore_errors=True)
+    return n
