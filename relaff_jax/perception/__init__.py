@@ -22,8 +22,10 @@ Stages, each a pure single-scene function (vmap at the caller, the caller owns j
                      its points (Open3D ``voxel_down_sample`` semantics), fixed capacity, overflow
                      flagged.
 4. ``pca_object``  : centroid, roll/pitch/yaw, eigenvalues; ``unseen`` below ``min_points``.
-5. ``rhf_histograms``: normals from the ray-hit geometry averaged per voxel; six histograms,
-                     computed tile by tile so memory does not grow with the point count.
+5. ``rhf_histograms``: normals averaged per voxel; six histograms, computed tile by tile so
+                     memory does not grow with the point count. Normals (``cfg.normals.source``):
+                     "ray" the exact ray-hit geometry (default), "cloud" PCA over a 5 x 5 pixel
+                     window of the noisy points (``window_normals``, the rule real clouds can use).
 
 ``features`` chains them for one scene; ``make_batched_features`` builds the jitted batch
 version once; ``render_scene_png`` draws what the robot saw. Exact definitions (camera pose,
@@ -39,6 +41,7 @@ Files, in dependency order (this module re-exports their public names):
 - ``raycast.py``: ray/primitive intersections and surface normals (``cast_rays``);
 - ``render.py``: stage 1, depth images, tile culling, object pixel compaction;
 - ``noise.py``: stage 2, depth noise models;
+- ``normals.py``: normals from the cloud (image-window PCA), shared with real organized clouds;
 - ``voxels.py``: stage 3, per-object voxel grid;
 - ``descriptors.py``: stages 4-5, PCA values and RHF histograms;
 - ``pipeline.py``: ``point_cloud``, ``features``, ``make_batched_features``;
@@ -53,18 +56,22 @@ from relaff_jax.constants import OBJECT_SEGMENTS, SEG_BACKGROUND, SEG_NONE, SEG_
 from .camera import camera_frame, camera_rays, intrinsics, tile_rays
 from .config import (
     NOISE_MODEL_NAMES,
+    NORMAL_SOURCES,
     PCA_NAMES,
     RHF_NAMES,
     CameraConfig,
     CullConfig,
     NoiseConfig,
+    NormalsConfig,
     PerceptionConfig,
     RHFConfig,
     VoxelConfig,
+    stored_config,
     validate_config,
 )
 from .descriptors import fast_arccos, pca_frame, pca_object, rhf_bin, rhf_histograms, rhf_pair_values, rotation_to_rpy
 from .noise import NOISE_MODELS, add_depth_noise, depth_noise_sigma, pixel_radius
+from .normals import pixel_normals, smallest_eigenvector, window_normals
 from .pipeline import SceneFeatures, features, features_from_voxels, make_batched_features, point_cloud
 from .plots import object_crop, render_scene_png, scene_view
 from .raycast import cast_rays, surface_normals
@@ -85,11 +92,12 @@ from .voxels import voxel_downsample
 __all__ = [
     "OBJECT_SEGMENTS", "SEG_BACKGROUND", "SEG_NONE", "SEG_OTHER", "SEG_TOY",
     "camera_frame", "camera_rays", "intrinsics", "tile_rays",
-    "NOISE_MODEL_NAMES", "PCA_NAMES", "RHF_NAMES", "CameraConfig", "CullConfig", "NoiseConfig",
-    "PerceptionConfig", "RHFConfig", "VoxelConfig", "validate_config",
+    "NOISE_MODEL_NAMES", "NORMAL_SOURCES", "PCA_NAMES", "RHF_NAMES", "CameraConfig", "CullConfig",
+    "NoiseConfig", "NormalsConfig", "PerceptionConfig", "RHFConfig", "VoxelConfig", "stored_config", "validate_config",
     "fast_arccos", "pca_frame", "pca_object", "rhf_bin", "rhf_histograms", "rhf_pair_values",
     "rotation_to_rpy",
     "NOISE_MODELS", "add_depth_noise", "depth_noise_sigma", "pixel_radius",
+    "pixel_normals", "smallest_eigenvector", "window_normals",
     "SceneFeatures", "features", "features_from_voxels", "make_batched_features", "point_cloud",
     "object_crop", "render_scene_png", "scene_view",
     "cast_rays", "surface_normals",

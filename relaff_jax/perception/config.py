@@ -1,6 +1,6 @@
 """Perception settings: frozen dataclasses (static under jit) and their validation.
 
-Takes nothing; gives ``PerceptionConfig`` (camera, noise, voxel, RHF, culling settings),
+Takes nothing; gives ``PerceptionConfig`` (camera, noise, normals, voxel, RHF, culling settings),
 ``validate_config(cfg) -> cfg`` (raises ``UserError`` naming the bad setting) and the feature
 names ``PCA_NAMES`` (9 per object) and ``RHF_NAMES`` (6 histograms).
 """
@@ -17,6 +17,8 @@ RHF_NAMES = ("dx", "dy", "dz", "dist", "angle_na_nb", "angle_na_d")
 
 # Depth noise models ``noise.NOISE_MODELS`` implements (validated here, before any tracing).
 NOISE_MODEL_NAMES = ("robwork", "khoshelham", "nguyen", "none")
+# Where the RHF normals come from (``NormalsConfig.source``).
+NORMAL_SOURCES = ("ray", "cloud")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,6 +43,21 @@ class NoiseConfig:
     """Depth noise: ``model`` in {"robwork", "khoshelham", "nguyen", "none"}."""
 
     model: str = "robwork"
+
+
+@dataclasses.dataclass(frozen=True)
+class NormalsConfig:
+    """Where the per-pixel normals (averaged per voxel, used by the RHF) come from.
+
+    ``source``: "ray" (default) the exact surface normal of the hit primitive, noise-free;
+    "cloud" PCA of the (noisy) object points in a ``window`` x ``window`` pixel neighbourhood
+    of the same object within ``radius`` metres, turned towards the camera
+    (``normals.window_normals``; the same rule as ``real.config.NormalConfig(method="window")``).
+    """
+
+    source: str = "ray"
+    window: int = 5
+    radius: float = 0.025
 
 
 @dataclasses.dataclass(frozen=True)
@@ -100,6 +117,7 @@ class PerceptionConfig:
 
     camera: CameraConfig = CameraConfig()
     noise: NoiseConfig = NoiseConfig()
+    normals: NormalsConfig = NormalsConfig()
     voxel: VoxelConfig = VoxelConfig()
     rhf: RHFConfig = RHFConfig()
     cull: CullConfig = CullConfig()
@@ -119,6 +137,13 @@ def validate_config(cfg: PerceptionConfig) -> PerceptionConfig:
         raise UserError("camera.target equals camera.position")
     if cfg.noise.model not in NOISE_MODEL_NAMES:
         raise UserError(f"unknown noise.model {cfg.noise.model!r}; valid: {sorted(NOISE_MODEL_NAMES)}")
+    nc = cfg.normals
+    if nc.source not in NORMAL_SOURCES:
+        raise UserError(f"unknown normals.source {nc.source!r}; valid: {list(NORMAL_SOURCES)}")
+    if nc.window < 3 or nc.window % 2 == 0:
+        raise UserError(f"normals.window must be odd and >= 3, got {nc.window}")
+    if nc.radius <= 0:
+        raise UserError(f"normals.radius must be positive, got {nc.radius}")
     if cfg.voxel.size <= 0:
         raise UserError(f"voxel.size must be positive, got {cfg.voxel.size}")
     if cfg.voxel.max_object_pixels <= 0 or cfg.voxel.max_voxels <= 0:
@@ -140,3 +165,18 @@ def validate_config(cfg: PerceptionConfig) -> PerceptionConfig:
     if cfg.min_points < 3:
         raise UserError(f"min_points must be >= 3 for a PCA frame, got {cfg.min_points}")
     return cfg
+
+
+def stored_config(cfg: PerceptionConfig) -> dict:
+    """``cfg`` as a feature folder records it (and compares it on resume).
+
+    The default normals (exact ray hits) are recorded by the ``normals`` key's absence, as in
+    every feature folder written before the option existed, so that those stay valid and
+    resumable: a folder whose config has no ``normals`` used ``source="ray"``.
+    """
+    from relaff_jax.config import to_dict
+
+    d = to_dict(cfg)
+    if cfg.normals == NormalsConfig():
+        d.pop("normals")
+    return d

@@ -125,7 +125,7 @@ def add_features(path, batch: int = 32, seed: int = 0, overrides: dict | None = 
     world = wd.build_world()
     fn = make_feature_fn(world, cfg, seed)
     return data.add_features(path, fn, batch, progress,
-                             {"perception": rconfig.to_dict(cfg), "seed": seed}, overwrite=overwrite)
+                             {"perception": pc.stored_config(cfg), "seed": seed}, overwrite=overwrite)
 
 
 def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, key=None,

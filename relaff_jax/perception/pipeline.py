@@ -15,6 +15,7 @@ import numpy as np
 from .config import PerceptionConfig, validate_config
 from .descriptors import pca_object, rhf_histograms
 from .noise import add_depth_noise
+from .normals import pixel_normals
 from .raycast import surface_normals
 from .render import compact_objects, render_objects
 from .scene import SceneGeoms, make_scene
@@ -24,15 +25,18 @@ from .voxels import voxel_downsample
 def point_cloud(scene: SceneGeoms, key, cfg: PerceptionConfig) -> dict:
     """Stages 1-3 for one scene: object pixels (noisy) and per-object voxel clouds.
 
-    Returns dict(pixels=``compact_objects`` result after noise, voxels=``voxel_downsample``
-    result plus n_pixels, pixel_overflow and tile_overflow).
+    Returns dict(pixels=``compact_objects`` result after noise with normal (M, 3) from
+    ``cfg.normals.source``, voxels=``voxel_downsample`` result plus n_pixels, pixel_overflow
+    and tile_overflow).
     """
     ro = render_objects(scene, cfg)
     pix = compact_objects(ro, cfg)
-    # Normals come from the exact (noise-free) hit geometry, see docs/perception.md.
-    pix["normal"] = surface_normals(scene, pix["points"], pix["geom"])
+    if cfg.normals.source == "ray":  # the exact (noise-free) hit geometry, see docs/perception.md
+        pix["normal"] = surface_normals(scene, pix["points"], pix["geom"])
     if cfg.noise.model != "none":
         pix = add_depth_noise(pix, key, cfg)
+    if cfg.normals.source == "cloud":  # from the noisy points, as on real data
+        pix["normal"] = pixel_normals(pix, cfg)
     vox = voxel_downsample(pix["points"], pix["normal"], pix["seg"], cfg)
     vox["n_pixels"] = pix["n_pixels"]
     vox["pixel_overflow"] = pix["pixel_overflow"]

@@ -9,8 +9,12 @@ then ``perception.pipeline.features_from_voxels``: ``pca_object`` and ``rhf_hist
 * ``pair_features(points_a (Na, 3), normals_a (Na, 3), points_b, normals_b, cfg)`` -> dict(pca
   (18,) a's 9 values then b's, rhf (300,), unseen (2,), n_points (2,) voxels, overflow (),
   voxels (the ``voxel_downsample`` result: centroids (2, V, 3), mean normals, mask, count));
+* ``window_cloud_normals(xyz (H, W, 3), select (H, W) bool, window, radius) -> (N, 3)``: the
+  simulation's image-window rule (``perception.normals.window_normals``) on an organized cloud,
+  for the N selected pixels (row-major), neighbours among the selected pixels, camera at 0;
 * ``object_points(cloud, seg, obj_id, frame, cfg)`` -> (points (N, 3), normals (N, 3)) in the
-  table frame, normals from the camera-frame cloud oriented towards the camera;
+  table frame, normals (``cfg.normals.method``: "knn" or "window") from the camera-frame cloud
+  oriented towards the camera;
 * ``object_pair_features(cloud, seg, id_a, id_b, frame, cfg)``: the two above chained.
 Point buffers are padded to a power of two (>= 4096) so few shapes are ever compiled.
 """
@@ -26,6 +30,7 @@ from scipy.spatial import cKDTree
 from relaff_jax.constants import SEG_OTHER, SEG_TOY
 from relaff_jax.errors import UserError
 from relaff_jax.perception.config import PerceptionConfig
+from relaff_jax.perception.normals import window_normals
 from relaff_jax.perception.pipeline import features_from_voxels
 from relaff_jax.perception.voxels import voxel_downsample
 
@@ -53,6 +58,32 @@ def cloud_normals(points, knn: int = 20, viewpoint=(0.0, 0.0, 0.0)) -> np.ndarra
 
 def _bucket(n: int) -> int:
     return max(4096, 1 << int(np.ceil(np.log2(max(n, 1)))))
+
+
+@functools.lru_cache(maxsize=4)
+def _window_fn(width: int, height: int, window: int, radius: float):
+    return jax.jit(lambda pts, lab, pix: window_normals(pts, lab, pix, width, height, window, radius,
+                                                         jnp.zeros(3, jnp.float32)))
+
+
+def window_cloud_normals(xyz, select, window: int = 5, radius: float = 0.025) -> np.ndarray:
+    """Unit normals (N, 3) float64 of the N pixels where ``select`` (H, W) is true (row-major
+    order, as ``xyz[select]``), by PCA over the selected pixels of their ``window`` x ``window``
+    neighbourhood within ``radius`` m of them, turned towards the camera (the origin).
+    xyz: (H, W, 3) organized camera-frame cloud (NaN where invalid; select must avoid those)."""
+    xyz, select = np.asarray(xyz), np.asarray(select, bool)
+    if xyz.ndim != 3 or xyz.shape[2] != 3 or select.shape != xyz.shape[:2]:
+        raise UserError(f"window normals need an organized (H, W, 3) cloud and an (H, W) selection, "
+                        f"got {xyz.shape} and {select.shape}")
+    if not np.all(np.isfinite(xyz[select])):
+        raise UserError("window normals: the selection holds invalid (non-finite) points")
+    H, W = select.shape
+    pix = np.flatnonzero(select).astype(np.int32)
+    buf = np.full(_bucket(len(pix)), -1, np.int32)
+    buf[:len(pix)] = pix
+    pts = np.where(select[..., None], xyz, 0.0).reshape(-1, 3).astype(np.float32)
+    n = _window_fn(W, H, int(window), float(radius))(pts, select.reshape(-1).astype(np.int32), buf)
+    return np.asarray(n, np.float64)[:len(pix)]
 
 
 @functools.lru_cache(maxsize=4)
@@ -103,7 +134,14 @@ def object_points(cloud, seg, obj_id: int, frame: dict, cfg: RealConfig = RealCo
         raise UserError(f"object {obj_id} has {np.count_nonzero(sel)} points (< 3) in "
                         f"{cloud.path or 'the cloud'}; objects present: {present}")
     p = cloud.xyz[sel].astype(np.float64)
-    n = cloud_normals(p, cfg.normals.knn, viewpoint=(0.0, 0.0, 0.0))
+    nc = cfg.normals
+    if nc.method == "window":
+        if cloud.xyz.ndim != 3:
+            raise UserError(f"normals.method 'window' needs an organized cloud; {cloud.path or 'the cloud'} "
+                            "is unorganized (use 'knn')")
+        n = window_cloud_normals(cloud.xyz, sel, nc.window, nc.radius)
+    else:
+        n = cloud_normals(p, nc.knn, viewpoint=(0.0, 0.0, 0.0))
     return to_table(p, frame), vectors_to_table(n, frame)
 
 

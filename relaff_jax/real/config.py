@@ -51,10 +51,16 @@ class KMeansConfig:
 
 @dataclasses.dataclass(frozen=True)
 class NormalConfig:
-    """Normals from the cloud: PCA of each point's ``knn`` nearest neighbours among the object's
-    points (smallest-eigenvalue eigenvector), oriented towards the camera."""
+    """Normals from the cloud, oriented towards the camera. ``method`` "knn" (default): PCA of
+    each point's ``knn`` nearest neighbours among the object's points (smallest-eigenvalue
+    eigenvector); "window" (organized clouds only): PCA of the object's points in a ``window`` x
+    ``window`` pixel neighbourhood within ``radius`` m, the simulation's
+    ``PerceptionConfig.normals.source = "cloud"`` rule (``perception.normals.window_normals``)."""
 
     knn: int = 20
+    method: str = "knn"
+    window: int = 5
+    radius: float = 0.025
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,7 +88,12 @@ def validate_real_config(cfg: RealConfig) -> RealConfig:
     k = cfg.kmeans
     if k.k < 1 + int(k.background) or k.iterations <= 0 or k.n_init <= 0:
         raise UserError(f"kmeans.k must leave an object cluster and kmeans.iterations, .n_init positive, got {k}")
-    if cfg.normals.knn < 3:
-        raise UserError(f"normals.knn must be >= 3 for a plane fit, got {cfg.normals.knn}")
+    nc = cfg.normals
+    if nc.knn < 3:
+        raise UserError(f"normals.knn must be >= 3 for a plane fit, got {nc.knn}")
+    if nc.method not in ("knn", "window"):
+        raise UserError(f"unknown normals.method {nc.method!r}; valid: ['knn', 'window']")
+    if nc.window < 3 or nc.window % 2 == 0 or nc.radius <= 0:
+        raise UserError(f"normals.window must be odd and >= 3 and normals.radius positive, got {nc}")
     validate_config(cfg.perception)
     return cfg

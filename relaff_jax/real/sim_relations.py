@@ -3,7 +3,8 @@
 Takes a ``SimSensor`` (camera height, tilt and vertical field of view, from the real scenes:
 ``sensor_from_scenes``) and a ``SimRelationConfig``; gives, per settled simulated toy+base
 scene, ``pca (N, 18)`` (toy first: the upper object of an ``on_top`` pair, as in the real
-labels), ``rhf (N, 300)`` (normals from the ray hits), ``relation (N,)`` index into
+labels), ``rhf (N, 300)`` (normals from the ray hits, or with ``normals="cloud"`` from the
+noisy points by the image-window rule real clouds can use), ``relation (N,)`` index into
 ``constants.RELATIONS`` (beside, on_top, inside), ``pair (N,)``, ``scene_id (N,)``.
 
 Scenes: ``sim.scenes.run_scenes`` on the toy+base pairs (the only pairing that stacks) with
@@ -48,7 +49,9 @@ class SimSensor:
 @dataclasses.dataclass(frozen=True)
 class SimRelationConfig:
     """Simulated relation data: scenes per chunk, workspace radius (m, around the robot),
-    the least scenes of each relation in ``need`` to stop at, a cap on chunks, the seed."""
+    the least scenes of each relation in ``need`` to stop at, a cap on chunks, the seed;
+    ``normals``: the RHF normals, "ray" (exact ray-hit geometry) or "cloud" (window PCA of the
+    noisy points, ``perception.NormalsConfig``)."""
 
     per_relation: int = 1000
     need: tuple[str, ...] = ("beside", "on_top")
@@ -60,20 +63,22 @@ class SimRelationConfig:
     max_tiles: int = 600  # of 1200 16 x 16 tiles: objects 0.6 m from the camera are large
     max_object_pixels: int = 65536
     seed: int = 0
+    normals: str = "ray"
 
 
 def perception_config(sensor: SimSensor, cfg: SimRelationConfig):
-    """The ``PerceptionConfig`` of the simulated sensor (camera pose, fov, noise, capacities)."""
+    """The ``PerceptionConfig`` of the simulated sensor (camera pose, fov, noise, normals, capacities)."""
     from relaff_jax.perception.config import (
         CameraConfig,
         CullConfig,
         NoiseConfig,
+        NormalsConfig,
         PerceptionConfig,
         VoxelConfig,
     )
 
     cam = rframe.sim_camera(sensor.height, sensor.tilt_deg, TARGET, CameraConfig(vfov_deg=sensor.vfov_deg))
-    return PerceptionConfig(camera=cam, noise=NoiseConfig(cfg.noise),
+    return PerceptionConfig(camera=cam, noise=NoiseConfig(cfg.noise), normals=NormalsConfig(source=cfg.normals),
                             voxel=VoxelConfig(max_object_pixels=cfg.max_object_pixels),
                             cull=CullConfig(max_tiles=cfg.max_tiles))
 
@@ -132,9 +137,12 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
     if meta_path.exists():
         old = rio.read_json(meta_path)
         if old["sensor"] != rio.jsonable(meta["sensor"]) or old["config"]["seed"] != cfg.seed or \
-                old["config"]["chunk"] != cfg.chunk or old["config"]["workspace_radius"] != cfg.workspace_radius:
+                old["config"]["chunk"] != cfg.chunk or old["config"]["workspace_radius"] != cfg.workspace_radius or \
+                old["config"].get("normals", "ray") != cfg.normals:  # folders from before the option: ray
             raise UserError(f"{folder} holds simulated relation data of another sensor or config; "
                             "use another folder or delete it")
+    if cfg.normals not in ("ray", "cloud"):
+        raise UserError(f"unknown normals {cfg.normals!r}; valid: ['ray', 'cloud']")
     if cfg.chunk % cfg.feature_batch:
         raise UserError(f"chunk ({cfg.chunk}) must be a multiple of feature_batch ({cfg.feature_batch})")
     bad = [r for r in cfg.need if r not in RELATIONS]
@@ -170,6 +178,19 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
                    seconds_per_scene=round(timed_s / max(timed_c * cfg.chunk, 1), 4))
     rio.atomic_write_json(meta_path, summary)
     return summary
+
+
+def normals_note(cfg: SimRelationConfig, real_cfg) -> str:
+    """Which RHF normals each side of a study used (one line for ``results.md``)."""
+    from relaff_jax.perception.config import NormalsConfig
+
+    w = NormalsConfig()
+    sim = ("the renderer's ray-hit normals" if cfg.normals == "ray" else
+           f"from the noisy cloud (PCA over a {w.window} x {w.window} pixel window within {w.radius} m)")
+    n = real_cfg.normals
+    real = (f"from the cloud ({n.knn} nearest points)" if n.method == "knn" else
+            f"from the cloud (PCA over a {n.window} x {n.window} pixel window within {n.radius} m)")
+    return f"simulation: {sim}; real: {real}"
 
 
 def _dropped(files) -> dict:

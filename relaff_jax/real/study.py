@@ -54,7 +54,7 @@ def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path,
     sim_summary = sr.build_sim_relations(sim_dir, sensor, sim_cfg, progress)
     sim = sr.load_sim_relations(sim_dir)
     key = json.dumps(dataclasses.asdict(exp_cfg), sort_keys=True) + lab.file_sha256(labels_path) + \
-        json.dumps(sim_summary["counts"], sort_keys=True) + "+sim_only"
+        json.dumps(sim_summary["counts"], sort_keys=True) + "+sim_only" + sr.normals_note(sim_cfg, real_cfg)
     raw, summary = {}, {}
     for space in spaces:
         path = out / f"raw_{space}.npz"
@@ -74,8 +74,7 @@ def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path,
                             f"(dropped: {sim_summary['dropped']})",
         "simulated cost": f"{sim_summary['seconds_per_scene']} s per scene (settle + perceive, "
                           f"{sim_summary['chunks_timed']} chunks timed, first one with compilation)",
-        "RHF normals": f"simulation: the renderer's ray-hit normals; real: from the cloud "
-                       f"({real_cfg.normals.knn} nearest points)",
+        "RHF normals": sr.normals_note(sim_cfg, real_cfg),
         "forests": f"{exp_cfg.trees} trees, engine {exp_cfg.engine}; seed {exp_cfg.seed}",
     }
     report.write_report(out, raw, summary, context)
