@@ -24,6 +24,10 @@ SEG_NONE = -1
 OBJECT_SEGMENTS = (SEG_TOY, SEG_OTHER)
 
 # State spaces of the learning experiment (paper V-A).
+# Executors of the planned motor programs (sim/rollouts.py): MJX (default; also runs on an
+# accelerator) and MuJoCo C batches on a thread pool (sim/native_batch.py).
+SIM_ENGINES = ("mjx", "native")
+
 SPACES = ("pca", "rhf")
 PCA_PER_OBJECT = 9
 RHF_BINS = 300

@@ -333,6 +333,29 @@ def test_resume_mismatch(built, tmp_path):
     ds.load_dataset(p)  # untouched
 
 
+def test_engine_recorded_and_resume_with_another_refused(built, tmp_path):
+    """A dataset records its simulation engine; resuming it with the other one is refused with
+    the fix in the message; a sidecar from before engines were recorded counts as MJX."""
+    import dataclasses
+
+    from relaff_jax.io import atomic_write_json, read_json
+
+    p = copy(built, tmp_path)
+    assert read_json(p / ds.SIDECAR)["engine"] == "mjx"
+    native = dataclasses.replace(EXACT, engine="native")
+    with pytest.raises(ds.DatasetMismatchError, match=r"generated with the mjx engine.*--engine mjx"):
+        gen(p, dataset_config=native)
+    meta = read_json(p / ds.SIDECAR)
+    del meta["engine"]  # as written before the native engine existed
+    atomic_write_json(p / ds.SIDECAR, meta)
+    assert gen(p)["new_chunks"] == 0  # still resumable (complete) as MJX
+    with pytest.raises(ds.DatasetMismatchError, match="mjx engine"):
+        gen(p, dataset_config=native)
+    with pytest.raises(ds.DatasetError, match="unknown simulation engine 'gpu'; valid engines: mjx, native"):
+        gen(tmp_path / "x", dataset_config=dataclasses.replace(EXACT, engine="gpu"))
+    assert not (tmp_path / "x").exists()
+
+
 def test_concurrent_writer_refused(built, tmp_path):
     p = copy(built, tmp_path)
     with store.writer_lock(p):

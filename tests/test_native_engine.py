@@ -147,6 +147,22 @@ def test_rollout_engine_argument():
         rollouts.make_rollout_fn("lift", 4, engine="native", nthread=0)
 
 
+@pytest.mark.slow  # compiles placement, settling and planning (MJX) at batch 8, as test_actions does
+def test_tiny_native_dataset_through_the_cli(tmp_path):
+    """`relaff generate --engine native`: a balanced tiny dataset that records its engine."""
+    from relaff_jax import data as ds
+    from relaff_jax.cli import main
+    from relaff_jax.io import read_json
+
+    out = tmp_path / "lift"
+    assert main(["generate", "lift", "--samples", "2", "--batch", "8", "--max-rollouts", "64", "--engine", "native",
+                 "--out", str(out), "--set", "dataset.borrow_fraction=1.0", "--set", "dataset.distance_bins=2",
+                 "--json"]) == 0
+    assert read_json(out / ds.SIDECAR)["engine"] == "native"
+    d = ds.load_dataset(out)
+    assert len(d["label"]) == 2 and d["label"].sum() == 1 and d["simulated"][d["label"]].all()
+
+
 @pytest.mark.slow  # compiles placement and settling (MJX)
 def test_native_rollout_fn_equals_replay(scene_world):
     """``make_rollout_fn(engine="native")``: the dataset fields, and labels and final states

@@ -5,7 +5,7 @@ import argparse
 from pathlib import Path
 
 from relaff_jax.cli import options
-from relaff_jax.constants import STAGES
+from relaff_jax.constants import SIM_ENGINES, STAGES
 from relaff_jax.runconfig import PRESETS
 
 
@@ -26,6 +26,9 @@ def register(sub) -> None:
     p.add_argument("--jobs", type=int, default=0, help="experiment worker processes (default: all cores)")
     options.add_cluster(p)
     options.add_set(p, "dataset.n_samples=400 --set experiment.reps_pca=5")
+    p.add_argument("--engine", choices=SIM_ENGINES, default=None,
+                   help="executor of the motor programs (same as --set dataset.engine=...): mjx (the preset's "
+                        "default) or native (MuJoCo C batches, docs/actions.md)")
     p.add_argument("--status", action="store_true", help="print each stage's status in OUT and exit")
     p.add_argument("--no-progress", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_reproduce)
@@ -44,9 +47,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     command += [x for f in args.force or () for x in ("--force", f)] + (["--jobs", str(args.jobs)] if args.jobs else [])
     command += [x for s in args.set or () for x in ("--set", s)] + (["--no-progress"] if args.no_progress else [])
     command += ["--cluster", args.cluster] if args.cluster else []
+    command += ["--engine", args.engine] if args.engine else []
+    overrides = {**({"dataset.engine": args.engine} if args.engine else {}), **parse_set(args.set or [])}
     with options.cluster(args, args.out) as client:
         log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
-                          progress=not args.no_progress, overrides=parse_set(args.set or []), argv=command,
+                          progress=not args.no_progress, overrides=overrides, argv=command,
                           client=client)
     run = log["runs"][-1]
     for stage in STAGES:

@@ -11,7 +11,7 @@ import json
 from pathlib import Path
 
 from relaff_jax.cli import options
-from relaff_jax.constants import ACTIONS, RELATIONS
+from relaff_jax.constants import ACTIONS, RELATIONS, SIM_ENGINES
 from relaff_jax.errors import UserError
 
 
@@ -42,6 +42,9 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--batch", type=int, default=256, help="scenes per simulated chunk")
     p.add_argument("--max-rollouts", type=int, default=None, help="stop after this many rollouts")
+    p.add_argument("--engine", choices=SIM_ENGINES, default=None,
+                   help="executor of the motor programs: mjx (default) or native (MuJoCo C batches on a thread "
+                        "pool, docs/actions.md); recorded in the dataset, a resume with another is refused")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     options.add_cluster(p)
     options.add_set(p, "action.lift_height=0.3")
@@ -97,20 +100,23 @@ def cmd_generate(args) -> int:
     sets = ["dataset.n_samples=%d" % args.samples, "dataset.rollout_batch=%d" % args.batch]
     if args.max_rollouts is not None:
         sets.append("dataset.max_rollouts=%d" % args.max_rollouts)
+    if args.engine is not None:
+        sets.append("dataset.engine=" + args.engine)
     tree = options.config(args, extra=sets)
 
     from relaff_jax import config as rc
     from relaff_jax import data as ds
     from relaff_jax.sim.rollouts import make_rollout_fn
 
-    cfg = tree.action
+    cfg, engine = tree.action, tree.dataset.engine
+    ds.config.check_dataset_config(tree.dataset)
     with options.cluster(args, Path(args.out)) as client:
         if client is None:
-            fn = make_rollout_fn(args.action, args.batch, cfg)
+            fn = make_rollout_fn(args.action, args.batch, cfg, engine=engine)
         else:  # each worker builds and compiles the rollout function once
             from relaff_jax.cluster import Remote
 
-            fn = Remote(make_rollout_fn, args.action, args.batch, cfg)
+            fn = Remote(make_rollout_fn, args.action, args.batch, cfg, engine=engine)
         try:
             summary = ds.generate_dataset(
                 args.out, args.action, args.samples, fn, args.seed, args.batch, {"action": rc.to_dict(cfg)},

@@ -15,7 +15,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.constants import ACTIONS
+from relaff_jax.constants import ACTIONS, SIM_ENGINES
 from relaff_jax.data.errors import DatasetError
 
 REQUIRED_FIELDS = ("label", "relation", "cog_distance", "toy", "other")
@@ -44,6 +44,8 @@ class DatasetConfig:
         1.5M simulations over nine actions are ~170k per action. Not part of the resume
         check, so a run stopped by the cap can be rerun with a larger one.
     distance_bins: equal-width COG-distance bins spanning the selected positives' range.
+    engine: executor of the motor programs, ``constants.SIM_ENGINES`` ("mjx" or "native");
+        recorded in the sidecar, and resuming a dataset with another engine is refused.
     borrow_fraction: generation stops once at most this fraction of the negatives has to be
         borrowed from outside its distance bin (0 = exact histogram match). At the cap any
         amount is accepted, with a warning, and the number is recorded.
@@ -55,6 +57,7 @@ class DatasetConfig:
     n_samples: int = 10_000
     rollout_batch: int = 256
     feature_batch: int = 32
+    engine: str = "mjx"
 
 
 def check_action(action: Any) -> str:
@@ -81,6 +84,13 @@ def check_dataset_config(cfg: DatasetConfig) -> None:
     check_int("n_samples", cfg.n_samples, 2)
     check_int("rollout_batch", cfg.rollout_batch, 1)
     check_int("feature_batch", cfg.feature_batch, 1)
+    check_engine(cfg.engine)
+
+
+def check_engine(engine: Any) -> str:
+    if engine not in SIM_ENGINES:
+        raise DatasetError(f"unknown simulation engine {engine!r}; valid engines: {', '.join(SIM_ENGINES)}")
+    return engine
 
 
 def jsonable_config(config_dict: Mapping[str, Any] | None) -> Any:

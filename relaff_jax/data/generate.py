@@ -102,6 +102,7 @@ def generate_dataset(
         "config": config,
         "object_names": list(object_names) if object_names is not None else None,
         "selection_scheme": {"distance_bins": dcfg.distance_bins, "borrow_fraction": dcfg.borrow_fraction},
+        "engine": dcfg.engine,  # the caller's rollout_fn must use it (cli and reproduce build both from one config)
     }
     path = Path(out_dir)
     created = prepare_dir(path)
@@ -122,6 +123,11 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
     clean_tmp(path, cdir)
     if (path / SIDECAR).exists():
         meta = read_sidecar(path)
+        if meta["engine"] != header["engine"]:
+            raise DatasetMismatchError(
+                f"{path}: was generated with the {meta['engine']} engine; resuming it with the {header['engine']} "
+                f"engine would mix two simulators in one dataset. Rerun with --engine {meta['engine']} "
+                f"(--set dataset.engine={meta['engine']}) or write to a new folder")
         diff = mismatch(meta, header, ("action", "n_samples", "seed", "batch", "config", "object_names", "selection_scheme"))
         if diff:
             raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff))

@@ -173,6 +173,7 @@ def read_sidecar(path: Path) -> dict[str, Any]:
     for key in ("action", "n_samples", "seed", "batch", "status", "counts"):
         if key not in meta:
             raise CorruptDatasetError(f"{path}: sidecar lacks {key!r}")
+    meta.setdefault("engine", "mjx")  # sidecars from before the native engine existed are MJX's
     return meta
 
 

@@ -7,7 +7,6 @@ import time
 from typing import Any
 
 from relaff_jax import data as D
-from relaff_jax.config import to_dict
 from relaff_jax.reproduce.stage import Run, Status
 
 NAME = "features"
@@ -27,7 +26,7 @@ def feature_config(seed: int, config: Any = None) -> dict:
     """The config dict ``default_feature_factory`` stores (without building the world)."""
     from relaff_jax import perception as pc
 
-    return {"perception": to_dict(config if config is not None else pc.PerceptionConfig()), "seed": seed}
+    return {"perception": pc.stored_config(config if config is not None else pc.PerceptionConfig()), "seed": seed}
 
 
 def factories_for(cfg: Any):

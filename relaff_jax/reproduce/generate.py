@@ -16,9 +16,10 @@ from relaff_jax.reproduce.stage import Run, Status
 NAME = "generate"
 
 
-def default_rollout_factory(action: str, batch: int, config: Any = None):
+def default_rollout_factory(action: str, batch: int, config: Any = None, engine: str = "mjx"):
     """``(rollout_fn, config_dict, object_names)`` of one action from ``relaff_jax.sim``
-    (``config``: its ``ActionConfig``, default the paper's; the rollouts carry object names)."""
+    (``config``: its ``ActionConfig``, default the paper's; ``engine``: "mjx" or "native", the
+    executor of the motor programs; the rollouts carry object names)."""
     try:
         sim = importlib.import_module("relaff_jax.sim.rollouts")
     except ModuleNotFoundError as e:
@@ -28,17 +29,18 @@ def default_rollout_factory(action: str, batch: int, config: Any = None):
                 "rollouts), which this installation does not have; the datasets cannot be generated") from e
         raise
     cfg = config if config is not None else sim.ActionConfig()
-    return sim.make_rollout_fn(action, batch, cfg), {"action": action, "action_config": to_dict(cfg)}, None
+    return sim.make_rollout_fn(action, batch, cfg, engine=engine), {"action": action, "action_config": to_dict(cfg)}, None
 
 
 def rollout_factory_for(cfg: Any):
-    """The default factory bound to a ``RunConfig``'s action settings."""
-    return functools.partial(default_rollout_factory, config=cfg.action)
+    """The default factory bound to a ``RunConfig``'s action settings and engine."""
+    return functools.partial(default_rollout_factory, config=cfg.action, engine=cfg.dataset.engine)
 
 
 def _expected(run: Run, action: str) -> dict[str, Any]:
     return {"action": action, "n_samples": run.cfg.dataset.n_samples,
-            "seed": run.log["seeds"]["datasets"][action], "batch": run.cfg.dataset.rollout_batch}
+            "seed": run.log["seeds"]["datasets"][action], "batch": run.cfg.dataset.rollout_batch,
+            "engine": run.cfg.dataset.engine}
 
 
 def action_status(run: Run, action: str) -> Status:

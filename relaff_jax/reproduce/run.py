@@ -20,7 +20,7 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.cluster import active, nthreads
 from relaff_jax.config import override
-from relaff_jax.constants import ACTIONS, SPACES, STAGES
+from relaff_jax.constants import ACTIONS, SIM_ENGINES, SPACES, STAGES
 from relaff_jax.reproduce import experiment, features, generate, report
 from relaff_jax.reproduce.folder import Paths, ReproduceError, now, open_log
 from relaff_jax.reproduce.progress import Progress, estimate_seconds
@@ -50,6 +50,8 @@ def check_config(cfg: RunConfig, seed: int) -> None:
     pos_int("reproduce.examples_per_action", cfg.reproduce.examples_per_action, 0)
     if not 0.0 <= float(d.borrow_fraction) <= 1.0:
         raise ReproduceError(f"dataset.borrow_fraction must be in [0, 1], got {d.borrow_fraction}")
+    if d.engine not in SIM_ENGINES:
+        raise ReproduceError(f"dataset.engine must be one of {', '.join(SIM_ENGINES)}, got {d.engine!r}")
     acts = tuple(cfg.reproduce.actions)
     if len(acts) < 2 or len(set(acts)) != len(acts) or not set(acts) <= set(ACTIONS):
         raise ReproduceError(f"reproduce.actions must be at least two distinct values of {ACTIONS}, got {acts}")

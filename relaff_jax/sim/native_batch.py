@@ -20,6 +20,7 @@ from __future__ import annotations
 import copy
 import functools
 import os
+import sys
 
 import mujoco
 import mujoco.batch
@@ -64,7 +65,13 @@ def sensor_models(phys: wd.PhysicsConfig, pair: np.ndarray) -> list[mujoco.MjMod
 
 
 def default_threads() -> int:
-    """Threads of the batch: the CPUs this process may run on."""
+    """Threads of the batch: the CPUs this process may run on, or, in a Dask worker
+    (``--cluster``), the worker's task threads, so that workers do not oversubscribe the cores."""
+    if "distributed" in sys.modules:  # only a cluster run has imported it
+        try:
+            return int(sys.modules["distributed"].get_worker().state.nthreads)
+        except (ValueError, AttributeError):  # not in a worker
+            pass
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 

@@ -32,10 +32,10 @@ from .planning import Plan
 from .simulate import make_prepare_fn, make_simulate_fn
 from .templates import ActionConfig
 
-from relaff_jax.constants import PAIRING, action_id
+from relaff_jax.constants import PAIRING, SIM_ENGINES, action_id
 from relaff_jax.errors import UserError
 
-ENGINES = ("mjx", "native")  # executors of the planned programs in make_rollout_fn
+ENGINES = SIM_ENGINES  # executors of the planned programs in make_rollout_fn
 
 
 def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
