@@ -67,6 +67,10 @@ def register(subparsers) -> None:
     p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"])
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk")
+    p.add_argument("--sim-normals", choices=("ray", "cloud"), default="ray",
+                   help="RHF normals of the simulated scenes: exact ray hits, or the cloud rule (5x5 pixel window)")
+    p.add_argument("--real-normals", choices=("knn", "window"), default="knn",
+                   help="RHF normals of the real scenes: 20 nearest neighbours, or the simulation's window rule")
     p.set_defaults(func=cmd_study)
 
 
@@ -147,9 +151,14 @@ def cmd_study(args) -> int:
     from relaff_jax.real import sim_relations as sr
     from relaff_jax.real.study import run_study
 
-    sim_cfg = sr.SimRelationConfig(per_relation=args.per_relation, chunk=args.chunk, seed=args.seed)
+    from relaff_jax.real.config import NormalConfig, RealConfig
+
+    sim_cfg = sr.SimRelationConfig(per_relation=args.per_relation, chunk=args.chunk, seed=args.seed,
+                                   normals=args.sim_normals)
     exp_cfg = ex.RealExperimentConfig(reps=args.reps, trees=args.trees, n_full=args.n_full, seed=args.seed)
-    summary = run_study(args.scenes, args.labels, args.out, sim_cfg, exp_cfg, tuple(args.spaces), args.sim)
+    real_cfg = RealConfig(normals=NormalConfig(method=args.real_normals))
+    summary = run_study(args.scenes, args.labels, args.out, sim_cfg, exp_cfg, tuple(args.spaces), args.sim,
+                        real_cfg=real_cfg)
     for space, s in summary.items():
         acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
         print(f"{space}: {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
