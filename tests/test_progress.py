@@ -62,3 +62,16 @@ def test_line_and_messages():
     assert p.eta() == pytest.approx(20.0, abs=0.5)  # no progress yet: the cost model
     p.message("report: done")
     assert buf.getvalue().endswith("report: done\n")
+
+
+def test_generation_estimate_follows_the_engine():
+    """The cost model's generate stage scales with the engine's rollouts/s; nothing else moves."""
+    from relaff_jax.reproduce.progress import COST, estimate_seconds
+    from relaff_jax.runconfig import preset, resolve
+
+    mjx = estimate_seconds(preset("quick"), 2, 2)
+    native = estimate_seconds(resolve(preset("quick"), {"dataset.engine": "native"}), 2, 2)
+    sim = 9 * 100 * COST["rollouts_per_sample"]
+    assert mjx["generate"] - COST["sim_compile"] == pytest.approx(sim / COST["rollouts_per_s"])
+    assert native["generate"] - COST["sim_compile"] == pytest.approx(sim / COST["rollouts_per_s_native"])
+    assert {k: v for k, v in mjx.items() if k != "generate"} == {k: v for k, v in native.items() if k != "generate"}

@@ -21,6 +21,7 @@ COST = {
     "sim_compile": 150.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
     "rollouts_per_sample": 2.5,  # rollouts simulated per selected sample (positive rate, matching)
     "rollouts_per_s": 5.0,  # settle + plan + the feasible 3.3 s motor programs (docs/actions.md)
+    "rollouts_per_s_native": 25.0,  # the same with dataset.engine=native (study preset, 2026-12-02)
     "feature_compile": 40.0,
     "feature_scenes_per_s": 12.0,
     "cpu_s_per_fit": 0.01,  # a forest of ~100 trees, fit + predict, fast engine (docs/learning.md)
@@ -44,7 +45,8 @@ def estimate_seconds(cfg: Any, jobs: int, cpus: int) -> dict[str, float]:
     from relaff_jax.learn import forests_per_space
 
     n, a = cfg.dataset.n_samples, len(cfg.reproduce.actions)
-    gen = COST["sim_compile"] + a * n * COST["rollouts_per_sample"] / COST["rollouts_per_s"]
+    rate = COST["rollouts_per_s_native" if cfg.dataset.engine == "native" else "rollouts_per_s"]
+    gen = COST["sim_compile"] + a * n * COST["rollouts_per_sample"] / rate
     feat = COST["feature_compile"] + a * n / COST["feature_scenes_per_s"]
     fits = sum(forests_per_space(cfg.experiment, a, s) for s in cfg.reproduce.spaces)
     per_fit = COST["cpu_s_per_fit_sklearn" if cfg.experiment.forest.engine == "sklearn" else "cpu_s_per_fit"]
