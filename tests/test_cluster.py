@@ -252,3 +252,24 @@ def test_cli_experiment_joins_a_running_scheduler(client, tmp_path, capsys):
     assert main(argv + ["--out", str(tmp_path / "b"), "--jobs", "1"]) == 0
     with np.load(tmp_path / "a" / "pca" / "results.npz") as a, np.load(tmp_path / "b" / "pca" / "results.npz") as b:
         assert np.array_equal(a["acc"], b["acc"], equal_nan=True)
+
+
+def test_benchmark_projection_by_hand():
+    """benchmarks/cluster.py's paper-preset projection against a hand-worked row: 48 s of CPU
+    for 6 chunks of 64 rollouts = 0.125 s per rollout, 1 s of overhead per task, so a chunk of
+    1024 takes 129 s; 9 x ceil(10,000 x 3.70 / 1024) = 333 chunks plus 9 x (ceil(32 / 9) - 1)
+    = 27 past the stopping points on 32 workers: ceil(360 / 32) = 12 rounds, + 60 s compile."""
+    spec = importlib.util.spec_from_file_location("cluster_bench", ROOT / "benchmarks" / "cluster.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    row = {"engine": "native", "generate": [60.0, 54.0, 6, 48.0], "features": [12.0, 12.0, 12, 12.0],
+           "sweep": [10.0, 10.0, 27, 10.0], "fits": 2520, "batch": 64, "feature_batch": 32,
+           "compile_generate_s": 60.0, "compile_features_s": 10.0}
+    lines = bench.project(row).splitlines()
+    w32 = next(line for line in lines if line.startswith("| 32 |"))
+    assert w32.split(" | ")[1] == f"{(60 + 12 * 129) / 60:.1f} min"  # 26.8 min
+    assert w32.endswith("generate: 12 rounds of 129 s |")
+    assert "native engine" in lines[1] and "125 ms per rollout" in lines[1]
+    # the nine actions' (CPU, wall) per rollout replace the one action's: 1024 x 0.25 + 1 = 257 s a chunk
+    w8 = next(line for line in bench.project(row, (0.25, 0.3)).splitlines() if line.startswith("| 8 |"))
+    assert w8.split(" | ")[1] == f"{(60 + 42 * 257) / 60:.1f} min"  # ceil(333 / 8) = 42 rounds
