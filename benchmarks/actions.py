@@ -10,15 +10,16 @@ Three parts (each optional):
                the same scenes and commands (mujoco.rollout, both cores; without the grasp-lock
                switching, which needs per-step Python logic), with ratios, and against the
                paper's ~1 minute per action simulation (IV-A).
-  --engines B...  per action, labelled rollouts/s (``make_rollout_fn``: sample, settle, plan,
-               execute, label) of the two engines, "mjx" (today's) and "native"
-               (``mujoco.batch``, all CPUs), at each batch size B, on the same scenes (same
-               keys), with the ratio native / MJX and the label agreement of the engines
-               (``--agree N`` scenes per action and batch; the first batch of each engine,
-               with its compile, is timed apart). Resumable with ``--json``.
-  --smoke      lift, batch 32, two batches per engine (< 5 min); the last line is
+  --engines B...  per action, labelled rollouts/s (``make_rollout_fn``'s two halves: sample,
+               settle, plan once per batch, then each executor: execute, label) of today's MJX
+               (``templates.untuned``), the tuned MJX (the default config) and the native
+               engine (``mujoco.batch``, all CPUs; tuned and untuned config) at each batch
+               size B, on the same scenes, with the ratios and the label agreements
+               (``--agree N`` scenes per action and batch; the first batch, with its
+               compiles, is timed apart). Resumable with ``--json``.
+  --smoke      lift, batch 32, two timed batches (< 5 min); the last line is
                ``mjx_speedup=<tuned / today's MJX> native_per_s=<native labelled rollouts/s>
-               native_over_mjx=<ratio>``. There is no tuned MJX yet: mjx_speedup is 1.00.
+               native_over_mjx=<native / tuned MJX>``.
 Usage:
     python benchmarks/actions.py --labels 512 --replay 32 --batch 128 --batches 16 64 256
     python benchmarks/actions.py --engines 64 256 --agree 512 --json engines.json
@@ -178,95 +179,91 @@ def throughput(action, batches, seed):
               f" {mjx_rate * 60:15.0f}x", flush=True)
 
 
-def _timed(fn, keys, batch):
-    """Run ``fn`` on every key; return the outputs and the steady rate (rollouts/s, the first
-    call excluded when there are several: it compiles) and the first call's seconds."""
-    outs, times = [], []
-    for k in keys:
-        t0 = time.perf_counter()
-        outs.append(fn(k, batch))
-        times.append(time.perf_counter() - t0)
-    steady = times[1:] if len(times) > 1 else times
-    return outs, batch * len(steady) / sum(steady), times[0]
+EXECUTORS = (  # (name, engine, tuned config?): today's MJX first, the reference of the ratios
+    ("mjx_today", "mjx", False), ("mjx", "mjx", True), ("native", "native", True), ("native_today", "native", False))
 
 
-def stage_seconds(action, batch, key, nthread=None):
-    """Seconds of each stage of one native-engine rollout batch (compiled shapes assumed):
-    place + settle (MJX), plan (JAX), execute (MuJoCo C, ``execute_native``)."""
-    from relaff_jax.sim import native_batch
-    from relaff_jax.sim.planning import Plan
-
-    cfg = templates.ActionConfig()
-    world = wd.build_world(cfg.phys)
-    place_fn, settle_fn, _ = sc.jitted_scene_fns(world, cfg.scene)
-    prepare_fn, _ = rollouts.jitted_stage_fns(cfg)
-    kp, ks, _ = jax.random.split(key, 3)
-    t0 = time.perf_counter()
-    pair = sc.sample_pairs(kp, rollouts.allowed_pairs(world, action), world, batch)
-    s = jax.device_get(settle_fn(pair, *place_fn(ks, pair)))
-    t1 = time.perf_counter()
-    plan, before = jax.device_get(prepare_fn(action_id(action), pair, s.qpos))
-    t2 = time.perf_counter()
-    run = np.flatnonzero(plan.feasible)
-    sub = Plan(*(x[run] if i != 2 else x for i, x in enumerate(plan)))
-    native_batch.execute_native(action, cfg, np.asarray(pair)[run], np.asarray(s.qpos)[run],
-                                np.asarray(s.qvel)[run], sub, np.asarray(before)[run], nthread=nthread)
-    t3 = time.perf_counter()
-    return {"settle": t1 - t0, "plan": t2 - t1, "execute": t3 - t2, "executed": int(len(run))}
+def _agree(a, b, feas):
+    return float(np.mean(a == b)), float(np.mean(a[feas] == b[feas]))
 
 
 def engines(actions, batches, n, seed, out_json=None, nthread=None):
-    """Per action and batch size: labelled rollouts/s of both engines on the same scenes
-    (``ceil(n / batch)`` + 1 batches; the first, which compiles, is not timed), their ratio and
-    label agreement on all of them.
-    Returns {action: {batch: row}}."""
-    cfg = templates.ActionConfig()
-    setting = {"n": n, "batches": list(batches), "seed": seed}
+    """Per action and batch size, on the same scenes (same keys): labelled rollouts/s of
+    today's MJX (``templates.untuned``), the tuned MJX and the native engine (tuned and
+    untuned), each = (sample + settle + plan, shared) + its own execution, over
+    ``ceil(n / batch)`` batches after one untimed batch (it compiles); label agreement of
+    tuned vs today's MJX, native vs tuned MJX, and native vs MJX untuned (the reference for
+    "C agreement no worse than today's"). Returns {action: {batch: row}}."""
+    tuned = templates.ActionConfig()
+    today = templates.untuned(tuned)
+    setting = {"n": n, "batches": list(batches), "seed": seed, "executors": [e[0] for e in EXECUTORS]}
     done = {}
     if out_json and os.path.exists(out_json):
         prev = read_json(out_json)
         done = prev.get("actions", {}) if prev.get("setting") == setting else {}
-    print(f"{'action':10s} {'batch':>5s} {'MJX /s':>7s} {'native /s':>9s} {'native/MJX':>10s} "
-          f"{'agree all':>9s} {'agree feasible (n; MJX+, native+)':>34s}", flush=True)
+    print(f"{'action':10s} {'batch':>5s} {'today /s':>8s} {'tuned /s':>8s} {'native /s':>9s} {'tuned/today':>11s} "
+          f"{'native/tuned':>12s} {'agree tuned~today':>17s} {'native~tuned':>12s} {'native~today (untuned)':>22s}",
+          flush=True)
     for action in actions:
         for b in batches:
             if str(b) in done.get(action, {}):
                 r = done[action][str(b)]
             else:
-                keys = [jax.random.fold_in(jax.random.PRNGKey(seed + 1000 * b), c) for c in range(-(-n // b) + 1)]
-                res = {}
-                for eng in rollouts.ENGINES:
-                    fn = rollouts.make_rollout_fn(action, b, cfg, engine=eng, nthread=nthread)
-                    res[eng] = _timed(fn, keys, b)
-                cat = lambda eng, f: np.concatenate([o[f] for o in res[eng][0]])
-                assert np.array_equal(cat("mjx", "pair"), cat("native", "pair"))
-                lm, ln, feas = cat("mjx", "label"), cat("native", "label"), cat("mjx", "feasible")
-                differ = np.flatnonzero(lm != ln)
-                r = {"mjx_per_s": res["mjx"][1], "native_per_s": res["native"][1],
-                     "first_s": {e: res[e][2] for e in res}, "n": int(len(lm)), "n_feasible": int(feas.sum()),
-                     "agree_all": float(np.mean(lm == ln)), "agree_feasible": float(np.mean(lm[feas] == ln[feas])),
-                     "mjx_pos": int(lm[feas].sum()), "native_pos": int(ln[feas].sum()),
-                     "differ": [{"pair": [str(cat("mjx", "toy")[i]), str(cat("mjx", "other")[i])],
-                                 "relation": sc.RELATIONS[int(cat("mjx", "relation")[i])], "mjx": bool(lm[i]),
-                                 "native": bool(ln[i]), "rollout_id": int(cat("mjx", "rollout_id")[i])}
-                                for i in differ[:40]]}
-                r["native_stages_s"] = stage_seconds(action, b, keys[-1], nthread)
+                r = _engine_row(action, b, n, seed, tuned, today, nthread)
                 done.setdefault(action, {})[str(b)] = r
                 if out_json:
                     atomic_write_json(out_json, {"setting": setting, "actions": done})
-            print(f"{action:10s} {b:5d} {r['mjx_per_s']:7.1f} {r['native_per_s']:9.1f} "
-                  f"{r['native_per_s'] / r['mjx_per_s']:10.1f} {r['agree_all']:9.3f} "
-                  f"{r['agree_feasible']:9.3f} ({r['n_feasible']}; {r['mjx_pos']}, {r['native_pos']})  native batch: "
-                  + "settle {settle:.2f} s, plan {plan:.2f} s, execute {execute:.2f} s ({executed} programs)".format(
-                      **r["native_stages_s"]), flush=True)
+            ps = r["per_s"]
+            print(f"{action:10s} {b:5d} {ps['mjx_today']:8.1f} {ps['mjx']:8.1f} {ps['native']:9.1f} "
+                  f"{ps['mjx'] / ps['mjx_today']:11.2f} {ps['native'] / ps['mjx']:12.2f} "
+                  f"{r['agree']['mjx~mjx_today'][1]:17.3f} {r['agree']['native~mjx'][1]:12.3f} "
+                  f"{r['agree']['native_today~mjx_today'][1]:22.3f}  (feasible {r['n_feasible']} of {r['n']}; "
+                  f"positives {r['positives']}; s per batch: prepare {r['prepare_s']:.2f}, execute "
+                  + ", ".join(f"{k} {v:.2f}" for k, v in r["execute_s"].items()) + ")", flush=True)
     return {a: done[a] for a in actions}
 
 
+def _engine_row(action, b, n, seed, tuned, today, nthread):
+    """One (action, batch) row of ``engines``: every executor on the same prepared batches."""
+    prepare = rollouts.make_batch_prepare_fn(action, tuned)
+    cfgs = {False: today, True: tuned}
+    keys = [jax.random.fold_in(jax.random.PRNGKey(seed + 1000 * b), c) for c in range(-(-n // b) + 1)]
+    outs = {e[0]: [] for e in EXECUTORS}
+    t_prep, t_exec, first = [], {e[0]: [] for e in EXECUTORS}, {}
+    for i, key in enumerate(keys):
+        t0 = time.perf_counter()
+        prep = prepare(key, b)
+        t_prep.append(time.perf_counter() - t0)
+        for name, engine, is_tuned in EXECUTORS:
+            t0 = time.perf_counter()
+            out = rollouts.execute_batch(prep, cfgs[is_tuned], engine, rollouts.default_sim_batch(b), nthread)
+            dt = time.perf_counter() - t0
+            if i == 0:
+                first[name] = dt + t_prep[0]
+            else:
+                t_exec[name].append(dt)
+            outs[name].append(out)
+    cat = {k: {f: np.concatenate([o[f] for o in v]) for f in ("label", "feasible", "pair")} for k, v in outs.items()}
+    feas = cat["mjx"]["feasible"]
+    lab = {k: v["label"] for k, v in cat.items()}
+    prep_s = sum(t_prep[1:])
+    timed = b * (len(keys) - 1)
+    agree = {f"{x}~{y}": _agree(lab[x], lab[y], feas) for x, y in
+             (("mjx", "mjx_today"), ("native", "mjx"), ("native_today", "mjx_today"), ("native", "native_today"))}
+    differ = {k: [int(i) for i in np.flatnonzero(lab[k.split("~")[0]] != lab[k.split("~")[1]])[:40]] for k in agree}
+    return {"n": int(len(feas)), "n_feasible": int(feas.sum()), "positives": {k: int(v.sum()) for k, v in lab.items()},
+            "per_s": {k: timed / (prep_s + sum(v)) for k, v in t_exec.items()},
+            "execute_only_per_s": {k: timed / sum(v) for k, v in t_exec.items()},
+            "prepare_s": prep_s / (len(keys) - 1), "execute_s": {k: sum(v) / len(v) for k, v in t_exec.items()},
+            "first_s": first, "agree": agree, "differ_rows": differ}
+
+
 def smoke() -> None:
-    """lift, batch 32, one warm-up and two timed batches per engine; the summary line last."""
-    rows = engines(["lift"], [32], 64, seed=0)["lift"]["32"]
-    print(f"mjx_speedup=1.00 native_per_s={rows['native_per_s']:.1f} "
-          f"native_over_mjx={rows['native_per_s'] / rows['mjx_per_s']:.2f}")
+    """lift, batch 32, one warm-up and two timed batches; the summary line last."""
+    r = engines(["lift"], [32], 64, seed=0)["lift"]["32"]
+    ps = r["per_s"]
+    print(f"mjx_speedup={ps['mjx'] / ps['mjx_today']:.2f} native_per_s={ps['native']:.1f} "
+          f"native_over_mjx={ps['native'] / ps['mjx']:.2f}")
 
 
 def main() -> None:

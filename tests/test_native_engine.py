@@ -188,3 +188,22 @@ def test_native_rollout_fn_equals_replay(scene_world):
     assert not out["label"][~out["feasible"]].any()
     np.testing.assert_array_equal(out["qpos_final"][~out["feasible"]], out["qpos_settled"][~out["feasible"]])
     assert out["label"].dtype == bool and out["rollout_id"].dtype == np.int64
+
+
+@pytest.mark.slow  # C executions of two actions, full and stopped
+@pytest.mark.parametrize("action", ["lift", "push"])
+def test_early_stop_in_c(planned, action):
+    """Same world, with and without the early stop, in C: lift's outcome is read at the
+    measuring step, so the centres of mass there and the labels are bit-identical (only the
+    final state moves on); push reads the end, which is the program's end when stopped."""
+    pair, q, qvel, plan, before = planned[action]
+    full = templates.ActionConfig(stop_at_program_end=False)
+    a = native_batch.execute_native(action, CFG, pair, q, qvel, plan, before)
+    b = native_batch.execute_native(action, full, pair, q, qvel, plan, before)
+    np.testing.assert_array_equal(a["com_m"], b["com_m"])
+    if action == "lift":
+        np.testing.assert_array_equal(a["label"], b["label"])
+        assert a["label"].any()  # a lift that worked, not programs that did nothing
+    else:
+        np.testing.assert_array_equal(a["com_end"], a["com_m"])  # stopped at the measuring step
+        assert not np.array_equal(a["qpos_final"], b["qpos_final"])

@@ -23,7 +23,7 @@ from . import world as wd
 from .native_program import native_labels, pad_hit, program_inputs, reachable, weld_relpose_np
 from .planning import make_plan_fn, setup
 from .simulate import welds
-from .templates import N_STEPS, UNOBSTRUCT_ID, ActionConfig
+from .templates import UNOBSTRUCT_ID, ActionConfig
 
 from relaff_jax.constants import action_id
 
@@ -140,7 +140,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
         eq_data0 = m.eq_data.copy()
         cm = None
         shots = [(d.geom_xpos.copy(), d.geom_xmat.copy())] if record_every > 0 else []
-        for t in range(N_STEPS):
+        for t in range(inp.n_run):
             # the grasp lock of simulate.run_program_locked, on C contacts
             for row, body, geoms, kind in ((wl.obj, world.obj_body, obj_geoms, 1),
                                            (wl.toy, world.toy_body, toy_geoms, 2)):

@@ -31,7 +31,7 @@ from . import world as wd
 from .native_program import native_labels, pad_hit, program_inputs, weld_relpose_np
 from .planning import Plan, setup
 from .simulate import welds
-from .templates import N_STEPS, ActionConfig
+from .templates import ActionConfig
 
 from relaff_jax.constants import action_id
 from relaff_jax.errors import UserError
@@ -107,7 +107,7 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
     com0 = xipos[:, bodies].copy()
     com_m = None
     grasp = {1: (wl.obj, world.obj_body, "obj"), 2: (wl.toy, world.toy_body, "toy")}.get(inp.grasp)
-    for t in range(N_STEPS):
+    for t in range(inp.n_run):
         # the grasp lock of simulate.run_program_locked, on the pads' contact sensors (the
         # other hand weld stays off: initial_data leaves it off and only the grasp row moves)
         if grasp is not None:

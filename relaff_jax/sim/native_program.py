@@ -28,7 +28,7 @@ from .labels import Outcome, goals
 from .planning import setup
 from .programs import toy_reachable
 from .simulate import initial_data
-from .templates import GRASPS, N_STEPS, TPL_CLOSED, TPL_MEASURE, TPL_STEPS, UNOBSTRUCT_ID, ActionConfig
+from .templates import GRASPS, N_STEPS, TPL_CLOSED, TPL_MEASURE, TPL_STEPS, UNOBSTRUCT_ID, ActionConfig, run_steps
 
 
 class ProgramInputs(NamedTuple):
@@ -37,7 +37,8 @@ class ProgramInputs(NamedTuple):
     qpos (B, nq), qvel (B, nv), eq_active (B, neq): the action world's initial state;
     ctrl (B, T, nu): the command of every control step (T = ``N_STEPS``); closing (T,) bool:
     does step t belong to a segment that closes the fingers; grasp: 0 none, 1 the other
-    object, 2 the toy (``templates.GRASPS``); measure: the control step of the lift-type goals.
+    object, 2 the toy (``templates.GRASPS``); measure: the control step of the lift-type goals;
+    n_run: the control steps to simulate (``templates.run_steps``).
     """
 
     qpos: np.ndarray
@@ -47,6 +48,7 @@ class ProgramInputs(NamedTuple):
     closing: np.ndarray
     grasp: int
     measure: int
+    n_run: int
 
 
 @functools.lru_cache(maxsize=4)
@@ -99,7 +101,7 @@ def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarr
     u = np.asarray(_padded(lambda qw, gw: ctrl(a, qw, gw), q_way, grip_way), np.float64)
     seg = np.asarray(A.segment_index(TPL_STEPS[aid], jnp.arange(N_STEPS)))
     return ProgramInputs(full_q, full_v, np.asarray(eq0, np.float64), u, np.asarray(TPL_CLOSED[aid])[seg],
-                         int(GRASPS[aid]), int(TPL_MEASURE[aid]))
+                         int(GRASPS[aid]), int(TPL_MEASURE[aid]), int(run_steps(cfg)[aid]))
 
 
 def weld_relpose_np(xpos1: np.ndarray, xquat1: np.ndarray, xpos2: np.ndarray,

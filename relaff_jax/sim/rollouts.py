@@ -6,7 +6,8 @@ programs per batch shape, plan and simulate, shared by all nine actions: the act
 traced) and ``make_rollout_fn(action, batch, config, engine=...)``, the sampler of
 ``dataset.generate_dataset``: sample pairs of the action's pairing (``allowed_pairs``), place
 and settle them (``scenes.py`` on the arm-less world), plan, simulate the feasible programs,
-label. Two engines execute the programs (``ENGINES``): ``"mjx"`` (default; it also runs on an
+label (``make_batch_prepare_fn`` then ``execute_batch``, also usable apart: the benchmark
+executes one prepared batch with several engines). Two engines execute the programs (``ENGINES``): ``"mjx"`` (default; it also runs on an
 accelerator) and ``"native"`` (MuJoCo C on a thread pool, ``native_batch.execute_native``);
 sampling, settling and planning are the same JAX code for both.
 
@@ -18,7 +19,7 @@ Motor programs: docs/actions.md.
 from __future__ import annotations
 
 import functools
-from typing import Callable
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -123,7 +124,7 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     C threads (default: every CPU of the process; ``sim_batch`` unused). Only the execution
     differs: the same scenes, plans and outcome rules (``docs/actions.md``, "Engines").
     """
-    aid = action_id(action)
+    action_id(action)  # an unknown action raises here, before any compile
     if int(batch) < 1:
         raise UserError(f"batch must be >= 1, got {batch}")
     sim_batch = default_sim_batch(batch) if sim_batch is None else int(sim_batch)
@@ -134,13 +135,41 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     if nthread is not None and int(nthread) < 1:
         raise UserError(f"nthread must be >= 1, got {nthread}")
     cfg = config or ActionConfig()
+    prepare = make_batch_prepare_fn(action, cfg)
+
+    def rollout_fn(key, batch_size: int) -> dict[str, np.ndarray]:
+        return execute_batch(prepare(key, batch_size), cfg, engine, sim_batch, nthread)
+
+    return rollout_fn
+
+
+class Prepared(NamedTuple):
+    """One rollout batch before execution (host arrays): ``action``, ``pair`` (B,), the
+    settled ``scenes`` (``scenes.Scenes``), the ``plan`` (``planning.Plan``), ``before`` (B,)
+    unobstruct's reachability, ``ids`` (B,) int64 rollout ids, ``names`` (B, 2) object names."""
+
+    action: str
+    pair: np.ndarray
+    scenes: Any
+    plan: Plan
+    before: np.ndarray
+    ids: np.ndarray
+    names: np.ndarray
+
+
+def make_batch_prepare_fn(action: str, cfg: ActionConfig) -> Callable:
+    """``prepare(key, batch_size) -> Prepared``: the engine-independent half of a rollout batch
+    (sample pairs of the action's pairing, place, settle in MJX, plan in JAX). Its results do
+    not depend on the arm world's tuning (``PhysicsConfig.arm_*``), only on the settle world
+    and the arm's kinematics."""
+    aid = action_id(action)
     scene_world = wd.build_world(cfg.phys)
     place_fn, settle_fn, _ = sc.jitted_scene_fns(scene_world, cfg.scene)
-    prepare_fn, simulate_fn = jitted_stage_fns(cfg)
+    prepare_fn, _ = jitted_stage_fns(cfg)
     allowed = allowed_pairs(scene_world, action)
     names = np.asarray([(t, o) for t, o, _ in scene_world.pairs])
 
-    def rollout_fn(key, batch_size: int) -> dict[str, np.ndarray]:
+    def prepare(key, batch_size: int) -> Prepared:
         kp, ks, kid = jax.random.split(key, 3)
         pair = sc.sample_pairs(kp, allowed, scene_world, int(batch_size))
         qpos0, intended = place_fn(ks, pair)
@@ -148,43 +177,55 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
         plan, before = prepare_fn(aid, pair, scenes.qpos)
         s, plan, before = jax.device_get((scenes, plan, before))
         p = np.asarray(pair)
-        qpos = np.asarray(s.qpos, np.float32)
-        # not executed: label False, objects where they settled
-        label = np.zeros(len(p), bool)
-        qpos_final = qpos.copy()
-        after = np.asarray(before, bool).copy()
-        run = np.flatnonzero(plan.feasible)
-        if engine == "native" and len(run):
-            sub = Plan(plan.q_way[run], plan.grip_way[run], plan.seg_steps, plan.feasible[run],
-                       plan.direction[run], plan.ik_error[run])
-            out = execute_native(action, cfg, p[run], qpos[run], np.asarray(s.qvel)[run], sub,
-                                 np.asarray(before)[run], nthread=nthread)
-            label[run], qpos_final[run], after[run] = out["label"], out["qpos_final"], out["reach_after"]
-        for lo in range(0, len(run) if engine == "mjx" else 0, sim_batch):
+        base = int(jax.random.bits(kid, (), jnp.uint32))
+        ids = np.int64(base) * int(batch_size) + np.arange(int(batch_size), dtype=np.int64)
+        return Prepared(action, p, s, plan, np.asarray(before, bool), ids, names[p])
+
+    return prepare
+
+
+def execute_batch(prep: Prepared, cfg: ActionConfig, engine: str = "mjx", sim_batch: int = 16,
+                  nthread: int | None = None) -> dict[str, np.ndarray]:
+    """Execute the feasible programs of ``prep`` with ``engine`` and label every scene: the
+    fields of ``make_rollout_fn``. An infeasible program is not executed: label False, the
+    objects where they settled, ``reach_after`` = ``reach_before``."""
+    if engine not in ENGINES:
+        raise UserError(f"unknown engine {engine!r}; valid: {', '.join(ENGINES)}")
+    aid = action_id(prep.action)
+    s, plan, before, p = prep.scenes, prep.plan, prep.before, prep.pair
+    qpos = np.asarray(s.qpos, np.float32)
+    label = np.zeros(len(p), bool)
+    qpos_final = qpos.copy()
+    after = before.copy()
+    run = np.flatnonzero(plan.feasible)
+    if engine == "native" and len(run):
+        sub = Plan(plan.q_way[run], plan.grip_way[run], plan.seg_steps, plan.feasible[run],
+                   plan.direction[run], plan.ik_error[run])
+        out = execute_native(prep.action, cfg, p[run], qpos[run], np.asarray(s.qvel)[run], sub,
+                             before[run], nthread=nthread)
+        label[run], qpos_final[run], after[run] = out["label"], out["qpos_final"], out["reach_after"]
+    if engine == "mjx":
+        _, simulate_fn = jitted_stage_fns(cfg)
+        for lo in range(0, len(run), sim_batch):
             rows = run[lo:lo + sim_batch]
             idx = np.resize(rows, sim_batch)  # pad with repeats: one compiled shape
             sub = Plan(plan.q_way[idx], plan.grip_way[idx], plan.seg_steps, plan.feasible[idx],
                        plan.direction[idx], plan.ik_error[idx])
-            out = jax.device_get(simulate_fn(aid, p[idx], qpos[idx], np.asarray(s.qvel)[idx], sub,
-                                             np.asarray(before)[idx]))
+            out = jax.device_get(simulate_fn(aid, p[idx], qpos[idx], np.asarray(s.qvel)[idx], sub, before[idx]))
             k = len(rows)
             label[rows] = out["label"][:k]
             qpos_final[rows] = out["qpos_final"][:k]
             after[rows] = out["reach_after"][:k]
-        simulated = np.zeros(len(p), bool)
-        simulated[run] = True
-        base = int(jax.random.bits(kid, (), jnp.uint32))
-        return dict(
-            label=label,
-            relation=np.asarray(s.relation, np.int32),
-            cog_distance=np.asarray(s.cog_distance, np.float32),
-            toy=names[p, 0], other=names[p, 1], pair=p.astype(np.int32),
-            qpos0=np.asarray(s.qpos0, np.float32), qpos_settled=qpos,
-            qpos_final=np.asarray(qpos_final, np.float32),
-            rollout_id=np.int64(base) * int(batch_size) + np.arange(int(batch_size), dtype=np.int64),
-            intended=np.asarray(s.intended, np.int32), at_rest=np.asarray(s.at_rest, bool),
-            feasible=np.asarray(plan.feasible, bool), ik_error=np.asarray(plan.ik_error, np.float32),
-            reach_before=np.asarray(before, bool), reach_after=after, simulated=simulated,
-        )
-
-    return rollout_fn
+    simulated = np.zeros(len(p), bool)
+    simulated[run] = True
+    return dict(
+        label=label,
+        relation=np.asarray(s.relation, np.int32),
+        cog_distance=np.asarray(s.cog_distance, np.float32),
+        toy=prep.names[:, 0], other=prep.names[:, 1], pair=p.astype(np.int32),
+        qpos0=np.asarray(s.qpos0, np.float32), qpos_settled=qpos,
+        qpos_final=np.asarray(qpos_final, np.float32), rollout_id=prep.ids,
+        intended=np.asarray(s.intended, np.int32), at_rest=np.asarray(s.at_rest, bool),
+        feasible=np.asarray(plan.feasible, bool), ik_error=np.asarray(plan.ik_error, np.float32),
+        reach_before=before, reach_after=after, simulated=simulated,
+    )

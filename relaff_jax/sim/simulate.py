@@ -30,7 +30,7 @@ from . import world as wd
 from .labels import Outcome, goals
 from .planning import Setup, home_grip, make_plan_fn, setup
 from .programs import toy_reachable
-from .templates import GRASPS, N_STEPS, RAKE_ID, TPL_CLOSED, TPL_MEASURE, UNOBSTRUCT_ID, ActionConfig
+from .templates import GRASPS, N_STEPS, RAKE_ID, TPL_CLOSED, TPL_MEASURE, UNOBSTRUCT_ID, ActionConfig, run_steps
 
 
 def _finger_home(action_id: jax.Array) -> jax.Array:
@@ -73,8 +73,14 @@ def welds(world: wd.World) -> Welds:
 
 
 def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array, mx, d, q_way, grip_way,
-              seg_steps, closed, observe):
+              seg_steps, closed, observe, n_run=None):
     """Run a program on one scene (``lax.scan`` over ``N_STEPS`` control steps) with grasp locks.
+
+    With ``n_run`` (scalar, may be traced but not batched) only the first ``n_run`` steps are
+    simulated; the later ones keep the state (``lax.cond``: skipped, not computed and masked),
+    so ``trace`` holds the final state from step ``n_run - 1`` on. Without it every step runs
+    in a plain scan (the cond changes XLA's fusion, hence float32 bits, even when it is always
+    true: ``templates.untuned`` keeps the bits of before the tuning).
 
     A grasp lock is the weld ``grasp_obj``/``grasp_toy`` (``grasp`` 1/2 selects which, 0 none):
     it engages only during a segment that closes the fingers and only once *both* finger pads
@@ -104,7 +110,11 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
         d = mjx.step(mx.replace(eq_data=eq_data), d)
         return (d, eq_data), observe(d)
 
-    (d, _), trace = jax.lax.scan(control_step, (d, jnp.asarray(mx.eq_data)), jnp.arange(N_STEPS))
+    def step_or_hold(carry, t):
+        return jax.lax.cond(t < n_run, control_step, lambda c, _: (c, observe(c[0])), carry, t)
+
+    body = control_step if n_run is None else step_or_hold
+    (d, _), trace = jax.lax.scan(body, (d, jnp.asarray(mx.eq_data)), jnp.arange(N_STEPS))
     return d, trace
 
 
@@ -147,8 +157,10 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         com0 = jnp.stack([data.xipos[:, toy_b], data.xipos[:, obj_b]], 1)
         grasp = jnp.asarray(GRASPS)[action_id]
         closed = jnp.asarray(TPL_CLOSED)[action_id]
+        # one value for the whole batch, so the cond stays a branch under vmap
+        n_run = jnp.asarray(run_steps(cfg))[action_id] if cfg.stop_at_program_end else None
         run = lambda mx, d, qw, gw: run_program_locked(st, cfg, wl, grasp, mx, d, qw, gw, plan.seg_steps,
-                                                         closed, observe)
+                                                         closed, observe, n_run)
         final, trace = jax.vmap(run, in_axes=(world.model_axes, 0, 0, 0))(
             models, data, plan.q_way, plan.grip_way)
         nqo = qpos.shape[-1]

@@ -47,6 +47,11 @@ class ActionConfig:
     take_align: bool = False  # take: turn the wrist to the toy's narrow side (False: closing
     # axis across the robot's line of sight, whatever the toy's yaw)
     corridor: float = 0.05  # unobstruct: clearance of the approach corridor (see docs)
+    # Simulate each action only to the end of its own program (its measuring step), not
+    # through the padding to N_STEPS: lift/take stop after 560 of 815 steps. The labels of
+    # lift, take, pour and slide read the measuring step only, so they cannot change; the
+    # other actions read the end, now the program's end (docs/actions.md, "Tuning").
+    stop_at_program_end: bool = True
     arm: A.ArmConfig = A.ArmConfig()
     phys: wd.PhysicsConfig = wd.PhysicsConfig()
     scene: sc.SceneConfig = sc.SceneConfig()
@@ -108,6 +113,22 @@ TPL_TARGET = np.asarray([TEMPLATES[a].target for a in ACTIONS], np.int32)
 TPL_CLOSED = np.asarray([TEMPLATES[a].closed for a in ACTIONS], bool)
 TPL_MEASURE = np.asarray([TEMPLATES[a].measure for a in ACTIONS], np.int32)
 RAKE_ID = ACTIONS.index("rake")
+
+
+def run_steps(cfg: ActionConfig) -> np.ndarray:
+    """(9,) int32: control steps simulated per action, ``TPL_MEASURE + 1`` (the program's own
+    end) or every action the padded ``N_STEPS`` (``cfg.stop_at_program_end`` False)."""
+    if cfg.stop_at_program_end:
+        return (TPL_MEASURE + 1).astype(np.int32)
+    return np.full(len(ACTIONS), N_STEPS, np.int32)
+
+
+def untuned(cfg: ActionConfig = ActionConfig()) -> ActionConfig:
+    """``cfg`` with the arm world as it was before issue 14's tuning: every geom pair through
+    MJX's narrow phase, the pedestal colliding, every action run for ``N_STEPS``. Kept for
+    ``benchmarks/actions.py`` (today's MJX against the tuned one) and the tests."""
+    phys = dataclasses.replace(cfg.phys, arm_max_geom_pairs=-1, arm_pedestal_contacts=True)
+    return dataclasses.replace(cfg, phys=phys, stop_at_program_end=False)
 UNOBSTRUCT_ID = ACTIONS.index("unobstruct")
 # Which body a closed gripper locks onto (0 none, 1 the other object, 2 the toy); see
 # simulate.run_program_locked.

@@ -53,6 +53,15 @@ class PhysicsConfig:
     # Let every container wall touch the table (off: they stand on the base plate's
     # footprint and never need to; on costs 12 more contact slots, kept for A/B benchmarks).
     wall_table_contacts: bool = False
+    # The arm world only (the settle world has no arm; docs/actions.md, "Tuning"):
+    # MJX's broad phase keeps, per collision function, the k geom pairs whose bounding spheres
+    # are nearest (MJX's `max_geom_pairs`; -1: all 46 non-plane pairs through the narrow
+    # phase). MuJoCo C ignores it. 4 covers every contact set of the nine programs (a pad on
+    # each side of a grasped wall and the toy, a toy on a base between two walls).
+    arm_max_geom_pairs: int = 4
+    # The pedestal never meets an object: objects stand >= SceneConfig.min_radius (0.2 m) plus
+    # their radius from the robot, the pedestal's radius is 0.09 m (off: 7 pairs fewer).
+    arm_pedestal_contacts: bool = False
 
 
 def _box_geom(name: str, size, pos, mass: float, rgba, extra: str = "") -> str:
@@ -133,6 +142,12 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
         from .arm import world_mjcf
 
         arm_xml = world_mjcf(tool_body="obj", grasp_bodies=("obj", "toy"))
+        if not phys.arm_pedestal_contacts:
+            arm_xml += ('\n  <contact><exclude body1="arm_base" body2="toy"/>'
+                        '<exclude body1="arm_base" body2="obj"/></contact>')
+        if phys.arm_max_geom_pairs >= 0:
+            arm_xml += (f'\n  <custom><numeric name="max_geom_pairs" '
+                        f'data="{int(phys.arm_max_geom_pairs)}"/></custom>')
     return f"""
 <mujoco model="relaff_{toy}_{other}">
   <option timestep="{phys.timestep}" iterations="{phys.iterations}"

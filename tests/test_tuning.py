@@ -1,0 +1,61 @@
+"""Issue 14's arm-world tuning (``PhysicsConfig.arm_*``, ``ActionConfig.stop_at_program_end``):
+the geom pairs and contact slots MJX compiles, the steps each action runs and ``templates.untuned``
+(today's world, kept for the benchmark). The early stop's effect on outcomes is checked in C
+(deterministic stepping) in ``test_native_engine.py``; the tuned MJX's labels by the hand-built
+scenes of ``test_actions.py``."""
+import dataclasses
+
+import mujoco
+import pytest
+from mujoco.mjx._src import collision_driver as cd
+
+from relaff_jax.constants import ACTIONS
+from relaff_jax.errors import UserError
+from relaff_jax.sim import rollouts, templates
+from relaff_jax.sim import world as wd
+
+CFG = templates.ActionConfig()
+
+
+def _pairs(phys):
+    m = mujoco.MjModel.from_xml_string(wd.pair_xml("block", "cup", phys, arm=True))  # every pair: same geoms
+    name = lambda g: m.geom(int(g)).name  # noqa: E731
+    return m, [(name(a), name(b)) for a, b, _ in cd.geom_pairs(m)]
+
+
+def test_run_steps_by_hand():
+    """Each action runs to its measuring step + 1 (template sums, docs/actions.md); untuned: 815."""
+    steps = dict(zip(ACTIONS, templates.run_steps(CFG)))
+    assert steps == {"lift": 560, "move": 800, "pull": 755, "push": 755, "rake": 650, "take": 560,
+                     "pour": 810, "slide": 810, "unobstruct": 755}
+    assert set(templates.run_steps(templates.untuned(CFG))) == {templates.N_STEPS}
+
+
+def test_tuned_world_pairs_and_slots():
+    """The tuned world drops the pedestal's 7 pairs, caps MJX's broad phase at 4 pairs per
+    collision function; ``untuned`` restores both."""
+    m, pairs = _pairs(CFG.phys)
+    mu, pairs_u = _pairs(templates.untuned(CFG).phys)
+    ped = [p for p in pairs_u if "arm_pedestal" in p]
+    assert len(ped) == 7 and not [p for p in pairs if "arm_pedestal" in p]
+    assert set(pairs) == set(pairs_u) - set(ped)
+    assert cd._numeric(m, "max_geom_pairs") == 4 and cd._numeric(mu, "max_geom_pairs") == -1
+    # the pads keep condim 4: at 3 they would join the objects' box-box function and share
+    # its 4 pairs (docs/actions.md, "Tuning": lift agreement 97.4 %, rake 91.0 %)
+    pad = m.geom("arm_pad_l").id
+    assert m.geom_condim[pad] == 4 == mu.geom_condim[pad]
+    groups = {(tuple(int(t) for t in k.types), int(k.condim)): len(v) for k, v in cd._geom_groups(m).items()}
+    assert groups[((6, 6), 4)] == 12 and groups[((6, 6), 3)] == 11  # pads apart from toy/base pairs
+    # contact slots MJX allocates: every pair's contacts untuned, 4 pairs per function tuned
+    assert len(cd.make_condim(mu)) == 138 and len(cd.make_condim(m)) < 70
+
+
+def test_untuned_settle_world_unchanged():
+    """The arm_* settings touch the action world only: the settle world's XML is the same."""
+    other = dataclasses.replace(CFG.phys, arm_max_geom_pairs=-1, arm_pedestal_contacts=True)
+    assert wd.pair_xml("block", "cup", CFG.phys) == wd.pair_xml("block", "cup", other)
+
+
+def test_execute_batch_refuses_unknown_engine():
+    with pytest.raises(UserError, match="unknown engine"):
+        rollouts.execute_batch(None, CFG, engine="bullet")
