@@ -24,7 +24,7 @@ def test_box_outline_side_and_top_views():
     np.testing.assert_allclose(poly.mean(0), [1.0, 2.5], atol=1e-12)
 
 
-@pytest.mark.slow  # plans (IK compile) and replays 815 C steps
+@pytest.mark.slow  # plans (IK compile) and replays 560 C steps
 def test_rollout_gif_of_a_settled_scene(tmp_path, scene_world, settle):
     import jax
     from PIL import Image
@@ -37,7 +37,12 @@ def test_rollout_gif_of_a_settled_scene(tmp_path, scene_world, settle):
     qpos0, intended = place(jax.random.PRNGKey(3), pair)
     s = settle(pair, qpos0, intended)
     frames = animate.animate_sample("lift", int(pair[0]), np.asarray(s.qpos)[0], tmp_path / "a.gif", title="t")
-    assert frames["frames_xpos"].shape[0] == 1 + 815 // 10
+    from relaff_jax.constants import action_id
+    from relaff_jax.sim import templates
+
+    # a frame every 10 steps of the program, which stops at its end (560 of lift's 815 steps)
+    n_run = int(templates.run_steps(templates.ActionConfig())[action_id("lift")])
+    assert n_run == 560 and frames["frames_xpos"].shape[0] == 1 + n_run // 10
     im = Image.open(tmp_path / "a.gif")
     assert im.n_frames == frames["frames_xpos"].shape[0]
     # the objects start where the scene settled

@@ -133,14 +133,19 @@ def chunk_path(cdir: Path, k: int) -> Path:
 
 
 def clean_tmp(*dirs: Path) -> list[str]:
-    """Remove leftovers of killed atomic writes (``.NAME.XXXX.tmp`` files/dirs)."""
+    """Remove leftovers of killed atomic writes (``.NAME.XXXX.tmp`` files/dirs). Tolerates a
+    writer still at work in one (a killed driver's task on a cluster worker): what it adds or
+    removes meanwhile is no error here; its own rename then fails and the chunk is redone."""
     removed = []
     for d in dirs:
         if not d.is_dir():
             continue
         for p in d.iterdir():
             if p.name.startswith(".") and p.name.endswith(".tmp"):
-                shutil.rmtree(p) if p.is_dir() and not p.is_symlink() else p.unlink()
+                if p.is_dir() and not p.is_symlink():
+                    shutil.rmtree(p, ignore_errors=True)
+                else:
+                    p.unlink(missing_ok=True)
                 removed.append(str(p))
     return removed
 

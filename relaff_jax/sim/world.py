@@ -56,9 +56,9 @@ class PhysicsConfig:
     # The arm world only (the settle world has no arm; docs/actions.md, "Tuning"):
     # MJX's broad phase keeps, per collision function, the k geom pairs whose bounding spheres
     # are nearest (MJX's `max_geom_pairs`; -1: all 46 non-plane pairs through the narrow
-    # phase). MuJoCo C ignores it. 4 covers every contact set of the nine programs (a pad on
-    # each side of a grasped wall and the toy, a toy on a base between two walls).
-    arm_max_geom_pairs: int = 4
+    # phase). MuJoCo C ignores it. 6, not 4: a take inside a container touches up to 6 of the
+    # pads' 12 pairs, and 4 lost 8 of 297 takes (docs/actions.md, "Tuning").
+    arm_max_geom_pairs: int = 6
     # The pedestal never meets an object: objects stand >= SceneConfig.min_radius (0.2 m) plus
     # their radius from the robot, the pedestal's radius is 0.09 m (off: 7 pairs fewer).
     arm_pedestal_contacts: bool = False
