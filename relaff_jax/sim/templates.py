@@ -113,6 +113,10 @@ TPL_TARGET = np.asarray([TEMPLATES[a].target for a in ACTIONS], np.int32)
 TPL_CLOSED = np.asarray([TEMPLATES[a].closed for a in ACTIONS], bool)
 TPL_MEASURE = np.asarray([TEMPLATES[a].measure for a in ACTIONS], np.int32)
 RAKE_ID = ACTIONS.index("rake")
+UNOBSTRUCT_ID = ACTIONS.index("unobstruct")
+# Which body a closed gripper locks onto (0 none, 1 the other object, 2 the toy); see
+# simulate.run_program_locked.
+GRASPS = np.asarray([{"take": 2, "move": 0, "rake": 0}.get(a, 1) for a in ACTIONS], np.int32)
 
 
 def run_steps(cfg: ActionConfig) -> np.ndarray:
@@ -129,7 +133,3 @@ def untuned(cfg: ActionConfig = ActionConfig()) -> ActionConfig:
     ``benchmarks/actions.py`` (today's MJX against the tuned one) and the tests."""
     phys = dataclasses.replace(cfg.phys, arm_max_geom_pairs=-1, arm_pedestal_contacts=True)
     return dataclasses.replace(cfg, phys=phys, stop_at_program_end=False)
-UNOBSTRUCT_ID = ACTIONS.index("unobstruct")
-# Which body a closed gripper locks onto (0 none, 1 the other object, 2 the toy); see
-# simulate.run_program_locked.
-GRASPS = np.asarray([{"take": 2, "move": 0, "rake": 0}.get(a, 1) for a in ACTIONS], np.int32)

@@ -59,8 +59,9 @@ class PhysicsConfig:
     # phase). MuJoCo C ignores it. 6, not 4: a take inside a container touches up to 6 of the
     # pads' 12 pairs, and 4 lost 8 of 297 takes (docs/actions.md, "Tuning").
     arm_max_geom_pairs: int = 6
-    # The pedestal never meets an object: objects stand >= SceneConfig.min_radius (0.2 m) plus
-    # their radius from the robot, the pedestal's radius is 0.09 m (off: 7 pairs fewer).
+    # Objects are placed >= SceneConfig.min_radius (0.2 m) plus their radius from the robot,
+    # outside the 0.09 m pedestal; only a pull or rake from the innermost placements could
+    # carry one back to it (off: 7 pairs fewer; labels checked in docs/actions.md, "Tuning").
     arm_pedestal_contacts: bool = False
 
 
