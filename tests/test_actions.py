@@ -113,6 +113,17 @@ def test_obvious_outcomes(results, action):
 
 
 @pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
+def test_mjx_stops_at_the_program_end(results):
+    """The tuned default stops each program at its measuring step: the scan's later steps hold
+    the state, so the end equals the measuring step bit for bit in every action (it would not
+    if the held steps were simulated: the drags release and retreat after it, and lift's
+    objects still settle in the grip)."""
+    assert templates.ActionConfig().stop_at_program_end
+    for action in ACTIONS:
+        np.testing.assert_array_equal(results[action]["com_end"], results[action]["com_m"], err_msg=action)
+
+
+@pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 def test_infeasible_programs_do_not_move_the_arm(results):
     # base row 4: the toy 1.55 m away cannot be grasped; the arm stays home, nothing moves
     r = results["take"]
