@@ -170,3 +170,23 @@ def test_collision_pairs_are_few(model):
     types = {int(model.geom_type[g]) for g in range(model.ngeom) if model.geom_contype[g]}
     assert types <= {int(mujoco.mjtGeom.mjGEOM_PLANE), int(mujoco.mjtGeom.mjGEOM_BOX),
                      int(mujoco.mjtGeom.mjGEOM_CAPSULE), int(mujoco.mjtGeom.mjGEOM_SPHERE)}
+
+
+def test_ik_path_solves_only_the_used_targets(arm):
+    """``solve_ik_path(..., n_used)`` (the plan solves only the targets its template uses):
+    the solved rows equal a full solve bit for bit, the skipped ones hold the last solution
+    and are never reachable. n_used is a traced argument, one value for the batch (vmap)."""
+    cfg = A.ArmConfig()
+    rng = np.random.default_rng(0)
+    pos = np.stack([rng.uniform([0.35, -0.3, 0.05], [0.6, 0.3, 0.3], (6, 3)) for _ in range(3)]).astype(np.float32)
+    targets = jax.vmap(jax.vmap(A.top_down_target))(jnp.asarray(pos))  # (3 scenes, 6 targets)
+    q0 = jnp.zeros(6)
+    full = jax.jit(jax.vmap(lambda t: A.solve_ik_path(arm, cfg, t, q0)))(targets)
+    part = jax.jit(jax.vmap(lambda t, n: A.solve_ik_path(arm, cfg, t, q0, n), in_axes=(0, None)))(targets, 4)
+    assert bool(np.all(np.asarray(full.reachable)[:, :4])), "the test's targets should be reachable"
+    for f, p in zip(full, part):
+        np.testing.assert_array_equal(np.asarray(p)[:, :4], np.asarray(f)[:, :4])
+    q = np.asarray(part.q)
+    np.testing.assert_array_equal(q[:, 4:], np.repeat(q[:, 3:4], 2, axis=1))
+    assert not np.asarray(part.reachable)[:, 4:].any() and not np.asarray(part.pos_err)[:, 4:].any()
+    assert not np.array_equal(q[:, 4:], np.asarray(full.q)[:, 4:])  # the skipped rows were not solved

@@ -207,14 +207,34 @@ def solve_ik(arm: Arm, cfg: ArmConfig, target: IKTarget, q_init: jax.Array) -> I
     return IKResult(q, pos_err[best], ang_err[best], sigma, reachable)
 
 
-def solve_ik_path(arm: Arm, cfg: ArmConfig, targets: IKTarget, q_init: jax.Array) -> IKResult:
+def solve_ik_path(arm: Arm, cfg: ArmConfig, targets: IKTarget, q_init: jax.Array,
+                  n_used: jax.Array | None = None) -> IKResult:
     """IK of a sequence of W targets (leading axis of every ``targets`` field), each warm-started
     from the previous solution so consecutive joint waypoints stay close. Returns ``IKResult``
-    with a leading (W,) axis; the program is feasible iff ``reachable.all()``."""
+    with a leading (W,) axis; the program is feasible iff ``reachable.all()``.
 
-    def step(q_prev, target):
+    ``n_used`` () int (may be traced, not batched): solve only the first ``n_used`` targets;
+    the later rows hold the last solution with zero residuals and ``reachable`` False
+    (``lax.cond``: skipped, not computed). A lift uses 3 of the 6 targets, so its plan costs
+    about half; the solved rows are bit-identical to those of a full solve
+    (``tests/test_tuning.py``)."""
+
+    def solve(q_prev, target):
         res = solve_ik(arm, cfg, target, q_prev)
         return res.q, res
 
-    _, res = jax.lax.scan(step, jnp.asarray(q_init, jnp.float32), targets)
+    if n_used is None:
+        _, res = jax.lax.scan(solve, jnp.asarray(q_init, jnp.float32), targets)
+        return res
+
+    def hold(q_prev, _):
+        z = jnp.zeros((), jnp.float32)
+        return q_prev, IKResult(q_prev, z, z, z, jnp.zeros((), bool))
+
+    def step(carry, target):
+        q_prev, k = carry
+        q, res = jax.lax.cond(k < n_used, solve, hold, q_prev, target)
+        return (q, k + 1), res
+
+    _, res = jax.lax.scan(step, (jnp.asarray(q_init, jnp.float32), jnp.int32(0)), targets)
     return res

@@ -74,9 +74,11 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
 
     def one(action_id, pair, qpos):
         prog = jax.lax.switch(action_id, branches, pair, qpos)
-        res = A.solve_ik_path(st.arm, cfg.arm, prog.targets, q_home)
-        # only the targets the template uses count (the padding repeats the last one)
-        used = jnp.arange(N_TARGETS) <= jnp.max(jnp.asarray(TPL_TARGET)[action_id])
+        # only the targets the template uses are solved and count (the padding repeats the
+        # last one); one value for the whole batch, so the cond stays a branch under vmap
+        n_used = jnp.max(jnp.asarray(TPL_TARGET)[action_id]) + 1
+        res = A.solve_ik_path(st.arm, cfg.arm, prog.targets, q_home, n_used)
+        used = jnp.arange(N_TARGETS) < n_used
         feasible = jnp.all(res.reachable | ~used) & prog.ok
         q_way = jnp.concatenate([q_home[None], res.q[jnp.asarray(TPL_TARGET)[action_id]]])
         opening = jnp.clip(prog.opening, 0.0, float(st.arm.finger_range[1]))
