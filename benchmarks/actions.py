@@ -250,7 +250,10 @@ def _engine_row(action, b, n, seed, tuned, today, nthread):
     timed = b * (len(keys) - 1)
     agree = {f"{x}~{y}": _agree(lab[x], lab[y], feas) for x, y in
              (("mjx", "mjx_today"), ("native", "mjx"), ("native_today", "mjx_today"), ("native", "native_today"))}
-    differ = {k: [int(i) for i in np.flatnonzero(lab[k.split("~")[0]] != lab[k.split("~")[1]])[:40]] for k in agree}
+    # every disagreeing row (index into the concatenated batches, so the scene can be rebuilt
+    # from its batch key) with its pair and both labels, for the examination in docs/actions.md
+    differ = {k: [[int(i), int(cat["mjx"]["pair"][i]), int(lab[k.split("~")[0]][i]), int(lab[k.split("~")[1]][i])]
+                  for i in np.flatnonzero(lab[k.split("~")[0]] != lab[k.split("~")[1]])] for k in agree}
     return {"n": int(len(feas)), "n_feasible": int(feas.sum()), "positives": {k: int(v.sum()) for k, v in lab.items()},
             "per_s": {k: timed / (prep_s + sum(v)) for k, v in t_exec.items()},
             "execute_only_per_s": {k: timed / sum(v) for k, v in t_exec.items()},

@@ -59,3 +59,26 @@ def test_untuned_settle_world_unchanged():
 def test_execute_batch_refuses_unknown_engine():
     with pytest.raises(UserError, match="unknown engine"):
         rollouts.execute_batch(None, CFG, engine="bullet")
+
+
+def test_disagreement_classes_by_hand():
+    """``benchmarks/disagreements.py``'s first-guess classes on hand-made rule quantities (cm)."""
+    import importlib.util
+    import pathlib
+
+    import numpy as np
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "disagreements.py"
+    spec = importlib.util.spec_from_file_location("disagreements", path)
+    dis = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(dis)
+    z = np.zeros(2)
+    q = lambda **kw: {k: np.asarray(kw.get(k, z), float) for k in ("rise", "along", "dr", "drop", "moved")}  # noqa: E731
+    # lift: one lifts both bodies 24 cm, the other nothing: a grasp, although the drops differ
+    assert dis.classify("lift", CFG, q(rise=[24, 24], drop=[-24, -24]), q()) == "grasp"
+    # push: both near the 10 cm threshold (9.0 and 11.5 cm)
+    assert dis.classify("push", CFG, q(dr=[9.0, 12.0]), q(dr=[11.5, 12.0])) == "threshold"
+    # rake: the toy tips in one (its centre 2.8 cm lower), pulled 11 cm against 1 cm
+    assert dis.classify("rake", CFG, q(dr=[-11, 0], drop=[2.8, 0]), q(dr=[-1, 0])) == "tips"
+    # move: 20 cm against 2 cm, nothing fell, far from the 8 cm: other
+    assert dis.classify("move", CFG, q(along=[20, 0]), q(along=[2, 0])) == "other"
