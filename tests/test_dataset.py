@@ -738,3 +738,27 @@ def test_corrupt_chunk_read_prints_no_event_loop_error(built, tmp_path):
     assert res.returncode == 0, res.stderr
     assert res.stderr.count("clear: chunk") == 3
     assert "Event loop is closed" not in res.stderr and "Traceback" not in res.stderr
+
+
+def test_a_chunk_that_does_not_read_back_never_lands(tmp_path, monkeypatch):
+    """The race of a killed driver's task on a worker: the restarted driver's ``clean_tmp``
+    removes the task's temporary folder while orbax writes into it, orbax finishes an
+    incomplete checkpoint, and the rename would land it. ``write_chunk`` reads the chunk
+    back first, so the writer fails and nothing appears under the chunk's name."""
+    real = store._checkpointer()
+
+    class Damaging:
+        def save(self, where, tree):
+            real.save(where, tree)
+            for f in Path(where).iterdir():  # what a concurrent rmtree leaves: files missing
+                if f.is_file():
+                    f.unlink()
+
+    monkeypatch.setattr(store, "_checkpointer", lambda: Damaging())
+    path = tmp_path / "chunk_000000"
+    with pytest.raises(ds.CorruptDatasetError, match="chunk"):
+        store.write_chunk(path, {"label": np.zeros(4, bool)}, {"chunk": 0})
+    assert not path.exists() and not list(tmp_path.iterdir())
+    monkeypatch.undo()
+    store.write_chunk(path, {"label": np.zeros(4, bool)}, {"chunk": 0})  # the real writer lands
+    assert store.read_chunk(path)[0]["label"].shape == (4,)

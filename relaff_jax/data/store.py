@@ -66,6 +66,10 @@ def write_chunk(path: Path, arrays: Mapping[str, np.ndarray], extra: Mapping[str
     with rio.atomic_directory(path) as tmp:
         _checkpointer().save(str((tmp / "arrays").resolve()), tree)
         rio.atomic_write_json(tmp / "meta.json", meta)
+        # Only a chunk that reads back lands: a killed driver's task still writing on a worker
+        # can have its temporary folder removed under it by the restarted driver's clean_tmp
+        # (orbax then finishes an incomplete checkpoint); it must fail, not rename that.
+        read_chunk(tmp)
 
 
 def read_chunk(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
