@@ -64,20 +64,23 @@ def outcomes(prep: rollouts.Prepared, cfg: templates.ActionConfig, engine: str) 
     return out
 
 
-def quantities(cfg: templates.ActionConfig, o: dict, i: int, direction: np.ndarray) -> dict[str, np.ndarray]:
-    """The outcome rule's inputs of row ``i``, (toy, other) each, in cm."""
+def quantities(o: dict, i: int, direction: np.ndarray) -> dict[str, np.ndarray]:
+    """The outcome rule's inputs of row ``i``, (toy, other) each, in cm; ``moved`` (the toy's
+    displacement, slide) and ``apart`` (toy minus base along the sweep, move) twice."""
     c0, cm, ce = o["com0"][i], o["com_m"][i], o["com_end"][i]
     r0, r1 = np.linalg.norm(c0[:, :2], axis=-1), np.linalg.norm(ce[:, :2], axis=-1)
     return {"rise": 100 * (cm[:, 2] - c0[:, 2]), "along": 100 * ((ce - c0) @ direction),
             "dr": 100 * (r1 - r0), "drop": 100 * (c0[:, 2] - ce[:, 2]),
-            "moved": 100 * np.linalg.norm(cm[0] - c0[0]) * np.ones(2)}
+            "moved": 100 * np.linalg.norm(cm[0] - c0[0]) * np.ones(2),
+            "apart": 100 * ((ce[0] - c0[0]) - (ce[1] - c0[1])) @ direction * np.ones(2)}
 
 
 def classify(action: str, cfg: templates.ActionConfig, qa: dict, qb: dict) -> str:
     """First-guess class of one disagreement (module docstring)."""
     rule = {"lift": ("rise", cfg.lifted), "take": ("rise", cfg.lifted), "pour": ("rise", cfg.lifted),
             "slide": ("moved", cfg.moved), "pull": ("dr", -cfg.closer), "push": ("dr", cfg.farther),
-            "rake": ("dr", -cfg.closer), "move": ("along", cfg.aside)}.get(action)
+            "rake": ("dr", -cfg.closer),
+            "move": ("apart" if cfg.move_rule == "apart" else "along", cfg.aside)}.get(action)
     if action in LIFT_TYPE and ((qa["rise"] >= 100 * cfg.lifted) != (qb["rise"] >= 100 * cfg.lifted)).any():
         return "grasp"
     fell = lambda q: np.maximum(q["drop"], 0.0)  # noqa: E731  (a lifted body's drop is negative)
@@ -127,7 +130,7 @@ def main() -> None:
                     oa, ob = runs[c, xa], runs[c, xb]
                     same = (bool(oa["label"][j]) == bool(la)) and (bool(ob["label"][j]) == bool(lb))
                     d = np.asarray(prep.plan.direction[j])
-                    qa, qb = quantities(tuned, oa, j, d), quantities(tuned, ob, j, d)
+                    qa, qb = quantities(oa, j, d), quantities(ob, j, d)
                     kind = classify(action, tuned, qa, qb)
                     counts.setdefault(action, {}).setdefault(kind, 0)
                     counts[action][kind] += 1
@@ -135,7 +138,8 @@ def main() -> None:
                           f"{'' if same else '  [NOT REPRODUCED]'} -> {kind}")
                     for x, q, o in ((xa, qa, oa), (xb, qb, ob)):
                         print(f"    {x:12s} " + "  ".join(f"{k} {v[0]:6.1f} {v[1]:6.1f}" for k, v in q.items()
-                                                        if k != "moved") + f"  toy moved {q['moved'][0]:5.1f}"
+                                                        if k not in ("moved", "apart"))
+                              + f"  toy moved {q['moved'][0]:5.1f}  apart {q['apart'][0]:5.1f}"
                               + (f"  reach {bool(prep.before[j])}->{bool(o['reach_after'][j])}"
                                  if action == "unobstruct" else ""), flush=True)
     print("\nclasses (cm; toy, other): " + "; ".join(f"{a}: " + ", ".join(f"{k} {v}" for k, v in c.items())

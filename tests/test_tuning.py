@@ -73,12 +73,22 @@ def test_disagreement_classes_by_hand():
     dis = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(dis)
     z = np.zeros(2)
-    q = lambda **kw: {k: np.asarray(kw.get(k, z), float) for k in ("rise", "along", "dr", "drop", "moved")}  # noqa: E731
+    q = lambda **kw: {k: np.asarray(kw.get(k, z), float) for k in ("rise", "along", "dr", "drop", "moved", "apart")}  # noqa: E731
     # lift: one lifts both bodies 24 cm, the other nothing: a grasp, although the drops differ
     assert dis.classify("lift", CFG, q(rise=[24, 24], drop=[-24, -24]), q()) == "grasp"
     # push: both near the 10 cm threshold (9.0 and 11.5 cm)
     assert dis.classify("push", CFG, q(dr=[9.0, 12.0]), q(dr=[11.5, 12.0])) == "threshold"
     # rake: the toy tips in one (its centre 2.8 cm lower), pulled 11 cm against 1 cm
     assert dis.classify("rake", CFG, q(dr=[-11, 0], drop=[2.8, 0]), q(dr=[-1, 0])) == "tips"
-    # move: 20 cm against 2 cm, nothing fell, far from the 8 cm: other
-    assert dis.classify("move", CFG, q(along=[20, 0]), q(along=[2, 0])) == "other"
+    # move reads toy minus base along the sweep against 8 cm: 6.6 against 8.9 is a threshold,
+    # although each body moved 25-34 cm; 20 against 2 cm is not
+    near = dict(along=[31.3, 24.7], apart=[6.6, 6.6]), dict(along=[33.7, 24.8], apart=[8.9, 8.9])
+    assert dis.classify("move", CFG, q(**near[0]), q(**near[1])) == "threshold"
+    assert dis.classify("move", CFG, q(apart=[20, 20]), q(apart=[2, 2])) == "other"
+    # the per-action quantities of a hand-made outcome (toy rises 6 cm, base 1 cm; along +x)
+    o = {"com0": np.zeros((1, 2, 3)), "com_m": np.array([[[0.0, 0, 0.06], [0, 0, 0.01]]]),
+         "com_end": np.array([[[0.5, 0, 0.0], [0.6, 0, 0.0]]])}
+    qq = dis.quantities(o, 0, np.array([1.0, 0, 0]))
+    np.testing.assert_allclose(qq["rise"], [6, 1]); np.testing.assert_allclose(qq["along"], [50, 60])
+    np.testing.assert_allclose(qq["dr"], [50, 60]); np.testing.assert_allclose(qq["apart"], [-10, -10])
+    np.testing.assert_allclose(qq["moved"], [np.hypot(0, 6)] * 2)
