@@ -258,7 +258,11 @@ def _engine_row(action, b, n, seed, tuned, today, nthread):
             "per_s": {k: timed / (prep_s + sum(v)) for k, v in t_exec.items()},
             "execute_only_per_s": {k: timed / sum(v) for k, v in t_exec.items()},
             "prepare_s": prep_s / (len(keys) - 1), "execute_s": {k: sum(v) / len(v) for k, v in t_exec.items()},
-            "first_s": first, "agree": agree, "differ_rows": differ}
+            "first_s": first, "agree": agree, "differ_rows": differ,
+            # every row's label per executor (0/1 string, the concatenated batches' order), so a
+            # later run can be compared with this one without re-running it
+            "labels": {k: "".join(map(str, v.astype(int))) for k, v in lab.items()},
+            "feasible": "".join(map(str, feas.astype(int)))}
 
 
 def smoke() -> None:

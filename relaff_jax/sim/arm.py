@@ -68,7 +68,7 @@ def tool_tcp_target(tool_pos: jax.Array, tool_mat: jax.Array) -> IKTarget:
                     jnp.asarray(1.0), jnp.asarray(1.0))
 
 
-def world_mjcf(tool_body: str | None = None, grasp_bodies: Sequence[str] = ()) -> str:
+def world_mjcf(tool_body: str | None = None, grasp_bodies: Sequence[str] = (), palm_attrs: str = "") -> str:
     """The arm's MJCF sections (default, worldbody, contact, actuator) as text to insert at the
     top level of a world's ``<mujoco>`` element (after its own sections), plus inactive welds
     from the hand, all switched per scene with ``mjx.Data.eq_active``:
@@ -77,8 +77,15 @@ def world_mjcf(tool_body: str | None = None, grasp_bodies: Sequence[str] = ()) -
       (``TOOL_GRIP_*``), for a held tool;
     - for each name in ``grasp_bodies``: ``grasp_<name>``, whose relative pose the caller sets
       (``eq_data``) at the moment both finger pads touch that body (a grasp lock).
+
+    ``palm_attrs`` (MJCF attributes, e.g. ``'priority="1" condim="1"'``) are added to the palm
+    geom (``PhysicsConfig.arm_palm_objects``).
     """
     text = arm_xml_path().read_text()
+    if palm_attrs:
+        tag = f'name="{PALM_GEOM}" class="arm_collide"'
+        assert text.count(tag) == 1, "the palm geom's tag changed in arm.xml"
+        text = text.replace(tag, f"{tag} {palm_attrs}")
     start, end = text.index("<mujocoinclude>"), text.index("</mujocoinclude>")
     body = text[start + len("<mujocoinclude>"):end]
     welds = []

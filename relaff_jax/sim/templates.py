@@ -129,7 +129,9 @@ def run_steps(cfg: ActionConfig) -> np.ndarray:
 
 def untuned(cfg: ActionConfig = ActionConfig()) -> ActionConfig:
     """``cfg`` with the arm world as it was before issue 14's tuning: every geom pair through
-    MJX's narrow phase, the pedestal colliding, every action run for ``N_STEPS``. Kept for
+    MJX's narrow phase, the pedestal and the palm colliding with both objects, every action
+    run for ``N_STEPS``. Kept for
     ``benchmarks/actions.py`` (today's MJX against the tuned one) and the tests."""
-    phys = dataclasses.replace(cfg.phys, arm_max_geom_pairs=-1, arm_pedestal_contacts=True)
+    phys = dataclasses.replace(cfg.phys, arm_max_geom_pairs=-1, arm_pedestal_contacts=True,
+                               arm_palm_objects="contact")
     return dataclasses.replace(cfg, phys=phys, stop_at_program_end=False)

@@ -63,6 +63,13 @@ class PhysicsConfig:
     # outside the 0.09 m pedestal; only a pull or rake from the innermost placements could
     # carry one back to it (off: 7 pairs fewer; labels checked in docs/actions.md, "Tuning").
     arm_pedestal_contacts: bool = False
+    # The palm against the objects: "exclude_other" (no pairs of the palm with the other
+    # object, `obj`; it keeps the toy); "contact" (every pair, condim 3); "frictionless"
+    # (priority 1, condim 1: normal forces only, in a collision function of its own). With
+    # "contact" the palm's 5 pairs with the other join the objects' box-box function (11
+    # pairs), and under the cap they can push a toy-wall contact out of it: a toy left a
+    # tilted baking pan (docs/actions.md, "Tuning").
+    arm_palm_objects: str = "exclude_other"
 
 
 def _box_geom(name: str, size, pos, mass: float, rgba, extra: str = "") -> str:
@@ -142,10 +149,20 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
         # scene by the action stage: the held rake, and grasp locks on `obj` / `toy`.
         from .arm import world_mjcf
 
-        arm_xml = world_mjcf(tool_body="obj", grasp_bodies=("obj", "toy"))
+        palm = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
+        if phys.arm_palm_objects not in palm:
+            raise UserError(f"action.phys.arm_palm_objects={phys.arm_palm_objects!r}: "
+                            f"one of {', '.join(palm)}")
+        arm_xml = world_mjcf(tool_body="obj", grasp_bodies=("obj", "toy"),
+                             palm_attrs=palm[phys.arm_palm_objects])
+        excludes = []
         if not phys.arm_pedestal_contacts:
-            arm_xml += ('\n  <contact><exclude body1="arm_base" body2="toy"/>'
-                        '<exclude body1="arm_base" body2="obj"/></contact>')
+            excludes += [("arm_base", "toy"), ("arm_base", "obj")]
+        if phys.arm_palm_objects == "exclude_other":
+            excludes += [("arm_hand", "obj")]  # the palm is the hand's one colliding geom
+        if excludes:
+            arm_xml += ("\n  <contact>" + "".join(f'<exclude body1="{a}" body2="{b}"/>'
+                                                  for a, b in excludes) + "</contact>")
         if phys.arm_max_geom_pairs >= 0:
             arm_xml += (f'\n  <custom><numeric name="max_geom_pairs" '
                         f'data="{int(phys.arm_max_geom_pairs)}"/></custom>')
