@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
-import platform
 import sys
 from pathlib import Path
 
@@ -76,8 +75,11 @@ def main(argv=None) -> int:
     if other is not None:
         print(f"\n{len(fp)} keys here, {len(other)} there, {diff} differ or are missing")
     if args.json:
-        args.json.write_text(json.dumps({"run": str(args.run), "machine": platform.platform(),
-                                         "processor": platform.processor(), "hashes": fp}, indent=1) + "\n")
+        # the CPU model and vector extensions too: XLA's code, and so the bits, depend on them
+        from relaff_jax.provenance import machine
+
+        args.json.write_text(json.dumps({"run": str(args.run), "machine": machine(), "hashes": fp},
+                                        indent=1) + "\n")
     return 1 if diff else 0
 
 

@@ -23,10 +23,35 @@ def versions() -> dict[str, str | None]:
     return out
 
 
+# The vector extensions that decide which code XLA:CPU emits (docs/reproduce.md: the same code
+# and seed on AVX-512 and AVX2 gives other contact outcomes).
+ISA_FLAGS = ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512bw", "avx512vl", "avx512_bf16", "amx_tile")
+
+
+def parse_cpuinfo(text: str) -> dict[str, Any]:
+    """The first processor's ``model name`` and which of ``ISA_FLAGS`` its ``flags`` hold,
+    from the text of Linux's ``/proc/cpuinfo``."""
+    model, flags = None, set()
+    for line in text.splitlines():
+        key, _, value = line.partition(":")
+        key = key.strip()
+        if key == "model name" and model is None:
+            model = value.strip()
+        elif key == "flags" and not flags:
+            flags = set(value.split())
+    return {"cpu_model": model, "isa": [f for f in ISA_FLAGS if f in flags]}
+
+
 def machine() -> dict[str, Any]:
-    """Platform, CPU architecture and core count (XLA's code, and so float rounding, depend on
-    the CPU's features)."""
-    return {"platform": platform.platform(), "machine": platform.machine(), "cpus": os.cpu_count()}
+    """Platform, CPU architecture, model, vector extensions and core count (XLA's code, and so
+    float rounding and contact outcomes, depend on the CPU's features)."""
+    out = {"platform": platform.platform(), "machine": platform.machine(), "cpus": os.cpu_count()}
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            out.update(parse_cpuinfo(f.read()))
+    except OSError:  # not Linux: the processor string is all there is
+        out.update(cpu_model=platform.processor() or None, isa=None)
+    return out
 
 
 def derive_seed(*keys: int) -> int:

@@ -242,3 +242,14 @@ def test_two_processes_generate_bit_identical_datasets(tmp_path):
             n += 1
     assert n > 10
     assert Path(tmp_path / "a" / "selection.json").read_text() == Path(tmp_path / "b" / "selection.json").read_text()
+
+
+def test_cpuinfo_model_and_vector_extensions_by_hand():
+    """Run logs record the CPU model and its vector extensions (XLA's code depends on them):
+    the first processor's fields, only the listed extensions, in the listed order."""
+    from relaff_jax.provenance import parse_cpuinfo
+
+    text = ("processor\t: 0\nmodel name\t: AMD EPYC 9R14\nflags\t\t: fpu sse4_2 avx512bw avx avx2 fma avx512f\n\n"
+            "processor\t: 1\nmodel name\t: other\nflags\t\t: fpu\n")
+    assert parse_cpuinfo(text) == {"cpu_model": "AMD EPYC 9R14", "isa": ["sse4_2", "avx", "avx2", "fma", "avx512f", "avx512bw"]}
+    assert parse_cpuinfo("") == {"cpu_model": None, "isa": []}
