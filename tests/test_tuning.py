@@ -87,15 +87,9 @@ def test_execute_batch_refuses_unknown_engine():
 
 def test_disagreement_classes_by_hand():
     """``benchmarks/disagreements.py``'s first-guess classes on hand-made rule quantities (cm)."""
-    import importlib.util
-    import pathlib
-
     import numpy as np
 
-    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / "disagreements.py"
-    spec = importlib.util.spec_from_file_location("disagreements", path)
-    dis = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(dis)
+    dis = _bench("disagreements")
     z = np.zeros(2)
     q = lambda **kw: {k: np.asarray(kw.get(k, z), float) for k in ("rise", "along", "dr", "drop", "moved", "apart")}  # noqa: E731
     # lift: one lifts both bodies 24 cm, the other nothing: a grasp, although the drops differ
@@ -116,3 +110,35 @@ def test_disagreement_classes_by_hand():
     np.testing.assert_allclose(qq["rise"], [6, 1]); np.testing.assert_allclose(qq["along"], [50, 60])
     np.testing.assert_allclose(qq["dr"], [50, 60]); np.testing.assert_allclose(qq["apart"], [-10, -10])
     np.testing.assert_allclose(qq["moved"], [np.hypot(0, 6)] * 2)
+
+
+def _bench(name):
+    import importlib.util
+    import pathlib
+
+    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_chaos_shift_and_interval_by_hand():
+    """``benchmarks/chaos.py``: the shift moves the toy's x only, and the Wilson interval of
+    5 of 10 is the textbook 0.2366-0.7634."""
+    import numpy as np
+
+    from relaff_jax.sim.scenes import Scenes
+
+    chaos = _bench("chaos")
+    lo, hi = chaos.wilson(5, 10)
+    assert abs(lo - 0.2366) < 1e-4 and abs(hi - 0.7634) < 1e-4
+    assert chaos.wilson(10, 10)[1] == pytest.approx(1.0)
+    q = np.arange(2 * 14, dtype=np.float32).reshape(2, 14)
+    z = np.zeros(2)
+    s = Scenes(pair=z, qpos0=q, qpos=q, qvel=q, relation=z, intended=z, cog_distance=z, at_rest=z)
+    prep = rollouts.Prepared("lift", z, s, None, z, z, z)
+    moved = chaos.shifted(prep, 7, 1e-6).scenes.qpos
+    diff = moved - q
+    assert np.all(diff[:, 7] > 0) and np.count_nonzero(diff) == 2  # both rows, toy x only
+    assert np.array_equal(prep.scenes.qpos, np.arange(28, dtype=np.float32).reshape(2, 14))  # not in place
