@@ -80,13 +80,15 @@ def preset(name: str) -> RunConfig:
     """The four presets of ``relaff reproduce``.
 
     ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
-    repetitions, 4000 test samples, the paper's forests): about 13 hours on two cores.
+    repetitions, 4000 test samples, the paper's forests): projected at ~10 hours on two cores
+    run as two workers (``--cluster local:2``), ~4.5 with the native engine (docs/reproduce.md).
     ``study``: numbers that can be read beside the paper's (docs/results.md): 1,000 samples
     per action, every n in 2..50, 10 repetitions in both spaces, 500 balanced test scenes per
     action, per scene outcomes kept for intervals; projected at about 2-3 hours here, most of
     it simulation (docs/reproduce.md).
     ``quick``: the README's main job, a small but complete study (all nine actions, both
-    spaces, every bootstrapping condition), 10-16 minutes on two cores (docs/reproduce.md):
+    spaces, every bootstrapping condition), 9.2 minutes on two idle cores, 4.4 with the native
+    engine (measured 2026-12-02, docs/reproduce.md):
     100 samples per action, n = 2 and every n in 4..25, 2 repetitions, the paper's forests;
     the learning pools shrink to the data (``ExperimentConfig.shrink_to_data``). Its
     intervals are too wide to compare with the paper; its report says so.

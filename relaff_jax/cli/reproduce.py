@@ -17,8 +17,9 @@ def register(sub) -> None:
                     "stages are skipped. Settings: a preset plus --set overrides of the config tree "
                     "(relaff_jax.runconfig); the run log records the whole resolved tree.")
     p.add_argument("--preset", choices=PRESETS, default="quick",
-                   help="quick: 10-16 min on 2 cores (default, docs/reproduce.md); paper: the full protocol "
-                        "(~13 h here); tiny: for tests")
+                   help="quick: ~9 min on 2 idle cores, ~4.5 with --engine native (default, "
+                        "docs/reproduce.md); study: 29 min with --engine native; paper: the full protocol "
+                        "(projected ~10 h with --cluster local:2, ~4.5 h with --engine native); tiny: for tests")
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="run folder (created, or continued)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
