@@ -69,8 +69,8 @@ def test_palm_modes_pairs():
     assert m.geom_condim[pg] == 1 and m.geom_priority[pg] == 1
     groups = {(tuple(int(t) for t in k.types), int(k.condim)): len(v) for k, v in cd._geom_groups(m).items()}
     assert groups[((6, 6), 1)] == 6 and groups[((6, 6), 3)] == 5
-    with pytest.raises(UserError, match="arm_palm_objects"):
-        wd.pair_xml("block", "cup", dataclasses.replace(CFG.phys, arm_palm_objects="off"), arm=True)
+    with pytest.raises(UserError, match="arm_palm_objects='off': one of contact, frictionless"):
+        dataclasses.replace(CFG.phys, arm_palm_objects="off")
 
 
 def test_untuned_settle_world_unchanged():

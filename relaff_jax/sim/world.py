@@ -33,6 +33,10 @@ from relaff_jax.constants import SEG_BACKGROUND, SEG_HIDDEN, SEG_OTHER, SEG_TOY 
 from relaff_jax.errors import UserError
 
 
+# PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
+PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
+
+
 @dataclasses.dataclass(frozen=True)
 class PhysicsConfig:
     """Static physics settings shared by settle and action rollouts.
@@ -71,6 +75,11 @@ class PhysicsConfig:
     # the cap they can push a toy-wall contact out of it: a toy left a tilted baking pan
     # (docs/actions.md, "Tuning").
     arm_palm_objects: str = "contact"
+
+    def __post_init__(self):
+        if self.arm_palm_objects not in PALM_MODES:  # refused when the config is made
+            raise UserError(f"action.phys.arm_palm_objects={self.arm_palm_objects!r}: "
+                            f"one of {', '.join(PALM_MODES)}")
 
 
 def _box_geom(name: str, size, pos, mass: float, rgba, extra: str = "") -> str:
@@ -150,12 +159,8 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
         # scene by the action stage: the held rake, and grasp locks on `obj` / `toy`.
         from .arm import world_mjcf
 
-        palm = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
-        if phys.arm_palm_objects not in palm:
-            raise UserError(f"action.phys.arm_palm_objects={phys.arm_palm_objects!r}: "
-                            f"one of {', '.join(palm)}")
         arm_xml = world_mjcf(tool_body="obj", grasp_bodies=("obj", "toy"),
-                             palm_attrs=palm[phys.arm_palm_objects])
+                             palm_attrs=PALM_MODES[phys.arm_palm_objects])
         excludes = []
         if not phys.arm_pedestal_contacts:
             excludes += [("arm_base", "toy"), ("arm_base", "obj")]
