@@ -84,7 +84,8 @@ def world_mjcf(tool_body: str | None = None, grasp_bodies: Sequence[str] = (), p
     text = arm_xml_path().read_text()
     if palm_attrs:
         tag = f'name="{PALM_GEOM}" class="arm_collide"'
-        assert text.count(tag) == 1, "the palm geom's tag changed in arm.xml"
+        if text.count(tag) != 1:
+            raise RuntimeError(f"{arm_xml_path()}: expected one palm geom tag {tag!r}")
         text = text.replace(tag, f"{tag} {palm_attrs}")
     start, end = text.index("<mujocoinclude>"), text.index("</mujocoinclude>")
     body = text[start + len("<mujocoinclude>"):end]

@@ -67,9 +67,9 @@ class PhysicsConfig:
     # outside the 0.09 m pedestal; only a pull or rake from the innermost placements could
     # carry one back to it (off: 7 pairs fewer; labels checked in docs/actions.md, "Tuning").
     arm_pedestal_contacts: bool = False
-    # The palm against the other object (`obj`): "contact" (every pair, condim 3); "exclude_other"
-    # (no palm-obj pairs; rejected at 2,112 scenes: unobstruct's positives rose from 303 to 484
-    # of 969 feasible, the palm's contacts with an obstacle are real); "frictionless" (priority 1, condim 1:
+    # The palm against the other object (`obj`): "contact" (every pair, condim 3);
+    # "exclude_other" (no palm-obj pairs; rejected at 2,112 scenes per action: unobstruct's
+    # positives rose from 303 to 484 of 969 feasible); "frictionless" (priority 1, condim 1:
     # normal forces only, its pairs in a collision function of their own). With "contact" the
     # palm's 5 pairs with the other join the objects' box-box function (11 pairs), and under
     # the cap they can push a toy-wall contact out of it: a toy left a tilted baking pan
