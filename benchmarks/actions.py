@@ -227,7 +227,7 @@ def _engine_row(action, b, n, seed, tuned, today, nthread):
     """One (action, batch) row of ``engines``: every executor on the same prepared batches."""
     prepare = rollouts.make_batch_prepare_fn(action, tuned)
     cfgs = {False: today, True: tuned}
-    keys = [jax.random.fold_in(jax.random.PRNGKey(seed + 1000 * b), c) for c in range(-(-n // b) + 1)]
+    keys = [rollouts.bench_batch_key(seed, b, c) for c in range(-(-n // b) + 1)]
     outs = {e[0]: [] for e in EXECUTORS}
     t_prep, t_exec, first = [], {e[0]: [] for e in EXECUTORS}, {}
     for i, key in enumerate(keys):

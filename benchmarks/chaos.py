@@ -55,7 +55,7 @@ def chaos_row(action: str, n: int, batch: int, engine: str, shift: float, seed: 
     sim_batch = rollouts.default_sim_batch(batch)
     base, moved, feas, apart = [], [], [], []
     for c in range(-(-n // batch)):
-        prep = prepare(jax.random.fold_in(jax.random.PRNGKey(seed + 1000 * batch), c), batch)
+        prep = prepare(rollouts.bench_batch_key(seed, batch, c), batch)
         out = rollouts.execute_batch(prep, cfg, engine, sim_batch)
         out_s = rollouts.execute_batch(shifted(prep, toy_x, shift), cfg, engine, sim_batch)
         base.append(out["label"])
@@ -67,8 +67,10 @@ def chaos_row(action: str, n: int, batch: int, engine: str, shift: float, seed: 
     a, b = np.concatenate(base)[f], np.concatenate(moved)[f]
     k = int((a != b).sum())
     d = np.concatenate(apart)[f]
-    return {"final_apart_m": {"median": float(np.median(d)), "max": float(d.max())} if len(d) else None,"n": int(len(f)), "n_feasible": int(f.sum()), "differ": k, "positives": [int(a.sum()), int(b.sum())],
-            "agree": 1 - k / max(int(f.sum()), 1), "agree_95": wilson(int(f.sum()) - k, int(f.sum()))}
+    nf = int(f.sum())
+    return {"n": int(len(f)), "n_feasible": nf, "differ": k, "positives": [int(a.sum()), int(b.sum())],
+            "agree": 1 - k / max(nf, 1), "agree_95": wilson(nf - k, nf),
+            "final_apart_m": {"median": float(np.median(d)), "max": float(d.max())} if nf else None}
 
 
 def main() -> None:
@@ -100,9 +102,9 @@ def main() -> None:
         if args.json:
             atomic_write_json(args.json, {"setting": setting, "actions": done})
         lo, hi = r["agree_95"]
+        fa = r["final_apart_m"] or {"median": float("nan"), "max": float("nan")}  # None: no feasible program
         print(f"{action:10s} {r['n_feasible']:8d} {r['differ']:6d} {r['agree']:6.3f} {lo:7.3f}-{hi:.3f}  {r['positives']}; "
-              f"{r['final_apart_m']['median']:.2g}, {r['final_apart_m']['max']:.2g}",
-              flush=True)
+              f"{fa['median']:.2g}, {fa['max']:.2g}", flush=True)
 
 
 if __name__ == "__main__":

@@ -122,7 +122,7 @@ def main() -> None:
                 for i, _, la, lb in rows:
                     c, j = divmod(int(i), b)
                     if c not in preps:
-                        preps[c] = prepare(jax.random.fold_in(jax.random.PRNGKey(seed + 1000 * b), c), b)
+                        preps[c] = prepare(rollouts.bench_batch_key(seed, b, c), b)
                     prep = preps[c]
                     for x in (xa, xb):  # each batch and executor runs once
                         if (c, x) not in runs:

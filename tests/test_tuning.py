@@ -23,6 +23,11 @@ def _pairs(phys):
     return m, [(name(a), name(b)) for a, b, _ in cd.geom_pairs(m)]
 
 
+def _groups(m):
+    """{((geom type, geom type), condim): pairs} of MJX's collision functions in model ``m``."""
+    return {(tuple(int(t) for t in k.types), int(k.condim)): len(v) for k, v in cd._geom_groups(m).items()}
+
+
 def test_run_steps_by_hand():
     """Each action runs to its measuring step + 1 (template sums, docs/actions.md); untuned: 815."""
     steps = dict(zip(ACTIONS, templates.run_steps(CFG)))
@@ -44,7 +49,7 @@ def test_tuned_world_pairs_and_slots():
     # its 4 pairs (docs/actions.md, "Tuning": lift agreement 97.4 %, rake 91.0 %)
     pad = m.geom("arm_pad_l").id
     assert m.geom_condim[pad] == 4 == mu.geom_condim[pad]
-    groups = {(tuple(int(t) for t in k.types), int(k.condim)): len(v) for k, v in cd._geom_groups(m).items()}
+    groups = _groups(m)
     # pads apart from the toy/base pairs; the toy's box against the other's 5 boxes and the
     # palm's against all 6 boxes share one function of 11 pairs, which the cap cuts to 6
     assert groups[((6, 6), 4)] == 12 and groups[((6, 6), 3)] == 11
@@ -61,13 +66,13 @@ def test_palm_modes_pairs():
     assert len(with_obj) == 5  # the other's 5 boxes
     assert palm(modes["exclude_other"][1]) == sorted(set(palm(modes["contact"][1])) - set(with_obj))
     m, _ = modes["exclude_other"]
-    groups = {(tuple(int(t) for t in k.types), int(k.condim)): len(v) for k, v in cd._geom_groups(m).items()}
+    groups = _groups(m)
     assert groups[((6, 6), 3)] == 6  # the cap keeps every pair
     m, pairs = modes["frictionless"]
     assert palm(pairs) == palm(modes["contact"][1])  # the same pairs, with the palm's condim 1
     pg = m.geom("arm_palm").id
     assert m.geom_condim[pg] == 1 and m.geom_priority[pg] == 1
-    groups = {(tuple(int(t) for t in k.types), int(k.condim)): len(v) for k, v in cd._geom_groups(m).items()}
+    groups = _groups(m)
     assert groups[((6, 6), 1)] == 6 and groups[((6, 6), 3)] == 5
     with pytest.raises(UserError, match="arm_palm_objects='off': one of contact, frictionless"):
         dataclasses.replace(CFG.phys, arm_palm_objects="off")

@@ -95,6 +95,12 @@ def default_sim_batch(batch: int) -> int:
     return min(int(batch), 16)
 
 
+def bench_batch_key(seed: int, batch_size: int, index: int) -> jax.Array:
+    """PRNG key of prepared batch ``index`` in the engine benchmarks (``benchmarks/actions.py
+    --engines``, ``disagreements.py``, ``chaos.py``): the same key gives the same scenes."""
+    return jax.random.fold_in(jax.random.PRNGKey(seed + 1000 * batch_size), index)
+
+
 def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
                     sim_batch: int | None = None, engine: str = "mjx",
                     nthread: int | None = None) -> Callable:
