@@ -1,4 +1,4 @@
-"""``relaff info`` and ``relaff export``: look at a dataset, or export it for other tools.
+"""``relaff info``, ``relaff anatomy`` and ``relaff export``: look at a dataset, or export it for other tools.
 
 Takes parsed arguments; prints ``data.info`` as a table or JSON, or writes
 ``data.export_dataset``'s Parquet file, feature schema and dataset card. Problems a user can
@@ -21,6 +21,12 @@ def _cmd_info(args) -> int:
     return 0
 
 
+def _cmd_anatomy(args) -> int:
+    d = D.anatomy(args.dir)
+    print(json.dumps(d, sort_keys=True) if args.json else D.format_anatomy(d))
+    return 0
+
+
 def _cmd_export(args) -> int:
     # export_dataset checks --out and --format before it loads or writes anything
     paths = D.export_dataset(args.dir, args.out, format=args.format, overwrite=args.overwrite)
@@ -40,6 +46,18 @@ def register(subparsers) -> None:
     p.add_argument("dir", metavar="DIR", help="dataset directory")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.set_defaults(func=_cmd_info)
+
+    p = subparsers.add_parser(
+        "anatomy",
+        help="what a dataset's labels consist of: reach or relation",
+        description="Counts and label rates by (feasible, relation) over every rollout and over the "
+        "balanced selection, the share of negatives that are infeasible, three oracles on the "
+        "selection (label = feasible; the relation's majority label; both) and centre-distance "
+        "quantiles by class and relation (docs/datasets.md, 'Population').",
+    )
+    p.add_argument("dir", metavar="DIR", help="finished dataset directory")
+    p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    p.set_defaults(func=_cmd_anatomy)
 
     p = subparsers.add_parser(
         "export",

@@ -17,6 +17,7 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.constants import ACTIONS, SIM_ENGINES
 from relaff_jax.data.errors import DatasetError
+from relaff_jax.data.selection import NEGATIVES, POPULATIONS
 
 REQUIRED_FIELDS = ("label", "relation", "cog_distance", "toy", "other")
 RESERVED_FIELDS = ("rollout", "selected", "action")
@@ -47,8 +48,19 @@ class DatasetConfig:
     engine: executor of the motor programs, ``constants.SIM_ENGINES`` ("mjx" or "native");
         recorded in the sidecar, and resuming a dataset with another engine is refused.
     borrow_fraction: generation stops once at most this fraction of the negatives has to be
-        borrowed from outside its distance bin (0 = exact histogram match). At the cap any
-        amount is accepted, with a warning, and the number is recorded.
+        borrowed from outside its distance bin (0 = exact histogram match). At the cap, or
+        after ``match_patience``, any amount is accepted, with a warning, and the number and
+        ``matching_met`` are recorded.
+    population: which rollouts may be selected, ``selection.POPULATIONS``: ``"all"`` (the
+        paper's reading: an infeasible program is a negative) or ``"feasible"`` (only
+        rollouts whose motor program was executable; the rollouts need a ``feasible`` field).
+    negatives: ``selection.NEGATIVES``: ``"cog"`` (matched on the centres' distance, the
+        paper's) or ``"uniform"``.
+    match_patience: once a balanced selection first exists at k chunks, simulate at most
+        ``ceil(match_patience * k)`` chunks for the distance matching to be met, then accept
+        the borrowing (recorded, warned). With the population "feasible" the matched
+        negatives are feasible stacked pairs that fail, which may be rare: without this the
+        generator would run to the cap.
     """
 
     max_rollouts: int = 200_000
@@ -58,6 +70,9 @@ class DatasetConfig:
     rollout_batch: int = 256
     feature_batch: int = 32
     engine: str = "mjx"
+    population: str = "all"
+    negatives: str = "cog"
+    match_patience: float = 4.0
 
 
 def check_action(action: Any) -> str:
@@ -85,6 +100,29 @@ def check_dataset_config(cfg: DatasetConfig) -> None:
     check_int("rollout_batch", cfg.rollout_batch, 1)
     check_int("feature_batch", cfg.feature_batch, 1)
     check_engine(cfg.engine)
+    check_choice("population", cfg.population, POPULATIONS)
+    check_choice("negatives", cfg.negatives, NEGATIVES)
+    if isinstance(cfg.match_patience, bool) or not isinstance(cfg.match_patience, (int, float)) \
+            or not cfg.match_patience >= 1.0:
+        raise DatasetError(f"match_patience must be a number >= 1, got {cfg.match_patience!r}")
+
+
+def check_choice(name: str, value: Any, valid: tuple[str, ...]) -> str:
+    if value not in valid:
+        raise DatasetError(f"dataset.{name} must be one of {', '.join(valid)}, got {value!r}")
+    return value
+
+
+def selection_scheme(cfg: DatasetConfig) -> dict[str, Any]:
+    """The settings the selection depends on, as recorded in the sidecar and compared on resume."""
+    return {"distance_bins": cfg.distance_bins, "borrow_fraction": cfg.borrow_fraction,
+            "population": cfg.population, "negatives": cfg.negatives, "match_patience": cfg.match_patience}
+
+
+def stored_scheme(scheme: Mapping[str, Any]) -> dict[str, Any]:
+    """A sidecar's ``selection_scheme`` with the defaults of settings added after it was written
+    (a dataset made before ``population`` existed was selected from all rollouts)."""
+    return {"population": "all", "negatives": "cog", "match_patience": DatasetConfig.match_patience, **scheme}
 
 
 def check_engine(engine: Any) -> str:

@@ -42,7 +42,8 @@ from relaff_jax import provenance
 from relaff_jax.cluster.tasks import Ordered
 from relaff_jax.config import to_dict
 from relaff_jax.data.config import (CHUNKS, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, DatasetConfig,
-                                    check_action, check_dataset_config, check_int, jsonable_config)
+                                    check_action, check_dataset_config, check_int, jsonable_config,
+                                    selection_scheme, stored_scheme)
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, RolloutCapError
 from relaff_jax.data.load import load_dataset
 from relaff_jax.data.progress import progress_bar
@@ -101,7 +102,7 @@ def generate_dataset(
         "batch": batch,
         "config": config,
         "object_names": list(object_names) if object_names is not None else None,
-        "selection_scheme": {"distance_bins": dcfg.distance_bins, "borrow_fraction": dcfg.borrow_fraction},
+        "selection_scheme": selection_scheme(dcfg),
         "engine": dcfg.engine,  # the caller's rollout_fn must use it (cli and reproduce build both from one config)
     }
     path = Path(out_dir)
@@ -123,6 +124,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
     clean_tmp(path, cdir)
     if (path / SIDECAR).exists():
         meta = read_sidecar(path)
+        meta["selection_scheme"] = stored_scheme(meta.get("selection_scheme", {}))
         if meta["engine"] != header["engine"]:
             raise DatasetMismatchError(
                 f"{path}: was generated with the {meta['engine']} engine; resuming it with the {header['engine']} "
@@ -147,7 +149,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         raise CorruptDatasetError(
             f"{path}: sidecar records {meta['counts']['chunks']} chunks but only {len(done)} exist (truncated)"
         )
-    labels, dists, schema = [], [], None
+    labels, dists, eligible, schema = [], [], [], None
     for k in done:
         arrays, _ = read_chunk(chunk_path(cdir, k))
         check_rollout_ids(chunk_path(cdir, k), arrays, k, batch)
@@ -156,6 +158,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         schema = schema or schema_of(arrays)
         labels.append(arrays["label"])
         dists.append(arrays["cog_distance"])
+        eligible.append(_eligible(arrays, dcfg.population, f"chunk {k}"))
     k0 = len(done)
     max_chunks = math.ceil(dcfg.max_rollouts / batch)
     bar = progress_bar(progress, n // 2, f"{action} positives")
@@ -171,15 +174,18 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         while True:
             lab = np.concatenate(labels) if labels else np.zeros(0, bool)
             dist = np.concatenate(dists) if dists else np.zeros(0)
-            sel = select_balanced(lab, dist, n, seed, dcfg.distance_bins)
+            ok = np.concatenate(eligible) if eligible else np.zeros(0, bool)
+            sel = select_balanced(lab, dist, n, seed, dcfg.distance_bins, eligible=ok, negatives=dcfg.negatives)
             at_cap = k >= max_chunks
-            if sel is not None and (at_cap or sel.borrowed <= dcfg.borrow_fraction * sel.n_negative):
+            patience_out = sel is not None and k >= _patience_chunks(labels, eligible, n, dcfg.match_patience)
+            if sel is not None and (at_cap or patience_out or sel.borrowed <= dcfg.borrow_fraction * sel.n_negative):
                 break
             if at_cap:
                 rate = lab.mean() if lab.size else float("nan")
+                which = "" if dcfg.population == "all" else f" (population {dcfg.population!r}: {int(ok.sum())} eligible)"
                 raise RolloutCapError(
                     f"{action}: rollout cap reached (max_rollouts={dcfg.max_rollouts}, {lab.size} rollouts in "
-                    f"{k} chunks) with {int(lab.sum())} positives and {int((~lab).sum())} negatives, "
+                    f"{k} chunks{which}) with {int((lab & ok).sum())} positives and {int((~lab & ok).sum())} negatives, "
                     f"positive rate {rate:.2%}; {n} samples need {n // 2} positives and {n - n // 2} "
                     f"negatives. Rerun with a larger max_rollouts to continue from the chunks kept in {cdir}."
                 )
@@ -190,6 +196,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
                 promote(stage, cdir, k)
             labels.append(got["label"])
             dists.append(got["cog_distance"])
+            eligible.append(_eligible(got, dcfg.population, f"chunk {k} from rollout_fn"))
             k += 1
             npos = int(sum(l.sum() for l in labels))
             meta["counts"] = {"chunks": k, "rollouts": k * batch, "positives": npos}
@@ -203,10 +210,13 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         bar.close()
     runner.finish()  # chunks past the stopping point: wait until written, then drop them
     discarded = discard_pending(pending)
-    if sel.borrowed > dcfg.borrow_fraction * sel.n_negative:
+    met = sel.borrowed <= dcfg.borrow_fraction * sel.n_negative
+    if not met:
+        why = "rollout cap reached" if k >= max_chunks else f"match_patience {dcfg.match_patience} reached at {k} chunks"
         warnings.warn(
-            f"{action}: rollout cap reached; {sel.borrowed} of {sel.n_negative} negatives come from "
-            f"outside their COG-distance bin (recorded in {SELECTION})",
+            f"{action}: the distance matching was not met ({why}); {sel.borrowed} of {sel.n_negative} "
+            f"negatives come from outside their COG-distance bin ({sel.borrowed / sel.n_negative:.1%}; "
+            f"recorded in {SELECTION}; population {dcfg.population!r}, negatives {dcfg.negatives!r})",
             stacklevel=2,
         )
     index = {
@@ -220,12 +230,19 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         "positive_bin_counts": sel.positive_bin_counts.tolist(),
         "negative_bin_counts": sel.negative_bin_counts.tolist(),
         "borrowed": sel.borrowed,
+        "borrowed_share": sel.borrowed / sel.n_negative,
+        "matching_met": bool(met),
+        "population": dcfg.population,
+        "negatives": dcfg.negatives,
+        "eligible_rollouts": int(ok.sum()),
         "at_cap": bool(k >= max_chunks),
         "selected": sel.selected.tolist(),
     }
     rio.atomic_write_json(path / SELECTION, index)
     meta["status"] = "complete"
-    meta["selection"] = {key: index[key] for key in ("n", "n_positive", "n_negative", "chunks", "rollouts", "borrowed", "at_cap")}
+    meta["selection"] = {key: index[key] for key in ("n", "n_positive", "n_negative", "chunks", "rollouts", "borrowed",
+                                                     "borrowed_share", "matching_met", "population", "negatives",
+                                                     "eligible_rollouts", "at_cap")}
     meta["selection"]["sha256"] = sha256(sel.selected.astype(np.int64))
     rio.atomic_write_json(path / SIDECAR, meta)
     summary = dict(_summary(meta, new_chunks=k - k0), discarded_chunks=discarded)
@@ -240,6 +257,26 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
     return summary
 
 
+def _eligible(arrays: Mapping[str, Any], population: str, where: str) -> np.ndarray:
+    """(B,) bool: the rollouts of a chunk the population admits."""
+    label = np.asarray(arrays["label"])
+    if population == "all":
+        return np.ones(label.shape, bool)
+    if "feasible" not in arrays:
+        raise DatasetError(f"{where} has no 'feasible' field, which dataset.population={population!r} needs "
+                           f"(the rollout function must return whether each motor program was executable)")
+    return np.asarray(arrays["feasible"], bool)
+
+
+def _patience_chunks(labels: Sequence[np.ndarray], eligible: Sequence[np.ndarray], n: int, patience: float) -> int:
+    """``ceil(patience * k1)``, k1 the first chunk count whose eligible rollouts hold a balanced
+    selection (a count condition only, so a resumed run stops where an unbroken one does)."""
+    pos = np.cumsum([int((l & e).sum()) for l, e in zip(labels, eligible)])
+    neg = np.cumsum([int((~l & e).sum()) for l, e in zip(labels, eligible)])
+    first = np.flatnonzero((pos >= n // 2) & (neg >= n - n // 2))
+    return math.ceil(patience * (int(first[0]) + 1)) if len(first) else 2**62
+
+
 def _summary(meta: Mapping[str, Any], new_chunks: int) -> dict[str, Any]:
     c = meta["counts"]
     return {
@@ -250,6 +287,7 @@ def _summary(meta: Mapping[str, Any], new_chunks: int) -> dict[str, Any]:
         "positives": c["positives"],
         "positive_rate": c["positives"] / c["rollouts"] if c["rollouts"] else float("nan"),
         "borrowed": meta.get("selection", {}).get("borrowed"),
+        "matching_met": meta.get("selection", {}).get("matching_met"),
         "new_chunks": new_chunks,
         "discarded_chunks": 0,
     }

@@ -15,6 +15,7 @@ import numpy as np
 
 from relaff_jax.constants import RELATIONS
 from relaff_jax.data.load import load_dataset, load_rollouts, read_features_sidecar
+from relaff_jax.data.config import stored_scheme
 from relaff_jax.data.store import read_sidecar
 
 
@@ -51,7 +52,9 @@ def info(path: str | os.PathLike) -> dict[str, Any]:
     ``count_by_relation`` {relation: {n, positives}}, ``positive_rate_by_pair`` and
     ``count_by_pair`` keyed ``"toy/other"`` -- all over the selected samples; the same with a
     ``rollouts_`` prefix over every rollout; ``rollouts``, ``chunks``, ``batch``, ``seed``,
-    ``borrowed`` (negatives taken outside their distance bin), ``config``, ``versions``; and
+    ``borrowed`` (negatives taken outside their distance bin), ``borrowed_share``,
+    ``matching_met`` (False: the matching was given up at the cap or ``match_patience``),
+    ``population`` and ``negatives`` (the selection's settings), ``config``, ``versions``; and
     ``features``: None, or {status, chunks, arrays {name: {shape, dtype}}, unseen_samples
     (samples with any unseen flag set), unseen_by_column}.
     """
@@ -75,7 +78,12 @@ def info(path: str | os.PathLike) -> dict[str, Any]:
     out["n_negative"] = out["n"] - out["n_positive"]
     out.update(_group_stats("", chosen))
     out.update(_group_stats("rollouts_", rollouts))
-    out["borrowed"] = meta.get("selection", {}).get("borrowed")
+    sel_meta = meta.get("selection", {})
+    out["borrowed"] = sel_meta.get("borrowed")
+    out["borrowed_share"] = sel_meta.get("borrowed_share")
+    out["matching_met"] = sel_meta.get("matching_met", True if sel_meta else None)
+    scheme = stored_scheme(meta.get("selection_scheme", {}))
+    out["population"], out["negatives"] = scheme["population"], scheme["negatives"]
     out["features"] = None
     fmeta = read_features_sidecar(path)
     if fmeta is not None:
@@ -107,6 +115,9 @@ def format_info(d: Mapping[str, Any]) -> str:
             f"from {d['rollouts']} rollouts in {d['chunks']} chunks; "
             f"{d['borrowed']} negatives borrowed across distance bins"
         )
+        lines.append(f"population {d['population']}, negatives {d['negatives']}"
+                     + ("" if d["matching_met"] is not False else
+                        f"; ** distance matching NOT met: {d['borrowed_share']:.1%} of the negatives borrowed **"))
     else:
         lines.append(f"generating: {d['rollouts']} rollouts in {d['chunks']} chunks, target {d['requested_n']} samples")
     lines.append(f"rollouts positive rate: {_fmt_rate(d['rollouts_positive_rate']).strip()}")

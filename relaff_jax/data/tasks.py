@@ -4,7 +4,7 @@ Takes the chunk's recipe (the rollout or feature function, its index, seed/batch
 features, the chunk's own samples) and the *pending* folder; writes the chunk there
 atomically (``store.write_chunk``) and returns only what the driver needs to go on: labels
 ``(batch,) bool`` and COG distances ``(batch,) metres`` of a dataset chunk (the selection),
-the schema of its arrays. The same functions run in the driver (no cluster) or on a Dask
+the schema of its arrays, and ``feasible`` (the selection's population) when they have it. The same functions run in the driver (no cluster) or on a Dask
 worker (``relaff_jax.cluster.Ordered``).
 
 Pending chunks (``chunks/.pending/chunk_K``, ``features/.pending/chunk_F``) may finish in any
@@ -53,7 +53,7 @@ def rollout_chunk(rollout_fn: Callable, seed: int, k: int, batch: int, object_na
     check_schema(f"chunk {k} from rollout_fn", schema, ref)
     arrays["rollout"] = k * batch + np.arange(batch, dtype=np.int64)
     _write_once(path, arrays, {"chunk": k, "batch": batch, "positives": int(arrays["label"].sum())})
-    return {"label": arrays["label"], "cog_distance": arrays["cog_distance"], "schema": schema}
+    return _for_driver(arrays, schema)
 
 
 def read_rollout_chunk(path: Path, k: int, batch: int) -> dict[str, Any]:
@@ -61,7 +61,15 @@ def read_rollout_chunk(path: Path, k: int, batch: int) -> dict[str, Any]:
     arrays, _ = read_chunk(path)
     check_rollout_ids(path, arrays, k, batch)
     arrays.pop("rollout")
-    return {"label": arrays["label"], "cog_distance": arrays["cog_distance"], "schema": schema_of(arrays)}
+    return _for_driver(arrays, schema_of(arrays))
+
+
+def _for_driver(arrays: Mapping[str, Any], schema: Mapping[str, list]) -> dict[str, Any]:
+    """What the driver's selection reads of a chunk (``feasible`` when the rollouts have it)."""
+    out = {"label": arrays["label"], "cog_distance": arrays["cog_distance"], "schema": schema}
+    if "feasible" in arrays:
+        out["feasible"] = arrays["feasible"]
+    return out
 
 
 def feature_chunk(compute_fn: Callable, samples: Mapping[str, np.ndarray], f: int, batch: int, lo: int, hi: int,

@@ -21,6 +21,8 @@ from relaff_jax import io as rio
 from relaff_jax.cluster import active, nthreads
 from relaff_jax.config import override
 from relaff_jax.constants import ACTIONS, SIM_ENGINES, SPACES, STAGES
+from relaff_jax.data.config import check_dataset_config
+from relaff_jax.data.errors import DatasetError
 from relaff_jax.reproduce import experiment, features, generate, report
 from relaff_jax.reproduce.folder import Paths, ReproduceError, now, open_log
 from relaff_jax.reproduce.progress import Progress, estimate_seconds
@@ -52,6 +54,10 @@ def check_config(cfg: RunConfig, seed: int) -> None:
         raise ReproduceError(f"dataset.borrow_fraction must be in [0, 1], got {d.borrow_fraction}")
     if d.engine not in SIM_ENGINES:
         raise ReproduceError(f"dataset.engine must be one of {', '.join(SIM_ENGINES)}, got {d.engine!r}")
+    try:  # the dataset stage's own check (population, negatives, match_patience, ...)
+        check_dataset_config(d)
+    except DatasetError as e:
+        raise ReproduceError(f"dataset: {e}") from e
     acts = tuple(cfg.reproduce.actions)
     if len(acts) < 2 or len(set(acts)) != len(acts) or not set(acts) <= set(ACTIONS):
         raise ReproduceError(f"reproduce.actions must be at least two distinct values of {ACTIONS}, got {acts}")
