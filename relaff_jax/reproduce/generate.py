@@ -70,11 +70,13 @@ def _one(run: Run, action: str, window: int | None) -> dict:
     dt = time.perf_counter() - t0
     item = {"status": "ran", "seconds": round(dt, 2), "rollouts": s["rollouts"],
             "new_rollouts": s["new_chunks"] * cfg.dataset.rollout_batch,
-            "positive_rate": s["positive_rate"], "borrowed": s["borrowed"]}
+            "positive_rate": s["positive_rate"], "borrowed": s["borrowed"], "matching_met": s.get("matching_met")}
     extra = ""
     if s.get("discarded_chunks"):
         item["discarded_chunks"] = s["discarded_chunks"]
         extra = f"; {s['discarded_chunks']} chunks simulated past the stopping point discarded"
+    if s.get("matching_met") is False:
+        extra += f"; distance matching NOT met ({s['borrowed']} negatives borrowed)"
     run.progress.message(f"generate {action}: {cfg.dataset.n_samples} samples from {s['rollouts']} rollouts "
                          f"(positive rate {s['positive_rate']:.1%}) in {dt:.0f} s{extra}")
     return item
