@@ -138,7 +138,8 @@ def test_edge_cases_match_sklearn(kind, n):
 @pytest.mark.parametrize("cfg", [
     {"max_samples": 2 / 3}, {"max_samples": 0.05}, {"bootstrap": False},
     {"base_trees": 3, "max_trees": 7, "samples_per_extra_tree": 5}, {"min_samples_leaf": 3},
-    {"max_depth": 2}, {"max_features": "log2"},
+    {"max_depth": 2}, {"max_features": "log2"}, {"max_features": "0.5"}, {"max_features": "6"},
+    {"max_features": None},
 ])
 def test_parameters_match_sklearn(cfg):
     # 0.05 x 40 = 2 draws per tree: scikit-learn warns, and so does the engine

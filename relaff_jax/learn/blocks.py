@@ -7,7 +7,8 @@ all of them at once (``engine.predict_many``) and gives the test accuracies ``(C
 every test scene's outcome ``(C, sizes, T)`` and, at the selection size, each candidate's
 leave-one-out accuracy on its own training samples ``(C,)`` (what an agent knows after n
 samples: the online "best after ten"). ``run_block`` is its accuracies alone.
-``run_block_to_file`` saves a block atomically; ``read_block`` reads a finished block back
+``run_block_to_file`` saves a block atomically, with the accuracy on each test subset
+(``SUBSETS``: positives, feasible and infeasible negatives); ``read_block`` reads a finished block back
 (None if missing or corrupt, so a killed sweep resumes with the finished blocks).
 """
 from __future__ import annotations
@@ -24,6 +25,8 @@ from relaff_jax.learn.states import augment
 from relaff_jax.provenance import derive_seed
 
 FLUSH = 256  # fast-engine forests evaluated together (bounds the trees held in memory)
+# test subsets an accuracy is broken down by: what a negative label is made of (issue 24)
+SUBSETS = ("positives", "feasible negatives", "infeasible negatives")
 
 
 def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tuple[int, tuple[int, ...]]],
@@ -119,15 +122,34 @@ def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tup
     return block_outcomes(X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys)["acc"]
 
 
+def subset_accuracy(correct: np.ndarray, subset: np.ndarray) -> np.ndarray:
+    """``(..., N_SUBSETS)`` accuracy on each test subset of ``correct: (..., T)`` bool outcomes;
+    ``subset: (T,)`` int codes into ``SUBSETS`` (-1: unknown, counted in none); NaN where a
+    subset has no test scene or the condition did not run (all-False outcomes of a NaN
+    accuracy are not a measurement)."""
+    correct = np.asarray(correct, bool)
+    subset = np.asarray(subset)
+    out = np.full(correct.shape[:-1] + (len(SUBSETS),), np.nan)
+    for k in range(len(SUBSETS)):
+        m = subset == k
+        if m.any():
+            out[..., k] = correct[..., m].mean(-1)
+    return out
+
+
 def run_block_to_file(path: str, X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys,
-                      loo_size=None, loo_conditions=(), keep_outcomes=True):
+                      loo_size=None, loo_conditions=(), keep_outcomes=True, subset=None):
     """``block_outcomes``, saved atomically to ``path`` (a finished block; the per scene
-    outcomes bit-packed, or left out (``correct: (C, S, 0)``) without ``keep_outcomes``)."""
+    outcomes bit-packed, or left out (``correct: (C, S, 0)``) without ``keep_outcomes``), with
+    ``acc_subset: (C, S, N_SUBSETS)``, the accuracy on each test subset (``subset: (T,)``
+    codes of the test scenes; None: all unknown), kept even when the outcomes are not."""
     out = block_outcomes(X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys,
                          loo_size, loo_conditions)
+    sub = np.full(len(test_idx), -1) if subset is None else np.asarray(subset)
+    out["acc_subset"] = np.where(np.isfinite(out["acc"])[..., None], subset_accuracy(out["correct"], sub), np.nan)
     if not keep_outcomes:
         out["correct"] = out["correct"][..., :0]
-    rio.atomic_save_npz(path, acc=out["acc"], loo=out["loo"], sizes=np.asarray(sizes),
+    rio.atomic_save_npz(path, acc=out["acc"], loo=out["loo"], sizes=np.asarray(sizes), acc_subset=out["acc_subset"],
                         correct=np.packbits(out["correct"], axis=-1), n_test=np.asarray(out["correct"].shape[-1]))
     return out
 
@@ -139,10 +161,10 @@ def read_block(path: Path, n_conditions: int, sizes: Sequence[int]) -> dict[str,
         return None
     try:
         with np.load(path) as z:
-            acc, s, loo = z["acc"], z["sizes"], z["loo"]
+            acc, s, loo, acc_subset = z["acc"], z["sizes"], z["loo"], z["acc_subset"]
             correct = np.unpackbits(z["correct"], axis=-1, count=int(z["n_test"])).astype(bool)
     except Exception:  # a corrupt file (or one of an older format) cannot be a finished block
         return None
     if acc.shape != (n_conditions, len(sizes)) or list(s) != list(sizes) or correct.shape[:2] != acc.shape:
         return None
-    return {"acc": acc, "correct": correct, "loo": loo}
+    return {"acc": acc, "correct": correct, "loo": loo, "acc_subset": acc_subset}

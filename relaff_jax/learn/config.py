@@ -15,6 +15,7 @@ import numpy as np
 from relaff_jax.constants import FAMILIES, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn.forests import ForestConfig, check_forest_config
+from relaff_jax.learn.states import StateConfig, check_state_config
 
 # Integer code of each state space in seed keys (part of every forest's seed: never change).
 SPACE_CODE = {"pca": 0, "rhf": 1}
@@ -78,6 +79,9 @@ class ExperimentConfig:
     ci_resamples: int = 1000
     sizes_per_block: int = 25
     forest: ForestConfig = ForestConfig()
+    # derived or partial states (relative and reach columns, RHF bins only, named RHF parts)
+    # for finding what a learner relies on; the default is the paper's PCA and RHF states
+    state: StateConfig = StateConfig()
 
     def reps(self, space: str) -> int:
         return self.reps_pca if space == "pca" else self.reps_rhf
@@ -127,6 +131,7 @@ def check_config(cfg: ExperimentConfig) -> None:
         if bad or "NB" not in cfg.conditions(space):
             raise UserError(f"conditions_{space} must include NB and be among {FAMILIES}, got {cfg.conditions(space)}")
     check_forest_config(cfg.forest)
+    check_state_config(cfg.state)
     if not 0.5 <= cfg.ci_level < 1 or cfg.ci_resamples < 10:
         raise UserError(f"ci_level must be in [0.5, 1) and ci_resamples >= 10, got {cfg.ci_level}, {cfg.ci_resamples}")
     if min(cfg.reps_pca, cfg.reps_rhf, cfg.test_size, cfg.source_size, cfg.corr_scenes, cfg.sizes_per_block) < 1:

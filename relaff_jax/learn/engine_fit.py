@@ -36,7 +36,7 @@ from sklearn.tree._criterion import Gini
 from sklearn.tree._splitter import BestSplitter
 from sklearn.tree._tree import DepthFirstTreeBuilder, Tree
 
-from relaff_jax.learn.forests import ForestConfig, n_trees
+from relaff_jax.learn.forests import ForestConfig, max_features_value, n_trees
 
 MAX_INT = np.iinfo(np.int32).max  # sklearn.ensemble._forest.MAX_INT
 _RS = np.random.RandomState(0)  # reseeded per tree: constructing one costs ~100 us
@@ -54,7 +54,7 @@ class Trees:
 
 def max_features_of(n_features: int, cfg: ForestConfig) -> int:
     """Features tried per split, as ``DecisionTreeClassifier._fit`` resolves ``max_features``."""
-    mf = cfg.max_features
+    mf = max_features_value(cfg.max_features)
     if mf == "sqrt":
         return max(1, int(np.sqrt(n_features)))
     if mf == "log2":

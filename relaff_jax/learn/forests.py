@@ -50,6 +50,22 @@ def n_trees(n_samples: int, cfg: ForestConfig = ForestConfig()) -> int:
     return int(min(cfg.max_trees, cfg.base_trees + n_samples // cfg.samples_per_extra_tree))
 
 
+def max_features_value(mf: str | None) -> str | int | float | None:
+    """``ForestConfig.max_features`` as scikit-learn takes it: "sqrt" / "log2" / None as they
+    are, a numeric string as an int (features per split) or a float (a fraction of them), so
+    ``--set experiment.forest.max_features=0.5`` is the fraction 0.5."""
+    if mf is None or mf in ("sqrt", "log2"):
+        return mf
+    try:
+        return int(mf)
+    except (TypeError, ValueError):
+        pass
+    try:
+        return float(mf)
+    except (TypeError, ValueError):
+        return mf  # scikit-learn's validation names the problem (check_forest_config)
+
+
 def make_forest(n_samples: int, seed: int, cfg: ForestConfig = ForestConfig()) -> RandomForestClassifier:
     """An unfitted forest for ``n_samples`` training samples; one process, seeded."""
     return RandomForestClassifier(
@@ -57,7 +73,7 @@ def make_forest(n_samples: int, seed: int, cfg: ForestConfig = ForestConfig()) -
         criterion=cfg.criterion,
         max_depth=cfg.max_depth,
         min_samples_leaf=cfg.min_samples_leaf,
-        max_features=cfg.max_features,
+        max_features=max_features_value(cfg.max_features),
         bootstrap=cfg.bootstrap,
         max_samples=cfg.max_samples,
         n_jobs=1,  # parallelism is over forests (sweep.py), never inside one

@@ -15,21 +15,22 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig
-from relaff_jax.learn.correlation import category_pairs, correlation_matrix
+from relaff_jax.learn.correlation import category_pairs, correlation_matrix, correlation_with
 from relaff_jax.learn.datasets import check_datasets
 from relaff_jax.learn.engine import fit, predict
 from relaff_jax.learn.forests import ForestConfig
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.protocol import split_pools
-from relaff_jax.learn.states import state_features
+from relaff_jax.learn.states import StateConfig, state_features
 from relaff_jax.provenance import derive_seed
 
 
 def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, actions: list[str],
-                targets: dict, corr_idx: dict, space: str, seed: int, fcfg: ForestConfig):
+                targets: dict, corr_idx: dict, space: str, seed: int, fcfg: ForestConfig,
+                scfg: StateConfig = StateConfig()):
     """Fit one action's source predictor; predict every target pool and the corr scenes."""
     def states(b: str, idx: np.ndarray) -> np.ndarray:  # scenes of action b in this source's order
-        return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space)
+        return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space, scfg)
 
     forest = fit(states(action, src), labels[src], derive_seed(seed, 2, SPACE_CODE[space], ACTIONS.index(action)), fcfg)
 
@@ -40,10 +41,10 @@ def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, a
 
 
 def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, actions: list[str],
-                  targets: dict, space: str, seed: int, fcfg: ForestConfig):
+                  targets: dict, space: str, seed: int, fcfg: ForestConfig, scfg: StateConfig = StateConfig()):
     """Fit one category on the union of two source sets (canonical order: toy first)."""
     def canon(b: str, idx: np.ndarray) -> np.ndarray:
-        return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, None, space)
+        return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, None, space, scfg)
 
     a, b = pair
     x = np.concatenate([canon(a, src[a]), canon(b, src[b])])
@@ -74,8 +75,10 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     pairs = [(actions[i], actions[j]) for i, j in category_pairs(actions)]
     # categories are only trained when this space uses them (the paper's RHF runs NB and DB1)
     with_cats = bool({"CB1", "CBn"} & set(cfg.conditions(space)))
-    calls = [delayed(_source_job)(feats, a, labels[a], src[a], actions, targets, corr_idx, space, seed, cfg.forest) for a in actions]
-    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest) for p in pairs] if with_cats else []
+    calls = [delayed(_source_job)(feats, a, labels[a], src[a], actions, targets, corr_idx, space, seed, cfg.forest,
+                                  cfg.state) for a in actions]
+    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest, cfg.state)
+              for p in pairs] if with_cats else []
     desc = f"{space} source predictors" + (" + categories" if with_cats else "")
     results = run_parallel(calls, jobs, progress, total=len(calls), desc=desc, unit="forest")
     sources = results[: len(actions)]
@@ -90,4 +93,16 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     out["corr"] = correlation_matrix(corr_out)
     out["corr_outputs_mean"] = corr_out.mean(axis=1)
     out["corr_n"] = np.asarray(corr_out.shape[1])
+    # what each predictor has learned: its outputs on the same scenes against reach and relation
+    feasible = np.concatenate([_feasible(datasets[b], corr_idx[b]) for b in actions])
+    stacked = np.concatenate([np.asarray(datasets[b]["relation"]).astype(str)[corr_idx[b]] != "beside" for b in actions])
+    out["corr_feasible"] = correlation_with(corr_out, feasible)
+    out["corr_stacked"] = correlation_with(corr_out, stacked)
     return out
+
+
+def _feasible(ds: Mapping[str, Any], idx: np.ndarray) -> np.ndarray:
+    """(len(idx),) float: 1 where the motor program was executable; NaN without the field."""
+    if "feasible" not in ds:
+        return np.full(len(idx), np.nan)
+    return np.asarray(ds["feasible"]).astype(float)[idx]

@@ -37,6 +37,11 @@ class SpaceResults:
     corr (T, T) predictor correlation; category_masks (K, T, P) categories kept per threshold;
     test_size (T,) test scenes per target, test_positive (T,) how many of them are positive;
     loo (T, C, R) leave-one-out accuracy at ``select_size`` of the DB1 and CB1 candidates;
+    acc_subset (T, C, S, R, 3) test accuracy on each test subset (``blocks.SUBSETS``:
+    positives, feasible negatives, infeasible negatives; NaN where a subset is empty or
+    unknown); subset_count (T, 3) test scenes per subset; corr_feasible, corr_stacked (T,)
+    each source predictor's correlation on the correlation scenes with "feasible" and with
+    "stacked" (on_top or inside), NaN where undefined;
     correct (T, C, S, R, N) bool outcome per test scene (N = the largest ``n_test``; scenes
     past a target's ``n_test`` are padding; N = 0 when the run kept no outcomes);
     seconds, seconds_prep, new_fits: scalars of the run.
@@ -52,6 +57,10 @@ class SpaceResults:
     test_size: np.ndarray
     test_positive: np.ndarray
     loo: np.ndarray
+    acc_subset: np.ndarray
+    subset_count: np.ndarray
+    corr_feasible: np.ndarray
+    corr_stacked: np.ndarray
     correct: np.ndarray
     n_test: np.ndarray
     seconds: np.ndarray

@@ -4,16 +4,79 @@ Takes per-action numpy features in the dataset stage's canonical layout (PCA ``(
 with the toy's nine values first, RHF ``(N, 300)`` with toy = A, other = B) and gives
 
 * ``state_features``: the state of an action in its own order (manipulated object first),
-  ``(N, 18)`` in PCA space or ``(N, 318)`` in RHF space;
+  ``(N, 18)`` in PCA space or ``(N, 318)`` in RHF space (the paper's), or a derived or
+  partial state (``StateConfig``: relative and reach columns added, RHF bins only, named RHF
+  sub-histograms), for finding out what a learner relies on;
 * ``augment``: a state extended with bootstrap inputs (0/1 predicted classes of other
   affordance or category predictors), each repeated 6 (PCA) or 30 (RHF) times.
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from relaff_jax.constants import ACTIONS, PCA_PER_OBJECT, RHF_BINS, SPACES
 from relaff_jax.errors import UserError
+
+RHF_PARTS = ("dx", "dy", "dz", "dist", "angle_na_nb", "angle_na_d")  # perception.config.RHF_NAMES
+EXTRAS = {"relative": 4, "reach": 2}  # derived columns: how many each adds
+
+
+@dataclasses.dataclass(frozen=True)
+class StateConfig:
+    """What a state holds beyond (or instead of) the paper's; the defaults are the paper's.
+
+    extra: derived columns appended in both spaces, from the canonical PCA centroids (robot
+        frame, robot at the origin): ``"relative"`` = toy minus other object dx, dy, dz and
+        their planar distance (4); ``"reach"`` = each object's planar distance from the robot,
+        toy then other (2). A forest that needs these as oblique functions of x, y gets them
+        as one column.
+    rhf_pca: RHF space keeps the 18 PCA values (the paper's 318) or holds the bins alone.
+    rhf_parts: the RHF sub-histograms kept (``RHF_PARTS``, 50 bins each), in their order.
+    """
+
+    extra: tuple[str, ...] = ()
+    rhf_pca: bool = True
+    rhf_parts: tuple[str, ...] = RHF_PARTS
+
+
+def check_state_config(cfg: StateConfig) -> None:
+    bad = [e for e in cfg.extra if e not in EXTRAS]
+    if bad or len(set(cfg.extra)) != len(cfg.extra):
+        raise UserError(f"experiment.state.extra must be distinct values of {tuple(EXTRAS)}, got {cfg.extra}")
+    bad = [p for p in cfg.rhf_parts if p not in RHF_PARTS]
+    if bad or not cfg.rhf_parts or len(set(cfg.rhf_parts)) != len(cfg.rhf_parts):
+        raise UserError(f"experiment.state.rhf_parts must be distinct values of {RHF_PARTS}, got {cfg.rhf_parts}")
+    if not isinstance(cfg.rhf_pca, bool):
+        raise UserError(f"experiment.state.rhf_pca must be true or false, got {cfg.rhf_pca!r}")
+
+
+def derived_columns(pca: np.ndarray, extra: tuple[str, ...]) -> np.ndarray:
+    """``(N, sum of EXTRAS[e])`` float32 derived columns of canonical ``pca: (N, 18)``."""
+    toy, other = pca[:, 0:3].astype(np.float64), pca[:, PCA_PER_OBJECT:PCA_PER_OBJECT + 3].astype(np.float64)
+    cols = []
+    for e in extra:
+        if e == "relative":
+            d = toy - other
+            cols += [d[:, 0], d[:, 1], d[:, 2], np.hypot(d[:, 0], d[:, 1])]
+        elif e == "reach":
+            cols += [np.hypot(toy[:, 0], toy[:, 1]), np.hypot(other[:, 0], other[:, 1])]
+    return np.stack(cols, axis=1).astype(np.float32) if cols else np.zeros((len(pca), 0), np.float32)
+
+
+def rhf_columns(parts: tuple[str, ...]) -> np.ndarray:
+    """Column indices into the (300,) RHF of the named sub-histograms, in order."""
+    per = RHF_BINS // len(RHF_PARTS)
+    return np.concatenate([np.arange(per) + per * RHF_PARTS.index(p) for p in parts])
+
+
+def state_width(space: str, cfg: StateConfig = StateConfig()) -> int:
+    """Columns of a state of ``space`` under ``cfg`` (18 / 318 for the paper's)."""
+    base = 2 * PCA_PER_OBJECT + sum(EXTRAS[e] for e in cfg.extra)
+    if space == "pca":
+        return base
+    return (base if cfg.rhf_pca else 0) + len(rhf_columns(cfg.rhf_parts))
 
 # Actions whose manipulated object is the toy; for the others it is the base / obstacle /
 # rake (paper Table I), whose nine PCA values then come first in the state.
@@ -28,28 +91,35 @@ def manipulated_first_order(action: str) -> np.ndarray:
     return np.concatenate([toy, other] if action in TOY_MANIPULATED else [other, toy])
 
 
-def state_features(pca: np.ndarray, rhf: np.ndarray | None, action: str | None, space: str) -> np.ndarray:
+def state_features(pca: np.ndarray, rhf: np.ndarray | None, action: str | None, space: str,
+                   state: StateConfig = StateConfig()) -> np.ndarray:
     """The state of scenes as seen by an ``action``'s predictor.
 
     pca: (N, 18) canonical PCA (toy's 9 values, then the other object's 9).
     rhf: (N, 300) relational histogram (toy = A, other = B); unused in PCA space.
     action: whose order to use (its manipulated object first); ``None`` keeps the canonical
       order (used by category predictors, whose training data mixes two actions).
-    Returns (N, 18) in PCA space, (N, 318) in RHF space, float32.
+    state: derived or partial states (``StateConfig``; default the paper's).
+    Returns (N, 18) in PCA space, (N, 318) in RHF space, float32 (``state_width`` columns
+    otherwise: PCA in the action's order, then ``state.extra``, then the RHF parts).
     """
     pca = np.asarray(pca, dtype=np.float32)
     if pca.ndim != 2 or pca.shape[1] != 2 * PCA_PER_OBJECT:
         raise ValueError(f"pca features must be (N, 18), got {pca.shape}")
-    state = pca if action is None else pca[:, manipulated_first_order(action)]
+    x = pca if action is None else pca[:, manipulated_first_order(action)]
+    if state.extra:
+        x = np.concatenate([x, derived_columns(pca, state.extra)], axis=1)
     if space == "pca":
-        return np.ascontiguousarray(state)
+        return np.ascontiguousarray(x)
     if space == "rhf":
         if rhf is None:
             raise ValueError("RHF space needs the rhf features, got None")
         rhf = np.asarray(rhf, dtype=np.float32)
         if rhf.shape != (pca.shape[0], RHF_BINS):
             raise ValueError(f"rhf features must be (N, {RHF_BINS}) matching pca's N={pca.shape[0]}, got {rhf.shape}")
-        return np.concatenate([state, rhf], axis=1)
+        if state.rhf_parts != RHF_PARTS:
+            rhf = rhf[:, rhf_columns(state.rhf_parts)]
+        return np.concatenate([x, rhf], axis=1) if state.rhf_pca else np.ascontiguousarray(rhf)
     raise UserError(f"unknown state space {space!r}; expected one of {SPACES}")
 
 

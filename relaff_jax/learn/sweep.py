@@ -39,7 +39,7 @@ from relaff_jax import io as rio
 from relaff_jax.config import to_dict
 from relaff_jax.constants import ACTIONS, SPACES
 from relaff_jax.errors import UserError
-from relaff_jax.learn.blocks import read_block, run_block_to_file
+from relaff_jax.learn.blocks import SUBSETS, read_block, run_block_to_file
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config
 from relaff_jax.learn.datasets import check_datasets, fingerprint
 from relaff_jax.learn.draws import draw_rep
@@ -128,6 +128,8 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                          cfg.balanced_test, cfg.balanced_train)[0] for t in actions}
     n_test = np.asarray([len(tests[t]) if cfg.keep_outcomes else 0 for t in actions])
     correct = np.zeros((a, n_cond, len(sizes), reps, int(n_test.max())), bool)
+    subsets = {t: subset_codes(datasets[t], prep[f"target:{t}"][tests[t]]) for t in actions}
+    acc_subset = np.full((a, n_cond, len(sizes), reps, len(SUBSETS)), np.nan)
     calls, weights, done_fits, total_fits = [], [], 0, 0
     keys = []
     target_data: dict[str, tuple] = {}  # (X, y, boot) per target, built once, shared by all its blocks
@@ -142,13 +144,14 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                 s0 = sizes.index(chunk[0])
                 got = read_block(path, n_cond, chunk)
                 if got is not None and got["correct"].shape[-1] == n_test[ti]:
-                    _store(acc, correct, loo, got, ti, s0, len(chunk), r)
+                    _store(acc, correct, loo, acc_subset, got, ti, s0, len(chunk), r)
                     done_fits += fits
                     continue
                 if t not in target_data:
                     ds = datasets[t]
                     target_data[t] = (
-                        state_features(np.asarray(ds["pca"])[pool], np.asarray(ds["rhf"])[pool] if space == "rhf" else None, t, space),
+                        state_features(np.asarray(ds["pca"])[pool], np.asarray(ds["rhf"])[pool] if space == "rhf" else None, t, space,
+                                       cfg.state),
                         np.asarray(ds["label"]).astype(bool)[pool],
                         prep[f"boot:{t}"],
                     )
@@ -160,13 +163,13 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                 seed_keys = (seed, 5, SPACE_CODE[space], ACTIONS.index(t), r)
                 calls.append((run_block_to_file, (str(path), X, y, boot, plans[ti], train_order, test_idx, chunk,
                                            cfg.repeats(space), n_cond, cfg.forest, seed_keys, loo_n or None, loo_conds,
-                                           cfg.keep_outcomes), {}))
+                                           cfg.keep_outcomes, subsets[t]), {}))
                 weights.append(fits)
                 keys.append((ti, s0, len(chunk), r))
     results = run_parallel(calls, jobs, progress, total=total_fits, desc=f"{space} sweep", unit="fit",
                             weights=weights, initial=done_fits)
     for (ti, s0, n, r), got in zip(keys, results):
-        _store(acc, correct, loo, got, ti, s0, n, r)
+        _store(acc, correct, loo, acc_subset, got, ti, s0, n, r)
     masks = category_masks(corr, actions, cfg)
     res_path = sdir / "results.npz"
     rio.atomic_save_npz(
@@ -181,6 +184,10 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
         test_size=np.asarray([len(tests[t]) for t in actions]),
         test_positive=np.asarray([int(labels_of[t][tests[t]].sum()) for t in actions]),
         loo=loo,
+        acc_subset=acc_subset,
+        subset_count=np.stack([np.bincount(subsets[t][subsets[t] >= 0], minlength=len(SUBSETS)) for t in actions]),
+        corr_feasible=prep["corr_feasible"],
+        corr_stacked=prep["corr_stacked"],
         correct=np.packbits(correct, axis=-1),
         n_test=n_test,
         seconds=np.asarray(time.perf_counter() - t0),
@@ -190,9 +197,21 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     return res_path
 
 
-def _store(acc, correct, loo, got, ti, s0, n, r) -> None:
+def subset_codes(ds: Mapping[str, Any], idx: np.ndarray) -> np.ndarray:
+    """``(T,)`` codes into ``blocks.SUBSETS`` of the test scenes ``idx`` of a dataset: 0
+    positive, 1 feasible negative, 2 infeasible negative (-1: a negative of a dataset without
+    the ``feasible`` field)."""
+    label = np.asarray(ds["label"]).astype(bool)[idx]
+    if "feasible" not in ds:
+        return np.where(label, 0, -1)
+    feasible = np.asarray(ds["feasible"]).astype(bool)[idx]
+    return np.where(label, 0, np.where(feasible, 1, 2))
+
+
+def _store(acc, correct, loo, acc_subset, got, ti, s0, n, r) -> None:
     """Put one block's outcomes (``blocks.block_outcomes``) into the space's arrays."""
     acc[ti, :, s0 : s0 + n, r] = got["acc"]
+    acc_subset[ti, :, s0 : s0 + n, r] = got["acc_subset"]
     k = got["correct"].shape[-1]
     correct[ti, :, s0 : s0 + n, r, :k] = got["correct"]
     finite = np.isfinite(got["loo"])
