@@ -95,10 +95,17 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     out["corr_n"] = np.asarray(corr_out.shape[1])
     # what each predictor has learned: its outputs on the same scenes against reach and relation
     feasible = np.concatenate([_feasible(datasets[b], corr_idx[b]) for b in actions])
-    stacked = np.concatenate([np.asarray(datasets[b]["relation"]).astype(str)[corr_idx[b]] != "beside" for b in actions])
+    stacked = np.concatenate([_stacked(datasets[b], corr_idx[b]) for b in actions])
     out["corr_feasible"] = correlation_with(corr_out, feasible)
     out["corr_stacked"] = correlation_with(corr_out, stacked)
     return out
+
+
+def _stacked(ds: Mapping[str, Any], idx: np.ndarray) -> np.ndarray:
+    """(len(idx),) float: 1 where the toy is on top of or inside the other object; NaN without relations."""
+    if "relation" not in ds:
+        return np.full(len(idx), np.nan)
+    return (np.asarray(ds["relation"]).astype(str)[idx] != "beside").astype(float)
 
 
 def _feasible(ds: Mapping[str, Any], idx: np.ndarray) -> np.ndarray:
