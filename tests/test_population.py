@@ -168,3 +168,17 @@ def test_anatomy_command(tmp_path, capsys):
     assert d["population"] == "all" and d["selection"]["n"] == 40
     assert main(["anatomy", str(tmp_path / "c")]) == 0
     assert "label = feasible" in capsys.readouterr().out
+
+
+def test_report_reach_section(tmp_path):
+    from relaff_jax.report.reach import reach_blocks, reach_figure
+
+    gen(tmp_path / "lift", n=200)
+    anat = {"lift": ds.anatomy(tmp_path / "lift")}
+    assert reach_figure(anat, tmp_path / "fig_reach.png").stat().st_size > 1000
+    blocks = reach_blocks(anat, {"take": "no 'feasible' field"}, tmp_path)
+    table = next(b for b in blocks if b[0] == "table")
+    s = anat["lift"]["selection"]
+    assert table[2][0][:4] == ["lift", "all", "cog", 200]
+    assert table[2][0][5] == f"{100 * s['negatives_infeasible_share']:.0f} %"
+    assert any(b[0] == "img" for b in blocks) and any("take (no 'feasible' field)" in str(b) for b in blocks)

@@ -8,7 +8,8 @@ optionally the dataset folders ``{action: DIR}`` and a run log; analyses every s
   and ``summary.json`` (``tables.py``);
 * ``fig06_nb_learning.png`` ... ``fig12_thresholds.png`` (``figures.py``);
 * ``findings.json`` (``findings.py``);
-* with datasets: ``fig_datasets.png`` and ``examples/*.png`` (``examples.py``);
+* with datasets: ``fig_datasets.png``, ``fig_reach.png``, ``reach.json`` (what the labels
+  consist of, ``reach.py``) and ``examples/*.png`` (``examples.py``);
 * ``report.md`` and the self-contained ``report.html`` (``sections.py``, ``document.py``).
 """
 from __future__ import annotations
@@ -26,6 +27,7 @@ from relaff_jax.report.examples import example_scenes
 from relaff_jax.report.figures import dataset_figure, write_figures
 from relaff_jax.report.findings import FindingRules, findings
 from relaff_jax.report.formatting import finite
+from relaff_jax.report.reach import predictor_blocks, reach_blocks, reach_figure, reach_json, subset_blocks
 from relaff_jax.report.tables import summary, table2_csv, table2_markdown
 
 
@@ -58,13 +60,25 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
     # datasets and example scenes
     data_blocks: list[tuple] = []
+    anat: dict[str, Any] = {}
     if data_dirs:
+        from relaff_jax.data import DatasetError, anatomy
         from relaff_jax.data import info as dataset_info
 
         infos = {act: dataset_info(d) for act, d in data_dirs.items()}
         dataset_figure(infos, out / "fig_datasets.png")
         data_blocks = S.dataset_blocks(infos, "fig_datasets.png")
+        missing = {}
+        for act, d in data_dirs.items():
+            try:
+                anat[act] = anatomy(d)
+            except DatasetError as e:  # e.g. rollouts without a 'feasible' field
+                missing[act] = str(e)
+        if anat:
+            reach_figure(anat, out / "fig_reach.png")
+        data_blocks += reach_blocks(anat, missing, out) + subset_blocks(res, cfg) + predictor_blocks(res)
         data_blocks += S.example_blocks(example_scenes(data_dirs, out / "examples", examples_per_action))
+    rio.atomic_write_json(out / "reach.json", finite(reach_json(anat, res, cfg)))
 
     # the document
     found = findings(an, cfg, rules)
