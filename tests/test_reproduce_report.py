@@ -220,3 +220,18 @@ def test_full_report(scene_run, tmp_path):
     assert f"RHF: affordances linked by correlations above T = 0.5: {groups or 'none'}" in md
     assert "synthetic features" in md  # the results say where they came from
     assert "preset `tiny`, seed 0" in md and "generate: 12 s" in md and "report: None" in md
+
+    # the reach section names the datasets without a 'feasible' field; compare reads the report back
+    assert "Reach or relation" in md and "No anatomy for lift" in md
+    reach = json.loads((out / "reach.json").read_text())
+    assert reach["subsets"] == ["positives", "feasible negatives", "infeasible negatives"]
+    cmp_md = tmp_path / "compare.md"
+    assert cli.main(["compare", f"a={out}", f"b={out}", "--size", "10", "--out", str(cmp_md)]) == 0
+    page = cmp_md.read_text()
+    nb = reach["spaces"]["pca"]
+    i = nb["sizes"].index(10)
+    # positives are the only known subset here (no feasible field): the whole-set cell is theirs
+    assert f"| {nb['actions'][0]} | {R.fmt(nb['nb_acc_subset'][0][i][0])} (" in page
+    for f in found:
+        assert f"| {f['finding']} |" in page
+    assert cli.main(["compare", f"a={out}"]) == 2  # one reading is refused

@@ -1,4 +1,5 @@
-"""``relaff experiment`` and ``relaff report``: the learning sweeps, and the report of their results.
+"""``relaff experiment``, ``relaff report`` and ``relaff compare``: the learning sweeps, the report of
+their results, and several readings of one study side by side.
 
 Takes parsed arguments; ``experiment`` runs (or resumes) ``learn.run_experiment`` on dataset
 folders or synthetic data and prints the results paths; ``report`` writes
@@ -57,8 +58,29 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_compare(args: argparse.Namespace) -> int:
+    from relaff_jax import io as rio
+    from relaff_jax.report.readings import compare_readings
+
+    reports = {}
+    for item in args.readings:
+        name, sep, path = item.partition("=")
+        if not sep or not name or not path:
+            raise UserError(f"a reading is NAME=REPORT_DIR, got {item!r}")
+        if name in reports:
+            raise UserError(f"reading {name!r} given twice")
+        reports[name] = path
+    page = compare_readings(reports, size=args.size)
+    if args.out:
+        rio.atomic_write_text(args.out, page)
+        print(f"wrote {args.out}")
+    else:
+        print(page, end="")
+    return 0
+
+
 def register(subparsers) -> None:
-    """Add ``relaff experiment`` and ``relaff report``."""
+    """Add ``relaff experiment``, ``relaff report`` and ``relaff compare``."""
     p = subparsers.add_parser("experiment", help="learning curves and bootstrapping sweeps (paper section V)",
                               description=EXPERIMENT_DESCRIPTION)
     p.add_argument("--data", nargs="+", metavar="DIR", help="featured dataset folders, one per action")
@@ -77,3 +99,12 @@ def register(subparsers) -> None:
     r.add_argument("results", metavar="RESULTS")
     r.add_argument("--out", required=True, metavar="REPORT")
     r.set_defaults(func=cmd_report)
+    c = subparsers.add_parser("compare", help="the same study in two or more readings, side by side, from their reports",
+                              description="Read the report folders of runs that differ in one setting (e.g. "
+                              "dataset.population=all and feasible) and print one markdown page: what the labels "
+                              "consist of, NB by test subset in PCA and RHF, the predictors' correlations with "
+                              "feasible and stacked, the correlation clusters, Table II and every finding's verdict.")
+    c.add_argument("readings", nargs="+", metavar="NAME=REPORT_DIR")
+    c.add_argument("--size", type=int, default=10, help="training size of the NB comparison (default 10)")
+    c.add_argument("--out", metavar="FILE.md", help="write the page here (default: print it)")
+    c.set_defaults(func=cmd_compare)

@@ -1,0 +1,144 @@
+"""Side by side: the same study in two or more readings (e.g. ``dataset.population=all`` and
+``feasible``), from their report folders (``relaff compare``).
+
+Takes ``{name: REPORT_DIR}`` written by ``write_report`` with datasets (``summary.json``,
+``findings.json``, ``reach.json``); gives ``compare_readings``, a markdown page: what the
+labels consist of per reading (infeasible share of negatives, the oracles), NB by test subset
+at one size, PCA against RHF, the source predictors' correlations with feasible and stacked,
+the correlation clusters, Table II's rows with their intervals, and every finding's verdict.
+Nothing is recomputed: every number is read from the report folders, so the page says what
+the reports say.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from relaff_jax import io as rio
+from relaff_jax.errors import UserError
+from relaff_jax.report.findings import correlation_clusters
+
+FILES = ("summary.json", "findings.json", "reach.json")
+
+
+def read_report(path: str | os.PathLike) -> dict[str, Any]:
+    """The three JSON files of a report folder; a ``UserError`` naming the missing one."""
+    p = Path(path)
+    out = {}
+    for f in FILES:
+        if not (p / f).exists():
+            raise UserError(f"{p} is not a report folder with datasets: {f} is missing (relaff report, or a "
+                            f"report written by this version with the datasets)")
+        out[f.split(".")[0]] = rio.read_json(p / f)
+    return out
+
+
+def _f(x: Any, nd: int = 3) -> str:
+    return "-" if x is None or not np.isfinite(float(x)) else f"{float(x):.{nd}f}"
+
+
+def _nb_overall(space: Mapping[str, Any], size: int) -> tuple[list[float], list[list[float]]]:
+    """Per target NB accuracy at ``size`` (the subsets weighted by their test counts) and the
+    subset accuracies, from ``reach.json``'s space entry."""
+    i = space["sizes"].index(size)
+    acc = np.array([[np.nan if v is None else v for v in t[i]] for t in space["nb_acc_subset"]], float)  # (T, 3)
+    cnt = np.asarray(space["subset_count"], float)
+    w = np.where(np.isfinite(acc), cnt, 0.0)
+    overall = np.where(w.sum(1) > 0, np.nansum(acc * w, 1) / np.maximum(w.sum(1), 1), np.nan)
+    return overall.tolist(), acc.tolist()
+
+
+def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, threshold: float = 0.5) -> str:
+    """The markdown page comparing the readings ``{name: REPORT_DIR}``."""
+    if len(reports) < 2:
+        raise UserError("compare needs at least two readings NAME=REPORT_DIR")
+    r = {name: read_report(p) for name, p in reports.items()}
+    names = list(r)
+    lines = ["# The same study in " + " and ".join(f"`{n}`" for n in names), ""]
+    lines += [f"- `{n}`: `{reports[n]}`" for n in names] + [""]
+
+    # what the labels consist of
+    acts = list(r[names[0]]["reach"]["datasets"])
+    lines += ["## What the labels consist of (balanced selection)", "",
+              "| action | " + " | ".join(f"{n}: neg. infeasible / label=feasible / relation / borrowed" for n in names) + " |",
+              "|---|" + "---|" * len(names)]
+    for a in acts:
+        cells = []
+        for n in names:
+            d = r[n]["reach"]["datasets"].get(a)
+            cells.append("-" if d is None else
+                         f"{_f(d['negatives_infeasible_share'], 2)} / {_f(d['oracle_feasible_acc'])} / "
+                         f"{_f(d['oracle_relation_acc'])} / {_f(d['borrowed_share'], 2)}"
+                         + ("" if d["matching_met"] is not False else " (not met)"))
+        lines.append(f"| {a} | " + " | ".join(cells) + " |")
+
+    # NB by space and subset
+    lines += ["", f"## NB at n = {size}: PCA against RHF, and by test subset", "",
+              "Accuracy on the whole test set, then on its positives / feasible negatives / infeasible negatives "
+              "(mean over repetitions; '-' where a subset is empty).", ""]
+    spaces = [s for s in ("pca", "rhf") if all(s in r[n]["reach"]["spaces"] for n in names)]
+    head = [f"{n} {s.upper()}" for n in names for s in spaces]
+    lines += ["| target | " + " | ".join(head) + " |", "|---|" + "---|" * len(head)]
+    tabs = {(n, s): _nb_overall(r[n]["reach"]["spaces"][s], size) for n in names for s in spaces
+            if size in r[n]["reach"]["spaces"][s]["sizes"]}
+    targets = r[names[0]]["reach"]["spaces"][spaces[0]]["actions"] if spaces else []
+    means = {k: float(np.nanmean(v[0])) for k, v in tabs.items()}
+    for ti, t in enumerate(targets):
+        cells = []
+        for n in names:
+            for s in spaces:
+                if (n, s) not in tabs:
+                    cells.append("-")
+                    continue
+                ov, sub = tabs[(n, s)]
+                cells.append(f"{_f(ov[ti])} ({' / '.join(_f(v, 2) for v in sub[ti])})")
+        lines.append(f"| {t} | " + " | ".join(cells) + " |")
+    lines.append("| mean | " + " | ".join(_f(means.get((n, s))) for n in names for s in spaces) + " |")
+
+    # predictors
+    lines += ["", "## What each source predictor follows: r(feasible) / r(stacked) on the correlation scenes", "",
+              "| predictor | " + " | ".join(f"{n} {s.upper()}" for n in names for s in spaces) + " |",
+              "|---|" + "---|" * (len(names) * len(spaces))]
+    for ti, t in enumerate(targets):
+        cells = [f"{_f(r[n]['reach']['spaces'][s]['corr_feasible'][ti], 2)} / {_f(r[n]['reach']['spaces'][s]['corr_stacked'][ti], 2)}"
+                 for n in names for s in spaces]
+        lines.append(f"| {t} | " + " | ".join(cells) + " |")
+
+    # clusters
+    lines += ["", f"## Correlation clusters (linked above T = {threshold:g})", ""]
+    for n in names:
+        for s in spaces:
+            x = r[n]["summary"][s]
+            cl = correlation_clusters(np.asarray(x["corr"], float), x["actions"], threshold)
+            lines.append(f"- {n} {s.upper()}: " + "; ".join("{" + ", ".join(g) + "}" for g in cl))
+
+    # Table II
+    lines += ["", "## Table II (average bootstrap factor over the window, avg over affordances, interval, rests on)", ""]
+    rows = list(r[names[0]]["summary"]["pca"]["table2"]) if "pca" in r[names[0]]["summary"] else []
+    lines += ["| row | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    for row in rows:
+        cells = []
+        for n in names:
+            v = r[n]["summary"]["pca"]["table2"].get(row, {})
+            ci = v.get("ci")
+            ci_s = f" [{_f(ci[0], 2)}, {_f(ci[1], 2)}]" if ci and None not in ci[:2] else ""
+            cells.append(f"{_f(v.get('avg'))}{ci_s} ({v.get('n_targets', '-')})")
+        lines.append(f"| {row} | " + " | ".join(cells) + " |")
+
+    # findings
+    lines += ["", "## Findings", "", "| finding | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    found = {n: {f["id"]: f for f in r[n]["findings"]["findings"]} for n in names}
+    for fid, f in found[names[0]].items():
+        cells = []
+        for n in names:
+            g = found[n].get(fid)
+            if g is None:
+                cells.append("-")
+                continue
+            verdict = g.get("verdict") or {True: "reproduced", False: "not reproduced", None: "not measurable"}[g["reproduced"]]
+            cells.append(f"**{verdict}**: {g['numbers']}")
+        lines.append(f"| {f['finding']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
