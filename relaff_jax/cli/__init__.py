@@ -5,7 +5,8 @@ Each module of this package registers the commands of one stage (``register(subp
 library functions; the stages themselves know nothing of argparse.
 
 Errors: a ``relaff_jax.errors.UserError`` (bad option, unusable folder, corrupt data) is
-printed as one line, ``relaff COMMAND: error: MESSAGE``, exit code 2, the prefix argparse uses
+printed as one line, ``relaff COMMAND: error: MESSAGE`` (``relaff real SUBCOMMAND: ...``
+for the ``real`` commands), exit code 2, the prefix argparse uses
 for its own errors. Any other exception is a bug and keeps its full traceback (exit 1).
 """
 from __future__ import annotations
@@ -40,17 +41,23 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def command_name(args: argparse.Namespace) -> str:
+    """The command as typed, subcommand included (``real study``), for error lines."""
+    return " ".join(x for x in (args.command, getattr(args, "real_command", None)) if x)
+
+
 def main(argv: list[str] | None = None) -> int:
     quiet.install()
     parser = build_parser()
     args = parser.parse_args(argv)
+    name = command_name(args)
     try:
         return int(args.func(args) or 0)
     except UserError as e:
-        print(f"relaff {args.command}: error: {e}", file=sys.stderr)
+        print(f"relaff {name}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"relaff {args.command}: interrupted; what was finished is kept, rerun the same command "
+        print(f"relaff {name}: interrupted; what was finished is kept, rerun the same command "
               "to continue", file=sys.stderr)
         return 130
 

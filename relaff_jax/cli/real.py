@@ -19,6 +19,7 @@ import csv
 import json
 from pathlib import Path
 
+from relaff_jax.cli.options import check_out_dir, check_out_file
 from relaff_jax.errors import UserError
 
 
@@ -98,6 +99,8 @@ def cmd_segment(args) -> int:
     from relaff_jax.real import score_scenes
     from relaff_jax.real.scene_source import scene_files
 
+    if args.out:
+        check_out_file(args.out)  # before the segmentation (about a minute)
     res = score_scenes(scene_files(args.scenes), seed=args.seed, known_count=args.known_count)
     for s in res["scenes"]:
         print(f"{s['scene']}: mean object IoU {s['mean']:.3f}, table {s['table']:.3f}")
@@ -115,6 +118,7 @@ def cmd_show(args) -> int:
 
     from relaff_jax.real import read_cloud, render_real_scene_png
 
+    check_out_file(args.out)
     cloud = read_cloud(args.scene)
     render_real_scene_png(cloud, jax.random.PRNGKey(args.seed), args.out, pair=args.pair, source=args.source)
     print(args.out)
@@ -125,6 +129,9 @@ def cmd_propose(args) -> int:
     from relaff_jax.real import labels as lab
     from relaff_jax.real.labelling import propose_folder
 
+    check_out_file(args.out)
+    if args.pictures is not None:
+        check_out_dir(args.pictures, "--pictures")
     corrections = _corrections(args.corrections)
     labels, record = propose_folder(args.scenes, args.pictures, corrections)
     lab.write_labels(args.out, labels)

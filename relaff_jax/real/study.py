@@ -10,7 +10,9 @@ each step stored in the output folder and skipped when already there:
    SIM for every pair of relations, inside included (``run_sim_only``), keyed by the
    experiment config, the labels file and the simulated counts (a change recomputes);
 4. the report (``report.write_report``): figures, ``results.json``, ``results.md``.
-Returns the summary dict per space.
+Returns the summary dict per space. Every check that depends only on the inputs (the output
+folders, the settings, the labels file against its scenes, >= 2 pairs of each relation, enough
+simulated scenes for SIM_full) is made first, by ``check_inputs``, before any work.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from relaff_jax import io as rio
+from relaff_jax.errors import UserError
 
 from . import experiments as ex
 from . import labels as lab
@@ -37,6 +40,51 @@ def _raw(path: Path, key: str):
     return None
 
 
+def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path,
+                 sim_cfg: sr.SimRelationConfig = sr.SimRelationConfig(),
+                 exp_cfg: ex.RealExperimentConfig = ex.RealExperimentConfig(),
+                 spaces: tuple[str, ...] = ("pca", "rhf"), sim_folder: str | Path | None = None,
+                 real_cfg: RealConfig = RealConfig()) -> list:
+    """Raise ``UserError`` for any problem ``run_study`` would otherwise meet only after minutes
+    of work; return the validated labels. Reads the labels file and the scenes' object ids only."""
+    from relaff_jax.constants import SPACES
+
+    from .config import validate_real_config
+    from .scene_source import object_ids
+
+    rio.check_writable_dir(out, "--out")
+    if sim_folder is not None:
+        rio.check_writable_dir(sim_folder, "--sim")
+    bad = [s for s in spaces if s not in SPACES]
+    if not spaces or bad:
+        raise UserError(f"spaces must be values of {', '.join(SPACES)}, got {list(spaces)}")
+    for name, v, lo in (("reps", exp_cfg.reps, 1), ("trees", exp_cfg.trees, 1), ("n_full", exp_cfg.n_full, 2),
+                        ("per_relation", sim_cfg.per_relation, 1), ("chunk", sim_cfg.chunk, 1)):
+        if v < lo:
+            raise UserError(f"{name} must be >= {lo}, got {v}")
+    if sim_cfg.normals not in ("ray", "cloud"):
+        raise UserError(f"unknown normals {sim_cfg.normals!r}; valid: ['ray', 'cloud']")
+    if sim_cfg.chunk % sim_cfg.feature_batch:
+        raise UserError(f"chunk ({sim_cfg.chunk}) must be a multiple of feature_batch ({sim_cfg.feature_batch})")
+    full = 2 * (exp_cfg.n_full // 2)
+    sim_dir = Path(sim_folder) if sim_folder else Path(out) / "sim"
+    have = sr._counts(sim_dir)[1] if sim_dir.is_dir() else np.zeros(len(sr.RELATIONS), np.int64)
+    held = min(int(have[sr.RELATIONS.index(r)]) for r in ("beside", "on_top"))
+    if sim_cfg.per_relation < full and held < full:  # the simulation would stop short of SIM_full
+        raise UserError(f"SIM_full needs {full} simulated scenes of each relation (n_full {exp_cfg.n_full} to train, "
+                        f"as many to test), but per_relation is {sim_cfg.per_relation}: raise per_relation or lower n_full")
+    validate_real_config(real_cfg)
+    labels = lab.read_labels(labels_path)
+    if not labels:
+        raise UserError(f"{labels_path} labels no pair")
+    counts = lab.relation_counts(labels)
+    try:
+        ex.split_sizes(np.asarray([int(x.relation == "on_top") for x in labels]), exp_cfg.train_fraction)
+    except UserError as e:
+        raise UserError(f"{labels_path}: {e} ({counts})") from None
+    return lab.validate(labels, scenes, object_ids)
+
+
 def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path,
               sim_cfg: sr.SimRelationConfig = sr.SimRelationConfig(),
               exp_cfg: ex.RealExperimentConfig = ex.RealExperimentConfig(),
@@ -44,7 +92,7 @@ def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path,
               real_cfg: RealConfig = RealConfig(), progress: bool = True) -> dict:
     """Run (or resume) the study; see the module docstring."""
     out = Path(out)
-    rio.check_writable_dir(out, "--out")
+    check_inputs(scenes, labels_path, out, sim_cfg, exp_cfg, spaces, sim_folder, real_cfg)
     real = real_data.cached_real_features(out / "real_features.npz", scenes, labels_path, real_cfg, progress)
     sensor = real_data.sensor(real)
     rio.atomic_write_json(out / "sensor.json", dict(

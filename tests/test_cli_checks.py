@@ -1,0 +1,105 @@
+"""What a new user trips over (issue 30): every path and every input-only condition is
+checked before any work, with the one-line ``relaff CMD: error: ...`` and exit code 2.
+
+The work itself is replaced by a function that fails the test if it is reached, so each test
+takes well under a second and shows that the check comes first."""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+
+from relaff_jax import cli
+
+OSD = Path(__file__).parent / "data" / "osd"
+
+
+def no_work(*args, **kwargs):
+    raise AssertionError("the work started before the inputs were checked")
+
+
+def one_line_error(capsys, command: str) -> str:
+    err = capsys.readouterr().err
+    lines = [x for x in err.splitlines() if x.strip()]
+    assert len(lines) == 1 and lines[0].startswith(f"relaff {command}: error: "), err
+    return lines[0]
+
+
+@pytest.fixture
+def a_file(tmp_path):
+    f = tmp_path / "a_file"
+    f.write_text("not a folder")
+    return f
+
+
+def test_real_segment_unwritable_out_fails_before_segmenting(monkeypatch, capsys, a_file):
+    import relaff_jax.real
+
+    monkeypatch.setattr(relaff_jax.real, "score_scenes", no_work)
+    assert cli.main(["real", "segment", str(OSD), "--out", f"{a_file}/iou.json"]) == 2
+    assert "is a file" in one_line_error(capsys, "real segment")
+
+
+def test_real_show_unwritable_out_fails_before_reading(monkeypatch, capsys, a_file):
+    import relaff_jax.real
+
+    monkeypatch.setattr(relaff_jax.real, "read_cloud", no_work)
+    assert cli.main(["real", "show", str(OSD / "learn0.pcd"), "--out", f"{a_file}/scene.png"]) == 2
+    one_line_error(capsys, "real show")
+    assert cli.main(["real", "show", str(OSD / "learn0.pcd"), "--out", str(a_file.parent)]) == 2
+    assert "is a folder" in one_line_error(capsys, "real show")
+
+
+@pytest.mark.parametrize("where", ["--out", "--pictures"])
+def test_real_propose_unwritable_out_or_pictures_fails_before_proposing(monkeypatch, capsys, tmp_path, a_file,
+                                                                        where):
+    import relaff_jax.real.labelling
+
+    monkeypatch.setattr(relaff_jax.real.labelling, "propose_folder", no_work)
+    out = f"{a_file}/labels.csv" if where == "--out" else str(tmp_path / "labels.csv")
+    argv = ["real", "propose", str(OSD), "--out", out]
+    if where == "--pictures":
+        argv += ["--pictures", str(a_file)]
+    assert cli.main(argv) == 2
+    assert where in one_line_error(capsys, "real propose")
+
+
+def _labels(tmp_path, relations):
+    """A labels file over the two shipped scenes' pairs with the given relations, checksums right."""
+    from relaff_jax.real import labels as lab
+
+    scenes = tmp_path / "scenes"
+    scenes.mkdir()
+    shutil.copy(OSD / "learn0.pcd", scenes / "learn0.pcd")
+    sha = lab.file_sha256(scenes / "learn0.pcd")
+    rows = [lab.Label("learn0.pcd", 2, 3, r, sha) for r in relations]
+    path = tmp_path / "labels.csv"
+    path.write_text("scene,object_a,object_b,relation,sha256\n" +
+                    "".join(f"{x.scene},{2 + i},{3 + i},{x.relation},{x.sha256}\n" for i, x in enumerate(rows)))
+    return scenes, path
+
+
+def test_real_study_checks_the_labels_before_any_work(monkeypatch, capsys, tmp_path):
+    from relaff_jax.real import real_data
+
+    monkeypatch.setattr(real_data, "cached_real_features", no_work)
+    scenes, labels = _labels(tmp_path, ["beside", "beside", "on_top"])
+    argv = ["real", "study", str(scenes), "--labels", str(labels), "--out", str(tmp_path / "study")]
+    assert cli.main(argv) == 2
+    line = one_line_error(capsys, "real study")
+    assert ">= 2 pairs of each relation" in line and "1 on_top" in line
+    assert not (tmp_path / "study").exists()
+
+
+def test_real_study_checks_the_simulation_budget_before_any_work(monkeypatch, capsys, tmp_path):
+    from relaff_jax.real import labels as lab
+    from relaff_jax.real import real_data
+
+    monkeypatch.setattr(real_data, "cached_real_features", no_work)
+    monkeypatch.setattr(lab, "validate", lambda labels, *a: labels)  # the scenes' object ids are not the point
+    scenes, labels = _labels(tmp_path, ["beside", "beside", "on_top", "on_top"])
+    argv = ["real", "study", str(scenes), "--labels", str(labels), "--out", str(tmp_path / "study"),
+            "--per-relation", "10", "--n-full", "100"]
+    assert cli.main(argv) == 2
+    assert "SIM_full needs 100 simulated scenes of each relation" in one_line_error(capsys, "real study")
