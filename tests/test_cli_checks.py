@@ -103,3 +103,15 @@ def test_real_study_checks_the_simulation_budget_before_any_work(monkeypatch, ca
             "--per-relation", "10", "--n-full", "100"]
     assert cli.main(argv) == 2
     assert "SIM_full needs 100 simulated scenes of each relation" in one_line_error(capsys, "real study")
+
+
+def test_export_uses_the_one_writability_check(monkeypatch, capsys, tmp_path):
+    from relaff_jax import io as rio
+    from relaff_jax.errors import UserError
+
+    def refuse(path, what="--out"):
+        raise UserError(f"{what} {path}: cannot write in it (probe)")
+
+    monkeypatch.setattr(rio, "check_writable_dir", refuse)
+    assert cli.main(["export", str(tmp_path), "--out", str(tmp_path / "x.parquet")]) == 2
+    assert "(probe)" in one_line_error(capsys, "export")

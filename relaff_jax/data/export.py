@@ -88,23 +88,11 @@ def export_paths(out: str | os.PathLike, format: str = "parquet") -> dict[str, P
             raise UserError(f"{out}: give a .parquet file name or a folder (a name without a suffix)")
         paths = {"data": out / "data.parquet", "schema": out / "features_schema.json", "card": out / "README.md"}
         folder = out
-    _check_writable_folder(folder)
+    rio.check_writable_dir(folder, "--out")  # the one check of every command (relaff_jax.io)
     for p in paths.values():
         if p.is_dir():
             raise UserError(f"{p}: is a folder, cannot write the export there")
     return paths
-
-
-def _check_writable_folder(folder: Path) -> None:
-    probe = folder
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if not probe.is_dir():
-        raise UserError(f"{folder}: cannot create it ({probe} is not a folder)")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise UserError(f"{folder}: cannot write there ({probe} is not writable)")
 
 
 def export_dataset(dataset_dir: str | os.PathLike, out: str | os.PathLike, format: str = "parquet",
