@@ -115,3 +115,41 @@ def test_export_uses_the_one_writability_check(monkeypatch, capsys, tmp_path):
     monkeypatch.setattr(rio, "check_writable_dir", refuse)
     assert cli.main(["export", str(tmp_path), "--out", str(tmp_path / "x.parquet")]) == 2
     assert "(probe)" in one_line_error(capsys, "export")
+
+
+def _run_folder(tmp_path):
+    """A run folder holding only the run log of the tiny preset, seed 0 (no stage ran)."""
+    from relaff_jax.reproduce.folder import Paths, open_log
+    from relaff_jax.runconfig import preset
+
+    out = tmp_path / "run"
+    open_log(Paths(out), "tiny", preset("tiny"), 0)
+    return out
+
+
+def test_reproduce_status_with_a_damaged_run_log_says_how_to_rebuild_it(capsys, tmp_path):
+    out = _run_folder(tmp_path)
+    (out / "run.json").write_text('{"format": "relaff_jax.reproduce", "conf')  # cut short by a full disk
+    for argv in (["reproduce", "--status", "--out", str(out)], ["reproduce", "--status", str(out)]):
+        assert cli.main(argv) == 2
+        line = one_line_error(capsys, "reproduce")
+        assert "run.json is damaged" in line and "--rebuild-log" in line and "use a new --out" not in line
+    assert cli.main(["reproduce", "--preset", "tiny", "--out", str(out)]) == 2  # a run says the same
+    assert "--rebuild-log" in one_line_error(capsys, "reproduce")
+
+
+def test_reproduce_status_takes_the_folder_as_a_positional_argument(capsys, tmp_path):
+    out = _run_folder(tmp_path)
+    assert cli.main(["reproduce", "--status", str(out)]) == 0
+    assert capsys.readouterr().out.startswith("generate")
+    assert cli.main(["reproduce", str(out)]) == 2
+    assert f"--out {out}" in one_line_error(capsys, "reproduce")
+
+
+def test_resuming_with_other_settings_names_only_the_keys_that_differ(capsys, tmp_path):
+    out = _run_folder(tmp_path)
+    argv = ["reproduce", "--preset", "tiny", "--out", str(out), "--set", "dataset.borrow_fraction=0.25"]
+    assert cli.main(argv) == 2
+    line = one_line_error(capsys, "reproduce")
+    assert "1 key(s) differ: dataset.borrow_fraction: stored" in line and "requested 0.25" in line
+    assert "perception" not in line and "experiment" not in line  # not the whole stored tree

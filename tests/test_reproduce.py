@@ -225,6 +225,24 @@ def test_stale_results_are_recomputed(base, tmp_path):
         np.testing.assert_array_equal(a, results_of(out0)[s])
 
 
+def test_a_damaged_run_log_is_rebuilt_and_the_finished_stages_kept(base, tmp_path):
+    """A run.json cut short: --status and a rerun refuse it with the repair, and --rebuild-log
+    with the run's options starts a new log in which every finished stage is skipped."""
+    out0, *_ = base
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    (out / R.RUN_LOG).write_text((out / R.RUN_LOG).read_text()[:100])
+    with pytest.raises(R.ReproduceError, match="damaged.*--rebuild-log"):
+        R.status(out)
+    with pytest.raises(R.ReproduceError, match="damaged.*--rebuild-log"):
+        run(out)
+    log = run(out, rebuild_log=True)
+    assert set(statuses(log).values()) == {"skipped"} and "rebuilt" in log
+    assert (out / (R.RUN_LOG + ".damaged")).exists()
+    with pytest.raises(R.ReproduceError, match="intact"):
+        run(out, rebuild_log=True)
+
+
 def test_a_corrupt_feature_chunk_is_reported_and_recomputed(base, tmp_path, monkeypatch):
     """One flipped byte in a feature chunk: the status names it, and both a plain rerun and
     --force features recompute it (the forced rerun used to fail on the same error)."""

@@ -6,6 +6,7 @@ from pathlib import Path
 
 from relaff_jax.cli import options
 from relaff_jax.constants import SIM_ENGINES, STAGES
+from relaff_jax.errors import UserError
 from relaff_jax.runconfig import PRESETS
 
 
@@ -20,7 +21,9 @@ def register(sub) -> None:
                    help="quick: ~9 min on 2 idle cores, ~4.5 with --engine native (default, "
                         "docs/reproduce.md); study: 29 min with --engine native; paper: the full protocol "
                         "(projected ~10 h with --cluster local:2, ~4.5 h with --engine native); tiny: for tests")
-    p.add_argument("--out", required=True, type=Path, metavar="DIR", help="run folder (created, or continued)")
+    p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
+    p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",
+                   help="the run folder, as a positional argument for --status (same as --out DIR)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
                    help=f"redo a stage ({', '.join(STAGES)}); may be repeated")
@@ -31,6 +34,9 @@ def register(sub) -> None:
                    help="executor of the motor programs (same as --set dataset.engine=...): mjx (the preset's "
                         "default) or native (MuJoCo C batches, docs/actions.md)")
     p.add_argument("--status", action="store_true", help="print each stage's status in OUT and exit")
+    p.add_argument("--rebuild-log", action="store_true",
+                   help="OUT's run.json is damaged: set it aside (run.json.damaged) and start a new log for the "
+                        "given --preset, --seed and --set; complete stages are then skipped")
     p.add_argument("--no-progress", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_reproduce)
 
@@ -39,6 +45,13 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     from relaff_jax import reproduce as R
     from relaff_jax.config import parse_set
 
+    if args.dir is not None and args.out is not None and args.dir != args.out:
+        raise UserError(f"two run folders given: {args.dir} and --out {args.out}")
+    if args.dir is not None and not args.status:
+        raise UserError(f"give the run folder as --out {args.dir} (a positional folder is taken with --status only)")
+    args.out = args.out if args.out is not None else args.dir
+    if args.out is None:
+        raise UserError("the run folder is required: --out DIR")
     if args.status:
         for stage, st in R.status(args.out).items():
             print(f"{stage:<10} {st.state:<9} {st.why}")
@@ -53,7 +66,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     with options.cluster(args, args.out) as client:
         log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
                           progress=not args.no_progress, overrides=overrides, argv=command,
-                          client=client)
+                          client=client, rebuild_log=args.rebuild_log)
     run = log["runs"][-1]
     for stage in STAGES:
         st = run["stages"][stage]

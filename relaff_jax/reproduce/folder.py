@@ -73,8 +73,28 @@ def now() -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S")
 
 
-def open_log(paths: Paths, preset_name: str, cfg: Any, seed: int) -> dict[str, Any]:
-    """Read or create the run log; a DIR of another preset, config or seed is refused."""
+def differences(stored: Any, wanted: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
+    """The dotted keys at which two JSON trees differ, with the stored and the wanted value
+    (a key missing on one side shows as ``<absent>``)."""
+    if isinstance(stored, dict) and isinstance(wanted, dict):
+        out = []
+        for k in sorted(set(stored) | set(wanted), key=str):
+            key = f"{prefix}.{k}" if prefix else str(k)
+            out += differences(stored.get(k, "<absent>"), wanted.get(k, "<absent>"), key)
+        return out
+    return [] if stored == wanted else [(prefix, stored, wanted)]
+
+
+def damaged_log_hint(root: Path) -> str:
+    return (f"every stage's own output is untouched: rebuild the log with `relaff reproduce --out {root} "
+            "--rebuild-log` and the --preset, --seed and --set options the run was made with (stages made "
+            "with other settings then show as stale)")
+
+
+def open_log(paths: Paths, preset_name: str, cfg: Any, seed: int, rebuild: bool = False) -> dict[str, Any]:
+    """Read or create the run log; a DIR of another preset, config or seed is refused.
+    ``rebuild``: a damaged run log is set aside (``run.json.damaged``) and a new one written for
+    the requested settings; the stages then find their own outputs and skip what is complete."""
     root = paths.root
     try:
         rio.check_writable_dir(root)
@@ -85,24 +105,42 @@ def open_log(paths: Paths, preset_name: str, cfg: Any, seed: int) -> dict[str, A
     if paths.log.exists():
         try:
             log = rio.read_json(paths.log)
+            if not isinstance(log, dict) or log.get("format") != FORMAT:
+                raise ValueError("not a relaff reproduce run log")
         except (OSError, ValueError) as e:
-            raise ReproduceError(f"{paths.log} is corrupt ({e}); use a new --out") from e
-        if not isinstance(log, dict) or log.get("format") != FORMAT:
-            raise ReproduceError(f"{paths.log} is not a relaff reproduce run log")
-        if log.get("format_version") != FORMAT_VERSION:
-            raise ReproduceError(f"{root} was made by another version of relaff reproduce (run log format "
-                                 f"{log.get('format_version')}, this one writes {FORMAT_VERSION}); use a new --out")
-        diff = [k for k in ("preset", "seed", "config") if log.get(k) != want[k]]
-        if diff:
-            detail = "; ".join(f"{k}: stored {json.dumps(log.get(k))[:80]}, requested {json.dumps(want[k])[:80]}"
-                               for k in diff)
-            raise ReproduceError(f"{root} holds a run with another {', '.join(diff)} ({detail}); "
-                                 "use a new --out (or the same options) to continue")
-        return log
-    if root.exists() and any(not p.name.startswith(".") for p in root.iterdir()):
+            if not rebuild:
+                raise ReproduceError(f"{paths.log} is damaged ({e}); {damaged_log_hint(root)}") from e
+            os.replace(paths.log, paths.log.with_name(RUN_LOG + ".damaged"))
+            log = None
+        if log is not None:
+            if rebuild:
+                raise ReproduceError(f"{paths.log} is intact; --rebuild-log is only for a damaged run log")
+            return _check_log(log, want, root)
+    elif rebuild:
+        if not root.is_dir():
+            raise ReproduceError(f"{root} does not exist: nothing to rebuild")
+    elif root.exists() and any(not p.name.startswith(".") for p in root.iterdir()):
         raise ReproduceError(f"{root} exists, is not empty and holds no {RUN_LOG}: not a relaff reproduce folder")
     os.makedirs(root, exist_ok=True)
     log = {"format": FORMAT, "format_version": FORMAT_VERSION, "created": now(), **want,
            "seeds": seeds(seed), "versions": versions(), "machine": machine(), "runs": [], "timings": {}}
+    if rebuild:
+        log["rebuilt"] = now()
     rio.atomic_write_json(paths.log, log)
+    return log
+
+
+def _check_log(log: dict, want: dict, root: Path) -> dict:
+    if log.get("format_version") != FORMAT_VERSION:
+        raise ReproduceError(f"{root} was made by another version of relaff reproduce (run log format "
+                             f"{log.get('format_version')}, this one writes {FORMAT_VERSION}); use a new --out")
+    stored = {k: log.get(k, "<absent>") for k in want}
+    diff = differences(stored, want)
+    if diff:
+        what = sorted({key.split(".")[0] for key, _, _ in diff})
+        shown = "; ".join(f"{key.removeprefix('config.')}: stored {json.dumps(a)[:60]}, requested {json.dumps(b)[:60]}"
+                          for key, a, b in diff[:8])
+        more = f"; and {len(diff) - 8} more" if len(diff) > 8 else ""
+        raise ReproduceError(f"{root} holds a run with another {', '.join(what)} ({len(diff)} key(s) differ: "
+                             f"{shown}{more}); use a new --out (or the same options) to continue")
     return log

@@ -24,7 +24,7 @@ from relaff_jax.constants import ACTIONS, SIM_ENGINES, SPACES, STAGES
 from relaff_jax.data.config import check_dataset_config
 from relaff_jax.data.errors import DatasetError
 from relaff_jax.reproduce import experiment, features, generate, report
-from relaff_jax.reproduce.folder import Paths, ReproduceError, now, open_log
+from relaff_jax.reproduce.folder import Paths, ReproduceError, damaged_log_hint, now, open_log
 from relaff_jax.reproduce.progress import Progress, estimate_seconds
 from relaff_jax.errors import UserError
 from relaff_jax.reproduce.stage import Run, Status
@@ -81,7 +81,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
               overrides: Mapping[str, Any] | None = None, cfg: RunConfig | None = None,
               rollout_factory: Callable | None = None, feature_factory: Callable | None = None,
               feature_config_fn: Callable | None = None, argv: Sequence[str] | None = None,
-              stream=None, client: Any = None) -> dict[str, Any]:
+              stream=None, client: Any = None, rebuild_log: bool = False) -> dict[str, Any]:
     """Run (or continue) the whole study in ``out``; return the run log.
 
     preset_name: ``tiny``, ``quick`` or ``paper`` (``cfg`` replaces it); ``overrides``: dotted
@@ -93,6 +93,8 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
     client: a ``distributed.Client`` (``relaff_jax.cluster.connect``): dataset chunks, feature
     chunks and sweep blocks run as tasks on its cluster (the factories must be picklable);
     the results are those of the run without it, bit for bit.
+    rebuild_log: ``out``'s run log is damaged; set it aside and start a new one for these
+    settings (``folder.open_log``); the stages' own outputs decide what is skipped.
     """
     if preset_name not in PRESETS:
         raise ReproduceError(f"unknown preset {preset_name!r}; expected one of {', '.join(PRESETS)}")
@@ -108,7 +110,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
     cpus = os.cpu_count() or 1
     jobs = jobs or cpus
     paths = Paths(Path(out))
-    log = open_log(paths, preset_name, cfg, seed)
+    log = open_log(paths, preset_name, cfg, seed, rebuild=rebuild_log)
     rio.clean_leftovers(paths.root)
     entry = {"started": now(), "argv": list(argv) if argv is not None else None, "jobs": jobs,
              "force": list(force), "status": "running", "stages": {}}
@@ -171,8 +173,13 @@ def status(out: str | os.PathLike) -> dict[str, Any]:
     paths = Paths(Path(out))
     if not paths.log.exists():
         raise ReproduceError(f"{out} holds no {paths.log.name}: not a relaff reproduce folder")
-    log = rio.read_json(paths.log)
-    cfg = from_json(log["config"])
+    try:
+        log = rio.read_json(paths.log)
+        cfg = from_json(log["config"])
+        log["preset"], log["seed"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        why = e if not isinstance(e, (KeyError, TypeError)) else f"no valid {e} entry"
+        raise ReproduceError(f"{paths.log} is damaged ({why}); {damaged_log_hint(paths.root)}") from None
     run = Run(paths, log["preset"], cfg, log["seed"], 1, (), Progress({}, enabled=False),
               generate.rollout_factory_for(cfg), *features.factories_for(cfg), log, {})
     out = {}
