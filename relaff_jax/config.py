@@ -53,6 +53,12 @@ def override(cfg: T, updates: Mapping[str, Any] | None = None, **kwargs: Any) ->
     return _override(cfg, merged, "") if merged else cfg
 
 
+def override_under(cfg: T, updates: Mapping[str, Any], prefix: str) -> T:
+    """``override`` of the node ``cfg`` found at ``prefix`` (``"dataset."``) of a larger tree:
+    the error messages name the keys as they are spelled from the tree's root."""
+    return _override(cfg, dict(updates), prefix) if updates else cfg
+
+
 def _override(cfg: T, merged: Mapping[str, Any], prefix: str) -> T:
     direct: dict[str, Any] = {}
     nested: dict[str, dict[str, Any]] = {}

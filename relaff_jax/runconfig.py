@@ -119,6 +119,23 @@ def preset(name: str) -> RunConfig:
     raise UserError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
 
 
+def precheck(overrides: Mapping[str, Any]) -> None:
+    """Check ``--set`` keys without building the tree, so that a mistake is reported at once:
+    a top-level key the tree does not have, and every key (and its value's kind) under the
+    nodes that load without JAX (``dataset``, ``reproduce``). The other nodes' keys are checked
+    by ``resolve``, which imports their stages (seconds). Raises the same ``ConfigError``s."""
+    from relaff_jax.config import override_under
+
+    names = {f.name for f in dataclasses.fields(RunConfig)}
+    light = {"dataset": _dataset, "reproduce": ReproduceConfig}
+    for key, value in dict(overrides).items():
+        head, _, rest = key.partition(".")
+        if head not in names:
+            raise ConfigError(f"unknown config key {key!r}: RunConfig has no {head!r}; valid keys: {sorted(names)}")
+        if head in light and rest:
+            override_under(light[head](), {rest: value}, f"{head}.")
+
+
 def resolve(base: RunConfig | None = None, overrides: Mapping[str, Any] | None = None) -> RunConfig:
     """``base`` (default: the paper's settings) with checked ``--set`` overrides."""
     return override(base or RunConfig(), dict(overrides or {}))

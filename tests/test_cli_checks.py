@@ -153,3 +153,30 @@ def test_resuming_with_other_settings_names_only_the_keys_that_differ(capsys, tm
     line = one_line_error(capsys, "reproduce")
     assert "1 key(s) differ: dataset.borrow_fraction: stored" in line and "requested 0.25" in line
     assert "perception" not in line and "experiment" not in line  # not the whole stored tree
+
+
+PROBE = """
+import sys
+from relaff_jax import cli
+code = cli.main(sys.argv[1:])
+print(code, sorted(m for m in ("jax", "mujoco", "sklearn") if m in sys.modules))
+"""
+
+
+@pytest.mark.parametrize("argv", [
+    ["generate", "lift", "--samples", "10", "--out", "{tmp}/d", "--set", "foo=1"],
+    ["generate", "lift", "--samples", "10", "--out", "{tmp}/d", "--set", "dataset.n_sample=10"],
+    ["reproduce", "--preset", "tiny", "--out", "{tmp}/r", "--set", "dataset.n_samples=many"],
+    ["experiment", "--synthetic", "10", "--out", "{tmp}/e", "--set", "foo=1"],
+    ["scenes", "3", "--set", "foo=1"],
+    ["features", "{tmp}", "--set", "foo=1"],
+])
+def test_a_config_mistake_is_reported_before_jax_is_imported(tmp_path, argv):
+    import subprocess
+    import sys
+
+    argv = [a.format(tmp=tmp_path) for a in argv]
+    r = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, timeout=120)
+    assert r.stdout == "2 []\n", (r.stdout, r.stderr)  # exit code 2, and no JAX, MuJoCo or sklearn loaded
+    assert r.stderr.startswith(f"relaff {argv[0]}: error: ") and "config key" in r.stderr
+    assert not any(tmp_path.iterdir())

@@ -21,6 +21,7 @@ EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bo
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
+    options.precheck(args)
     from relaff_jax import learn
 
     from relaff_jax.runconfig import RunConfig

@@ -17,12 +17,22 @@ def add_set(p: argparse.ArgumentParser, example: str = "perception.voxel.size=0.
                         "an unknown key lists the valid ones")
 
 
+def precheck(args: argparse.Namespace, extra: list[str] = ()) -> None:
+    """The ``--set`` keys that can be checked without importing JAX (``runconfig.precheck``):
+    called first by the commands that import their stage before resolving the config."""
+    from relaff_jax.runconfig import precheck as check
+
+    check({**parse_set(extra), **parse_set(args.set or [])})
+
+
 def config(args: argparse.Namespace, base: Any = None, extra: list[str] = ()) -> Any:
     """The resolved ``RunConfig``: ``base`` (default: the paper's settings), then the
     command's own options given as ``extra`` ``KEY=VALUE`` items, then ``--set`` (which wins)."""
-    from relaff_jax.runconfig import resolve
+    from relaff_jax.runconfig import precheck, resolve
 
-    return resolve(base, {**parse_set(extra), **parse_set(args.set or [])})
+    overrides = {**parse_set(extra), **parse_set(args.set or [])}
+    precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
+    return resolve(base, overrides)
 
 
 def check_out_dir(path: Path, what: str = "--out") -> None:

@@ -43,6 +43,7 @@ def register(subparsers) -> None:
 
 def cmd_features(args) -> int:
     """``relaff features``: attach features, print their shapes."""
+    options.precheck(args)
     from relaff_jax.perception import from_sim
 
     tree = options.config(args, extra=[f"dataset.feature_batch={args.batch}"])
@@ -66,6 +67,7 @@ def cmd_features(args) -> int:
 
 def cmd_show(args) -> int:
     """``relaff show``: draw sample ``--index`` of the dataset into ``--out``."""
+    options.precheck(args)
     from relaff_jax import data
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import world as wd

@@ -42,8 +42,8 @@ def register(sub) -> None:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from relaff_jax import reproduce as R
     from relaff_jax.config import parse_set
+    from relaff_jax.runconfig import precheck
 
     if args.dir is not None and args.out is not None and args.dir != args.out:
         raise UserError(f"two run folders given: {args.dir} and --out {args.out}")
@@ -52,6 +52,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     args.out = args.out if args.out is not None else args.dir
     if args.out is None:
         raise UserError("the run folder is required: --out DIR")
+    overrides = {**({"dataset.engine": args.engine} if args.engine else {}), **parse_set(args.set or [])}
+    if not args.status:
+        precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
+    from relaff_jax import reproduce as R
+
     if args.status:
         for stage, st in R.status(args.out).items():
             print(f"{stage:<10} {st.state:<9} {st.why}")
@@ -62,7 +67,6 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     command += [x for s in args.set or () for x in ("--set", s)] + (["--no-progress"] if args.no_progress else [])
     command += ["--cluster", args.cluster] if args.cluster else []
     command += ["--engine", args.engine] if args.engine else []
-    overrides = {**({"dataset.engine": args.engine} if args.engine else {}), **parse_set(args.set or [])}
     with options.cluster(args, args.out) as client:
         log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
                           progress=not args.no_progress, overrides=overrides, argv=command,

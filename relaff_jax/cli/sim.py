@@ -69,6 +69,7 @@ def cmd_objects(args) -> int:
 
 
 def cmd_scenes(args) -> int:
+    options.precheck(args)
     from relaff_jax.sim import scenes as sc
     from relaff_jax.sim import world as wd
 
