@@ -180,3 +180,32 @@ def test_a_config_mistake_is_reported_before_jax_is_imported(tmp_path, argv):
     assert r.stdout == "2 []\n", (r.stdout, r.stderr)  # exit code 2, and no JAX, MuJoCo or sklearn loaded
     assert r.stderr.startswith(f"relaff {argv[0]}: error: ") and "config key" in r.stderr
     assert not any(tmp_path.iterdir())
+
+
+def test_generate_refuses_a_sample_count_beyond_the_rollout_cap_with_the_projected_time(monkeypatch, capsys,
+                                                                                          tmp_path):
+    import relaff_jax.sim.rollouts
+    from relaff_jax import data
+
+    monkeypatch.setattr(relaff_jax.sim.rollouts, "make_rollout_fn", no_work)
+    monkeypatch.setattr(data, "generate_dataset", no_work)
+    argv = ["generate", "lift", "--samples", "1000000000000", "--out", str(tmp_path / "d")]
+    assert cli.main(argv) == 2
+    line = one_line_error(capsys, "generate")
+    assert "needs at least N rollouts" in line and "caps them at 200,192" in line  # 200,000 in chunks of 256
+    assert "years at ~5 rollouts/s" in line
+    assert cli.main(argv[:3] + ["300", "--max-rollouts", "256", "--batch", "64", "--engine", "native",
+                                "--out", str(tmp_path / "d")]) == 2
+    assert "--samples 300 cannot be reached" in one_line_error(capsys, "generate")
+    assert not (tmp_path / "d").exists()
+
+
+def test_reproduce_refuses_a_sample_count_beyond_the_rollout_cap(monkeypatch, capsys, tmp_path):
+    from relaff_jax.reproduce import generate as stage_generate
+
+    monkeypatch.setattr(stage_generate, "rollout_factory_for", lambda cfg: no_work)
+    argv = ["reproduce", "--preset", "tiny", "--out", str(tmp_path / "r"), "--set", "dataset.n_samples=5000"]
+    assert cli.main(argv) == 2
+    line = one_line_error(capsys, "reproduce")
+    assert "dataset.n_samples 5,000 cannot be reached" in line and "dataset.max_rollouts caps them at 2,000" in line
+    assert not (tmp_path / "r").exists()

@@ -111,6 +111,12 @@ def cmd_generate(args) -> int:
 
     cfg, engine = tree.action, tree.dataset.engine
     ds.config.check_dataset_config(tree.dataset)
+    from relaff_jax.reproduce.progress import sample_bound
+
+    bound = sample_bound(args.samples, tree.dataset.max_rollouts, args.batch, engine,
+                         names=("--samples", "--max-rollouts (dataset.max_rollouts)"))
+    if bound:
+        raise UserError(bound)
     with options.cluster(args, Path(args.out)) as client:
         if client is None:
             fn = make_rollout_fn(args.action, args.batch, cfg, engine=engine)

@@ -55,6 +55,40 @@ def estimate_seconds(cfg: Any, jobs: int, cpus: int) -> dict[str, float]:
     return {"generate": gen, "features": feat, "experiment": exp, "report": rep}
 
 
+def human_time(s: float) -> str:
+    """A duration for a message: ``m:ss`` up to an hour, then hours, days or years."""
+    if s < 3600:
+        return fmt_time(s)
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400), ("hours", 3600)):
+        if s >= 2 * size or unit == "hours":
+            return f"{s / size:,.0f} {unit}" if s >= 10 * size else f"{s / size:.1f} {unit}"
+    return fmt_time(s)  # pragma: no cover
+
+
+def generate_seconds(n_samples: int, engine: str = "mjx") -> float:
+    """The cost model's wall time for one balanced dataset of ``n_samples`` (compile included)."""
+    rate = COST["rollouts_per_s_native" if engine == "native" else "rollouts_per_s"]
+    return COST["sim_compile"] + n_samples * COST["rollouts_per_sample"] / rate
+
+
+def sample_bound(n_samples: int, max_rollouts: int, batch: int, engine: str = "mjx",
+                 names: tuple[str, str] = ("dataset.n_samples", "dataset.max_rollouts")) -> str | None:
+    """Why ``n_samples`` balanced samples cannot come out of the rollout cap, or None.
+
+    A balanced dataset of N samples needs N distinct rollouts at the least (about
+    ``COST["rollouts_per_sample"]`` times as many in practice); the generator stops at
+    ``max_rollouts`` rounded up to whole chunks of ``batch``. ``names``: how the message calls
+    the two settings (the CLI's options, or the config keys)."""
+    cap = -(-int(max_rollouts) // int(batch)) * int(batch)
+    if n_samples <= cap:
+        return None
+    rate = COST["rollouts_per_s_native" if engine == "native" else "rollouts_per_s"]
+    return (f"{names[0]} {n_samples:,} cannot be reached: a balanced dataset of N samples needs at least N "
+            f"rollouts, and {names[1]} caps them at {cap:,}; the ~{n_samples * COST['rollouts_per_sample']:,.0f} "
+            f"rollouts it would take run ~{human_time(generate_seconds(n_samples, engine))} at ~{rate:g} "
+            f"rollouts/s (engine {engine}, docs/reproduce.md). Lower {names[0]} or raise {names[1]}")
+
+
 def stage_left(model: float, spent: float, f: float, first: tuple[float, float] | None, now: float) -> float:
     """Seconds left in a stage at fraction ``f`` after ``spent`` seconds.
 

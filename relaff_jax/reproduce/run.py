@@ -25,7 +25,7 @@ from relaff_jax.data.config import check_dataset_config
 from relaff_jax.data.errors import DatasetError
 from relaff_jax.reproduce import experiment, features, generate, report
 from relaff_jax.reproduce.folder import Paths, ReproduceError, damaged_log_hint, now, open_log
-from relaff_jax.reproduce.progress import Progress, estimate_seconds
+from relaff_jax.reproduce.progress import Progress, estimate_seconds, sample_bound
 from relaff_jax.errors import UserError
 from relaff_jax.reproduce.stage import Run, Status
 from relaff_jax.runconfig import PRESETS, RunConfig, from_json, preset
@@ -54,6 +54,9 @@ def check_config(cfg: RunConfig, seed: int) -> None:
         raise ReproduceError(f"dataset.borrow_fraction must be in [0, 1], got {d.borrow_fraction}")
     if d.engine not in SIM_ENGINES:
         raise ReproduceError(f"dataset.engine must be one of {', '.join(SIM_ENGINES)}, got {d.engine!r}")
+    bound = sample_bound(d.n_samples, d.max_rollouts, d.rollout_batch, d.engine)
+    if bound:
+        raise ReproduceError(bound)
     try:  # the dataset stage's own check (population, negatives, match_patience, ...)
         check_dataset_config(d)
     except DatasetError as e:
