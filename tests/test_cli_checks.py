@@ -209,3 +209,12 @@ def test_reproduce_refuses_a_sample_count_beyond_the_rollout_cap(monkeypatch, ca
     line = one_line_error(capsys, "reproduce")
     assert "dataset.n_samples 5,000 cannot be reached" in line and "dataset.max_rollouts caps them at 2,000" in line
     assert not (tmp_path / "r").exists()
+
+
+def test_no_test_prints_past_the_capture():
+    """`pytest -q` output is the dots and the summary: a test's figures go in its assertion
+    messages or in captured prints (shown with a failure), never past the capture."""
+    here = Path(__file__).parent
+    bypass = "capsys" + ".disabled("
+    offenders = [p.name for p in sorted(here.glob("test_*.py")) if bypass in p.read_text()]
+    assert offenders == []
