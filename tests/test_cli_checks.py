@@ -218,3 +218,12 @@ def test_no_test_prints_past_the_capture():
     bypass = "capsys" + ".disabled("
     offenders = [p.name for p in sorted(here.glob("test_*.py")) if bypass in p.read_text()]
     assert offenders == []
+
+
+def test_compare_unwritable_out_fails_before_reading_the_reports(monkeypatch, capsys, tmp_path, a_file):
+    import relaff_jax.report.readings
+
+    monkeypatch.setattr(relaff_jax.report.readings, "compare_readings", no_work)
+    argv = ["compare", f"a={tmp_path}", f"b={tmp_path}", "--out", f"{a_file}/page.md"]
+    assert cli.main(argv) == 2
+    assert "is a file" in one_line_error(capsys, "compare")

@@ -63,6 +63,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
     from relaff_jax import io as rio
     from relaff_jax.report.readings import compare_readings
 
+    if args.out:
+        options.check_out_file(args.out)  # before the reports are read
     reports = {}
     for item in args.readings:
         name, sep, path = item.partition("=")
