@@ -122,12 +122,12 @@ def preset(name: str) -> RunConfig:
 def precheck(overrides: Mapping[str, Any]) -> None:
     """Check ``--set`` keys without building the tree, so that a mistake is reported at once:
     a top-level key the tree does not have, and every key (and its value's kind) under the
-    nodes that load without JAX (``dataset``, ``reproduce``). The other nodes' keys are checked
+    nodes that load without JAX (``dataset``, ``perception``, ``reproduce``). The other nodes' keys are checked
     by ``resolve``, which imports their stages (seconds). Raises the same ``ConfigError``s."""
     from relaff_jax.config import override_under
 
     names = {f.name for f in dataclasses.fields(RunConfig)}
-    light = {"dataset": _dataset, "reproduce": ReproduceConfig}
+    light = {"dataset": _dataset, "perception": _perception, "reproduce": ReproduceConfig}
     for key, value in dict(overrides).items():
         head, _, rest = key.partition(".")
         if head not in names:

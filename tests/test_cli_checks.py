@@ -170,6 +170,7 @@ print(code, sorted(m for m in ("jax", "mujoco", "sklearn") if m in sys.modules))
     ["experiment", "--synthetic", "10", "--out", "{tmp}/e", "--set", "foo=1"],
     ["scenes", "3", "--set", "foo=1"],
     ["features", "{tmp}", "--set", "foo=1"],
+    ["features", "{tmp}", "--set", "perception.voxel.sise=0.02"],
 ])
 def test_a_config_mistake_is_reported_before_jax_is_imported(tmp_path, argv):
     import subprocess
