@@ -183,6 +183,27 @@ def test_a_config_mistake_is_reported_before_jax_is_imported(tmp_path, argv):
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.parametrize("argv", [
+    ["features", "{tmp}/none"],
+    ["show", "{tmp}/none"],
+    ["experiment", "--data", "{tmp}/none", "--out", "{tmp}/e"],
+    ["report", "{tmp}/none", "--out", "{tmp}/r"],
+    ["real", "segment", "{tmp}/none"],
+    ["real", "show", "{tmp}/none.pcd"],
+    ["real", "study", "{tmp}/none", "--labels", "{tmp}/l.csv", "--out", "{tmp}/s"],
+])
+def test_a_missing_input_is_reported_before_the_stage_is_imported(tmp_path, argv):
+    import subprocess
+    import sys
+
+    argv = [a.format(tmp=tmp_path) for a in argv]
+    r = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, timeout=120)
+    assert r.stdout == "2 []\n", (r.stdout, r.stderr)
+    command = " ".join(argv[:2]) if argv[0] == "real" else argv[0]
+    assert r.stderr.startswith(f"relaff {command}: error: ") and str(tmp_path) in r.stderr, r.stderr
+    assert not any(tmp_path.iterdir())
+
+
 def test_generate_refuses_a_sample_count_beyond_the_rollout_cap_with_the_projected_time(monkeypatch, capsys,
                                                                                           tmp_path):
     import relaff_jax.sim.rollouts

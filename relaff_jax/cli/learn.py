@@ -22,6 +22,8 @@ EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bo
 
 def cmd_experiment(args: argparse.Namespace) -> int:
     options.precheck(args)
+    for d in args.data or ():
+        options.check_in_dir(d)
     from relaff_jax import learn
 
     from relaff_jax.runconfig import RunConfig
@@ -51,9 +53,11 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
+    options.check_in_file(os.path.join(args.results, "experiment.json"),
+                          f"{args.results} is not an experiment folder (no experiment.json)")
+    check_out_dir(args.out)
     from relaff_jax.report import write_report
 
-    check_out_dir(args.out)
     out = write_report(args.results, args.out)
     print(f"report: {out}")
     return 0

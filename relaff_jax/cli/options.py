@@ -49,6 +49,19 @@ def check_out_file(path: Path, what: str = "--out") -> None:
     check_out_dir(path.parent, what=f"{what} {path}: folder")
 
 
+def check_in_dir(path: Path, message: str | None = None) -> None:
+    """An input folder must exist: checked first, before the command imports its stage (seconds);
+    ``message`` defaults to the dataset store's own."""
+    if not Path(path).is_dir():
+        raise UserError(message or f"{path}: no such dataset directory")
+
+
+def check_in_file(path: Path, message: str) -> None:
+    """An input file must exist: checked first, before the command imports its stage."""
+    if not Path(path).is_file():
+        raise UserError(message)
+
+
 CONFIG_RECORD = "relaff_config.json"
 
 

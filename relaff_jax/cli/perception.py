@@ -44,6 +44,7 @@ def register(subparsers) -> None:
 def cmd_features(args) -> int:
     """``relaff features``: attach features, print their shapes."""
     options.precheck(args)
+    options.check_in_dir(args.dir)
     from relaff_jax.perception import from_sim
 
     tree = options.config(args, extra=[f"dataset.feature_batch={args.batch}"])
@@ -68,6 +69,7 @@ def cmd_features(args) -> int:
 def cmd_show(args) -> int:
     """``relaff show``: draw sample ``--index`` of the dataset into ``--out``."""
     options.precheck(args)
+    options.check_in_dir(args.dir)
     from relaff_jax import data
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import world as wd

@@ -19,7 +19,7 @@ import csv
 import json
 from pathlib import Path
 
-from relaff_jax.cli.options import check_out_dir, check_out_file
+from relaff_jax.cli.options import check_in_dir, check_in_file, check_out_dir, check_out_file
 from relaff_jax.errors import UserError
 
 
@@ -95,7 +95,15 @@ def _corrections(path: Path | None) -> dict:
     return out
 
 
+def _check_inputs(args) -> None:
+    """The scenes folder and the labels file exist: checked before the real stage is imported."""
+    check_in_dir(args.scenes, f"scenes folder {args.scenes} does not exist")
+    if getattr(args, "labels", None) is not None:
+        check_in_file(args.labels, f"labels file {args.labels} does not exist")
+
+
 def cmd_segment(args) -> int:
+    _check_inputs(args)
     from relaff_jax.real import score_scenes
     from relaff_jax.real.scene_source import scene_files
 
@@ -114,11 +122,12 @@ def cmd_segment(args) -> int:
 
 
 def cmd_show(args) -> int:
+    check_in_file(args.scene, f"scene file {args.scene} does not exist")
+    check_out_file(args.out)
     import jax
 
     from relaff_jax.real import read_cloud, render_real_scene_png
 
-    check_out_file(args.out)
     cloud = read_cloud(args.scene)
     render_real_scene_png(cloud, jax.random.PRNGKey(args.seed), args.out, pair=args.pair, source=args.source)
     print(args.out)
@@ -126,6 +135,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_propose(args) -> int:
+    _check_inputs(args)
     from relaff_jax.real import labels as lab
     from relaff_jax.real.labelling import propose_folder
 
@@ -143,6 +153,7 @@ def cmd_propose(args) -> int:
 
 
 def cmd_check(args) -> int:
+    _check_inputs(args)
     from relaff_jax.real import labels as lab
     from relaff_jax.real.scene_source import object_ids
 
@@ -154,6 +165,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_study(args) -> int:
+    _check_inputs(args)
     from relaff_jax.real import experiments as ex
     from relaff_jax.real import sim_relations as sr
     from relaff_jax.real.study import run_study
