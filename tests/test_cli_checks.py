@@ -249,3 +249,10 @@ def test_compare_unwritable_out_fails_before_reading_the_reports(monkeypatch, ca
     argv = ["compare", f"a={tmp_path}", f"b={tmp_path}", "--out", f"{a_file}/page.md"]
     assert cli.main(argv) == 2
     assert "is a file" in one_line_error(capsys, "compare")
+
+
+def test_generate_help_prints_a_plain_percent(capsys):
+    with pytest.raises(SystemExit):
+        cli.main(["generate", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert "50% positives" in out and "%%" not in out and "--engine native" in out

@@ -32,9 +32,10 @@ def register(subparsers) -> None:
     p = subparsers.add_parser(
         "generate",
         help="simulate an action on sampled scenes and write a balanced, resumable dataset",
-        description="Sample and settle scenes, run the action in MJX, label by physics, and keep "
-        "N samples with 50%% positives (negatives matched to the positives' COG-distance "
-        "distribution). Rerun with the same arguments to resume an interrupted run.",
+        description="Sample and settle scenes, run the action's motor program (in MJX, or in MuJoCo C "
+        "with --engine native), label by physics, and keep N samples with 50% positives (negatives "
+        "matched to the positives' COG-distance distribution). Rerun with the same arguments to resume "
+        "an interrupted run. N beyond the rollout cap (--max-rollouts) is refused at once.",
     )
     p.add_argument("action", help=f"one of: {', '.join(ACTIONS)}")
     p.add_argument("--samples", type=int, required=True, help="balanced samples to keep (N >= 2)")
