@@ -72,16 +72,15 @@ def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path,
     held = min(int(have[sr.RELATIONS.index(r)]) for r in ("beside", "on_top"))
     if sim_cfg.per_relation < full and held < full:  # the simulation would stop short of SIM_full
         raise UserError(f"SIM_full needs {full} simulated scenes of each relation (n_full {exp_cfg.n_full} to train, "
-                        f"as many to test), but per_relation is {sim_cfg.per_relation}: raise per_relation or lower n_full")
+                        f"as many to test), but per_relation is {sim_cfg.per_relation}: raise --per-relation or lower --n-full")
     validate_real_config(real_cfg)
     labels = lab.read_labels(labels_path)
     if not labels:
         raise UserError(f"{labels_path} labels no pair")
-    counts = lab.relation_counts(labels)
-    try:
+    try:  # the real pairs are the labelled ones, so their split is known now
         ex.split_sizes(np.asarray([int(x.relation == "on_top") for x in labels]), exp_cfg.train_fraction)
     except UserError as e:
-        raise UserError(f"{labels_path}: {e} ({counts})") from None
+        raise UserError(f"{labels_path}: {e}") from None
     return lab.validate(labels, scenes, object_ids)
 
 
