@@ -88,10 +88,12 @@ def test_table2_from_hand_built_accuracies():
     per = dict(zip(an["table2_rows"], an["table2_per_target"]))
     np.testing.assert_allclose(t2["NB"], [1, 1, 1])
     np.testing.assert_allclose(per["DB1 average"], [1.5, 1.5, 1.5])  # target 0: (2 + 1) / 2
-    np.testing.assert_allclose(per["DB1 best"], [2.0, 1.5, 1.5])
-    np.testing.assert_allclose(t2["DB1 best"], [5 / 3, 1.5, 2.0])
-    np.testing.assert_allclose(t2["CB1 best"], [3, 3, 3])
-    np.testing.assert_allclose(t2["CBn"], [1, 1, 1])
+    np.testing.assert_allclose(per["DB1 best (in-sample oracle)"], [2.0, 1.5, 1.5])
+    np.testing.assert_allclose(t2["DB1 best (in-sample oracle)"], [5 / 3, 1.5, 2.0])
+    np.testing.assert_allclose(t2["CB1 best (in-sample oracle)"], [3, 3, 3])
+    # no category passed T = 0.5 (identity corr): CBn would be NB relabelled, so it has no value
+    assert np.all(np.isnan(t2["CBn"])) and "no category passed T = 0.5" in an["unmeasurable"]["CBn"]
+    assert "no test outcomes" in an["unmeasurable"]["DB1 best"]  # no halves to choose on
     assert an["best_db1"][0] == lay["DB1"][1] and an["ten_db1"][0] == lay["DB1"][1]
     # with no category above 0.5 (identity corr), Fig. 12's T=0.5 curve is empty, T=0 uses all
     th = an["thresholds"]
