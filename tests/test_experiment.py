@@ -335,7 +335,7 @@ def test_cli_experiment_and_report(tmp_path):
     with open(tmp_path / "rep" / "table2.csv", newline="") as f:
         rows = list(csv.reader(f))
     assert rows[0] == ["method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max", "n_targets", "ci_low",
-                       "ci_high", "gain_avg", "gain_ci_low", "gain_ci_high"]
+                       "ci_high", "gain_avg", "gain_ci_low", "gain_ci_high", "not_measurable"]
     assert [r[0] for r in rows[1:]] == list(E.TABLE2_ROWS)
     assert rows[1][1:7] == ["1.0000"] * 6  # NB is 1 by definition, in the paper too
     assert rows[3][4:7] == ["2.8190", "0.9760", "3.6570"]  # paper's DB1 best
