@@ -243,16 +243,23 @@ def test_full_report(scene_run, tmp_path):
     res = E.load_results(scene_run / "results")
     an = {s: E.analyse(res[s], res["config"]) for s in ("pca", "rhf")}
     t2 = an["pca"]["table2"]
-    row = lambda name: f"| {name} | " + " | ".join(R.fmt(v) for v in t2[E.TABLE2_ROWS.index(name)])
+    from relaff_jax.report.formatting import row_cells  # a row without a value reads "not measurable: why"
+    row = lambda name: f"| {name} | " + " | ".join(row_cells(an["pca"], E.TABLE2_ROWS.index(name)))
     assert row("DB1 best") in md and row("CBn") in md and "| 2.819 | 0.976 | 3.657 |" in md
+    assert "nan" not in row("CBn")
     for i, name in enumerate(E.TABLE2_ROWS):  # every row says how many affordances it averages
         assert f"{row(name)} | {an['pca']['n_targets'][i]} of {len(an['pca']['actions'])} |" in md
-    assert f"Rests on {len(an['pca']['actions'])} affordances" in md and "percentile bootstrap" in md
+    assert f"Rests on {len(an['pca']['actions'])} affordances" in md and "bias-corrected (BC) bootstrap" in md
+    assert "## Sizes of the protocol" in md and "| test scenes (per affordance) |" in md
     found = json.loads((out / "findings.json").read_text())["findings"]
     assert [f["id"] for f in found] == [f["id"] for f in R.findings(an, res["config"])]
     by_id = {f["id"]: f for f in found}
     assert by_id["dbn_below_db1"]["values"]["dbn"] == pytest.approx(t2[E.TABLE2_ROWS.index("DBn"), 0])
-    assert by_id["dbn_below_db1"]["reproduced"] == bool(t2[E.TABLE2_ROWS.index("DBn"), 0] < t2[E.TABLE2_ROWS.index("DB1 best"), 0])
+    # decided from the interval of the paired difference, not from the point values
+    i_dbn, i_db1 = E.TABLE2_ROWS.index("DBn"), E.TABLE2_ROWS.index(by_id["dbn_below_db1"]["values"]["db1_row"])
+    j = R.judge(t2[i_dbn, 0] - t2[i_db1, 0], an["pca"]["table2_boot"][:, i_dbn] - an["pca"]["table2_boot"][:, i_db1],
+                0.0, False, res["config"].ci_level)
+    assert by_id["dbn_below_db1"]["verdict"] == j["verdict"]
     for f in found:
         assert f"| {f['finding']} |" in md
     clusters = R.correlation_clusters(res["rhf"]["corr"], an["rhf"]["actions"], res["config"].cbn_threshold)

@@ -99,7 +99,8 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     """Everything section V reports for one space, as arrays over (target, condition, size).
 
     Returns ``mean``/``sem`` curves ``(A, C + 2, S)``, ``bf`` curves, ``avg_bf (A, C + 2)``,
-    ``defined (A,)`` (window sizes with a bf; ``min_defined`` of them needed), ``tol (A,)`` the
+    ``defined (A,)`` (window sizes with a bf; ``min_defined`` of them needed), ``built (T, A)``
+    (a category built at T for the target), ``tol (A,)`` the
     at-chance tolerance, the in-sample chosen candidates per target (``best_db1``, ``ten_db1``,
     ... condition indices, the first of tied ones; ``ties_*`` how many tied; ``online_db1`` /
     ``online_cb1`` the online weights ``(A, K, R)``), Table II per target
@@ -127,7 +128,7 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     conds = [str(c) for c in res["conditions"]] + ["DB1 online after ten", "CB1 online after ten"]
     out: dict[str, Any] = {"actions": actions, "sizes": sizes, "mean": mean, "sem": sem, "bf": bf, "tol": tol,
                            "avg_bf": window_mean(bf, sizes, *cfg.bf_sizes)[0], "defined": t2["defined"],
-                           "min_defined": min_defined(cfg, sizes), "cbn_ok": cbn_ok,
+                           "min_defined": min_defined(cfg, sizes), "cbn_ok": cbn_ok, "built": masks.any(-1),
                            "window_sizes": int(size_mask(sizes, *cfg.bf_sizes).sum()), "conditions": conds,
                            "table2_rows": list(TABLE2_ROWS), "table2_per_target": t2["bf"], "table2": table2,
                            "n_targets": n_targets, "gain_per_target": t2["gain"], "gain": gain, "gain_n_targets": gain_n,

@@ -46,6 +46,7 @@ from relaff_jax.learn.draws import draw_rep
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.prep import prepare
 from relaff_jax.learn.protocol import (
+    pool_sizes,
     block_fits,
     category_masks,
     condition_names,
@@ -94,7 +95,10 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
             old["fingerprint"] = dict(old["fingerprint"], **now["fingerprint"])
             rio.atomic_write_json(meta_path, old)
     else:
-        rio.atomic_write_json(meta_path, dict(meta, data=list(map(str, data_desc)), started=time.strftime("%Y-%m-%d %H:%M:%S")))
+        # the pools' real sizes (a preset may shrink them to the data), for the report's protocol table
+        pools = {a: dict(zip(("source", "corr", "test"), pool_sizes(len(datasets[a]["label"]), cfg))) for a in actions}
+        rio.atomic_write_json(meta_path, dict(meta, data=list(map(str, data_desc)), pool_sizes=pools,
+                                              started=time.strftime("%Y-%m-%d %H:%M:%S")))
     paths = {}
     for space in spaces:
         paths[space] = run_space(datasets, out / space, cfg, space, actions, seed, jobs, progress)

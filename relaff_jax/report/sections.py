@@ -136,7 +136,7 @@ def table2_blocks(an: Mapping[str, Mapping[str, Any]], cfg: Any, out: Path, pres
                 if np.any(np.isfinite(r))]
         rows.append(["sizes with a bf"] + [f"{int(d)} of {x['window_sizes']}" for d in x["defined"]])
         blocks += [("p", "Per affordance (paper Fig. 10 as numbers); the last row: how many sizes of the window "
-                         "each average rests on (bf is undefined where NB is at or below chance):"),
+                         "each average rests on (bf is undefined where NB is at most half a test scene above chance):"),
                    ("table", ["method"] + list(x["actions"]), rows)]
     blocks += fig_block(out, "fig10_average_bf.png", "Average bootstrap factor per method and affordance, paper Fig. 10")
     return blocks
@@ -218,15 +218,16 @@ def threshold_blocks(corr: np.ndarray, a: Mapping[str, Any], cfg: Any, main: str
     counts = categories_per_threshold(corr, cfg.thresholds)
     rows = [[f"{t:g}", counts[f"{t:g}"]["built"], fmt(th["avg"][i]),
              ci_text(a, "threshold_ci", i) if "threshold_ci" in a else "-", fmt(th["avg_oracle"][i]),
-             fmt(nanmean(a["avg_bf"][:, lay["CBn"][i]]))]
+             fmt(nanmean(np.where(a["built"][i], a["avg_bf"][:, lay["CBn"][i]], np.nan)))]
             for i, t in enumerate(th["T"])]
-    rows.append(["all categories (overall average)", k, "-", "-", fmt(curve_average(th["overall_curve"], a["sizes"], cfg)), "-"])
+    rows.append(["all categories (overall average)", k, fmt(curve_average(th["overall_curve"], a["sizes"], cfg)), "-", "-", "-"])
     blocks: list[tuple] = [("h", 2, "Threshold study"),
                            ("p", f"Categories built at each correlation threshold T and the average bf ({main.upper()}, mean over "
                                  "affordances) of each affordance's best category among them, aggregated as Table II (per "
                                  "affordance over the window, then over the affordances with a value; at T = 0 this is "
                                  "Table II's 'CB1 best'): chosen on one half of the test scenes and scored on the other, "
-                                 "and the in-sample oracle; and of CBn (all of them together). The figure shows the "
+                                 "and the in-sample oracle; and of CBn (all of them together; over the affordances with a "
+                                 "category built at T: without one CBn is NB's learner). The figure shows the "
                                  "in-sample best category's curve."),
                            ("table", ["T", f"categories built (of {k})", "best category avg bf", "interval",
                                       "in-sample oracle", "CBn avg bf"], rows)]
@@ -247,7 +248,10 @@ def protocol_blocks(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]],
         vals = [int(v) for v in vals]
         return f"{min(vals)}" if min(vals) == max(vals) else f"{min(vals)}-{max(vals)}"
 
-    if n_samples:
+    recorded = res["meta"].get("pool_sizes")  # written by the sweep
+    if recorded:
+        src, corr = rng(p["source"] for p in recorded.values()), rng(p["corr"] for p in recorded.values())
+    elif n_samples:
         pools = [pool_sizes(int(n), cfg) for n in n_samples.values()]
         src, corr = rng(p[0] for p in pools), rng(p[1] for p in pools)
     else:
