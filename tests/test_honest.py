@@ -190,8 +190,10 @@ def test_balanced_test_sets_split_into_balanced_halves():
     # draws.draw_test puts the k positives first: scenes 0..3 positive, 4..7 negative
     h = E.scene_halves(np.array([8]), np.array([4]), 8)[0]
     assert list(h) == [0, 1, 0, 1, 0, 1, 0, 1]
-    h = E.scene_halves(np.array([6]), np.array([3]), 6)[0]  # k = 3: each half 1-2 of each class
-    assert list(h) == [0, 1, 0, 0, 1, 0]
+    h = E.scene_halves(np.array([6]), np.array([3]), 6)[0]  # k = 3: halves of 3 (2 + 1 and 1 + 2)
+    assert list(h) == [0, 1, 0, 1, 0, 1]
+    h = E.scene_halves(np.array([2]), np.array([1]), 2)[0]  # one scene per class: one in each half
+    assert list(h) == [0, 1]
 
 
 def test_no_bootstrap_factor_exceeds_the_bound_of_the_test_set_size():

@@ -36,14 +36,18 @@ from relaff_jax.learn.measures import _quiet
 def scene_halves(n_test: np.ndarray, n_positive: np.ndarray | None, width: int) -> np.ndarray:
     """``(A, width)`` int: the half of each target's test set every scene is in. A balanced test
     set (``draws.draw_test``: its k positives first, then k negatives) is split into two
-    balanced halves (alternate scenes within each class); any other into alternate scenes.
-    Padding scenes (past ``n_test``) get -1."""
+    balanced halves of k scenes (alternate scenes within each class; with k odd the negatives
+    start on the other half); any other into alternate scenes. Padding scenes (past ``n_test``)
+    get -1."""
     out = np.full((len(n_test), width), -1, int)
     for t, n in enumerate(np.asarray(n_test, dtype=int)):
         j = np.arange(n)
         k = n // 2
-        balanced = n_positive is not None and n > 0 and 2 * int(n_positive[t]) == n
-        out[t, :n] = (j % k) % 2 if balanced and k > 0 else j % 2
+        if n_positive is not None and k > 0 and 2 * int(n_positive[t]) == n:
+            neg = j >= k
+            out[t, :n] = (j - k * neg + neg * (k % 2)) % 2
+        else:
+            out[t, :n] = j % 2
     return out
 
 
@@ -67,6 +71,9 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
             for h in range(2):
                 idx = np.flatnonzero(halves[t, :n] == h)
                 m = len(idx)
+                if m == 0:  # a test set of one scene: its other half is empty
+                    out[:, h, t] = np.nan
+                    continue
                 w = rng.multinomial(m, np.full(m, 1.0 / m), size=resamples) / m  # (B, m)
                 x = np.asarray(correct[t], dtype=np.float64)[..., idx].reshape(-1, m)  # (C' S R, m)
                 per_rep = (x @ w.T).reshape(c, s, r, resamples)  # accuracy per repetition and resample
