@@ -249,7 +249,7 @@ def test_full_report(scene_run, tmp_path):
     assert "nan" not in row("CBn")
     for i, name in enumerate(E.TABLE2_ROWS):  # every row says how many affordances it averages
         assert f"{row(name)} | {an['pca']['n_targets'][i]} of {len(an['pca']['actions'])} |" in md
-    assert f"Rests on {len(an['pca']['actions'])} affordances" in md and "bias-corrected (BC) bootstrap" in md
+    assert f"of {len(an['pca']['actions'])} affordances, by row (column n)" in md and "bias-corrected (BC) bootstrap" in md
     assert "## Sizes of the protocol" in md and "| test scenes (per affordance) |" in md
     found = json.loads((out / "findings.json").read_text())["findings"]
     assert [f["id"] for f in found] == [f["id"] for f in R.findings(an, res["config"])]

@@ -17,7 +17,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from relaff_jax.learn.config import TABLE2_ROWS, ExperimentConfig
+from relaff_jax.learn.config import ORACLE, TABLE2_ROWS, ExperimentConfig
 from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn.intervals import bc_interval, half_sizes, resampled_means, scene_halves, whole
 from relaff_jax.learn.measures import (
@@ -161,6 +161,9 @@ def unmeasurable(a: Mapping[str, Any], cfg: ExperimentConfig) -> dict[str, str]:
             why[name] = f"no category passed T = {cfg.cbn_threshold:g} (CBn would be NB relabelled)"
         elif ("best" in name and "oracle" not in name and "online" not in name) and not a["outcomes"]:
             why[name] = "no test outcomes kept: no half of the test scenes to choose on"
+        elif name + ORACLE in TABLE2_ROWS and a["n_targets"][TABLE2_ROWS.index(name + ORACLE)] > 0:
+            why[name] = ("no affordance has a bootstrap factor on half of its test set (NB on a half at most "
+                         f"{cfg.chance_tol_scenes:g} of its scenes above chance at every size)")
         elif np.all(np.isnan(a["gain_per_target"][i])):
             why[name] = "the condition did not run"
         else:

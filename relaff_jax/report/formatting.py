@@ -74,7 +74,9 @@ def rests_on(a: Any, cfg: Any) -> str:
             f"(so |bf| <= {int(round(float(np.max(0.5 / tol))))} here, the largest test set); an affordance enters a bf row only with bf defined at "
             f">= {a['min_defined']} of the window's {a['window_sizes']} sizes."
             if tol is not None and "min_defined" in a else "")
-    return (f"Rests on {len(a['actions'])} affordances; {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
+    n = [int(v) for v, row in zip(a["n_targets"], a["table2"]) if np.isfinite(row[0])] if "n_targets" in a else []
+    rows_n = f"{min(n)}-{max(n)}" if n and min(n) != max(n) else (str(n[0]) if n else "none")
+    return (f"Rests on {rows_n} of {len(a['actions'])} affordances, by row (column n); {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
             f"({', '.join(map(str, ran)) if len(ran) <= 6 else f'{ran[0]}..{ran[-1]}'}); {a['reps']} repetitions{t}. "
             "avg/min/max are over the affordances with a value (n); a bootstrap factor is averaged over the sizes "
             "where it is defined (NB above chance); the gain is the mean accuracy difference to NB over the same window."
