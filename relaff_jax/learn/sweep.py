@@ -58,6 +58,9 @@ from relaff_jax.learn.results import FORMAT_VERSION
 from relaff_jax.learn.states import state_features
 
 
+ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share")  # ExperimentConfig keys the sweep never reads
+
+
 def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
                    spaces: Sequence[str] = SPACES, seed: int = 0, jobs: int = 1, progress: bool = True,
                    data_desc: Sequence[str] = ()) -> dict[str, Path]:
@@ -86,6 +89,8 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         # same protocol, seed, actions and data; a space may be added to a finished one
         old = rio.read_json(meta_path)
         now = rio.jsonable(meta)
+        # settings only the analysis reads, added after a run began, do not make it another run
+        now = dict(now, config={k: v for k, v in now["config"].items() if k in old.get("config", {}) or k not in ANALYSIS_ONLY})
         diff = [k for k in ("format", "config", "seed", "actions") if old.get(k) != now[k]]
         diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
         if diff:
