@@ -88,10 +88,12 @@ def test_table2_from_hand_built_accuracies():
     per = dict(zip(an["table2_rows"], an["table2_per_target"]))
     np.testing.assert_allclose(t2["NB"], [1, 1, 1])
     np.testing.assert_allclose(per["DB1 average"], [1.5, 1.5, 1.5])  # target 0: (2 + 1) / 2
-    np.testing.assert_allclose(per["DB1 best"], [2.0, 1.5, 1.5])
-    np.testing.assert_allclose(t2["DB1 best"], [5 / 3, 1.5, 2.0])
-    np.testing.assert_allclose(t2["CB1 best"], [3, 3, 3])
-    np.testing.assert_allclose(t2["CBn"], [1, 1, 1])
+    np.testing.assert_allclose(per["DB1 best (in-sample oracle)"], [2.0, 1.5, 1.5])
+    np.testing.assert_allclose(t2["DB1 best (in-sample oracle)"], [5 / 3, 1.5, 2.0])
+    np.testing.assert_allclose(t2["CB1 best (in-sample oracle)"], [3, 3, 3])
+    # no category passed T = 0.5 (identity corr): CBn would be NB relabelled, so it has no value
+    assert np.all(np.isnan(t2["CBn"])) and "no category passed T = 0.5" in an["unmeasurable"]["CBn"]
+    assert "no test outcomes" in an["unmeasurable"]["DB1 best"]  # no halves to choose on
     assert an["best_db1"][0] == lay["DB1"][1] and an["ten_db1"][0] == lay["DB1"][1]
     # with no category above 0.5 (identity corr), Fig. 12's T=0.5 curve is empty, T=0 uses all
     th = an["thresholds"]
@@ -333,11 +335,13 @@ def test_cli_experiment_and_report(tmp_path):
     with open(tmp_path / "rep" / "table2.csv", newline="") as f:
         rows = list(csv.reader(f))
     assert rows[0] == ["method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max", "n_targets", "ci_low",
-                       "ci_high", "gain_avg", "gain_ci_low", "gain_ci_high"]
+                       "ci_high", "gain_avg", "gain_ci_low", "gain_ci_high", "not_measurable"]
     assert [r[0] for r in rows[1:]] == list(E.TABLE2_ROWS)
     assert rows[1][1:7] == ["1.0000"] * 6  # NB is 1 by definition, in the paper too
-    assert rows[3][4:7] == ["2.8190", "0.9760", "3.6570"]  # paper's DB1 best
-    assert rows[5][4:7] == ["nan"] * 3  # the online row is not in the paper
+    by = {r[0]: r for r in rows[1:]}
+    assert by["DB1 best (in-sample oracle)"][4:7] == ["2.8190", "0.9760", "3.6570"]  # paper's DB1 best: chosen in sample
+    assert by["DB1 best"][4:7] == ["nan"] * 3  # the held-out row is not in the paper
+    assert by["DB1 best after ten (online)"][4:7] == ["nan"] * 3  # nor the online row
     assert (tmp_path / "rep" / "table2_rhf.csv").exists()
     md = (tmp_path / "rep" / "table2.md").read_text()
     assert "| DB1 best after ten |" in md and "Categories built per threshold" in md

@@ -97,8 +97,11 @@ def test_tied_candidates_share_best_and_best_after_ten():
     an = E.analyse(_res(_acc(nb, db1)), _cfg(), intervals=False)
     bf_pull = (0.3 / 0.1 + 0.3 / 0.2 + 0.3 / 0.3) / 3
     bf_take = (1 + 0.3 / 0.2 + 0.5 / 0.3) / 3
-    for row in ("DB1 best", "DB1 best after ten"):
+    # the in-sample rows (no outcomes kept: the held-out ones are NaN); before n = 10 the after-ten
+    # learner is an equal share of pull and take, which is what the tie gives here too
+    for row in ("DB1 best (in-sample oracle)", "DB1 best after ten (in-sample oracle)"):
         assert an["table2_per_target"][E.TABLE2_ROWS.index(row), 0] == pytest.approx((bf_pull + bf_take) / 2)
+    assert np.isnan(an["table2_per_target"][E.TABLE2_ROWS.index("DB1 best"), 0])
     assert an["ties_db1"][0] == 2
 
 
@@ -119,13 +122,15 @@ def test_online_choice_differs_from_the_offline_one_in_the_known_way():
     assert an["ten_db1"][0] == LAY["DB1"][1]
     np.testing.assert_allclose(an["online_db1"][0, :, 0], [0, 0, 1])
     np.testing.assert_allclose(an["online_db1"][0, :, 1], [0, 0.5, 0.5])
-    # the online learner per repetition: rep 0 = take, rep 1 = (pull + take) / 2
+    # the online learner per repetition from n = 10 on: rep 0 = take, rep 1 = (pull + take) / 2;
+    # before n = 10 (here n = 4) nothing is chosen yet: an equal share of pull and take
     online = np.stack([acc[0, LAY["DB1"][2], :, 0], (acc[0, LAY["DB1"][1], :, 1] + acc[0, LAY["DB1"][2], :, 1]) / 2], -1)
     p = online.mean(-1)
-    want = np.mean((p[1:] - 0.5) / 0.1)
+    at4 = (acc[0, LAY["DB1"][1], 1].mean() + acc[0, LAY["DB1"][2], 1].mean()) / 2  # 0.75
+    want = np.mean([(at4 - 0.5) / 0.1] + list((p[2:] - 0.5) / 0.1))
     assert an["table2_per_target"][E.TABLE2_ROWS.index("DB1 best after ten (online)"), 0] == pytest.approx(want)
-    off = np.mean((acc[0, LAY["DB1"][1], 1:].mean(-1) - 0.5) / 0.1)
-    assert an["table2_per_target"][E.TABLE2_ROWS.index("DB1 best after ten"), 0] == pytest.approx(off)
+    off = np.mean([(at4 - 0.5) / 0.1] + list((acc[0, LAY["DB1"][1], 2:].mean(-1) - 0.5) / 0.1))
+    assert an["table2_per_target"][E.TABLE2_ROWS.index("DB1 best after ten (in-sample oracle)"), 0] == pytest.approx(off)
     assert want < off
 
 
@@ -160,14 +165,63 @@ def test_resampled_means_match_a_plain_numpy_loop():
     correct[1, ..., 5] = False  # target 1 has 5 test scenes (one padding)
     n_test = np.array([6, 5])
     acc = np.stack([correct[0].mean(-1), correct[1, ..., :5].mean(-1)])
-    got = E.resampled_means(acc, correct, n_test, 7, seed=11)
+    halves = E.scene_halves(n_test, None, 6)  # alternate scenes; padding -1
+    np.testing.assert_array_equal(halves, [[0, 1, 0, 1, 0, 1], [0, 1, 0, 1, 0, -1]])
+    got = E.resampled_means(acc, correct, n_test, 7, seed=11, halves=halves)
+    assert got.dtype == np.float64 and got.shape == (7, 2, 2, 3, 2)
     g = np.random.default_rng(11)
     v = g.multinomial(4, np.full(4, 0.25), size=7)
     for t in range(2):
-        w = g.multinomial(n_test[t], np.full(n_test[t], 1 / n_test[t]), size=7)
-        for b in range(7):
-            per_rep = (correct[t, ..., : n_test[t]] * w[b]).sum(-1) / n_test[t]  # (C, S, R)
-            np.testing.assert_allclose(got[b, t], (per_rep * v[b]).sum(-1) / 4, rtol=1e-6)
+        for h in range(2):
+            idx = np.flatnonzero(halves[t] == h)
+            w = g.multinomial(len(idx), np.full(len(idx), 1 / len(idx)), size=7)  # within the half
+            for b in range(7):
+                per_rep = (correct[t][..., idx] * w[b]).sum(-1) / len(idx)  # (C, S, R)
+                np.testing.assert_allclose(got[b, h, t], (per_rep * v[b]).sum(-1) / 4, rtol=1e-12)
+    # the halves average back to the whole test set: with no resampling, the plain accuracy
+    sizes = E.half_sizes(n_test, halves)
+    np.testing.assert_array_equal(sizes, [[3, 3], [3, 2]])
+    per_half = np.stack([np.stack([correct[t][..., halves[t] == h].mean(-1) for t in range(2)]) for h in range(2)])
+    plain = E.whole(np.moveaxis(per_half, -1, 0), sizes)  # repetitions in front: (R, A, C, S)
+    np.testing.assert_allclose(plain, np.moveaxis(acc, -1, 0), rtol=1e-12)
+
+
+def test_balanced_test_sets_split_into_balanced_halves():
+    # draws.draw_test puts the k positives first: scenes 0..3 positive, 4..7 negative
+    h = E.scene_halves(np.array([8]), np.array([4]), 8)[0]
+    assert list(h) == [0, 1, 0, 1, 0, 1, 0, 1]
+    h = E.scene_halves(np.array([6]), np.array([3]), 6)[0]  # k = 3: halves of 3 (2 + 1 and 1 + 2)
+    assert list(h) == [0, 1, 0, 1, 0, 1]
+    h = E.scene_halves(np.array([2]), np.array([1]), 2)[0]  # one scene per class: one in each half
+    assert list(h) == [0, 1]
+
+
+def test_no_bootstrap_factor_exceeds_the_bound_of_the_test_set_size():
+    """bf is undefined where NB is at most half a test scene above chance, so with T test scenes
+    no cell (and no interval end) can exceed T in size, in the estimate or in any resample;
+    float32 put NB means of exactly 0.5 at 0.5 + 6e-8 (a bf of ~1e6)."""
+    t_scenes = 24
+    assert np.isnan(E.bootstrap_factor(0.9, 0.5 + 0.5 / t_scenes, 0.5, 0.5 / t_scenes))  # at the tolerance
+    assert E.bootstrap_factor(0.0, 0.5 + 1 / t_scenes, 0.5, 0.5 / t_scenes) == pytest.approx(-12.0)
+    rng = np.random.default_rng(0)
+    reps = 2
+    correct = np.zeros((3, LAY["n"], len(SIZES), reps, t_scenes), bool)
+    # NB: every repetition 13 or 14 of 24 right (1-2 scenes above chance); sources random
+    for t in range(3):
+        for s in range(len(SIZES)):
+            for r in range(reps):
+                correct[t, 0, s, r, rng.permutation(t_scenes)[: 13 + (r + s + t) % 2]] = True
+    correct[:, 1:] = rng.random(correct[:, 1:].shape) < 0.5
+    acc = correct.mean(-1)
+    res = dict(_res(acc), correct=correct, n_test=np.full(3, t_scenes), test_positive=np.full(3, t_scenes // 2))
+    an = E.analyse(res, _cfg(ci_resamples=300, min_defined_share=0.0), seed=1)
+    np.testing.assert_allclose(an["tol"], 0.5 / t_scenes)
+    for key in ("table2_ci", "per_target_ci", "table2_boot"):
+        v = np.asarray(an[key])
+        assert np.all(np.abs(v[np.isfinite(v)]) <= t_scenes + 1e-9), key
+    assert np.isfinite(an["table2_boot"]).any()  # the bound was tested on real values
+    bf = an["bf"]
+    assert np.all(np.abs(bf[np.isfinite(bf)]) <= t_scenes)
 
 
 def test_intervals_are_seeded_and_contain_the_estimate_for_a_linear_measure():

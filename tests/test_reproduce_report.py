@@ -61,10 +61,13 @@ def scene_run(tmp_path_factory, scene_world, settle):
 # ------------------------------------------------------------------- findings, by hand
 
 
-def _analysis(nb_pca, nb_rhf, rows, best_curves, counts=(36, 5, 2)):
-    """A minimal ``analyse`` output: NB means per size, Table II averages, threshold curves."""
+def _analysis(nb_pca, nb_rhf, rows, best_curves, counts=(36, 5, 2), spread=0.01):
+    """A minimal ``analyse`` output: NB means per size, Table II averages, threshold averages,
+    and resamples of each spread evenly by +-``spread`` around its value (paired: the same
+    offsets in every quantity, so a difference of two equal values has a zero-width interval)."""
     sizes = [2, 4, 10, 25]
     acts = ["lift", "move", "pull"]
+    off = np.linspace(-spread, spread, 201)[:, None]  # (B, 1)
 
     def space(nb, table):
         mean = np.full((3, 5, 4), np.nan)
@@ -72,9 +75,12 @@ def _analysis(nb_pca, nb_rhf, rows, best_curves, counts=(36, 5, 2)):
         t2 = np.ones((len(E.TABLE2_ROWS), 3))
         for name, v in table.items():
             t2[E.TABLE2_ROWS.index(name), 0] = v
+        avg = np.array(best_curves, dtype=float)
         th = {"T": [0.0, 0.125, 0.5], "best_curve": np.stack([np.full(4, c) for c in best_curves]),
-              "count": list(counts), "overall_curve": np.ones(4)}
-        return {"sizes": sizes, "actions": acts, "mean": mean, "table2": t2, "thresholds": th}
+              "count": list(counts), "overall_curve": np.ones(4), "avg": avg}
+        return {"sizes": sizes, "actions": acts, "mean": mean, "table2": t2, "thresholds": th,
+                "table2_boot": t2[:, 0][None] + off, "threshold_boot": avg[None] + off,
+                "nb_boot": np.asarray(nb, dtype=float)[None] + off}
 
     return {"pca": space(nb_pca, rows), "rhf": space(nb_rhf, {})}
 
@@ -84,39 +90,73 @@ GOOD = {"DB1 best": 2.0, "CBn": 1.6, "DBn": 1.5, "DB1 best after ten": 1.9, "CB1
 
 
 def verdicts(an):
-    return {f["id"]: f["reproduced"] for f in R.findings(an, CFG)}
+    return {f["id"]: f["verdict"] for f in R.findings(an, CFG)}
 
 
 def test_findings_hand_worked():
     an = _analysis([0.6, 0.65, 0.7, 0.8], [0.62, 0.7, 0.71, 0.79], GOOD, [2.0, 1.95, 1.9])
     got = R.findings(an, CFG)
     assert [f["id"] for f in got] == ["rhf_faster", "bootstrapping_helps", "dbn_below_db1", "pruning_cheap", "best_after_ten"]
-    assert all(f["reproduced"] is True for f in got)
+    assert all(f["verdict"] == "reproduced" and f["reproduced"] is True for f in got)
     f = {x["id"]: x for x in got}
-    # n <= 10: RHF - PCA = +0.02, +0.05, +0.01 -> mean +0.0267
+    # n <= 10: RHF - PCA = +0.02, +0.05, +0.01 -> mean +0.0267; paired resamples: interval of zero width
     assert f["rhf_faster"]["values"]["sizes"] == [2, 4, 10]
     assert f["rhf_faster"]["values"]["difference"] == pytest.approx(0.08 / 3)
-    assert "+0.027" in f["rhf_faster"]["numbers"]
+    assert f["rhf_faster"]["claims"][0]["interval"] == [pytest.approx(0.08 / 3)] * 2
+    assert "+0.027" not in f["rhf_faster"]["numbers"] and "0.027 [0.027, 0.027] (claim > 0)" in f["rhf_faster"]["numbers"]
     assert f["pruning_cheap"]["values"]["avg_bf"] == [pytest.approx(2.0), pytest.approx(1.9)]
-    assert f["pruning_cheap"]["values"]["built"] == [36, 2] and "ratio 0.95" in f["pruning_cheap"]["numbers"]
+    assert f["pruning_cheap"]["values"]["built"] == [36, 2] and "ratio 0.95 [" in f["pruning_cheap"]["numbers"]
     assert f["best_after_ten"]["values"]["DB1"]["ratio"] == pytest.approx(0.95)
+    lo, hi = f["bootstrapping_helps"]["claims"][0]["interval"]  # DB1 best 2.0 +- 0.01
+    assert 1.98 < lo < 2.0 < hi < 2.02
+    assert "bias-corrected bootstrap interval" in f["dbn_below_db1"]["decision"]
 
-    assert verdicts(_analysis([0.6] * 4, [0.59] * 4, GOOD, [2.0, 1.9, 1.9]))["rhf_faster"] is False
-    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, CBn=1.2), [2.0] * 3))["bootstrapping_helps"] is False
-    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, DBn=2.0), [2.0] * 3))["dbn_below_db1"] is False
-    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0, 2.0, 1.7]))["pruning_cheap"] is False  # 0.85 < 0.9
-    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, **{"CB1 best after ten": 1.9}), [2.0] * 3))["best_after_ten"] is False
+    assert verdicts(_analysis([0.6] * 4, [0.59] * 4, GOOD, [2.0, 1.9, 1.9]))["rhf_faster"] == "not reproduced"
+    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, CBn=1.2), [2.0] * 3))["bootstrapping_helps"] == "not reproduced"
+    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, DBn=2.1), [2.0] * 3))["dbn_below_db1"] == "not reproduced"
+    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0, 2.0, 1.7]))["pruning_cheap"] == "not reproduced"  # 0.85 < 0.9
+    assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, **{"CB1 best after ten": 1.9}), [2.0] * 3))["best_after_ten"] == "not reproduced"
     # undefined numbers (no category kept at T = 0.5; no RHF sweep) are "not measurable"
     v = verdicts(_analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0, 1.9, np.nan]))
-    assert v["pruning_cheap"] is None
-    # CBn with no category kept at its threshold (T = 0.5) is NB itself: not measurable
+    assert v["pruning_cheap"] == "not measurable"
+    # CBn with no category kept at its threshold (T = 0.5): not measurable, whatever number the row holds
     f = {x["id"]: x for x in R.findings(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, CBn=1.0), [2.0] * 3,
                                                  counts=(36, 5, 0)), CFG)}
-    assert f["bootstrapping_helps"]["reproduced"] is None
-    assert "no category kept at T = 0.5: CBn is NB" in f["bootstrapping_helps"]["numbers"]
+    assert f["bootstrapping_helps"]["verdict"] == "not measurable" and f["bootstrapping_helps"]["reproduced"] is None
+    assert "no category passed T = 0.5: CBn is not measurable" in f["bootstrapping_helps"]["numbers"]
     an = _analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0] * 3)
     del an["rhf"]
-    assert verdicts(an)["rhf_faster"] is None
+    assert verdicts(an)["rhf_faster"] == "not measurable"
+    # no resamples (intervals not computed): nothing can be decided
+    an = _analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0] * 3)
+    for s in an.values():
+        del s["table2_boot"], s["threshold_boot"], s["nb_boot"]
+    assert set(verdicts(an).values()) == {"not measurable"}
+
+
+def test_verdicts_whose_interval_crosses_the_bound_are_undecided():
+    # DBn 1.95 vs DB1 best 2.0, each resampled +-0.1 independently (not paired): DBn - DB1 in
+    # about [-0.15, +0.05], which contains 0 -> undecided, though the point difference is < 0
+    an = _analysis([0.6] * 4, [0.61] * 4, dict(GOOD, DBn=1.95), [2.0] * 3, spread=0.1)
+    pca = an["pca"]
+    rng = np.random.default_rng(0)
+    for name in ("DBn",):
+        i = E.TABLE2_ROWS.index(name)
+        pca["table2_boot"][:, i] = rng.permutation(pca["table2_boot"][:, i])  # break the pairing
+    got = {f["id"]: f for f in R.findings(an, CFG)}
+    j = got["dbn_below_db1"]["claims"][0]
+    assert j["estimate"] == pytest.approx(-0.05) and j["interval"][0] < 0 < j["interval"][1]
+    assert got["dbn_below_db1"]["verdict"] == "undecided at this scale" and got["dbn_below_db1"]["reproduced"] is None
+    # RHF 0.01 above PCA, each NB resampled +-0.1 independently: the interval holds 0 -> undecided
+    an["rhf"]["nb_boot"] = rng.permutation(an["rhf"]["nb_boot"])
+    got = {f["id"]: f for f in R.findings(an, CFG)}
+    assert got["rhf_faster"]["verdict"] == "undecided at this scale"
+    # hand-made: an estimate 1.3 whose interval [1.2, 1.4] holds the bound 1.25
+    j = R.judge(1.3, np.linspace(1.2, 1.4, 101), 1.25, True, 0.95)
+    assert j["verdict"] == "undecided at this scale"
+    assert R.judge(1.3, np.linspace(1.26, 1.34, 101), 1.25, True, 0.95)["verdict"] == "reproduced"
+    assert R.judge(1.1, np.linspace(1.0, 1.2, 101), 1.25, True, 0.95)["verdict"] == "not reproduced"
+    assert R.judge(np.nan, np.linspace(1.0, 1.2, 101), 1.25, True, 0.95)["verdict"] == "not measurable"
 
 
 def test_correlation_clusters_hand_worked():
@@ -203,16 +243,23 @@ def test_full_report(scene_run, tmp_path):
     res = E.load_results(scene_run / "results")
     an = {s: E.analyse(res[s], res["config"]) for s in ("pca", "rhf")}
     t2 = an["pca"]["table2"]
-    row = lambda name: f"| {name} | " + " | ".join(R.fmt(v) for v in t2[E.TABLE2_ROWS.index(name)])
+    from relaff_jax.report.formatting import row_cells  # a row without a value reads "not measurable: why"
+    row = lambda name: f"| {name} | " + " | ".join(row_cells(an["pca"], E.TABLE2_ROWS.index(name)))
     assert row("DB1 best") in md and row("CBn") in md and "| 2.819 | 0.976 | 3.657 |" in md
+    assert "nan" not in row("CBn")
     for i, name in enumerate(E.TABLE2_ROWS):  # every row says how many affordances it averages
         assert f"{row(name)} | {an['pca']['n_targets'][i]} of {len(an['pca']['actions'])} |" in md
-    assert f"Rests on {len(an['pca']['actions'])} affordances" in md and "percentile bootstrap" in md
+    assert f"of {len(an['pca']['actions'])} affordances, by row (column n)" in md and "bias-corrected (BC) bootstrap" in md
+    assert "## Sizes of the protocol" in md and "| test scenes (per affordance) |" in md
     found = json.loads((out / "findings.json").read_text())["findings"]
     assert [f["id"] for f in found] == [f["id"] for f in R.findings(an, res["config"])]
     by_id = {f["id"]: f for f in found}
     assert by_id["dbn_below_db1"]["values"]["dbn"] == pytest.approx(t2[E.TABLE2_ROWS.index("DBn"), 0])
-    assert by_id["dbn_below_db1"]["reproduced"] == bool(t2[E.TABLE2_ROWS.index("DBn"), 0] < t2[E.TABLE2_ROWS.index("DB1 best"), 0])
+    # decided from the interval of the paired difference, not from the point values
+    i_dbn, i_db1 = E.TABLE2_ROWS.index("DBn"), E.TABLE2_ROWS.index(by_id["dbn_below_db1"]["values"]["db1_row"])
+    j = R.judge(t2[i_dbn, 0] - t2[i_db1, 0], an["pca"]["table2_boot"][:, i_dbn] - an["pca"]["table2_boot"][:, i_db1],
+                0.0, False, res["config"].ci_level)
+    assert by_id["dbn_below_db1"]["verdict"] == j["verdict"]
     for f in found:
         assert f"| {f['finding']} |" in md
     clusters = R.correlation_clusters(res["rhf"]["corr"], an["rhf"]["actions"], res["config"].cbn_threshold)

@@ -50,6 +50,7 @@ from relaff_jax.learn.config import (
     PAPER_TABLE2,
     SPACE_CODE,
     TABLE2_ROWS,
+    ORACLE,
     ExperimentConfig,
     check_config,
     experiment_preset,
@@ -70,9 +71,11 @@ from relaff_jax.learn.forests import (
     n_trees,
     predict_class,
 )
-from relaff_jax.learn.intervals import percentile_interval, resampled_means
+from relaff_jax.learn.intervals import bc_interval, half_sizes, percentile_interval, resampled_means, scene_halves, whole
 from relaff_jax.learn.measures import (
     bootstrap_factor,
+    chance_tolerance,
+    min_defined,
     size_mask,
     summarise,
     table2_rows,
@@ -82,6 +85,7 @@ from relaff_jax.learn.measures import (
 from relaff_jax.learn.online import extend, online_weights
 from relaff_jax.learn.prep import prepare
 from relaff_jax.learn.protocol import (
+    pool_sizes,
     block_fits,
     category_allowed,
     category_masks,
@@ -120,5 +124,5 @@ __all__ = [
     "run_block", "run_block_to_file", "run_experiment", "run_space", "select_at", "select_best", "size_mask",
     "split_pools", "state_features", "synthetic_datasets", "threshold_study",
     "block_outcomes", "draw_test", "draw_train", "extend", "online_weights", "paper_row", "percentile_interval",
-    "resampled_means", "summarise", "table2_rows", "tie_weights", "window_mean",
+    "resampled_means", "summarise", "pool_sizes", "bc_interval", "half_sizes", "scene_halves", "whole", "chance_tolerance", "min_defined", "ORACLE", "table2_rows", "tie_weights", "window_mean",
 ]

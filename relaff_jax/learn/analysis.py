@@ -17,12 +17,14 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from relaff_jax.learn.config import TABLE2_ROWS, ExperimentConfig
+from relaff_jax.learn.config import ORACLE, TABLE2_ROWS, ExperimentConfig
 from relaff_jax.learn.correlation import categories_above, category_pairs
-from relaff_jax.learn.intervals import percentile_interval, resampled_means
+from relaff_jax.learn.intervals import bc_interval, half_sizes, resampled_means, scene_halves, whole
 from relaff_jax.learn.measures import (
     _quiet,
     bootstrap_factor,
+    chance_tolerance,
+    min_defined,
     size_mask,
     summarise,
     table2_rows,
@@ -82,18 +84,30 @@ def _get(res: Mapping[str, Any], key: str, default: Any) -> Any:
     return res[key] if key in res.keys() else default
 
 
+def half_curves(acc_x: np.ndarray, corr_x: np.ndarray, halves: np.ndarray) -> np.ndarray | None:
+    """``(2, A, C', S)`` mean accuracy on each half of every test set (None without outcomes)."""
+    if not corr_x.shape[-1]:
+        return None
+    a = acc_x.shape[0]
+    ran = np.isfinite(acc_x).any(-1)
+    out = np.stack([np.stack([corr_x[t][..., halves[t] == h].astype(float).mean(-1).mean(-1) for t in range(a)])
+                    for h in range(2)])
+    return np.where(ran[None], out, np.nan)
+
+
 def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0, intervals: bool = True) -> dict[str, Any]:
     """Everything section V reports for one space, as arrays over (target, condition, size).
 
     Returns ``mean``/``sem`` curves ``(A, C + 2, S)``, ``bf`` curves, ``avg_bf (A, C + 2)``,
-    ``defined (A,)`` (window sizes with a bf), the chosen candidates per target
-    (``best_db1``, ``ten_db1``, ... condition indices, the first of tied ones; ``ties_*`` how
-    many tied; ``online_db1`` / ``online_cb1`` the online weights ``(A, K, R)``), Table II
-    per target ``table2_per_target (rows, A)``, ``table2 (rows, 3)`` avg/min/max,
-    ``n_targets (rows,)``, the same for the accuracy gain (``gain_*``), and with
-    ``intervals`` the bootstrap intervals ``table2_ci``/``gain_ci (rows, 2)`` of each row's
-    avg, ``per_target_ci (rows, A, 2)`` and ``mean_ci (A, C + 2, S, 2)`` (``cfg.ci_level``,
-    ``cfg.ci_resamples`` resamples, seeded by ``seed``), and the threshold study.
+    ``defined (A,)`` (window sizes with a bf; ``min_defined`` of them needed), ``built (T, A)``
+    (a category built at T for the target), ``tol (A,)`` the
+    at-chance tolerance, the in-sample chosen candidates per target (``best_db1``, ``ten_db1``,
+    ... condition indices, the first of tied ones; ``ties_*`` how many tied; ``online_db1`` /
+    ``online_cb1`` the online weights ``(A, K, R)``), Table II per target
+    ``table2_per_target (rows, A)``, ``table2 (rows, 3)`` avg/min/max, ``n_targets (rows,)``,
+    ``unmeasurable {row: reason}``, the same for the accuracy gain (``gain_*``), and with
+    ``intervals`` (``_intervals``) bias-corrected bootstrap intervals and the resampled values
+    behind them, and the threshold study.
     """
     acc, sizes = np.asarray(res["acc"], dtype=float), [int(s) for s in res["sizes"]]
     actions = [str(a) for a in res["actions"]]
@@ -102,18 +116,25 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     loo, correct, n_test = _outcomes(res, acc)
     acc_x, corr_x, w_on = extend(acc, correct, loo, lay)
     mean, sem = curves(acc_x)  # (A, C + 2, S)
-    bf = bootstrap_factor(mean, mean[:, lay["NB"]][:, None, :], cfg.chance)
-    t2 = table2_rows(mean, sizes, cfg, lay)
+    tol = chance_tolerance(cfg, n_test, a)
+    masks = np.asarray(res["category_masks"], dtype=bool)  # (T, A, K)
+    cbn_ok = masks[list(cfg.thresholds).index(cfg.cbn_threshold)].any(-1)  # (A,)
+    halves = scene_halves(n_test, _get(res, "test_positive", None), corr_x.shape[-1])
+    half_means = half_curves(acc_x, corr_x, halves)
+    bf = bootstrap_factor(mean, mean[:, lay["NB"]][:, None, :], cfg.chance, tol[:, None, None])
+    t2 = table2_rows(mean, sizes, cfg, lay, tol, half_means, cbn_ok, masks)
     table2, n_targets = summarise(t2["bf"])
     gain, gain_n = summarise(t2["gain"])
     conds = [str(c) for c in res["conditions"]] + ["DB1 online after ten", "CB1 online after ten"]
-    out: dict[str, Any] = {"actions": actions, "sizes": sizes, "mean": mean, "sem": sem, "bf": bf,
+    out: dict[str, Any] = {"actions": actions, "sizes": sizes, "mean": mean, "sem": sem, "bf": bf, "tol": tol,
                            "avg_bf": window_mean(bf, sizes, *cfg.bf_sizes)[0], "defined": t2["defined"],
+                           "min_defined": min_defined(cfg, sizes), "cbn_ok": cbn_ok, "built": masks.any(-1),
                            "window_sizes": int(size_mask(sizes, *cfg.bf_sizes).sum()), "conditions": conds,
                            "table2_rows": list(TABLE2_ROWS), "table2_per_target": t2["bf"], "table2": table2,
                            "n_targets": n_targets, "gain_per_target": t2["gain"], "gain": gain, "gain_n_targets": gain_n,
                            "test_size": _get(res, "test_size", None), "test_positive": _get(res, "test_positive", None),
-                           "outcomes": bool(corr_x.shape[-1]), "reps": int(acc.shape[-1])}
+                           "n_test": n_test, "outcomes": bool(corr_x.shape[-1]), "reps": int(acc.shape[-1])}
+    out["unmeasurable"] = unmeasurable(out, cfg)
     lo, hi = cfg.best_sizes
     for fam in ("DB1", "CB1"):
         idx = lay[fam]
@@ -124,36 +145,86 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
         out[f"ten_{fam.lower()}"] = idx[select_at(fam_mean, sizes, cfg.select_size)] if cfg.select_size in sizes else out[f"best_{fam.lower()}"]
         out[f"ties_{fam.lower()}"] = (tie_weights(best_score) > 0).sum(-1)
         out[f"online_{fam.lower()}"] = w_on[fam]
+    out["thresholds"] = threshold_study(mean[:, : lay["n"]], bf[:, : lay["n"]], masks, sizes, cfg, lay, t2)
     if intervals:
-        out.update(_intervals(acc_x, corr_x, n_test, sizes, cfg, lay, seed))
-    out["thresholds"] = threshold_study(mean[:, : lay["n"]], bf[:, : lay["n"]], np.asarray(res["category_masks"], dtype=bool),
-                                        sizes, cfg, lay)
+        out.update(_intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, out))
     return out
 
 
-def _intervals(acc_x, corr_x, n_test, sizes, cfg, lay, seed) -> dict[str, np.ndarray]:
-    """Bootstrap intervals of Table II (bf and gain: each row's avg and every per target
-    value) and of every mean curve."""
-    means = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, 7))
-    avg_bf, avg_gain, per_bf = [], [], []
-    for b in range(0, len(means), CI_CHUNK):
-        t2 = table2_rows(means[b : b + CI_CHUNK], sizes, cfg, lay)
-        avg_bf.append(summarise(t2["bf"])[0][..., 0])
-        avg_gain.append(summarise(t2["gain"])[0][..., 0])
-        per_bf.append(t2["bf"])
+def unmeasurable(a: Mapping[str, Any], cfg: ExperimentConfig) -> dict[str, str]:
+    """``{row: reason}`` for every Table II row without a single target: never shown as a number."""
+    why: dict[str, str] = {}
+    for i, name in enumerate(TABLE2_ROWS):
+        if a["n_targets"][i] > 0:
+            continue
+        if name == "CBn" and not np.any(a["cbn_ok"]):
+            why[name] = f"no category passed T = {cfg.cbn_threshold:g} (CBn would be NB relabelled)"
+        elif ("best" in name and "oracle" not in name and "online" not in name) and not a["outcomes"]:
+            why[name] = "no test outcomes kept: no half of the test scenes to choose on"
+        elif name + ORACLE in TABLE2_ROWS and a["n_targets"][TABLE2_ROWS.index(name + ORACLE)] > 0:
+            why[name] = ("no affordance has a bootstrap factor on half of its test set (NB on a half at most "
+                         f"{cfg.chance_tol_scenes:g} of its scenes above chance at every size)")
+        elif np.all(np.isnan(a["gain_per_target"][i])):
+            why[name] = "the condition did not run"
+        else:
+            why[name] = (f"no affordance has a bootstrap factor at >= {a['min_defined']} of the window's "
+                         f"{a['window_sizes']} sizes (NB more than {cfg.chance_tol_scenes:g} test scene above chance)")
+    return why
+
+
+def _fixed_mean(per_target: np.ndarray, fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over the targets of the point estimate ``fixed (rows, A)`` (no other target ever
+    enters) in each resample ``per_target (B, rows, A)``, over those of them with a value in
+    it, and whether all of them had one ``(B, rows)`` (reported as ``table2_set_held``)."""
+    held = np.all(np.isfinite(per_target) | ~fixed, -1)
+    with _quiet():
+        return np.nanmean(np.where(fixed, per_target, np.nan), -1), held
+
+
+def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, pt) -> dict[str, Any]:
+    """Bias-corrected bootstrap intervals (``intervals.bc_interval``) of Table II (bf and gain:
+    each row's avg over the point estimate's targets, held fixed, and every per target
+    value), of the threshold study's averages and of every mean curve; the resampled values
+    (``*_boot``, for the findings' paired differences) and the share of resamples in which
+    each row's set of targets kept a value (``table2_set_held (rows,)``)."""
+    hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, 7), halves)
+    hs = half_sizes(n_test, halves)
+    outcomes = bool(corr_x.shape[-1])
+    fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]), np.isfinite(pt["gain_per_target"])
+    fixed_thr = np.isfinite(pt["thresholds"]["per_target"])
+    boot: dict[str, list] = {k: [] for k in ("bf", "held", "gain", "per", "thr", "nb", "mean")}
+    for b in range(0, len(hm), CI_CHUNK):
+        h = hm[b : b + CI_CHUNK]
+        m = whole(h, hs)
+        t2 = table2_rows(m, sizes, cfg, lay, tol, h if outcomes else None, cbn_ok, masks, min_cells=1)
+        v, held = _fixed_mean(t2["bf"], fixed_bf)
+        boot["bf"].append(v), boot["held"].append(held)
+        boot["gain"].append(_fixed_mean(t2["gain"], fixed_gain)[0])
+        boot["per"].append(t2["bf"])
+        boot["thr"].append(_fixed_mean(t2["thr_bf"], fixed_thr)[0])
+        with _quiet():
+            boot["nb"].append(np.nanmean(m[:, :, lay["NB"]], 1))  # (b, S) mean NB over targets
+        boot["mean"].append(m)
+    bt = {k: np.concatenate(v) for k, v in boot.items()}
     level = cfg.ci_level
-    return {"table2_ci": np.stack(percentile_interval(np.concatenate(avg_bf), level), -1),
-            "gain_ci": np.stack(percentile_interval(np.concatenate(avg_gain), level), -1),
-            "per_target_ci": np.stack(percentile_interval(np.concatenate(per_bf), level), -1),
-            "mean_ci": np.stack(percentile_interval(means, level), -1),
-            "ci_level": level, "ci_resamples": int(cfg.ci_resamples)}
+    ci = lambda vals, est: np.stack(bc_interval(vals, est, level), -1)  # noqa: E731
+    return {"table2_ci": ci(bt["bf"], pt["table2"][:, 0]), "gain_ci": ci(bt["gain"], pt["gain"][:, 0]),
+            "per_target_ci": ci(bt["per"], pt["table2_per_target"]), "mean_ci": ci(bt["mean"], pt["mean"]),
+            "threshold_ci": ci(bt["thr"], pt["thresholds"]["avg"]),
+            "table2_boot": bt["bf"], "gain_boot": bt["gain"], "threshold_boot": bt["thr"], "nb_boot": bt["nb"],
+            "table2_set_held": bt["held"].mean(0), "ci_level": level, "ci_resamples": int(cfg.ci_resamples),
+            "ci_method": "bias-corrected percentile (BC)"}
 
 
 def threshold_study(mean: np.ndarray, bf: np.ndarray, masks: np.ndarray, sizes: Sequence[int],
-                    cfg: ExperimentConfig, lay: dict) -> dict[str, Any]:
-    """Paper Fig. 12: per threshold T the bf curve ``(S,)`` of each target's best category
-    among those built at T (tied ones share; mean over targets), plus the overall average over all usable
-    categories; ``masks: (T, A, K)``."""
+                    cfg: ExperimentConfig, lay: dict, t2: Mapping[str, np.ndarray]) -> dict[str, Any]:
+    """Paper Fig. 12. Its numbers use Table II's aggregation (``t2 = table2_rows(..., masks)``):
+    per threshold T, each target's best category among those built at T, chosen on one half
+    of the test scenes and scored on the other (``per_target (T, A)``, ``avg (T,)``, over the
+    targets with a value, ``n_targets (T,)``; at T = 0 it is Table II's "CB1 best"), and the
+    in-sample oracle (``avg_oracle``). For the figure: per T the in-sample best category's bf
+    curve ``best_curve (T, S)`` (tied ones share; mean over targets) and the average over all
+    usable categories ``overall_curve (S,)``; ``masks: (T, A, K)``."""
     idx = lay["CB1"]
     cb_mean, cb_bf = mean[:, idx], bf[:, idx]  # (A, K, S)
     ran = np.any(np.isfinite(cb_mean), axis=-1)  # (A, K)
@@ -172,6 +243,9 @@ def threshold_study(mean: np.ndarray, bf: np.ndarray, masks: np.ndarray, sizes: 
             out["best"].append(idx[best])
             out["count"].append(int(masks[ti].any(0).sum()))
         out["overall_curve"] = np.nanmean(np.where(ran[..., None], cb_bf, np.nan), axis=(0, 1))
+        out["per_target"], out["per_target_oracle"] = t2["thr_bf"], t2["thr_oracle_bf"]
+        out["avg"], out["avg_oracle"] = np.nanmean(t2["thr_bf"], -1), np.nanmean(t2["thr_oracle_bf"], -1)
+    out["n_targets"] = np.isfinite(t2["thr_bf"]).sum(-1)
     out["best_curve"] = np.stack(out["best_curve"])
     return out
 

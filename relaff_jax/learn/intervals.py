@@ -1,48 +1,98 @@
-"""Bootstrap intervals: resampled mean accuracy curves, and percentile intervals of any statistic.
+"""Bootstrap intervals: resampled mean accuracy curves (whole test sets and their two halves),
+and bias-corrected intervals of any statistic.
 
 Takes one space's accuracies with the online learners appended (``online.extend``):
 ``acc: (A, C', S, R)``, the outcome of every test scene ``correct: (A, C', S, R, N)`` float
-(N = 0 when the run kept none) with ``n_test: (A,)`` scenes per target, a resample count B
-and a seed; ``resampled_means`` gives B resampled mean curves ``(B, A, C', S)`` float32:
+(N = 0 when the run kept none) with ``n_test: (A,)`` scenes per target and ``halves: (A, N)``
+int (0 or 1: the half of the test set each scene is in, ``scene_halves``), a resample count B
+and a seed; ``resampled_means`` gives B resampled mean curves of each half ``(B, 2, A, C', S)``
+float64 (``whole`` averages them back into the whole test set's):
 
 * repetitions are drawn with replacement (the same draw for every target: a repetition is one
   training draw of every target, with the same source predictors);
-* with outcomes, each target's test scenes are drawn with replacement too, independently per
-  target (each has its own test set), and every condition, size and repetition is scored on
-  the same resampled scenes (the comparison stays paired);
-* without outcomes (the paper preset keeps none) only the repetitions are resampled, and the
-  interval leaves out the test set's own sampling error (at 4000 test scenes, a standard error
-  of about 0.008 in accuracy).
+* with outcomes, each target's test scenes are drawn with replacement within each half
+  (a stratified bootstrap: the halves keep their sizes, so a choice made on one half can be
+  scored on the other in every resample), independently per target, and every condition,
+  size and repetition is scored on the same resampled scenes (the comparison stays paired);
+* without outcomes (the paper preset keeps none) only the repetitions are resampled, both
+  "halves" are the whole test set, and the interval leaves out the test set's own sampling
+  error (at 4000 test scenes, a standard error of about 0.008 in accuracy).
 
-Conditions that did not run stay NaN. ``percentile_interval`` turns B values of a statistic
-``(B, ...)`` into its (low, high) percentile interval at ``level``.
+Everything is float64: a resampled NB mean exactly at chance stays exactly at chance (float32
+put it 6e-8 above, and its bootstrap factor near 1e6). Conditions that did not run stay NaN.
+``bc_interval`` turns B values of a statistic ``(B, ...)`` and its estimate into the
+bias-corrected percentile interval (Efron's BC: the percentiles moved by how far the estimate
+sits from the resamples' median); ``percentile_interval`` is the plain one.
 """
 from __future__ import annotations
+
+from statistics import NormalDist
 
 import numpy as np
 
 from relaff_jax.learn.measures import _quiet
 
 
-def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, resamples: int, seed: int) -> np.ndarray:
-    """``(B, A, C', S)`` float32 mean accuracy curves of ``resamples`` bootstrap resamples."""
-    acc = np.asarray(acc, dtype=float)
+def scene_halves(n_test: np.ndarray, n_positive: np.ndarray | None, width: int) -> np.ndarray:
+    """``(A, width)`` int: the half of each target's test set every scene is in. A balanced test
+    set (``draws.draw_test``: its k positives first, then k negatives) is split into two
+    balanced halves of k scenes (alternate scenes within each class; with k odd the negatives
+    start on the other half); any other into alternate scenes. Padding scenes (past ``n_test``)
+    get -1."""
+    out = np.full((len(n_test), width), -1, int)
+    for t, n in enumerate(np.asarray(n_test, dtype=int)):
+        j = np.arange(n)
+        k = n // 2
+        if n_positive is not None and k > 0 and 2 * int(n_positive[t]) == n:
+            neg = j >= k
+            out[t, :n] = (j - k * neg + neg * (k % 2)) % 2
+        else:
+            out[t, :n] = j % 2
+    return out
+
+
+def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, resamples: int, seed: int,
+                    halves: np.ndarray | None = None) -> np.ndarray:
+    """``(B, 2, A, C', S)`` float64 mean accuracy curves of each test half in ``resamples``
+    bootstrap resamples (both entries the whole test set without outcomes)."""
+    acc = np.asarray(acc, dtype=np.float64)
     a, c, s, r = acc.shape
     rng = np.random.default_rng(seed)
-    v = rng.multinomial(r, np.full(r, 1.0 / r), size=resamples).astype(np.float32) / r  # (B, R)
+    v = rng.multinomial(r, np.full(r, 1.0 / r), size=resamples) / r  # (B, R) float64
     ran = np.isfinite(acc).any(-1)  # (A, C', S)
-    out = np.empty((resamples, a, c, s), np.float32)
+    out = np.empty((resamples, 2, a, c, s), np.float64)
     n_test = np.asarray(n_test, dtype=int)
+    n_max = np.shape(correct)[-1]
+    if halves is None:
+        halves = scene_halves(n_test, None, n_max)
     for t in range(a):
-        n = int(n_test[t]) if np.shape(correct)[-1] else 0
+        n = int(n_test[t]) if n_max else 0
         if n > 0:
-            w = rng.multinomial(n, np.full(n, 1.0 / n), size=resamples).astype(np.float32) / n  # (B, n)
-            x = np.asarray(correct[t], dtype=np.float32)[..., :n].reshape(-1, n)  # (C' S R, n)
-            per_rep = (x @ w.T).reshape(c, s, r, resamples)  # accuracy per repetition and resample
-            out[:, t] = np.einsum("csrb,br->bcs", per_rep, v)
+            for h in range(2):
+                idx = np.flatnonzero(halves[t, :n] == h)
+                m = len(idx)
+                if m == 0:  # a test set of one scene: its other half is empty
+                    out[:, h, t] = np.nan
+                    continue
+                w = rng.multinomial(m, np.full(m, 1.0 / m), size=resamples) / m  # (B, m)
+                x = np.asarray(correct[t], dtype=np.float64)[..., idx].reshape(-1, m)  # (C' S R, m)
+                per_rep = (x @ w.T).reshape(c, s, r, resamples)  # accuracy per repetition and resample
+                out[:, h, t] = np.einsum("csrb,br->bcs", per_rep, v)
         else:
-            out[:, t] = np.einsum("csr,br->bcs", np.nan_to_num(acc[t]).astype(np.float32), v)
-    return np.where(ran[None], out, np.nan).astype(np.float32)
+            out[:, :, t] = np.einsum("csr,br->bcs", np.nan_to_num(acc[t]), v)[:, None]
+    return np.where(ran[None, None], out, np.nan)
+
+
+def half_sizes(n_test: np.ndarray, halves: np.ndarray) -> np.ndarray:
+    """``(2, A)`` scenes in each half (1 each where a target kept no outcomes)."""
+    n = np.stack([(halves == h).sum(-1) for h in range(2)]).astype(float)
+    return np.where(n.sum(0) > 0, n, 1.0)
+
+
+def whole(half_means: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """``(..., 2, A, C', S)`` half curves and ``sizes (2, A)`` -> the whole test set's ``(..., A, C', S)``."""
+    w = sizes / sizes.sum(0)
+    return np.einsum("...hacs,ha->...acs", half_means, w)
 
 
 def percentile_interval(values: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
@@ -52,3 +102,39 @@ def percentile_interval(values: np.ndarray, level: float) -> tuple[np.ndarray, n
     with _quiet():
         lo, hi = np.nanpercentile(np.asarray(values, dtype=float), [q, 100 - q], axis=0)
     return lo, hi
+
+
+def bc_interval(values: np.ndarray, estimate: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
+    """Bias-corrected percentile interval: ``values (B, ...)``, ``estimate (...)`` -> (low, high).
+
+    z0 = Phi^-1(share of finite resamples below the estimate, ties counted half); the ends are
+    the resamples' percentiles Phi(2 z0 -+ z_level) (Efron 1987 with acceleration 0: the
+    jackknife acceleration would need a refit per left-out scene and repetition). NaN where
+    the estimate or every resample is undefined."""
+    v = np.asarray(values, dtype=float)
+    est = np.broadcast_to(np.asarray(estimate, dtype=float), v.shape[1:])
+    ok = np.isfinite(v)
+    n = ok.sum(0)
+    below = (np.where(ok, v < est, False).sum(0) + 0.5 * np.where(ok, v == est, False).sum(0)) / np.maximum(n, 1)
+    nd = NormalDist()
+    eps = 0.5 / np.maximum(n, 1)  # keep z0 finite when the estimate is outside every resample
+    z0 = np.vectorize(nd.inv_cdf, otypes=[float])(np.clip(below, eps, 1 - eps))
+    za = nd.inv_cdf(0.5 + level / 2)
+    cdf = np.vectorize(nd.cdf, otypes=[float])
+    q_lo, q_hi = 100 * cdf(2 * z0 - za), 100 * cdf(2 * z0 + za)
+    srt = np.sort(np.where(ok, v, np.inf), axis=0)  # finite values first
+    lo, hi = (_pick(srt, n, q) for q in (q_lo, q_hi))
+    bad = (n == 0) | ~np.isfinite(est)
+    return np.where(bad, np.nan, lo), np.where(bad, np.nan, hi)
+
+
+def _pick(srt: np.ndarray, n: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The q-th percentile (linear interpolation, as ``np.percentile``) of the first n sorted values."""
+    pos = np.clip(q / 100 * (n - 1), 0, np.maximum(n - 1, 0))
+    i0 = np.floor(pos).astype(int)
+    i1 = np.minimum(i0 + 1, np.maximum(n - 1, 0))
+    a = np.take_along_axis(srt, i0[None], 0)[0]
+    b = np.take_along_axis(srt, i1[None], 0)[0]
+    f = pos - i0
+    with np.errstate(invalid="ignore"):
+        return np.where(n > 0, a + f * np.where(np.isfinite(b), b - a, 0.0), np.nan)

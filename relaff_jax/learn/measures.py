@@ -2,19 +2,26 @@
 
 Takes mean accuracy curves ``mean: (..., A, C + 2, S)`` over target, condition and size (the
 sweep's C conditions, then the two online "best after ten" learners of ``online.py``), the
-sizes, the config and the condition layout; ``table2_rows`` gives, per Table II row and
-target, two measures over the window ``cfg.bf_sizes`` (paper V-C: n = 4..25):
+same curves on the two halves of every test set ``(..., 2, A, C + 2, S)``, the sizes, the
+config, the condition layout and the at-chance tolerance ``tol (A,)``; ``table2_rows`` gives,
+per Table II row and target, two measures over the window ``cfg.bf_sizes`` (paper V-C:
+n = 4..25):
 
 * ``bf``: the average bootstrap factor, the mean of bf(n) = (P_bl - P_c) / (P_sl - P_c) over
-  the sizes of the window where it is defined (P_sl > P_c); ``defined``: how many sizes that
-  was per target (0: the target has no value, and is left out of the row's average);
+  the sizes of the window where it is defined (P_sl - P_c > tol, ``chance_tolerance``: half a
+  test scene by default, so |bf| <= T); ``defined``: how many sizes that was per target; a
+  target defined at fewer than ``min_defined`` sizes has no bf in any row (left out of the
+  row's average, which says how many it rests on);
 * ``gain``: the mean accuracy gain over the window, mean of P_bl(n) - P_sl(n) (a difference of
   accuracies, defined wherever both ran, linear in the accuracies: well conditioned where bf
   is not, i.e. where P_sl is near chance).
 
-Choices ("best", "best after ten") use ``tie_weights``: every candidate tied at the highest
-score gets an equal share, so a tie counts as a uniform random choice among the tied
-candidates (its expected value), never as "whichever comes first". ``summarise`` gives each
+Choices use ``tie_weights``: every candidate tied at the highest score gets an equal share
+(a uniform random choice among them). "best" and "best after ten" are chosen on one half of
+the test scenes and scored on the other, both ways, averaged (cross-fitting: a choice never
+scores itself); the paper's choice on the very scores it reports is kept as the "(in-sample
+oracle)" rows. Every "after ten" learner (offline, oracle, online) has chosen nothing before
+n = ``select_size``: there it is an equal share of every candidate. ``summarise`` gives each
 row's avg/min/max over the targets with a value and how many those are (``n_targets``).
 """
 from __future__ import annotations
@@ -26,6 +33,7 @@ import numpy as np
 from relaff_jax.learn.config import TABLE2_ROWS, ExperimentConfig
 
 TIE_TOL = 1e-12  # scores closer than this are tied (accuracies are multiples of 1/T)
+ROUND = 1e-12  # float64 round-off of a mean of k/T: far below one scene (1/T)
 
 
 def size_mask(sizes: Sequence[int], lo: int, hi: int) -> np.ndarray:
@@ -34,13 +42,15 @@ def size_mask(sizes: Sequence[int], lo: int, hi: int) -> np.ndarray:
     return (s >= lo) & (s <= hi)
 
 
-def bootstrap_factor(p_bl: np.ndarray, p_sl: np.ndarray, chance: float = 0.5) -> np.ndarray:
-    """bf = (P_bl - P_c) / (P_sl - P_c) (paper III-D), broadcast; NaN where P_sl <= P_c
-    (the standard learner is at or below chance and the ratio has no meaning)."""
-    p_bl, p_sl = np.asarray(p_bl, dtype=float), np.asarray(p_sl, dtype=float)
+def bootstrap_factor(p_bl: np.ndarray, p_sl: np.ndarray, chance: float = 0.5, tol: float | np.ndarray = 0.0) -> np.ndarray:
+    """bf = (P_bl - P_c) / (P_sl - P_c) (paper III-D), broadcast, float64; NaN where
+    P_sl - P_c <= tol (the standard learner is at chance and the ratio has no meaning), so
+    |bf| <= 1/2 / tol. ``ROUND`` absorbs the round-off of means of k/T."""
+    p_bl, p_sl = np.asarray(p_bl, dtype=np.float64), np.asarray(p_sl, dtype=np.float64)
     den = p_sl - chance
+    ok = den > np.asarray(tol, dtype=np.float64) + ROUND
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, (p_bl - chance) / np.where(den > 0, den, 1.0), np.nan)
+        return np.where(ok, (p_bl - chance) / np.where(ok, den, 1.0), np.nan)
 
 
 def window_mean(x: np.ndarray, sizes: Sequence[int], lo: int, hi: int) -> tuple[np.ndarray, np.ndarray]:
@@ -67,44 +77,130 @@ def weighted(values: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.where(w.sum(-1) > 0, (v * w).sum(-1), np.nan)
 
 
-def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, lay: dict) -> dict[str, Any]:
+def _curves(mean: np.ndarray, tol: np.ndarray, chance: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per size bf and gain cells ``(..., A, C + 2, S)`` against NB; ``tol (A,)`` at-chance tolerances."""
+    nb = mean[..., :1, :]  # NB is condition 0
+    return bootstrap_factor(mean, nb, chance, np.asarray(tol, dtype=float)[:, None, None]), mean - nb
+
+
+def _score(fam_mean: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``(..., A, K, S) -> (..., A, K)`` mean accuracy over the sizes of ``mask``."""
+    with _quiet():
+        return np.nanmean(np.where(mask, fam_mean, np.nan), -1)
+
+
+def _mix(cells: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``cells (..., A, K, S)``, weights ``(..., A, K)`` -> ``(..., A, S)`` (NaN where all weights are 0)."""
+    ws = w[..., None]
+    out = (np.where(ws > 0, cells, 0.0) * ws).sum(-2)
+    return np.where(w.sum(-1)[..., None] > 0, out, np.nan)
+
+
+def _from_ten(cells_k: np.ndarray, chosen: np.ndarray, ran: np.ndarray, after: np.ndarray) -> np.ndarray:
+    """A learner that chooses at n = select_size: before it, an equal share of every candidate
+    that ran (no choice yet); from it on, ``chosen (..., A, S)``."""
+    return np.where(after, chosen, _mix(cells_k, ran / np.maximum(ran.sum(-1, keepdims=True), 1)))
+
+
+def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, lay: dict, tol: np.ndarray,
+                halves: np.ndarray | None = None, cbn_ok: np.ndarray | None = None,
+                masks: np.ndarray | None = None, min_cells: int | None = None) -> dict[str, Any]:
     """Per target values of every Table II row, ``bf`` and ``gain`` ``(..., rows, A)`` (rows in
-    ``TABLE2_ROWS`` order), and ``defined (..., A)``: the window's sizes where bf is defined
-    (P_sl > chance; the same for every row). ``mean: (..., A, C + 2, S)`` as in the module
-    docstring."""
+    ``TABLE2_ROWS`` order), ``defined (..., A)``: the window's sizes where bf is defined (NB
+    more than ``tol`` above chance; the same for every row), and with ``masks (T, A, K)`` the
+    threshold study's best category per T, held-out and oracle, ``thr_bf``/``thr_bf_oracle``
+    ``(..., T, A)`` (the CB1 best rows restricted to the categories built at T: one aggregation).
+
+    ``mean: (..., A, C + 2, S)`` as in the module docstring; ``halves: (..., 2, A, C + 2, S)``
+    the same curves on the two halves of each test set (``intervals.scene_halves``; None: the
+    held-out rows are NaN); ``tol (A,)`` the whole test set's at-chance tolerance (a half has
+    half the scenes: twice it); ``cbn_ok (A,)`` whether the target had a category at CBn's
+    threshold (False: CBn is NB relabelled, so NaN). A target whose bf is defined at fewer than
+    ``min_cells`` (default ``min_defined(cfg, sizes)``) sizes of the window has no bf in any row
+    (resamples pass 1: which targets a row rests on is the estimate's decision)."""
     mean = np.asarray(mean, dtype=float)
-    nb = mean[..., lay["NB"], :][..., None, :]  # (..., A, 1, S)
-    bf = bootstrap_factor(mean, nb, cfg.chance)
+    tol = np.asarray(tol, dtype=float)
     lo, hi = cfg.bf_sizes
-    avg, defined = window_mean(bf, sizes, lo, hi)  # (..., A, C + 2)
-    gain, _ = window_mean(mean - nb, sizes, lo, hi)
-    on = {"DB1": lay["n"], "CB1": lay["n"] + 1}
+    wm = lambda x: window_mean(x, sizes, lo, hi)[0]  # noqa: E731
+    bf, gain = _curves(mean, tol, cfg.chance)
+    split = [_curves(halves[..., h, :, :, :], 2 * tol, cfg.chance) if halves is not None else None for h in range(2)]
     b_lo, b_hi = cfg.best_sizes
     best_mask = size_mask(sizes, b_lo, b_hi)
     best_mask = best_mask if best_mask.any() else np.ones_like(best_mask)
+    sz = np.asarray(sizes)
+    after = sz >= cfg.select_size
     at = list(sizes).index(cfg.select_size) if cfg.select_size in sizes else None
+    on = {"DB1": lay["n"], "CB1": lay["n"] + 1}
+    nan = np.full(mean.shape[:-2], np.nan)  # (..., A)
+
+    def family(m, idx, allowed):
+        """Candidates' mean curves, which ran, and the 'best' / 'at ten' weights ``(..., A, K)``."""
+        fm = m[..., idx, :]
+        ran = np.any(np.isfinite(fm), -1) & allowed
+        fm = np.where(ran[..., None], fm, np.nan)
+        return fm, ran, tie_weights(_score(fm, best_mask)), tie_weights(fm[..., at] if at is not None else _score(fm, best_mask))
+
+    def choices(key_i, idx, allowed):
+        """(best held-out, best oracle, ten held-out, ten oracle, average, ran) of one family, ``(..., A)``."""
+        cells = (bf, gain)[key_i][..., idx, :]
+        fm, ran, w_best, w_ten = family(mean, idx, allowed)
+        best_o = wm(_mix(cells, w_best))
+        ten_o = wm(_from_ten(cells, _mix(cells, w_ten), ran, after))
+        with _quiet():
+            avg = np.nanmean(np.where(ran, wm(cells), np.nan), -1)
+        if halves is None:
+            return nan, best_o, nan, ten_o, avg, ran
+        held_b, held_t = [], []
+        for h in range(2):  # choose on half h, score on the other half
+            _, ran_h, wb_h, wt_h = family(halves[..., h, :, :, :], idx, allowed)
+            other = split[1 - h][key_i][..., idx, :]
+            held_b.append(wm(_mix(other, wb_h)))
+            held_t.append(wm(_from_ten(other, _mix(other, wt_h), ran_h, after)))
+        with _quiet():
+            return np.nanmean(held_b, 0), best_o, np.nanmean(held_t, 0), ten_o, avg, ran
+
+    defined = window_mean(bf[..., lay["NB"], :], sizes, lo, hi)[1]  # (..., A)
+    enough = defined >= (min_defined(cfg, sizes) if min_cells is None else min_cells)
     out: dict[str, Any] = {}
-    for key, val in (("bf", avg), ("gain", gain)):
-        rows: dict[str, np.ndarray] = {"NB": val[..., lay["NB"]]}
+    for key_i, key in enumerate(("bf", "gain")):
+        cells = (bf, gain)[key_i]
+        rows: dict[str, np.ndarray] = {"NB": wm(cells[..., lay["NB"], :])}
         for fam in ("DB1", "CB1"):
             idx = lay[fam]
-            fam_mean = mean[..., idx, :]  # (..., A, K, S)
-            ran = np.any(np.isfinite(fam_mean), -1)
-            with _quiet():
-                score_best = np.nanmean(np.where(best_mask, fam_mean, np.nan), -1)
-                rows[f"{fam} average"] = np.nanmean(np.where(ran, val[..., idx], np.nan), -1)
-            w_ten = tie_weights(fam_mean[..., at]) if at is not None else tie_weights(score_best)
-            rows[f"{fam} best"] = weighted(val[..., idx], tie_weights(score_best))
-            rows[f"{fam} best after ten"] = weighted(val[..., idx], w_ten)
-            rows[f"{fam} best after ten (online)"] = val[..., on[fam]]
-            if fam == "DB1":
-                rows["DBn"] = val[..., lay["DBn"]]
-            else:
-                rows["CBn"] = val[..., lay["CBn"][list(cfg.thresholds).index(cfg.cbn_threshold)]]
-        out[key] = np.stack([rows[r] for r in TABLE2_ROWS], axis=-2)
-    # bf(n) is defined where P_sl(n) > chance: the same sizes for every row of a target
-    out["defined"] = defined[..., lay["NB"]]
+            b_h, b_o, t_h, t_o, avg, ran = choices(key_i, idx, np.ones(len(idx), bool))
+            rows.update({f"{fam} average": avg, f"{fam} best": b_h, f"{fam} best (in-sample oracle)": b_o,
+                         f"{fam} best after ten": t_h, f"{fam} best after ten (in-sample oracle)": t_o,
+                         f"{fam} best after ten (online)": wm(_from_ten(cells[..., idx, :], cells[..., on[fam], :], ran, after))})
+        rows["DBn"] = wm(cells[..., lay["DBn"], :])
+        cbn = wm(cells[..., lay["CBn"][list(cfg.thresholds).index(cfg.cbn_threshold)], :])
+        rows["CBn"] = cbn if cbn_ok is None else np.where(cbn_ok, cbn, np.nan)
+        val = np.stack([rows[r] for r in TABLE2_ROWS], axis=-2)
+        out[key] = np.where(enough[..., None, :], val, np.nan) if key == "bf" else val
+        if masks is not None:
+            per_t = [choices(key_i, lay["CB1"], np.asarray(m, bool)) for m in masks]  # m: (A, K)
+            for name, j in (("thr", 0), ("thr_oracle", 1)):
+                v = np.stack([c[j] for c in per_t], -2)  # (..., T, A)
+                out[f"{name}_{key}"] = np.where(enough[..., None, :], v, np.nan) if key == "bf" else v
+    # bf(n) is defined where P_sl(n) > chance + tol: the same sizes for every row of a target
+    out["defined"] = defined
+    out["enough"] = enough
     return out
+
+
+def min_defined(cfg: ExperimentConfig, sizes: Sequence[int]) -> int:
+    """Sizes of the window at which a target's bf must be defined for it to enter a row:
+    ``cfg.min_defined_share`` of the window's sizes that ran (at least 1)."""
+    k = int(size_mask(sizes, *cfg.bf_sizes).sum())
+    return max(1, int(np.ceil(cfg.min_defined_share * k - 1e-9)))
+
+
+def chance_tolerance(cfg: ExperimentConfig, n_test: np.ndarray | None, a: int) -> np.ndarray:
+    """``(A,)``: P_sl - P_c at or below this is "at chance" (bf undefined): ``cfg.chance_tol_scenes``
+    test scenes' worth of accuracy, k / T (``cfg.test_size`` where the run kept no counts).
+    With k = 1/2 no bf can exceed T / (2 k) = T in size: |P_bl - P_c| <= 1/2."""
+    n = np.asarray(n_test if n_test is not None and np.size(n_test) else np.full(a, cfg.test_size), dtype=float)
+    n = np.where(n > 0, n, cfg.test_size)
+    return cfg.chance_tol_scenes / n
 
 
 def summarise(per_target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -89,15 +89,22 @@ def condition_plan(actions: Sequence[str], target: int, corr: np.ndarray, cfg: E
     return plan
 
 
+def pool_sizes(n: int, cfg: ExperimentConfig) -> tuple[int, int, int]:
+    """(source samples, correlation scenes, test scenes) of an action with ``n`` samples: the
+    config's, or with ``shrink_to_data`` at most 40 %, 10 % and what the training sizes leave."""
+    s, q, test = cfg.source_size, cfg.corr_scenes, cfg.test_size
+    if cfg.shrink_to_data:
+        s, q = min(s, int(0.4 * n)), min(q, int(0.1 * n))
+        test = min(test, n - s - q - max(cfg.sizes))
+    return int(s), int(q), int(test)
+
+
 def split_pools(n: int, action_index: int, cfg: ExperimentConfig, seed: int) -> dict[str, np.ndarray]:
     """Disjoint index sets of one action's dataset: ``source`` (trains its source predictor
     and categories), ``corr`` (held-out scenes for the correlation heuristic), ``target``
     (train and test samples of its own affordance classifier), and the test size."""
     max_size = max(cfg.sizes)
-    s, q, test = cfg.source_size, cfg.corr_scenes, cfg.test_size
-    if cfg.shrink_to_data:
-        s, q = min(s, int(0.4 * n)), min(q, int(0.1 * n))
-        test = min(test, n - s - q - max_size)
+    s, q, test = pool_sizes(n, cfg)
     need = s + q + max_size + test
     if n < need or min(s, q, test) < 1:
         raise UserError(

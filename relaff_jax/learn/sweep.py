@@ -46,6 +46,7 @@ from relaff_jax.learn.draws import draw_rep
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.prep import prepare
 from relaff_jax.learn.protocol import (
+    pool_sizes,
     block_fits,
     category_masks,
     condition_names,
@@ -55,6 +56,9 @@ from relaff_jax.learn.protocol import (
 )
 from relaff_jax.learn.results import FORMAT_VERSION
 from relaff_jax.learn.states import state_features
+
+
+ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share")  # ExperimentConfig keys the sweep never reads
 
 
 def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
@@ -85,6 +89,8 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         # same protocol, seed, actions and data; a space may be added to a finished one
         old = rio.read_json(meta_path)
         now = rio.jsonable(meta)
+        # settings only the analysis reads, added after a run began, do not make it another run
+        now = dict(now, config={k: v for k, v in now["config"].items() if k in old.get("config", {}) or k not in ANALYSIS_ONLY})
         diff = [k for k in ("format", "config", "seed", "actions") if old.get(k) != now[k]]
         diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
         if diff:
@@ -94,7 +100,10 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
             old["fingerprint"] = dict(old["fingerprint"], **now["fingerprint"])
             rio.atomic_write_json(meta_path, old)
     else:
-        rio.atomic_write_json(meta_path, dict(meta, data=list(map(str, data_desc)), started=time.strftime("%Y-%m-%d %H:%M:%S")))
+        # the pools' real sizes (a preset may shrink them to the data), for the report's protocol table
+        pools = {a: dict(zip(("source", "corr", "test"), pool_sizes(len(datasets[a]["label"]), cfg))) for a in actions}
+        rio.atomic_write_json(meta_path, dict(meta, data=list(map(str, data_desc)), pool_sizes=pools,
+                                              started=time.strftime("%Y-%m-%d %H:%M:%S")))
     paths = {}
     for space in spaces:
         paths[space] = run_space(datasets, out / space, cfg, space, actions, seed, jobs, progress)

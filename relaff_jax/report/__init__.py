@@ -17,9 +17,12 @@ Files:
 from relaff_jax.report.document import render_html, render_markdown
 from relaff_jax.report.figures import dataset_figure, write_figures
 from relaff_jax.report.findings import (
+    VERDICTS,
     FindingRules,
+    combine,
     correlation_clusters,
     findings,
+    judge,
     verdict,
 )
 from relaff_jax.report.formatting import finite, fmt
@@ -28,6 +31,6 @@ from relaff_jax.report.write import write_report
 
 __all__ = [
     "CSV_COLUMNS", "FindingRules", "correlation_clusters", "dataset_figure", "findings", "finite", "fmt",
-    "render_html", "render_markdown", "summary", "table2_csv", "table2_markdown", "verdict", "write_figures",
+    "render_html", "render_markdown", "summary", "table2_csv", "table2_markdown", "verdict", "write_figures", "VERDICTS", "combine", "judge",
     "write_report",
 ]

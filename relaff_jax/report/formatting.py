@@ -36,6 +36,23 @@ def ci_text(a: Any, key: str, i: int, nd: int = 3) -> str:
     return f"[{fmt(lo, nd)}, {fmt(hi, nd)}]"
 
 
+def row_cells(a: Any, i: int, nd: int = 3) -> list[str]:
+    """avg / min / max of Table II row ``i`` as text; a row without a single target reads
+    "not measurable: <reason>" (``analyse``'s ``unmeasurable``), never a number."""
+    from relaff_jax.learn import TABLE2_ROWS
+
+    why = (a.get("unmeasurable") or {}).get(TABLE2_ROWS[i])
+    if why:
+        return [f"not measurable: {why}", "-", "-"]
+    return [fmt(v, nd) for v in a["table2"][i]]
+
+
+def span(sizes: Sequence[int], lo: int, hi: int) -> str:
+    """The sizes of ``lo..hi`` that ran, as ``a..b`` (what a window really covered)."""
+    ran = [int(n) for n in sizes if lo <= n <= hi]
+    return f"{ran[0]}..{ran[-1]}" if ran else "none"
+
+
 def rests_on(a: Any, cfg: Any) -> str:
     """One sentence: what the Table II of analysis ``a`` rests on."""
     lo, hi = cfg.bf_sizes
@@ -44,14 +61,26 @@ def rests_on(a: Any, cfg: Any) -> str:
     pos = a.get("test_positive")
     t = (f"; test scenes per affordance {min(tests)}-{max(tests)}" + (f" ({min(pos)}-{max(pos)} positive)" if pos is not None else "")
          if tests is not None else "")
-    ci = (f" Intervals: {100 * a['ci_level']:.0f} % percentile bootstrap, {a['ci_resamples']} resamples of the repetitions"
-          + (" and of each affordance's test scenes." if a["outcomes"] else " (test scenes not resampled: outcomes not kept).")
+    held = a.get("table2_set_held")
+    ci = (f" Intervals: {100 * a['ci_level']:.0f} % bias-corrected (BC) bootstrap, {a['ci_resamples']} resamples of the repetitions"
+          + (" and of each affordance's test scenes (within each half of its test set)" if a["outcomes"] else
+             " (test scenes not resampled: outcomes not kept)")
+          + "; a row's average in a resample is over the affordances of its estimate only"
+          + (f" (all of them had a value in {100 * np.nanmin(held):.0f}-{100 * np.nanmax(held):.0f} % of the resamples, by row)"
+             if held is not None and np.any(np.isfinite(held)) else "") + "."
           if "ci_level" in a else " No intervals computed.")
-    return (f"Rests on {len(a['actions'])} affordances; {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
+    tol = a.get("tol")
+    rule = (f" bf(n) is undefined where NB is at most {cfg.chance_tol_scenes:g} test scene above chance "
+            f"(so |bf| <= {int(round(float(np.max(0.5 / tol))))} here, the largest test set); an affordance enters a bf row only with bf defined at "
+            f">= {a['min_defined']} of the window's {a['window_sizes']} sizes."
+            if tol is not None and "min_defined" in a else "")
+    n = [int(v) for v, row in zip(a["n_targets"], a["table2"]) if np.isfinite(row[0])] if "n_targets" in a else []
+    rows_n = f"{min(n)}-{max(n)}" if n and min(n) != max(n) else (str(n[0]) if n else "none")
+    return (f"Rests on {rows_n} of {len(a['actions'])} affordances, by row (column n); {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
             f"({', '.join(map(str, ran)) if len(ran) <= 6 else f'{ran[0]}..{ran[-1]}'}); {a['reps']} repetitions{t}. "
             "avg/min/max are over the affordances with a value (n); a bootstrap factor is averaged over the sizes "
             "where it is defined (NB above chance); the gain is the mean accuracy difference to NB over the same window."
-            + ci)
+            + rule + ci)
 
 
 def curve_average(curve: np.ndarray, sizes: Sequence[int], cfg: Any) -> float:

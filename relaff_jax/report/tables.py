@@ -3,8 +3,9 @@
 Takes the experiment (``load_results``) and its analysis ``{space: analyse(...)}``; gives the
 CSV of Table II (``table2_csv``: columns ``method, avg, min, max, paper_avg, paper_min,
 paper_max, n_targets, ci_low, ci_high, gain_avg, gain_ci_low, gain_ci_high``: ``n_targets``
-affordances have a value in the row (avg/min/max are over them), ``ci_*`` the bootstrap
-interval of ``avg``, ``gain_*`` the mean accuracy gain over the window and its interval; no
+affordances have a value in the row (avg/min/max are over them), ``ci_*`` the bias-corrected bootstrap
+interval of ``avg``, ``gain_*`` the mean accuracy gain over the window and its interval,
+``not_measurable`` why a row has no value (empty where it has one); no
 paper numbers for RHF, the paper has no RHF table, nor for the online rows), the Markdown
 tables (``table2_markdown``) and the ``summary.json`` dict (``summary``).
 """
@@ -30,11 +31,13 @@ from relaff_jax.report.formatting import (
     finite,
     fmt,
     rests_on,
+    row_cells,
     rows_run,
+    span,
 )
 
 CSV_COLUMNS = ("method", "avg", "min", "max", "paper_avg", "paper_min", "paper_max", "n_targets", "ci_low", "ci_high",
-               "gain_avg", "gain_ci_low", "gain_ci_high")
+               "gain_avg", "gain_ci_low", "gain_ci_high", "not_measurable")
 
 
 def table2_csv(a: Mapping[str, Any], paper: bool) -> str:
@@ -47,7 +50,8 @@ def table2_csv(a: Mapping[str, Any], paper: bool) -> str:
     for i, (name, row) in enumerate(zip(TABLE2_ROWS, a["table2"])):
         ref = paper_row(name) if paper else (np.nan,) * 3
         w.writerow([name] + [fmt(v, 4) for v in row] + [fmt(v, 4) for v in ref] + [int(a["n_targets"][i])]
-                   + [fmt(v, 4) for v in ci[i]] + [fmt(a["gain"][i, 0], 4)] + [fmt(v, 4) for v in gci[i]])
+                   + [fmt(v, 4) for v in ci[i]] + [fmt(a["gain"][i, 0], 4)] + [fmt(v, 4) for v in gci[i]]
+                   + [(a.get("unmeasurable") or {}).get(name, "")])
     return buf.getvalue()
 
 
@@ -61,10 +65,12 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
     lines += [
         f"Seed {meta['seed']}; actions: {', '.join(meta['actions'])}; training sizes {list(cfg.sizes)[:3]}...{max(cfg.sizes)} "
         f"({len(cfg.sizes)} sizes); repetitions PCA {cfg.reps_pca}, RHF {cfg.reps_rhf}; "
-        f"average bootstrap factor over n = {cfg.bf_sizes[0]}..{cfg.bf_sizes[1]}; 'best' = highest mean accuracy over "
-        f"n = {cfg.best_sizes[0]}..{cfg.best_sizes[1]}; 'best after ten' = highest mean test accuracy at n = {cfg.select_size} "
-        "(offline, the paper's); '(online)' = per repetition, highest leave-one-out accuracy on its "
-        f"{cfg.select_size} training samples; tied candidates share the choice equally.",
+        f"average bootstrap factor over n = {span(cfg.sizes, *cfg.bf_sizes)}; 'best' = highest mean accuracy over "
+        f"n = {span(cfg.sizes, *cfg.best_sizes)}, 'best after ten' = highest mean accuracy at n = {cfg.select_size}, both chosen "
+        "on one half of each test set and scored on the other (both ways, averaged); '(in-sample oracle)' = the paper's "
+        "choice, on the very scores it reports; '(online)' = per repetition, highest leave-one-out accuracy on its "
+        f"{cfg.select_size} training samples; every 'after ten' learner uses its choice from n = {cfg.select_size} on "
+        "(before it: an equal share of the candidates); tied candidates share the choice equally.",
         "",
     ]
     for space, a in an.items():
@@ -77,7 +83,7 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
         for i, (name, row) in enumerate(zip(TABLE2_ROWS, a["table2"])):
             if i not in rows_run(cfg, space):
                 continue
-            cells = [fmt(v) for v in row] + [f"{int(a['n_targets'][i])} of {n_aff}", ci_text(a, "table2_ci", i),
+            cells = row_cells(a, i) + [f"{int(a['n_targets'][i])} of {n_aff}", ci_text(a, "table2_ci", i),
                                              fmt(a["gain"][i, 0]), ci_text(a, "gain_ci", i)]
             cells += [fmt(v) for v in paper_row(name)] if paper else []
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
@@ -107,8 +113,9 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
                   + "; ".join(f"T = {t}: {c['built']} (pairs with corr > T: {c['corr_above']})" for t, c in counts.items()), ""]
         th = a["thresholds"]
         lines += ["Threshold study (paper Fig. 12), average bf over n = "
-                  f"{cfg.bf_sizes[0]}..{cfg.bf_sizes[1]} of the best category built at T, mean over affordances: "
-                  + "; ".join(f"T = {t:g}: {fmt(curve_average(c, a['sizes'], cfg))}" for t, c in zip(th["T"], th["best_curve"]))
+                  f"{span(cfg.sizes, *cfg.bf_sizes)} of the best category built at T (chosen on one half of the test scenes, "
+                  "scored on the other; Table II's aggregation: at T = 0 it is 'CB1 best'), mean over affordances: "
+                  + "; ".join(f"T = {t:g}: {fmt(v)} (in-sample oracle {fmt(o)})" for t, v, o in zip(th["T"], th["avg"], th["avg_oracle"]))
                   + f"; all categories (overall average): {fmt(curve_average(th['overall_curve'], a['sizes'], cfg))}", ""]
         lines += [f"Test samples per affordance: {', '.join(f'{t} {int(n)}' for t, n in zip(acts, r['test_size']))}; "
                   f"sweep time {float(r['seconds']):.0f} s (of which source predictors/categories {float(r['seconds_prep']):.0f} s).", ""]
@@ -133,7 +140,12 @@ def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures
             "window_sizes_defined": dict(zip(x["actions"], (int(d) for d in x["defined"]))),
             "window_sizes": x["window_sizes"],
             "test_size": x["test_size"], "test_positive": x["test_positive"],
-            "ci": {"level": x.get("ci_level"), "resamples": x.get("ci_resamples"), "test_scenes_resampled": x["outcomes"]},
+            "ci": {"level": x.get("ci_level"), "resamples": x.get("ci_resamples"), "test_scenes_resampled": x["outcomes"],
+                   "method": x.get("ci_method"), "target_set_held": x.get("table2_set_held")},
+            "not_measurable": x.get("unmeasurable", {}),
+            "chance_tolerance": x.get("tol"), "min_defined_sizes": x.get("min_defined"),
+            "threshold_study": {"T": x["thresholds"]["T"], "avg": x["thresholds"]["avg"],
+                                "avg_oracle": x["thresholds"]["avg_oracle"], "ci": x.get("threshold_ci")},
             "table2_per_affordance": {name: dict(zip(x["actions"], row)) for name, row in zip(TABLE2_ROWS, x["table2_per_target"])},
             "db1_best": {t: x["conditions"][i] for t, i in zip(x["actions"], x["best_db1"])},
             "db1_best_after_ten": {t: x["conditions"][i] for t, i in zip(x["actions"], x["ten_db1"])},

@@ -61,11 +61,13 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     # datasets and example scenes
     data_blocks: list[tuple] = []
     anat: dict[str, Any] = {}
+    n_samples = None
     if data_dirs:
         from relaff_jax.data import DatasetError, anatomy
         from relaff_jax.data import info as dataset_info
 
         infos = {act: dataset_info(d) for act, d in data_dirs.items()}
+        n_samples = {act: i["n"] for act, i in infos.items()}
         dataset_figure(infos, out / "fig_datasets.png")
         data_blocks = S.dataset_blocks(infos, "fig_datasets.png")
         missing = {}
@@ -82,7 +84,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
     # the document
     found = findings(an, cfg, rules)
-    blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + data_blocks
+    blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
               + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset")) + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
               + S.run_blocks(info))
