@@ -359,9 +359,12 @@ def test_cli_out_paths_are_checked_before_any_work(tmp_path):
     cli_learn.register(parser.add_subparsers(dest="command"))
     blocker = tmp_path / "file"
     blocker.write_text("x")
+    results = tmp_path.parent / f"{tmp_path.name}_results"  # looks like an experiment folder (checked first)
+    results.mkdir()
+    (results / "experiment.json").write_text("{}")
     for argv in (["experiment", "--synthetic", "150", "--out", str(blocker / "res")],
                  ["experiment", "--synthetic", "150", "--out", str(blocker)],
-                 ["report", str(tmp_path), "--out", str(blocker / "rep")]):
+                 ["report", str(results), "--out", str(blocker / "rep")]):
         args = parser.parse_args(argv)
         with pytest.raises(UserError, match="file"):
             args.func(args)
