@@ -256,3 +256,23 @@ def test_generate_help_prints_a_plain_percent(capsys):
         cli.main(["generate", "--help"])
     out = " ".join(capsys.readouterr().out.split())
     assert "50% positives" in out and "%%" not in out and "--engine native" in out
+
+
+def test_a_run_begun_before_a_setting_existed_resumes_at_its_default(tmp_path):
+    """A config key missing from run.json (added to the code later) is the same run when it is
+    requested at its default, and a refused one otherwise."""
+    import json as _json
+
+    from relaff_jax.config import override
+    from relaff_jax.reproduce.folder import Paths, ReproduceError, open_log
+    from relaff_jax.runconfig import preset
+
+    out = _run_folder(tmp_path)
+    log = _json.loads((out / "run.json").read_text())
+    del log["config"]["experiment"]["state"], log["config"]["dataset"]["population"]
+    (out / "run.json").write_text(_json.dumps(log))
+    with pytest.raises(ReproduceError, match="dataset.population: stored \"<absent>\", requested \"feasible\""):
+        open_log(Paths(out), "tiny", override(preset("tiny"), {"dataset.population": "feasible"}), 0)
+    back = open_log(Paths(out), "tiny", preset("tiny"), 0)
+    assert sorted(back["added_settings"]) == ["dataset.population", "experiment.state"]
+    assert "population" in _json.loads((out / "run.json").read_text())["config"]["dataset"]

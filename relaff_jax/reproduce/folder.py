@@ -85,6 +85,20 @@ def differences(stored: Any, wanted: Any, prefix: str = "") -> list[tuple[str, A
     return [] if stored == wanted else [(prefix, stored, wanted)]
 
 
+def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
+    """A config key absent from a stored run log and requested at the code's default."""
+    if stored != "<absent>" or not key.startswith("config."):
+        return False
+    from relaff_jax.runconfig import RunConfig
+
+    node: Any = json.loads(json.dumps(to_dict(RunConfig()), default=rio.json_default))
+    for part in key.split(".")[1:]:
+        if not isinstance(node, dict) or part not in node:
+            return False
+        node = node[part]
+    return node == wanted
+
+
 def damaged_log_hint(root: Path) -> str:
     return (f"every stage's own output is untouched: rebuild the log with `relaff reproduce --out {root} "
             "--rebuild-log` and the --preset, --seed and --set options the run was made with (stages made "
@@ -136,6 +150,14 @@ def _check_log(log: dict, want: dict, root: Path) -> dict:
                              f"{log.get('format_version')}, this one writes {FORMAT_VERSION}); use a new --out")
     stored = {k: log.get(k, "<absent>") for k in want}
     diff = differences(stored, want)
+    added = [d for d in diff if _added_at_default(*d)]
+    diff = [d for d in diff if d not in added]
+    if added and not diff:
+        # settings that did not exist when the run began, requested at their defaults (which
+        # keep the old behaviour): the same run; the log records them from now on
+        log["config"] = want["config"]
+        log.setdefault("added_settings", []).extend(k.removeprefix("config.") for k, _, _ in added)
+        rio.atomic_write_json(root / RUN_LOG, log)
     if diff:
         what = sorted({key.split(".")[0] for key, _, _ in diff})
         shown = "; ".join(f"{key.removeprefix('config.')}: stored {json.dumps(a)[:60]}, requested {json.dumps(b)[:60]}"
