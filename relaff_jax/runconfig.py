@@ -80,7 +80,8 @@ def preset(name: str) -> RunConfig:
     """The four presets of ``relaff reproduce``.
 
     ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
-    repetitions, 4000 test samples, the paper's forests): projected at ~10 hours on two cores
+    repetitions, 4000 test samples, the paper's forests), from the feasible rollouts
+    (``dataset.population=feasible``; ``--set dataset.population=all`` for today's reading): projected at ~10 hours on two cores
     run as two workers (``--cluster local:2``), ~4.5 with the native engine (docs/reproduce.md).
     ``study``: numbers that can be read beside the paper's (docs/results.md): 1,000 samples
     per action, every n in 2..50, 10 repetitions in both spaces, 500 balanced test scenes per
@@ -98,7 +99,14 @@ def preset(name: str) -> RunConfig:
     from relaff_jax.learn import experiment_preset
 
     if name == "paper":
-        return override(RunConfig(), {"dataset.rollout_batch": 1024})
+        # the feasible population (issue 24, docs/results.md): the paper's IK failures are
+        # "occasional" and its matching targets the relation, while here half the scenes are out
+        # of reach and the COG-matched negatives of the population "all" are unreachable stacks.
+        # The matching cannot be met inside it (73-78 % borrowed at twice the rollouts in the
+        # study preset), so it is given up at the first balanced selection; take's feasible
+        # negatives are 2.6 % of its rollouts, so 5,000 of them need ~194,000 (the cap)
+        return override(RunConfig(), {"dataset.rollout_batch": 1024, "dataset.population": "feasible",
+                                      "dataset.match_patience": 1.0, "dataset.max_rollouts": 300_000})
     if name == "study":
         return override(RunConfig(experiment=experiment_preset("study")), {
             "dataset.n_samples": 1000, "dataset.rollout_batch": 256, "dataset.max_rollouts": 100_000,

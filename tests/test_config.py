@@ -55,6 +55,9 @@ def test_presets():
     assert (tiny.dataset.n_samples, tiny.dataset.rollout_batch, tiny.dataset.feature_batch) == (24, 8, 8)
     assert (quick.dataset.n_samples, quick.dataset.rollout_batch, quick.dataset.feature_batch) == (100, 64, 16)
     assert paper.dataset.n_samples == 10_000 and paper.dataset.rollout_batch == 1024
+    # the paper preset reads the feasible population (issue 24), the others today's reading
+    assert (paper.dataset.population, paper.dataset.match_patience, paper.dataset.max_rollouts) == ("feasible", 1.0, 300_000)
+    assert {p.dataset.population for p in (tiny, quick, study)} == {"all"}
     assert tiny.experiment.forest.max_trees == 8 and quick.experiment.sizes == (2,) + tuple(range(4, 26))
     with pytest.raises(UserError, match="unknown preset"):
         runconfig.preset("fast")
