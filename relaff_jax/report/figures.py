@@ -135,6 +135,13 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
         ax.set(ylabel=f"average bf (n = {cfg.bf_sizes[0]}..{cfg.bf_sizes[1]})", title=f"{s0.upper()} - average bootstrap factors")
         ax.legend(fontsize=7, ncol=4)
         save(fig, "fig10_average_bf.png")
+    else:  # say why the figure is empty rather than leave it out (tiny runs: no row is measurable)
+        fig = Figure(figsize=(8, 2.5))
+        ax = fig.subplots()
+        ax.axis("off")
+        ax.text(0.5, 0.5, f"{s0.upper()}: no bootstrap-factor row is measurable in this run\n(too few test scenes "
+                f"or sizes with NB above chance; Table II gives each row's reason)", ha="center", va="center")
+        save(fig, "fig10_average_bf.png")
 
     # Fig. 11: correlation matrices
     fig = Figure(figsize=(5.5 * len(spaces), 5))
