@@ -135,7 +135,7 @@ def reach_json(anat: Mapping[str, Mapping[str, Any]], res: Mapping[str, Any], cf
         nb = np.stack([subset_table(x, 0, i) for i in range(len(sizes))], 1)  # (T, S, 3)
         out["spaces"][space] = {
             "actions": [str(t) for t in np.asarray(x["actions"])], "sizes": sizes,
-            "nb_acc_subset": np.where(np.isfinite(nb), nb, np.nan).tolist(),
+            "nb_acc_subset": nb.tolist(),  # NaN (empty subset) becomes null in finite()
             "subset_count": np.asarray(x["subset_count"]).tolist(),
             "corr_feasible": np.asarray(x["corr_feasible"]).tolist(),
             "corr_stacked": np.asarray(x["corr_stacked"]).tolist()}
