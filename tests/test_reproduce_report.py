@@ -3,6 +3,7 @@ whole report on a results folder of `relaff experiment --synthetic` plus small d
 real settled scenes (labels from a test rule, not from the arm's actions)."""
 import base64
 import json
+import os
 import re
 import subprocess
 import sys
@@ -170,6 +171,15 @@ def test_correlation_clusters_hand_worked():
     assert R.correlation_clusters(corr, acts, 0.05) == [acts[:5], ["f"]]
 
 
+def test_numeric_columns_read_intervals_and_dashes_as_numbers():
+    from relaff_jax.report.document import numeric_columns
+
+    rows = [["lift", "0.85 [0.80, 0.90]", "infeasible", "-", "**1.2**"],
+            ["move", "\u22120.02", "reach", "n/a", "nan"]]
+    assert numeric_columns(list("abcde"), rows) == [False, True, False, True, True]
+    assert numeric_columns(["a"], []) == [False]  # an empty column stays left-aligned
+
+
 def test_render_markdown_and_html(tmp_path):
     png = b"\x89PNG\r\n\x1a\n" + bytes(range(40))
     (tmp_path / "f.png").write_bytes(png)
@@ -177,10 +187,13 @@ def test_render_markdown_and_html(tmp_path):
               ("table", ["x", "y"], [[1, "<2>"]]), ("img", "f.png", "a figure")]
     md = R.render_markdown(blocks)
     assert md.splitlines()[:4] == ["# Title", "", "a < b & `code` **bold**", ""]
-    assert "| x | y |\n|---|---|\n| 1 | <2> |" in md and "![a figure](f.png)" in md
+    # a number column is right-aligned, a text column left-aligned
+    assert "| x | y |\n|---:|---|\n| 1 | <2> |" in md
+    assert "![a figure](f.png)" in md
     page = R.render_html(blocks, tmp_path, "t")
     assert "<p>a &lt; b &amp; <code>code</code> <b>bold</b></p>" in page
-    assert "<td>&lt;2&gt;</td>" in page and "<li>two</li>" in page
+    assert '<td class="num">1</td><td class="txt">&lt;2&gt;</td>' in page
+    assert "<li>two</li>" in page
     data = re.search(r'src="data:image/png;base64,([^"]+)"', page).group(1)
     assert base64.b64decode(data) == png
     with pytest.raises(ValueError, match="unknown block"):
@@ -266,7 +279,12 @@ def test_full_report(scene_run, tmp_path):
     groups = "; ".join("{" + ", ".join(g) + "}" for g in clusters if len(g) > 1)
     assert f"RHF: affordances linked by correlations above T = 0.5: {groups or 'none'}" in md
     assert "synthetic features" in md  # the results say where they came from
-    assert "preset `tiny`, seed 0" in md and "generate: 12 s" in md and "report: None" in md
+    assert "preset `tiny`, seed 0" in md
+    assert "generate: 12 s" in md
+    # the report's own time replaces the run log's (None: the stage had not ended), with the machine and load
+    assert re.search(r"- report: \d+ s \(this document\)", md)
+    assert f"{os.cpu_count()} cores" in md
+    assert "load average as the report was written: " in md
 
     # the reach section names the datasets without a 'feasible' field; compare reads the report back
     assert "Reach or relation" in md and "No anatomy for lift" in md

@@ -19,6 +19,7 @@ from relaff_jax.constants import OBJECT_SEGMENTS
 from relaff_jax.io import atomic_write_bytes
 
 from .config import PerceptionConfig, validate_config
+from .cloud_plot import draw_clouds
 from .descriptors import pca_frame
 from .noise import add_depth_noise
 from .pipeline import features_from_voxels, point_cloud
@@ -109,38 +110,19 @@ def _draw_segments(ax, seg, crop):
 
 
 def _draw_clouds(ax, v, cfg: PerceptionConfig):
-    """Voxel clouds with PCA frames (axes 2 sqrt(eigenvalue) long, at least 4 cm)."""
+    """Voxel clouds with PCA frames, the robot base marked."""
     feats = v["feats"]
-    for o, (name, colour) in enumerate(zip(OBJECT_NAMES, OBJECT_COLOURS)):
-        n = int(min(v["voxels"]["count"][o], cfg.voxel.max_voxels))
-        p = v["voxels"]["points"][o][:n]
-        ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=2, c=colour, label=f"{name}: {n} voxels")
-        if feats["unseen"][o]:
-            continue
-        mu, frame, ev = v["frames"][o]
-        for k, c in enumerate(("r", "g", "b")):
-            vec = frame[:, k] * max(2 * np.sqrt(max(ev[k], 0.0)), 0.04)
-            ax.quiver(*mu, *vec, color=c, linewidth=2)
+    counts = [int(min(v["voxels"]["count"][o], cfg.voxel.max_voxels)) for o in range(2)]
+    points = [v["voxels"]["points"][o][:counts[o]] for o in range(2)]
+    frames = [None if feats["unseen"][o] else v["frames"][o] for o in range(2)]
     ax.scatter([0], [0], [0], marker="^", c="k", s=40, label="robot base")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_zlabel("z (m)")
-    ax.legend(loc="upper left", fontsize=8)
     pca = feats["pca"]
-    ax.set_title("voxel clouds, PCA frames (x red, y green, z blue)\n"
-                 f"toy yaw {np.rad2deg(pca[5]):.0f} deg, other yaw {np.rad2deg(pca[14]):.0f} deg"
-                 + ("  [UNSEEN: " + ", ".join(n for n, u in zip(OBJECT_NAMES, feats["unseen"]) if u) + "]"
-                    if feats["unseen"].any() else ""), fontsize=9)
-    # Equal aspect around the middle of both clouds' box (not their mean: the larger object
-    # would push the smaller one out of the axes), at least 0.6 m wide.
-    pts = np.concatenate([v["voxels"]["points"][o][: int(min(v["voxels"]["count"][o], cfg.voxel.max_voxels))]
-                          for o in range(2)] + [np.zeros((0, 3))])
-    lo, hi = (pts.min(0), pts.max(0)) if len(pts) else (np.zeros(3), np.zeros(3))
-    centre, half = (lo + hi) / 2, max(0.3, 0.55 * float(np.max(hi - lo)))
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
-    ax.set_zlim(0, 2 * half)
-    ax.set_box_aspect((1, 1, 1))
+    title = ("voxel clouds, PCA frames (x red, y green, z blue)\n"
+             f"toy yaw {np.rad2deg(pca[5]):.0f} deg, other yaw {np.rad2deg(pca[14]):.0f} deg"
+             + ("  [UNSEEN: " + ", ".join(n for n, u in zip(OBJECT_NAMES, feats["unseen"]) if u)
+                + ": fewer voxels than a frame needs, so its 9 PCA values are zeros]" if feats["unseen"].any() else ""))
+    draw_clouds(ax, points, [f"{n}: {c} voxels" for n, c in zip(OBJECT_NAMES, counts)], OBJECT_COLOURS,
+                frames, title, min_half=0.3)
 
 
 def render_scene_png(scene: SceneGeoms, key, out_path, cfg: PerceptionConfig = PerceptionConfig(),

@@ -14,15 +14,13 @@ import numpy as np
 
 from relaff_jax.errors import UserError
 from relaff_jax.io import atomic_write_bytes
+from relaff_jax.perception.cloud_plot import draw_clouds
 from relaff_jax.perception.descriptors import pca_frame
 
 from .cloud_features import object_pair_features
 from .config import RealConfig
 from .frame import table_frame
 from .segment import hand_segmentation, object_ids, segment_scene
-
-PAIR_COLOURS = ("tab:orange", "tab:purple")
-
 
 def real_scene_view(cloud, key, cfg: RealConfig = RealConfig(), pair=None, source: str = "hand",
                     n_objects: int | None = None) -> dict:
@@ -71,28 +69,16 @@ def _seg_image(ax, seg, valid, title):
 
 
 def _draw_clouds(ax, v):
-    vox, feats = v["feats"]["voxels"], v["feats"]
-    for o, colour in enumerate(PAIR_COLOURS):
-        p = vox["points"][o][: v["counts"][o]]
-        ax.scatter(p[:, 0], p[:, 1], p[:, 2], s=2, c=colour, label=f"object {v['pair'][o]}: {v['counts'][o]} voxels")
-        if feats["unseen"][o]:
-            continue
-        mu, fr, ev = v["frames"][o]
-        for k, c in enumerate(("r", "g", "b")):
-            ax.quiver(*mu, *(fr[:, k] * max(2 * np.sqrt(max(ev[k], 0.0)), 0.04)), color=c, linewidth=2)
-    pts = np.concatenate([vox["points"][o][: v["counts"][o]] for o in range(2)])
-    lo, hi = pts.min(0), pts.max(0)
-    centre, half = (lo + hi) / 2, max(0.15, 0.55 * float(np.max(hi - lo)))
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
-    ax.set_zlim(0, 2 * half)
-    ax.set_box_aspect((1, 1, 1))
-    ax.set_xlabel("x (m, viewing dir.)")
-    ax.set_ylabel("y (m)")
-    ax.set_zlabel("z (m, up)")
-    ax.legend(loc="upper left", fontsize=8)
-    ax.set_title(f"{v['source']} pair in the table frame (voxel centroids)\n"
-                 "PCA frames (x red, y green, z blue)", fontsize=9)
+    """The pair's voxel clouds in the table frame, each in its colour of the segmentation panel."""
+    feats = v["feats"]
+    seg = v["hand"] if v["source"] == "hand" else v["pipeline"]["seg"]
+    ids = object_ids(seg)
+    colours = [f"C{ids.index(o) % 10}" if o in ids else "0.3" for o in v["pair"]]
+    points = [feats["voxels"]["points"][o][: v["counts"][o]] for o in range(2)]
+    frames = [None if feats["unseen"][o] else v["frames"][o] for o in range(2)]
+    draw_clouds(ax, points, [f"object {v['pair'][o]}: {v['counts'][o]} voxels" for o in range(2)], colours, frames,
+                f"{v['source']} pair in the table frame (voxel centroids)\nPCA frames (x red, y green, z blue)",
+                min_half=0.15, axis_labels=("x (m, viewing dir.)", "y (m)", "z (m, up)"))
 
 
 def render_real_scene_png(cloud, key, out_path, cfg: RealConfig = RealConfig(), pair=None, source: str = "hand",

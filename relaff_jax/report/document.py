@@ -19,6 +19,19 @@ def _inline_html(text: str) -> str:
     return re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", s)
 
 
+_NUMERIC = re.compile(r"^[-+−]?(\d|\.\d|(inf|nan)\b)|^[-–—]$|^n/a$", re.IGNORECASE)
+
+
+def numeric_columns(header: list, rows: list) -> list[bool]:
+    """Per column: True when every non-empty cell reads as a number (figures, intervals such as
+    ``0.85 [0.80, 0.90]``, a dash), so it is right-aligned; text columns are left-aligned."""
+    cols = []
+    for j in range(len(header)):
+        cells = [str(r[j]).strip().strip("*`") for r in rows if j < len(r) and str(r[j]).strip()]
+        cols.append(bool(cells) and all(_NUMERIC.match(c) for c in cells))
+    return cols
+
+
 def render_markdown(blocks: list[tuple]) -> str:
     """Markdown of a block list: ``("h", level, text)``, ``("p", text)``, ``("ul", [items])``,
     ``("table", header, rows)``, ``("img", relative_path, caption)``."""
@@ -34,7 +47,7 @@ def render_markdown(blocks: list[tuple]) -> str:
         elif kind == "table":
             header, rows = b[1], b[2]
             lines.append("| " + " | ".join(header) + " |")
-            lines.append("|" + "---|" * len(header))
+            lines.append("|" + "".join("---:|" if num else "---|" for num in numeric_columns(header, rows)))
             lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
             lines.append("")
         elif kind == "img":
@@ -46,8 +59,7 @@ def render_markdown(blocks: list[tuple]) -> str:
 
 _CSS = """body{font-family:-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1100px;margin:2em auto;
 padding:0 1em;color:#222;line-height:1.45}table{border-collapse:collapse;margin:0.6em 0 1.2em;font-size:0.9em}
-th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}th{background:#f2f2f2}td:first-child,th:first-child
-{text-align:left}img{max-width:100%;border:1px solid #eee}figure{margin:1em 0}figcaption{font-size:0.85em;color:#555}
+th,td{border:1px solid #ccc;padding:3px 8px}th{background:#f2f2f2}.num{text-align:right}.txt{text-align:left}img{max-width:100%;border:1px solid #eee}figure{margin:1em 0}figcaption{font-size:0.85em;color:#555}
 code{background:#f4f4f4;padding:0 3px}h1,h2,h3{border-bottom:1px solid #eee;padding-bottom:0.2em}"""
 
 
@@ -63,8 +75,10 @@ def render_html(blocks: list[tuple], base: Path, title: str) -> str:
         elif kind == "ul":
             body.append("<ul>" + "".join(f"<li>{_inline_html(x)}</li>" for x in b[1]) + "</ul>")
         elif kind == "table":
-            head = "".join(f"<th>{_inline_html(str(c))}</th>" for c in b[1])
-            rows = "".join("<tr>" + "".join(f"<td>{_inline_html(str(c))}</td>" for c in r) + "</tr>" for r in b[2])
+            side = ["num" if num else "txt" for num in numeric_columns(b[1], b[2])]
+            head = "".join(f'<th class="{k}">{_inline_html(str(c))}</th>' for c, k in zip(b[1], side))
+            rows = "".join("<tr>" + "".join(f'<td class="{k}">{_inline_html(str(c))}</td>' for c, k in zip(r, side))
+                           + "</tr>" for r in b[2])
             body.append(f"<table><thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>")
         elif kind == "img":
             data = base64.b64encode((base / b[1]).read_bytes()).decode("ascii")

@@ -43,6 +43,14 @@ def _grid(n: int):
     return fig, axes.flat
 
 
+def _colours(n: int) -> list:
+    """n distinguishable colours (tab10 repeats after ten; tab20 holds the 15 Table II rows)."""
+    from matplotlib import colormaps
+
+    cmap = colormaps["tab10" if n <= 10 else "tab20"]
+    return [cmap(i % cmap.N) for i in range(n)]
+
+
 def _logx(ax, sizes) -> None:
     """Log-scaled n axis with plain tick labels at round sizes."""
     from matplotlib.ticker import FixedLocator, NullLocator, ScalarFormatter
@@ -77,9 +85,11 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
     a = an[s0]
     fig = Figure(figsize=(7, 4.5))
     ax = fig.subplots()
+    # Means only: nine overlapping bands hide each other; each curve's interval is in Fig. 7.
     for ti, t in enumerate(a["actions"]):
-        _curve(ax, a, ti, 0, t)
-    ax.set(xlabel="training samples n", ylabel="accuracy", title=f"{s0.upper()} - non-bootstrapped (NB)")
+        ax.plot(a["sizes"], a["mean"][ti, 0], label=t, linestyle=("-", "--", ":")[ti // 10 % 3])
+    ax.set(xlabel="training samples n", ylabel="accuracy",
+           title=f"{s0.upper()} - non-bootstrapped (NB); intervals per affordance in Fig. 7")
     _logx(ax, a["sizes"])
     ax.legend(fontsize=7, ncol=3)
     save(fig, "fig06_nb_learning.png")
@@ -123,17 +133,28 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
     # Fig. 10: average bootstrap factor per method and affordance (PCA)
     rows = [r for r in range(1, len(TABLE2_ROWS)) if np.any(np.isfinite(a["table2_per_target"][r]))]
     if rows:
-        fig = Figure(figsize=(12, 4.5))
+        fig = Figure(figsize=(12, 6))
         ax = fig.subplots()
         groups = a["actions"] + ["average"]
         width = 0.8 / len(rows)
+        colours = _colours(len(rows))
+        missing = []
         for k, r in enumerate(rows):
             vals = np.append(a["table2_per_target"][r], a["table2"][r, 0])
-            ax.bar(np.arange(len(groups)) + (k - (len(rows) - 1) / 2) * width, np.nan_to_num(vals), width, label=TABLE2_ROWS[r])
+            x = np.arange(len(groups)) + (k - (len(rows) - 1) / 2) * width
+            ax.bar(x, np.nan_to_num(vals), width, label=TABLE2_ROWS[r], color=colours[k])
+            # an undefined cell is marked where its bar would stand, not left as a silent gap
+            gone = ~np.isfinite(vals)
+            ax.plot(x[gone], np.zeros(gone.sum()), "x", color="k", ms=4)
+            missing += [groups[i] for i in np.flatnonzero(gone[:-1])]
         ax.axhline(1.0, color="k", lw=0.8)
         ax.set_xticks(np.arange(len(groups)), groups)
         ax.set(ylabel=f"average bf (n = {cfg.bf_sizes[0]}..{cfg.bf_sizes[1]})", title=f"{s0.upper()} - average bootstrap factors")
-        ax.legend(fontsize=7, ncol=4)
+        if missing:
+            ax.set_xlabel("x: not measurable (NB at chance over too many sizes; Table II gives the reason) in "
+                          + ", ".join(sorted(set(missing), key=groups.index)))
+        # below the axes: the legend of 15 rows would cover the tallest bars
+        ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12 if not missing else -0.18))
         save(fig, "fig10_average_bf.png")
     else:  # say why the figure is empty rather than leave it out (tiny runs: no row is measurable)
         fig = Figure(figsize=(8, 2.5))
@@ -164,8 +185,14 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
     if np.any(np.isfinite(th["overall_curve"])):
         fig = Figure(figsize=(7, 4.5))
         ax = fig.subplots()
-        for t, c, n in zip(th["T"], th["best_curve"], th["count"]):
-            ax.plot(a["sizes"], c, label=f"best category, T = {t:g} ({n} built)")
+        styles = ("-", "--", ":", "-.")
+        for k, (t, c, n) in enumerate(zip(th["T"], th["best_curve"], th["count"])):
+            if n == 0 or not np.any(np.isfinite(c)):  # a legend entry without a line misleads
+                ax.plot([], [], " ", label=f"T = {t:g}: no category built")
+                continue
+            # distinct styles and widths: thresholds that keep the same best category coincide
+            ax.plot(a["sizes"], c, linestyle=styles[k % 4], lw=2.4 - 0.5 * (k % 3),
+                    label=f"best category, T = {t:g} ({n} built)")
         ax.plot(a["sizes"], th["overall_curve"], "k--", label="overall average (all categories)")
         ax.axhline(1.0, color="k", lw=0.8)
         ax.set(xlabel="training samples n", ylabel="bootstrap factor", title=f"{s0.upper()} - correlation thresholds")

@@ -270,13 +270,29 @@ def protocol_blocks(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]],
     return [("h", 2, "Sizes of the protocol"), ("table", ["part", "this run", "paper"], rows)]
 
 
-def run_blocks(run_info: Mapping[str, Any] | None) -> list[tuple]:
-    if not run_info:
-        return []
-    items = [f"preset `{run_info.get('preset')}`, seed {run_info.get('seed')}"]
-    for st, t in (run_info.get("timings") or {}).items():
+def run_blocks(run_info: Mapping[str, Any] | None, report_s: float | None = None,
+               load: tuple[float, float, float] | None = None, machine: Mapping[str, Any] | None = None) -> list[tuple]:
+    """The run's preset, seed, stage times, machine, load and versions.
+
+    report_s: seconds this report has taken up to its writing (the run log's own ``report``
+      timing, when there, is of an earlier report); load: the 1/5/15-minute load averages
+      as the report is written (a loaded machine makes every timing above slower).
+    """
+    info = dict(run_info or {})
+    items = [f"preset `{info.get('preset')}`, seed {info.get('seed')}"] if run_info else []
+    timings = dict(info.get("timings") or {})
+    if report_s is not None:
+        timings["report"] = f"{report_s:.0f} s (this document)"
+    for st, t in timings.items():
         items.append(f"{st}: {t:.0f} s" if isinstance(t, (int, float)) else f"{st}: {t}")
-    v = run_info.get("versions") or {}
+    m = info.get("machine") or machine
+    if m:
+        isa = ", ".join(m.get("isa") or []) or "-"
+        items.append(f"machine: {m.get('cpu_model')}, {m.get('cpus')} cores, {m.get('machine')} ({isa}); {m.get('platform')}")
+    if load is not None:
+        items.append("load average as the report was written: " + " / ".join(f"{x:.2f}" for x in load)
+                     + " (1 / 5 / 15 min)")
+    v = info.get("versions") or {}
     if v:
         items.append("versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val))
-    return [("h", 2, "The run"), ("ul", items)]
+    return [("h", 2, "The run"), ("ul", items)] if items else []

@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import time
 from pathlib import Path
 from typing import Any, Mapping
 
 from relaff_jax import io as rio
+from relaff_jax import provenance
 from relaff_jax.learn import analyse, load_results
 from relaff_jax.report import sections as S
 from relaff_jax.report.document import render_html, render_markdown
@@ -29,6 +31,13 @@ from relaff_jax.report.findings import FindingRules, findings
 from relaff_jax.report.formatting import finite
 from relaff_jax.report.reach import predictor_blocks, reach_blocks, reach_figure, reach_json, subset_blocks
 from relaff_jax.report.tables import summary, table2_csv, table2_markdown
+
+
+def _load() -> tuple[float, float, float] | None:
+    try:
+        return os.getloadavg()
+    except OSError:  # not available on this platform
+        return None
 
 
 def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
@@ -42,6 +51,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     info: the run log of ``relaff reproduce`` (``preset``, ``seed``, ``timings``, ``versions``).
     rules: how the findings summary decides whether a paper finding is reproduced.
     """
+    t0 = time.perf_counter()
     res = load_results(results_dir)
     cfg = res["config"]
     spaces = list(res["meta"]["spaces"])
@@ -87,7 +97,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
               + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset")) + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
-              + S.run_blocks(info))
+              + S.run_blocks(info, time.perf_counter() - t0, _load(), provenance.machine()))
     rio.atomic_write_json(out / "findings.json", finite({"findings": found, "rules": dataclasses.asdict(rules)}))
     rio.atomic_write_text(out / "report.md", render_markdown(blocks))
     rio.atomic_write_text(out / "report.html", render_html(blocks, out, "relaff_jax reproduction report"))
