@@ -80,7 +80,9 @@ def dataset_blocks(infos: Mapping[str, Mapping[str, Any]], fig: str | None) -> l
         "p", "Per action: the balanced selection (half positive; negatives matched to the positives' distribution of the "
         "distance between the objects' centres of gravity) and every rollout simulated to find it. Positive rates by "
         "the settled spatial relation, over all rollouts (what the action does in each relation) and, with counts, "
-        "over the selected samples.")]
+        "over the selected samples. `unseen`: samples in which an object has fewer voxels than a PCA frame needs "
+        "(occluded, out of view or too small); its nine PCA values are then zeros, a centroid at the robot base that no "
+        "seen object has, and all 300 RHF values are zeros (docs/perception.md, 'Unseen objects').")]
     header = ["action", "samples", "rollouts", "rollout pos. rate"] + [f"rollouts {r}" for r in RELATIONS] \
         + [f"selected {r} (n)" for r in RELATIONS] + ["borrowed", "unseen"]
     rows = []
