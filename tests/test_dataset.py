@@ -559,7 +559,7 @@ def test_progress_bar_and_report(tmp_path, capsys):
     res = ds.generate_dataset(tmp_path / "p", "take", 6, synthetic_rollout_fn(), 0, 8, {}, progress=True,
                               dataset_config=EXACT)
     err = capsys.readouterr().err
-    assert "take positives" in err  # the tqdm bar
+    assert "take samples" in err  # the tqdm bar, after its compile phase
     assert f"6 samples selected from {res['rollouts']} rollouts" in err
     sizes: list = []
     ds.add_features(tmp_path / "p", feature_fn(sizes=sizes), batch=4, progress=True)
@@ -762,3 +762,72 @@ def test_a_chunk_that_does_not_read_back_never_lands(tmp_path, monkeypatch):
     monkeypatch.undo()
     store.write_chunk(path, {"label": np.zeros(4, bool)}, {"chunk": 0})  # the real writer lands
     assert store.read_chunk(path)[0]["label"].shape == (4,)
+
+
+class _RecordingBar:
+    """Stands in for the tqdm bar: records every count and description."""
+
+    def __init__(self, total, desc):
+        self.total, self.n, self.counts, self.descs = total, 0, [], [desc]
+
+    def update(self, k):
+        self.n += k
+        self.counts.append(self.n)
+
+    def set_postfix(self, **kw):
+        pass
+
+    def set_description(self, desc):
+        self.descs.append(desc)
+
+    def close(self):
+        pass
+
+
+def test_progress_bar_counts_samples_in_hand_and_ends_at_n(tmp_path, monkeypatch):
+    bars = []
+
+    def fake_bar(progress, total, desc, unit="pos"):
+        bars.append(_RecordingBar(total, desc))
+        return bars[-1]
+
+    monkeypatch.setattr(generate, "progress_bar", fake_bar)
+    res = ds.generate_dataset(tmp_path / "lift", "lift", 40, synthetic_rollout_fn(), 3, 16, CFG,
+                              progress=True, dataset_config=EXACT)
+    (bar,) = bars
+    assert bar.total == 40
+    # the first chunk (the compile) is its own phase, then the bar counts samples
+    assert bar.descs == ["lift: compiling, first chunk", "lift samples"]
+    assert bar.counts[0] == 0
+    assert bar.counts[-1] == 40
+    # one count per selection attempt: one before the first chunk and one after each chunk
+    assert len(bar.counts) == res["chunks"] + 1
+    # matching negatives counts: the bar is below 40 until the last chunk, never at 100 % early
+    assert all(c < 40 for c in bar.counts[:-1])
+
+
+def test_samples_in_hand_hand_worked():
+    from types import SimpleNamespace
+
+    lab = np.array([1, 1, 1, 0, 0, 0, 0], bool)
+    ok = np.array([1, 1, 0, 1, 1, 1, 0], bool)
+    # no selection yet: eligible positives (2) capped at n // 2 = 5, eligible negatives 3 of 5
+    assert generate.samples_in_hand(None, lab, ok, 10, 0.0) == 5
+    assert generate.samples_in_hand(None, lab, ok, 4, 0.0) == 4
+    sel = SimpleNamespace(borrowed=7, n_negative=20)
+    assert generate.samples_in_hand(sel, lab, ok, 40, 0.0) == 33  # 7 borrowed negatives still owed
+    assert generate.samples_in_hand(sel, lab, ok, 40, 0.35) == 40  # 7 <= floor(0.35 * 20): none owed
+    assert generate.samples_in_hand(sel, lab, ok, 40, 0.2) == 37  # floor(4) allowed, 3 owed
+
+
+def test_generation_progress_of_a_killed_run_reads_samples_in_hand(tmp_path):
+    from relaff_jax.data.status import generation_progress
+
+    path = tmp_path / "lift"
+    with pytest.raises(Killed):
+        gen(path, n=40, fn=synthetic_rollout_fn(kill_after=2))
+    meta = store.read_sidecar(path)
+    c = meta["counts"]
+    assert c["chunks"] == 2
+    assert 0 < c["in_hand"] < 40
+    assert generation_progress(path, 40) == c["in_hand"] / 40

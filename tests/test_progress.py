@@ -75,3 +75,35 @@ def test_generation_estimate_follows_the_engine():
     assert mjx["generate"] - COST["sim_compile"] == pytest.approx(sim / COST["rollouts_per_s"])
     assert native["generate"] - COST["sim_compile"] == pytest.approx(sim / COST["rollouts_per_s_native"])
     assert {k: v for k, v in mjx.items() if k != "generate"} == {k: v for k, v in native.items() if k != "generate"}
+
+
+def test_sweep_progress_weighs_blocks_by_their_forests_cost(tmp_path):
+    """Blocks of large n and of the wide RHF state count for more of the fraction, so the ETA
+    does not rise when they come after the cheap ones; every block and prep written is 1."""
+    from relaff_jax.learn import ExperimentConfig
+    from relaff_jax.learn.status import forest_cost_ms, sweep_progress
+
+    cfg = ExperimentConfig(sizes=(2, 10, 50, 100), sizes_per_block=2, reps_pca=2, reps_rhf=2)
+    acts, spaces = ["lift", "pull"], ("pca", "rhf")
+    assert forest_cost_ms(100, 318) > forest_cost_ms(100, 18) > forest_cost_ms(2, 18)
+
+    def touch(space, name):
+        (tmp_path / space / "blocks").mkdir(parents=True, exist_ok=True)
+        (tmp_path / space / "blocks" / name).write_bytes(b"")
+
+    assert sweep_progress(tmp_path, cfg, 2, spaces) == 0.0
+    touch("pca", "lift_r000_c00.npz")
+    small = sweep_progress(tmp_path, cfg, 2, spaces)
+    (tmp_path / "pca" / "blocks" / "lift_r000_c00.npz").unlink()
+    touch("pca", "lift_r000_c01.npz")
+    large = sweep_progress(tmp_path, cfg, 2, spaces)
+    assert 0 < small < large  # sizes 50 and 100 cost more than 2 and 10
+    touch("rhf", "lift_r000_c01.npz")
+    assert sweep_progress(tmp_path, cfg, 2, spaces) - large > large  # the RHF block outweighs the PCA one
+    for s in spaces:
+        (tmp_path / s / "prep.npz").write_bytes(b"")
+        for t in acts:
+            for r in range(2):
+                for c in range(2):
+                    touch(s, f"{t}_r{r:03d}_c{c:02d}.npz")
+    assert abs(sweep_progress(tmp_path, cfg, 2, spaces) - 1.0) < 1e-12

@@ -161,8 +161,9 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         eligible.append(_eligible(arrays, dcfg.population, f"chunk {k}"))
     k0 = len(done)
     max_chunks = math.ceil(dcfg.max_rollouts / batch)
-    bar = progress_bar(progress, n // 2, f"{action} positives")
-    bar.update(min(int(sum(l.sum() for l in labels)), n // 2))
+    # the bar counts samples of a balanced selection in hand, negatives matched included, so
+    # it does not stand at 100 % while negatives are still being matched
+    bar = progress_bar(progress, n, f"{action} samples" if done else f"{action}: compiling, first chunk", unit="sample")
     k = k0
     pending = cdir / PENDING
     clean_tmp(pending)
@@ -176,6 +177,11 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
             dist = np.concatenate(dists) if dists else np.zeros(0)
             ok = np.concatenate(eligible) if eligible else np.zeros(0, bool)
             sel = select_balanced(lab, dist, n, seed, dcfg.distance_bins, eligible=ok, negatives=dcfg.negatives)
+            in_hand = samples_in_hand(sel, lab, ok, n, dcfg.borrow_fraction)
+            bar.update(in_hand - bar.n)
+            if meta["counts"].get("in_hand") != in_hand:  # read by reproduce's progress line
+                meta["counts"]["in_hand"] = in_hand
+                rio.atomic_write_json(path / SIDECAR, meta)
             at_cap = k >= max_chunks
             patience_out = sel is not None and k >= _patience_chunks(labels, eligible, n, dcfg.match_patience)
             if sel is not None and (at_cap or patience_out or sel.borrowed <= dcfg.borrow_fraction * sel.n_negative):
@@ -190,6 +196,8 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
                     f"negatives. Rerun with a larger max_rollouts to continue from the chunks kept in {cdir}."
                 )
             got = runner.get(k)
+            if k == k0 and not done:
+                bar.set_description(f"{action} samples")
             check_schema(f"chunk {k} from rollout_fn", got["schema"], schema)
             schema = schema or got["schema"]
             if stage != cdir:
@@ -199,9 +207,8 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
             eligible.append(_eligible(got, dcfg.population, f"chunk {k} from rollout_fn"))
             k += 1
             npos = int(sum(l.sum() for l in labels))
-            meta["counts"] = {"chunks": k, "rollouts": k * batch, "positives": npos}
+            meta["counts"].update(chunks=k, rollouts=k * batch, positives=npos)
             rio.atomic_write_json(path / SIDECAR, meta)
-            bar.update(min(npos, n // 2) - bar.n)
             bar.set_postfix(rollouts=k * batch, pos_rate=f"{npos / (k * batch):.1%}")
     except BaseException:
         runner.cancel()  # tasks already running still finish into chunks/.pending, kept for a rerun
@@ -255,6 +262,20 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
             file=sys.stderr,
         )
     return summary
+
+
+def samples_in_hand(sel, label: np.ndarray, eligible: np.ndarray, n: int, borrow_fraction: float) -> int:
+    """How many of the ``n`` samples a balanced selection has now: positives plus negatives
+    within their distance bin (a negative borrowed beyond ``borrow_fraction`` is still owed).
+
+    sel: ``select_balanced``'s result or None (no balanced selection yet); label, eligible:
+    (R,) bool over every rollout so far."""
+    if sel is None:
+        pos = int((label & eligible).sum())
+        neg = int((~label & eligible).sum())
+        return min(pos, n // 2) + min(neg, n - n // 2)
+    owed = max(0, sel.borrowed - math.floor(borrow_fraction * sel.n_negative))
+    return n - owed
 
 
 def _eligible(arrays: Mapping[str, Any], population: str, where: str) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Progress bars for the dataset writers: a tqdm bar on stderr, or a silent stand-in.
 
 Takes ``progress`` (bool), a total, a description and a unit; gives an object with
-``update``, ``set_postfix``, ``close`` and the count ``n``.
+``update``, ``set_postfix``, ``set_description``, ``close`` and the count ``n``.
 """
 from __future__ import annotations
 
@@ -15,6 +15,9 @@ class NoBar:
         self.n += k
 
     def set_postfix(self, **kw: Any) -> None:
+        pass
+
+    def set_description(self, desc: str) -> None:
         pass
 
     def close(self) -> None:

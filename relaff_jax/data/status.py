@@ -91,13 +91,17 @@ def features_status(path: str | os.PathLike, batch: int, config: Mapping[str, An
 
 def generation_progress(path: str | os.PathLike, n_samples: int) -> float:
     """Fraction of a dataset's generation done, from its sidecar alone (cheap enough for a
-    progress line): 1 when complete, else positives found towards the N/2 it needs."""
+    progress line): 1 when complete, else the samples of a balanced selection in hand
+    (``counts.in_hand``, negatives matched included) out of N; a sidecar written before that
+    count existed gives the positives found towards the N/2 it needs."""
     path = Path(path)
     if not (path / SIDECAR).exists():
         return 0.0
     meta = read_sidecar(path)
     if meta.get("status") == "complete":
         return 1.0
+    if "in_hand" in meta["counts"]:
+        return min(meta["counts"]["in_hand"], n_samples) / max(n_samples, 1)
     half = max(n_samples // 2, 1)
     return min(meta["counts"]["positives"], half) / half
 

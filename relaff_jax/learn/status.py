@@ -47,20 +47,39 @@ def experiment_status(out: str | os.PathLike, datasets: Mapping[str, Mapping[str
     return "partial", "resumable: some sweep blocks are missing"
 
 
+def forest_cost_ms(n: int, width: int) -> float:
+    """Model of one forest's fit + predict, in ms, at n training samples of ``width`` columns
+    (the fast engine on the project's 2 cores, loaded, 2026-12-03: 3.7 / 5.5 / 14 ms at
+    n = 2 / 25 / 100 with 18 columns, 3.8 / 7.9 / 39 ms with 300). Only its shape matters: it
+    weighs the blocks of a progress fraction so that the ETA does not rise when the costly
+    RHF forests and large n come after the cheap ones."""
+    return 3.6 + 0.1 * n + (width / 300.0) * 0.0025 * n * n
+
+
 def sweep_progress(out: str | os.PathLike, cfg: Any, n_actions: int, spaces: Sequence[str]) -> float:
-    """Fraction of an experiment's sweeps done: per space 1 when ``results.npz`` exists, else
-    0.1 for the preparation (source predictors, correlations) and 0.9 x the blocks written;
-    spaces weighted by their number of forests (``forests_per_space``)."""
+    """Fraction of an experiment's sweeps done, weighted by cost: per space 1 when
+    ``results.npz`` exists, else 0.1 for the preparation (source predictors, correlations) and
+    0.9 x the blocks written, each block weighted by its sizes' ``forest_cost_ms``; spaces
+    weighted by their number of forests (``forests_per_space``) times their mean forest cost."""
     from relaff_jax.learn import forests_per_space
+    from relaff_jax.learn.states import state_width
 
     out = Path(out)
-    n_chunks = math.ceil(len(cfg.sizes) / cfg.sizes_per_block)
+    sizes = list(cfg.sizes)  # the sweep's own chunking (sweep.run_space)
+    chunks = [sizes[i:i + cfg.sizes_per_block] for i in range(0, len(sizes), cfg.sizes_per_block)]
     done = total = 0.0
     for s in spaces:
-        w = forests_per_space(cfg, n_actions, s)
+        width = state_width(s, cfg.state)
+        chunk_cost = [sum(forest_cost_ms(n, width) for n in c) for c in chunks]
+        w = forests_per_space(cfg, n_actions, s) * sum(chunk_cost) / len(sizes)
         blocks = out / s / "blocks"
-        n_blocks = len(list(blocks.glob("*.npz"))) if blocks.is_dir() else 0
-        frac = 1.0 if (out / s / "results.npz").exists() else \
-            0.1 * (out / s / "prep.npz").exists() + 0.9 * n_blocks / (cfg.reps(s) * n_actions * n_chunks)
+        if (out / s / "results.npz").exists():
+            frac = 1.0
+        else:
+            got = 0.0
+            for f in (blocks.glob("*.npz") if blocks.is_dir() else ()):
+                ci = f.stem.rsplit("_c", 1)[-1]
+                got += chunk_cost[int(ci)] if ci.isdigit() and int(ci) < len(chunks) else 0.0
+            frac = 0.1 * (out / s / "prep.npz").exists() + 0.9 * got / (cfg.reps(s) * n_actions * sum(chunk_cost))
         done, total = done + w * frac, total + w
     return done / total if total else 0.0
