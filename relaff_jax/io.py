@@ -131,6 +131,26 @@ def atomic_directory(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
+@contextlib.contextmanager
+def folder_lock(path: str | os.PathLike, busy: str, name: str = ".relaff.lock") -> Iterator[None]:
+    """Hold an exclusive advisory lock on folder ``path`` (its file ``name``) while the body runs,
+    so that a second writer is refused at once (``UserError(busy)``) rather than interleaved.
+    The lock file stays (readers ignore it); the lock goes with the process, even on kill -9."""
+    import fcntl
+
+    from relaff_jax.errors import UserError
+
+    fd = os.open(Path(path) / name, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise UserError(busy) from None
+        yield
+    finally:
+        os.close(fd)
+
+
 def remove_tree(path: str | os.PathLike) -> None:
     """Delete a folder so that a kill leaves no half-deleted output under its name: it is
     renamed to a hidden ``.NAME.old.tmp`` first (``clean_leftovers`` removes those)."""

@@ -129,13 +129,15 @@ def preset(name: str) -> RunConfig:
 
 def precheck(overrides: Mapping[str, Any]) -> None:
     """Check ``--set`` keys without building the tree, so that a mistake is reported at once:
-    a top-level key the tree does not have, and every key (and its value's kind) under the
-    nodes that load without JAX (``dataset``, ``perception``, ``reproduce``). The other nodes' keys are checked
-    by ``resolve``, which imports their stages (seconds). Raises the same ``ConfigError``s."""
+    a top-level key the tree does not have, and every key (and its value's kind) under every
+    node: their configs load without JAX, MJX or scikit-learn (``sim.config``, ``learn.config``,
+    ``perception.config``, ``data.config``), in well under a second. Raises the same
+    ``ConfigError``s as ``resolve``."""
     from relaff_jax.config import override_under
 
     names = {f.name for f in dataclasses.fields(RunConfig)}
-    light = {"dataset": _dataset, "perception": _perception, "reproduce": ReproduceConfig}
+    light = {"action": _action, "dataset": _dataset, "perception": _perception, "experiment": _experiment,
+             "reproduce": ReproduceConfig}
     for key, value in dict(overrides).items():
         head, _, rest = key.partition(".")
         if head not in names:

@@ -217,9 +217,9 @@ def test_cli_generate_bad_input(tmp_path):
     cli_sim.register(parser.add_subparsers())
     (tmp_path / "file").write_text("x")
     for argv, msg in ((["generate", "fly", "--samples", "10", "--out", str(tmp_path / "a")], "unknown action 'fly'"),
-                      (["generate", "lift", "--samples", "1", "--out", str(tmp_path / "b")], "--samples must be >= 2"),
+                      (["generate", "lift", "--samples", "1", "--out", str(tmp_path / "b")], "--samples (dataset.n_samples) must be >= 2"),
                       (["generate", "lift", "--samples", "8", "--batch", "0", "--out", str(tmp_path / "c")],
-                       "--batch must be >= 1"),
+                       "--batch (dataset.rollout_batch) must be >= 1"),
                       # checked before any simulation: a file, or a folder below a file
                       (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file")], "is a file, not a folder"),
                       (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file" / "d")],

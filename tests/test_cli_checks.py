@@ -171,6 +171,11 @@ print(code, sorted(m for m in ("jax", "mujoco", "sklearn") if m in sys.modules))
     ["scenes", "3", "--set", "foo=1"],
     ["features", "{tmp}", "--set", "foo=1"],
     ["features", "{tmp}", "--set", "perception.voxel.sise=0.02"],
+    # the simulation's and the learning's nodes load without JAX, MJX and scikit-learn too
+    ["generate", "lift", "--samples", "10", "--out", "{tmp}/d", "--set", "action.lift_hieght=0.3"],
+    ["reproduce", "--preset", "tiny", "--out", "{tmp}/r", "--set", "action.scene.p_stacked=abc"],
+    ["experiment", "--synthetic", "10", "--out", "{tmp}/e", "--set", "experiment.forest.max_trees=many"],
+    ["show", "{tmp}", "--set", "action.arm.ik_step=3"],
 ])
 def test_a_config_mistake_is_reported_before_jax_is_imported(tmp_path, argv):
     import subprocess
@@ -276,3 +281,17 @@ def test_a_run_begun_before_a_setting_existed_resumes_at_its_default(tmp_path):
     back = open_log(Paths(out), "tiny", preset("tiny"), 0)
     assert sorted(back["added_settings"]) == ["dataset.population", "experiment.state"]
     assert "population" in _json.loads((out / "run.json").read_text())["config"]["dataset"]
+
+
+@pytest.mark.parametrize("argv,flag", [
+    (["generate", "lift", "--samples", "100", "--out", "{tmp}/d", "--set", "dataset.n_samples=50"], "--samples 100"),
+    (["generate", "lift", "--samples", "10", "--batch", "8", "--out", "{tmp}/d", "--set", "dataset.rollout_batch=16"],
+     "--batch 8"),
+    (["features", "{tmp}", "--batch", "4", "--set", "dataset.feature_batch=8"], "--batch 4"),
+])
+def test_a_flag_and_a_set_of_its_key_that_disagree_are_refused(capsys, tmp_path, argv, flag):
+    argv = [a.format(tmp=tmp_path) for a in argv]
+    assert cli.main(argv) == 2
+    line = one_line_error(capsys, argv[0])
+    assert flag in line and "disagree" in line
+    assert not any(tmp_path.iterdir())  # refused before anything is written

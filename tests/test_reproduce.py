@@ -243,6 +243,62 @@ def test_a_damaged_run_log_is_rebuilt_and_the_finished_stages_kept(base, tmp_pat
         run(out, rebuild_log=True)
 
 
+def test_one_damaged_dataset_is_redone_alone(base, tmp_path):
+    """A chunk of take's dataset removed: the rerun refuses with the targeted repair in its
+    message; --redo-dataset take makes take again (bit-identical), keeps lift's and pour's
+    datasets as they were; the remade dataset is bit-identical, so the experiment and the report
+    (whose inputs did not change) are skipped."""
+    out0, *_ = base
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    lift_chunks = sorted(p.name for p in (out / "data" / "lift" / "chunks").iterdir())
+    lift_mtime = (out / "data" / "lift" / D.SIDECAR).stat().st_mtime_ns
+    shutil.rmtree(sorted((out / "data" / "take" / "chunks").iterdir())[0])
+    st = R.status(out)
+    assert st["generate"].state == "corrupt"
+    # the report's own stamp is intact, but it rests on the damaged dataset: not "complete"
+    assert st["report"].state == "stale"
+    assert "generate is not complete" in st["report"].why
+    with pytest.raises(R.ReproduceError) as e:
+        run(out)
+    assert "--redo-dataset take" in str(e.value)
+    assert "--force generate" in str(e.value)
+    with pytest.raises(R.ReproduceError, match="redo-dataset takes an action of this study"):
+        run(out, redo=("push",))  # not among ACTS
+    with pytest.raises(R.ReproduceError, match="give one"):
+        run(out, redo=("take",), force=("generate",))
+    log = run(out, redo=("take",))
+    assert statuses(log) == {"generate": "ran", "features": "ran", "experiment": "skipped", "report": "skipped"}
+    gen = log["runs"][-1]["stages"]["generate"]["actions"]
+    assert gen["lift"]["status"] == "skipped"
+    assert gen["pour"]["status"] == "skipped"
+    assert gen["take"]["status"] == "ran"
+    assert log["runs"][-1]["redo"] == ["take"]
+    assert sorted(p.name for p in (out / "data" / "lift" / "chunks").iterdir()) == lift_chunks
+    assert (out / "data" / "lift" / D.SIDECAR).stat().st_mtime_ns == lift_mtime  # lift untouched
+    new, old = D.load_dataset(out / "data" / "take"), D.load_dataset(out0 / "data" / "take")
+    assert set(new) == set(old)
+    for k in sorted(k for k, v in new.items() if isinstance(v, np.ndarray)):
+        np.testing.assert_array_equal(new[k], old[k])
+    for s, a in results_of(out).items():
+        np.testing.assert_array_equal(a, results_of(out0)[s])
+
+
+def test_a_second_run_in_the_same_folder_is_refused(base, tmp_path):
+    """While one reproduce holds the folder, another is refused at once and writes nothing."""
+    from relaff_jax import io as rio
+
+    out0, *_ = base
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    before = (out / R.RUN_LOG).read_bytes()
+    with rio.folder_lock(out, "held by this test"):
+        with pytest.raises(UserError, match="another relaff reproduce is running in this folder"):
+            run(out)
+    assert (out / R.RUN_LOG).read_bytes() == before
+    assert set(statuses(run(out)).values()) == {"skipped"}  # free again once the first is done
+
+
 def test_a_corrupt_feature_chunk_is_reported_and_recomputed(base, tmp_path, monkeypatch):
     """One flipped byte in a feature chunk: the status names it, and both a plain rerun and
     --force features recompute it (the forced rerun used to fail on the same error)."""

@@ -29,8 +29,40 @@ COMMAND_MODULES = (
 )
 
 
+class HelpFormatter(argparse.HelpFormatter):
+    """Adds ``(default: X)`` to an option's help when it has a default worth naming (not
+    None, False or empty, and not already in the text)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        d = action.default
+        if (d is None or d is False or d is argparse.SUPPRESS or (isinstance(d, (list, tuple)) and not d)
+                or "default" in text or not (action.option_strings or action.nargs in ("?", "*"))):
+            return text
+        if isinstance(d, (list, tuple)):
+            return f"{text} (default: {' '.join(map(str, d))})"
+        return f"{text} (default: %(default)s)"
+
+
+class Parser(argparse.ArgumentParser):
+    """Every ``relaff`` (sub)command's parser: defaults shown in ``--help``; a subcommand
+    without its own description takes its one-line help as the description."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+        self.register("action", "parsers", _Commands)  # registries are per parser: ``real``'s too
+
+
+class _Commands(argparse._SubParsersAction):
+    def add_parser(self, name, **kwargs):
+        if "help" in kwargs and "description" not in kwargs:
+            kwargs["description"] = kwargs["help"][:1].upper() + kwargs["help"][1:] + "."
+        return super().add_parser(name, **kwargs)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="relaff",
         description="Relational affordances of object pairs: simulate, perceive, learn, bootstrap.",
     )

@@ -94,24 +94,30 @@ def register(subparsers) -> None:
     p.add_argument("--synthetic", type=int, metavar="N", default=0,
                    help="use N synthetic samples per action instead of --data (a dry run of the stage)")
     p.add_argument("--out", required=True, metavar="RESULTS", help="results folder (resumed if it exists)")
-    p.add_argument("--preset", choices=("quick", "study", "paper"), default="quick")
-    p.add_argument("--space", choices=("pca", "rhf", "both"), default="both")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--preset", choices=("quick", "study", "paper"), default="quick",
+                   help="the protocol's sizes, repetitions and forests (relaff_jax.learn.experiment_preset)")
+    p.add_argument("--space", choices=("pca", "rhf", "both"), default="both", help="state space(s) to sweep")
+    p.add_argument("--seed", type=int, default=0, help="seed of the test draws, training orders and forests")
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
     options.add_cluster(p)
     options.add_set(p, "experiment.reps_pca=5 --set 'experiment.sizes=[2,10,25]'")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_experiment)
-    r = subparsers.add_parser("report", help="Table II, findings, figures and report.html from an experiment folder")
-    r.add_argument("results", metavar="RESULTS")
-    r.add_argument("--out", required=True, metavar="REPORT")
+    r = subparsers.add_parser(
+        "report", help="Table II, findings, figures and report.html from an experiment folder",
+        description="Read a finished experiment folder and write the report: Table II with intervals beside "
+                    "the paper's numbers, every finding's verdict from its interval, Figs. 6-12, the "
+                    "correlation clusters and the threshold study, as report.md, report.html and PNGs.")
+    r.add_argument("results", metavar="RESULTS", help="a finished experiment folder (relaff experiment)")
+    r.add_argument("--out", required=True, metavar="REPORT", help="report folder (created or replaced)")
     r.set_defaults(func=cmd_report)
     c = subparsers.add_parser("compare", help="the same study in two or more readings, side by side, from their reports",
                               description="Read the report folders of runs that differ in one setting (e.g. "
                               "dataset.population=all and feasible) and print one markdown page: what the labels "
                               "consist of, NB by test subset in PCA and RHF, the predictors' correlations with "
                               "feasible and stacked, the correlation clusters, Table II and every finding's verdict.")
-    c.add_argument("readings", nargs="+", metavar="NAME=REPORT_DIR")
+    c.add_argument("readings", nargs="+", metavar="NAME=REPORT_DIR",
+                   help="two or more readings, each a name and a report folder, e.g. all=runs/a/report")
     c.add_argument("--size", type=int, default=10, help="training size of the NB comparison (default 10)")
     c.add_argument("--out", metavar="FILE.md", help="write the page here (default: print it)")
     c.set_defaults(func=cmd_compare)

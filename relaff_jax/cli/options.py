@@ -25,12 +25,25 @@ def precheck(args: argparse.Namespace, extra: list[str] = ()) -> None:
     check({**parse_set(extra), **parse_set(args.set or [])})
 
 
-def config(args: argparse.Namespace, base: Any = None, extra: list[str] = ()) -> Any:
+def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
+           flags: dict[str, tuple[str, Any]] | None = None) -> Any:
     """The resolved ``RunConfig``: ``base`` (default: the paper's settings), then the
-    command's own options given as ``extra`` ``KEY=VALUE`` items, then ``--set`` (which wins)."""
+    command's own options given as ``extra`` ``KEY=VALUE`` items, then ``--set`` (which wins).
+
+    ``flags``: the command's options that are aliases of tree keys, ``{key: (flag, value)}``
+    (``{"dataset.n_samples": ("--samples", 100)}``; a value of None: not given). A flag and a
+    ``--set`` of its key that disagree are an error, so what runs is what is recorded."""
     from relaff_jax.runconfig import precheck, resolve
 
-    overrides = {**parse_set(extra), **parse_set(args.set or [])}
+    sets = parse_set(args.set or [])
+    aliased = {}
+    for key, (flag, value) in (flags or {}).items():
+        if value is None:
+            continue
+        if key in sets and sets[key] != value:
+            raise UserError(f"{flag} {value} and --set {key}={sets[key]} disagree; give one of them")
+        aliased[key] = value
+    overrides = {**parse_set(extra), **aliased, **sets}
     precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     return resolve(base, overrides)
 
@@ -107,3 +120,30 @@ def cluster(args: argparse.Namespace, folder: Path):
             yield client
 
     return run()
+
+
+class PhaseBars:
+    """``progress(phase, done, total)`` callbacks as one tqdm bar per phase on stderr (a phase
+    of one step shows its elapsed time while it runs): what long single-item commands report."""
+
+    def __init__(self, command: str, enabled: bool = True):
+        self.command, self.enabled, self.bar, self.phase = command, enabled, None, None
+
+    def __call__(self, phase: str, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        if phase != self.phase:
+            self.close()
+            from tqdm.auto import tqdm
+
+            self.phase = phase
+            self.bar = tqdm(total=total, desc=f"{self.command}: {phase}", dynamic_ncols=True,
+                            bar_format="{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}<{remaining}]")
+        self.bar.update(done - self.bar.n)
+        if done >= total:
+            self.close()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+        self.bar, self.phase = None, None

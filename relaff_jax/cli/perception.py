@@ -22,18 +22,31 @@ from relaff_jax.cli.options import check_out_file
 
 def register(subparsers) -> None:
     """Add ``features`` and ``show`` to an ``argparse`` subparsers object."""
-    p = subparsers.add_parser("features", help="add PCA and RHF features to a dataset (resumable)")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--batch", type=int, default=32)
+    from relaff_jax.data.config import DatasetConfig  # the tree's default, shown in --help (no JAX)
+
+    p = subparsers.add_parser(
+        "features", help="add PCA and RHF features to a dataset (resumable)",
+        description="Render every selected sample of a finished dataset with the simulated Kinect, voxelise "
+                    "the two objects' clouds and attach their PCA (18) and RHF (300) features (docs/perception.md). "
+                    "Resumable chunk by chunk; features of another perception config are refused unless "
+                    "--overwrite.")
+    p.add_argument("dir", type=Path, help="a finished dataset folder (relaff generate)")
+    p.add_argument("--batch", type=int, default=None,
+                   help="scenes per compiled chunk, the same as --set dataset.feature_batch=B (default: "
+                        f"{DatasetConfig().feature_batch})")
     p.add_argument("--seed", type=int, default=0, help="depth-noise seed")
     p.add_argument("--overwrite", action="store_true", help="recompute features of another config")
     options.add_cluster(p)
     options.add_set(p, "perception.voxel.size=0.02")
     p.set_defaults(func=cmd_features)
 
-    p = subparsers.add_parser("show", help="draw what the robot saw in one sample of a dataset")
-    p.add_argument("dir", type=Path)
-    p.add_argument("--index", type=int, default=0)
+    p = subparsers.add_parser(
+        "show", help="draw what the robot saw in one sample of a dataset",
+        description="Draw sample --index of a dataset as the robot saw it (depth image, segmentation, "
+                    "voxel clouds, PCA frames) into a PNG, or with --rollout animate its motor program, "
+                    "replayed in MuJoCo C, as a GIF.")
+    p.add_argument("dir", type=Path, help="a dataset folder")
+    p.add_argument("--index", type=int, default=0, help="which selected sample (0 .. N-1)")
     p.add_argument("--out", type=Path, default=None, help="scene.png (default), or action.gif with --rollout")
     p.add_argument("--rollout", action="store_true",
                    help="animate the sample's motor program (replayed in MuJoCo C) as a GIF instead")
@@ -47,7 +60,7 @@ def cmd_features(args) -> int:
     options.check_in_dir(args.dir)
     from relaff_jax.perception import from_sim
 
-    tree = options.config(args, extra=[f"dataset.feature_batch={args.batch}"])
+    tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch)})
     with options.cluster(args, args.dir) as client:
         if client is None:
             out = from_sim.add_features(args.dir, tree.dataset.feature_batch, args.seed, config=tree.perception,
@@ -89,8 +102,12 @@ def cmd_show(args) -> int:
     if args.rollout:
         from relaff_jax.sim.animate import animate_sample
 
-        frames = animate_sample(str(ds["action"]), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
-                                title=title, cfg=tree.action)
+        bars = options.PhaseBars("show")
+        try:
+            frames = animate_sample(str(ds["action"]), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
+                                    title=title, cfg=tree.action, progress=bars)
+        finally:
+            bars.close()
         print(f"wrote {args.out}: {len(frames['frames_xpos'])} frames; feasible {frames['feasible']}, "
               f"label in the MuJoCo C replay {frames['label']} (dataset: {bool(ds['label'][i])}, MJX)")
         return 0

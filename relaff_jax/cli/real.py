@@ -24,27 +24,33 @@ from relaff_jax.errors import UserError
 
 
 def register(subparsers) -> None:
-    real = subparsers.add_parser("real", help="real scenes: segmentation, relation labels, sim-to-real study")
+    real = subparsers.add_parser(
+        "real", help="real scenes: segmentation, relation labels, sim-to-real study",
+        description="Real Kinect/Xtion scenes (a folder of .pcd, .ply or .npz clouds with hand segmentation, "
+                    "docs/real.md): segment them as the paper does, propose and check relation labels, draw a "
+                    "scene, and run the four sim-to-real experiments of paper section VI.")
     sub = real.add_subparsers(dest="real_command", metavar="SUBCOMMAND")
     sub.required = True
 
     p = sub.add_parser("segment", help="score the paper's segmentation against the hand labels (IoU)")
     p.add_argument("scenes", type=Path, help="folder of scene files (.pcd, .ply, .npz) with labels")
     p.add_argument("--known-count", action="store_true", help="k = objects + 1 instead of 3")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialisation")
     p.add_argument("--out", type=Path, default=None, help="write the per-scene figures as JSON")
     p.set_defaults(func=cmd_segment)
 
     p = sub.add_parser("show", help="draw a real scene: colour, segmentation, voxel clouds, PCA frames")
-    p.add_argument("scene", type=Path)
-    p.add_argument("--out", type=Path, default=Path("scene.png"))
-    p.add_argument("--pair", type=int, nargs=2, default=None, metavar=("A", "B"))
-    p.add_argument("--source", choices=("hand", "pipeline"), default="hand")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("scene", type=Path, help="one scene file (.pcd, .ply or .npz)")
+    p.add_argument("--out", type=Path, default=Path("scene.png"), help="PNG to write")
+    p.add_argument("--pair", type=int, nargs=2, default=None, metavar=("A", "B"),
+                   help="the two objects whose PCA frames and RHF are drawn (default: the first two)")
+    p.add_argument("--source", choices=("hand", "pipeline"), default="hand",
+                   help="objects from the hand segmentation, or from the paper's pipeline (k-means)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the pipeline's k-means")
     p.set_defaults(func=cmd_show)
 
     p = sub.add_parser("propose", help="propose relation labels by the geometric rule (+ pictures)")
-    p.add_argument("scenes", type=Path)
+    p.add_argument("scenes", type=Path, help="folder of scene files")
     p.add_argument("--out", type=Path, required=True, help="labels CSV to write")
     p.add_argument("--pictures", type=Path, default=None, help="folder for one PNG per pair")
     p.add_argument("--corrections", type=Path, default=None,
@@ -52,21 +58,21 @@ def register(subparsers) -> None:
     p.set_defaults(func=cmd_propose)
 
     p = sub.add_parser("check", help="validate a labels file against its scenes and count the pairs")
-    p.add_argument("scenes", type=Path)
-    p.add_argument("--labels", type=Path, required=True)
+    p.add_argument("scenes", type=Path, help="folder of scene files")
+    p.add_argument("--labels", type=Path, required=True, help="labels CSV (relaff real propose, or by hand)")
     p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("study", help="the four experiments of paper VI and their report (resumable)")
-    p.add_argument("scenes", type=Path)
-    p.add_argument("--labels", type=Path, required=True)
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("scenes", type=Path, help="folder of scene files")
+    p.add_argument("--labels", type=Path, required=True, help="labels CSV of its pairs")
+    p.add_argument("--out", type=Path, required=True, help="study folder (created, or resumed)")
     p.add_argument("--sim", type=Path, default=None, help="simulated relation folder (default OUT/sim)")
     p.add_argument("--per-relation", type=int, default=1000, help="simulated scenes per relation (paper: thousands)")
     p.add_argument("--n-full", type=int, default=1000, help="SIM_full training samples (paper: 6500)")
-    p.add_argument("--reps", type=int, default=50)
-    p.add_argument("--trees", type=int, default=100)
-    p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"])
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--reps", type=int, default=50, help="repetitions of every train/test split")
+    p.add_argument("--trees", type=int, default=100, help="trees per relation classifier")
+    p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"], help="state spaces")
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulated scenes, splits and forests")
     p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk")
     p.add_argument("--sim-normals", choices=("ray", "cloud"), default="ray",
                    help="RHF normals of the simulated scenes: exact ray hits, or the cloud rule (5x5 pixel window)")

@@ -5,7 +5,7 @@ import argparse
 from pathlib import Path
 
 from relaff_jax.cli import options
-from relaff_jax.constants import SIM_ENGINES, STAGES
+from relaff_jax.constants import ACTIONS, SIM_ENGINES, STAGES
 from relaff_jax.errors import UserError
 from relaff_jax.runconfig import PRESETS
 
@@ -24,9 +24,12 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
     p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",
                    help="the run folder, as a positional argument for --status (same as --out DIR)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="run seed: every dataset, feature and forest seed derives from it")
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
                    help=f"redo a stage ({', '.join(STAGES)}); may be repeated")
+    p.add_argument("--redo-dataset", action="append", choices=ACTIONS, metavar="ACTION",
+                   help="delete one action's dataset and make it again, keeping the other datasets (the repair "
+                        "of one damaged dataset; later stages rerun only if their inputs changed); may be repeated")
     p.add_argument("--jobs", type=int, default=0, help="experiment worker processes (default: all cores)")
     options.add_cluster(p)
     options.add_set(p, "dataset.n_samples=400 --set experiment.reps_pca=5")
@@ -63,14 +66,16 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         return 0
     options.check_out_dir(args.out)
     command = ["relaff", "reproduce", "--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
-    command += [x for f in args.force or () for x in ("--force", f)] + (["--jobs", str(args.jobs)] if args.jobs else [])
+    command += [x for f in args.force or () for x in ("--force", f)]
+    command += [x for a in args.redo_dataset or () for x in ("--redo-dataset", a)] + (["--jobs", str(args.jobs)] if args.jobs else [])
     command += [x for s in args.set or () for x in ("--set", s)] + (["--no-progress"] if args.no_progress else [])
     command += ["--cluster", args.cluster] if args.cluster else []
     command += ["--engine", args.engine] if args.engine else []
     with options.cluster(args, args.out) as client:
         log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
                           progress=not args.no_progress, overrides=overrides, argv=command,
-                          client=client, rebuild_log=args.rebuild_log)
+                          client=client, rebuild_log=args.rebuild_log,
+                          redo=tuple(args.redo_dataset or ()))
     run = log["runs"][-1]
     for stage in STAGES:
         st = run["stages"][stage]

@@ -17,13 +17,16 @@ from relaff_jax.errors import UserError
 
 def register(subparsers) -> None:
     """Add ``objects``, ``scenes`` and ``generate`` to ``subparsers``."""
+    from relaff_jax.data.config import DatasetConfig  # the tree's defaults, shown in --help (no JAX)
+
+    d = DatasetConfig()
     p = subparsers.add_parser("objects", help="list the 29 objects of the library")
     p.add_argument("--json", action="store_true", help="one JSON array")
     p.set_defaults(func=cmd_objects)
 
     p = subparsers.add_parser("scenes", help="sample and settle N mixed scenes in MJX, print a summary")
     p.add_argument("n", type=int, help="number of scenes")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the placements")
     p.add_argument("--batch", type=int, default=1024, help="scenes per compiled batch (memory bound)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     options.add_set(p, "action.scene.p_stacked=0.8")
@@ -40,9 +43,14 @@ def register(subparsers) -> None:
     p.add_argument("action", help=f"one of: {', '.join(ACTIONS)}")
     p.add_argument("--samples", type=int, required=True, help="balanced samples to keep (N >= 2)")
     p.add_argument("--out", required=True, help="dataset directory (new, empty or resumable)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--batch", type=int, default=256, help="scenes per simulated chunk")
-    p.add_argument("--max-rollouts", type=int, default=None, help="stop after this many rollouts")
+    p.add_argument("--seed", type=int, default=0, help="seed of the dataset (every chunk's key derives from it)")
+    p.add_argument("--batch", type=int, default=None,
+                   help=f"scenes per simulated chunk, the same as --set dataset.rollout_batch=B (default: "
+                        f"{d.rollout_batch}; the presets of relaff reproduce use 8 to 1024); part of the "
+                        "dataset's identity: a resume must use the same")
+    p.add_argument("--max-rollouts", type=int, default=None,
+                   help=f"stop after this many rollouts, the same as --set dataset.max_rollouts=M (default: "
+                        f"{d.max_rollouts}); --samples beyond what it can give is refused at once")
     p.add_argument("--engine", choices=SIM_ENGINES, default=None,
                    help="executor of the motor programs: mjx (default) or native (MuJoCo C batches on a thread "
                         "pool, docs/actions.md); recorded in the dataset, a resume with another is refused")
@@ -94,17 +102,16 @@ def cmd_scenes(args) -> int:
 def cmd_generate(args) -> int:
     if args.action not in ACTIONS:
         raise UserError(f"unknown action {args.action!r}; valid actions: {', '.join(ACTIONS)}")
-    if args.samples < 2:
-        raise UserError(f"--samples must be >= 2, got {args.samples}")
-    if args.batch < 1:
-        raise UserError(f"--batch must be >= 1, got {args.batch}")
     options.check_out_dir(Path(args.out))  # before any simulation (minutes) or world building
-    sets = ["dataset.n_samples=%d" % args.samples, "dataset.rollout_batch=%d" % args.batch]
-    if args.max_rollouts is not None:
-        sets.append("dataset.max_rollouts=%d" % args.max_rollouts)
-    if args.engine is not None:
-        sets.append("dataset.engine=" + args.engine)
-    tree = options.config(args, extra=sets)
+    # the flags are aliases of tree keys: everything below reads the tree, which is what is recorded
+    tree = options.config(args, flags={
+        "dataset.n_samples": ("--samples", args.samples), "dataset.rollout_batch": ("--batch", args.batch),
+        "dataset.max_rollouts": ("--max-rollouts", args.max_rollouts), "dataset.engine": ("--engine", args.engine)})
+    n, batch = tree.dataset.n_samples, tree.dataset.rollout_batch
+    if n < 2:
+        raise UserError(f"--samples (dataset.n_samples) must be >= 2, got {n}")
+    if batch < 1:
+        raise UserError(f"--batch (dataset.rollout_batch) must be >= 1, got {batch}")
 
     from relaff_jax import config as rc
     from relaff_jax import data as ds
@@ -114,20 +121,20 @@ def cmd_generate(args) -> int:
     ds.config.check_dataset_config(tree.dataset)
     from relaff_jax.reproduce.progress import sample_bound
 
-    bound = sample_bound(args.samples, tree.dataset.max_rollouts, args.batch, engine,
+    bound = sample_bound(n, tree.dataset.max_rollouts, batch, engine,
                          names=("--samples", "--max-rollouts (dataset.max_rollouts)"))
     if bound:
         raise UserError(bound)
     with options.cluster(args, Path(args.out)) as client:
         if client is None:
-            fn = make_rollout_fn(args.action, args.batch, cfg, engine=engine)
+            fn = make_rollout_fn(args.action, batch, cfg, engine=engine)
         else:  # each worker builds and compiles the rollout function once
             from relaff_jax.cluster import Remote
 
-            fn = Remote(make_rollout_fn, args.action, args.batch, cfg, engine=engine)
+            fn = Remote(make_rollout_fn, args.action, batch, cfg, engine=engine)
         try:
             summary = ds.generate_dataset(
-                args.out, args.action, args.samples, fn, args.seed, args.batch, {"action": rc.to_dict(cfg)},
+                args.out, args.action, n, fn, args.seed, batch, {"action": rc.to_dict(cfg)},
                 progress=not args.json, dataset_config=tree.dataset, client=client)
         except ds.DatasetError as e:
             if isinstance(e, UserError):
@@ -137,7 +144,7 @@ def cmd_generate(args) -> int:
     if args.json:
         print(json.dumps(summary, default=str))
     else:
-        print(f"{args.action}: {args.samples} samples written to {args.out} after "
+        print(f"{args.action}: {n} samples written to {args.out} after "
               f"{summary.get('rollouts')} rollouts (positive rate over all rollouts "
               f"{summary.get('positive_rate', float('nan')):.3f})")
     return 0

@@ -30,21 +30,14 @@ Files, in pipeline order:
 
 Nothing here imports the report or the command line (``relaff_jax.cli.learn``).
 """
-from relaff_jax.constants import ACTIONS, FAMILIES, SPACES
-from relaff_jax.learn.analysis import (
-    analyse,
-    average_bf,
-    categories_per_threshold,
-    curves,
-    select_at,
-    select_best,
-    threshold_study,
-)
-from relaff_jax.learn.blocks import (
-    block_outcomes,
-    read_block,
-    run_block,
-    run_block_to_file,
+from __future__ import annotations
+
+from relaff_jax.lazy import lazy_attributes
+
+from relaff_jax.constants import (
+    ACTIONS,
+    FAMILIES,
+    SPACES,
 )
 from relaff_jax.learn.config import (
     PAPER_TABLE2,
@@ -56,13 +49,6 @@ from relaff_jax.learn.config import (
     experiment_preset,
     paper_row,
 )
-from relaff_jax.learn.correlation import (
-    categories_above,
-    category_pairs,
-    correlation_matrix,
-)
-from relaff_jax.learn.datasets import check_datasets, fingerprint, load_datasets
-from relaff_jax.learn.draws import draw_rep, draw_test, draw_train
 from relaff_jax.learn.forests import (
     ForestConfig,
     check_forest_config,
@@ -71,38 +57,6 @@ from relaff_jax.learn.forests import (
     n_trees,
     predict_class,
 )
-from relaff_jax.learn.intervals import bc_interval, half_sizes, percentile_interval, resampled_means, scene_halves, whole
-from relaff_jax.learn.measures import (
-    bootstrap_factor,
-    chance_tolerance,
-    min_defined,
-    size_mask,
-    summarise,
-    table2_rows,
-    tie_weights,
-    window_mean,
-)
-from relaff_jax.learn.online import extend, online_weights
-from relaff_jax.learn.prep import prepare
-from relaff_jax.learn.protocol import (
-    pool_sizes,
-    block_fits,
-    category_allowed,
-    category_masks,
-    condition_names,
-    condition_plan,
-    forests_per_space,
-    layout,
-    split_pools,
-)
-from relaff_jax.learn.results import (
-    FORMAT_VERSION,
-    Results,
-    ResultsNotFound,
-    SpaceResults,
-    is_complete,
-    load_results,
-)
 from relaff_jax.learn.states import (
     TOY_MANIPULATED,
     augment,
@@ -110,8 +64,69 @@ from relaff_jax.learn.states import (
     manipulated_first_order,
     state_features,
 )
-from relaff_jax.learn.sweep import run_experiment, run_space
-from relaff_jax.learn.synthetic import synthetic_datasets
+
+# Everything else loads on first use (PEP 562), so that the command line checks
+# --set experiment.* without scikit-learn and JAX: name -> submodule.
+_LAZY = {
+    "analyse": "analysis",
+    "average_bf": "analysis",
+    "categories_per_threshold": "analysis",
+    "curves": "analysis",
+    "select_at": "analysis",
+    "select_best": "analysis",
+    "threshold_study": "analysis",
+    "block_outcomes": "blocks",
+    "read_block": "blocks",
+    "run_block": "blocks",
+    "run_block_to_file": "blocks",
+    "categories_above": "correlation",
+    "category_pairs": "correlation",
+    "correlation_matrix": "correlation",
+    "check_datasets": "datasets",
+    "fingerprint": "datasets",
+    "load_datasets": "datasets",
+    "draw_rep": "draws",
+    "draw_test": "draws",
+    "draw_train": "draws",
+    "bc_interval": "intervals",
+    "half_sizes": "intervals",
+    "percentile_interval": "intervals",
+    "resampled_means": "intervals",
+    "scene_halves": "intervals",
+    "whole": "intervals",
+    "bootstrap_factor": "measures",
+    "chance_tolerance": "measures",
+    "min_defined": "measures",
+    "size_mask": "measures",
+    "summarise": "measures",
+    "table2_rows": "measures",
+    "tie_weights": "measures",
+    "window_mean": "measures",
+    "extend": "online",
+    "online_weights": "online",
+    "prepare": "prep",
+    "pool_sizes": "protocol",
+    "block_fits": "protocol",
+    "category_allowed": "protocol",
+    "category_masks": "protocol",
+    "condition_names": "protocol",
+    "condition_plan": "protocol",
+    "forests_per_space": "protocol",
+    "layout": "protocol",
+    "split_pools": "protocol",
+    "FORMAT_VERSION": "results",
+    "Results": "results",
+    "ResultsNotFound": "results",
+    "SpaceResults": "results",
+    "is_complete": "results",
+    "load_results": "results",
+    "run_experiment": "sweep",
+    "run_space": "sweep",
+    "synthetic_datasets": "synthetic",
+}
+
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "ACTIONS", "FAMILIES", "SPACES", "FORMAT_VERSION", "PAPER_TABLE2", "SPACE_CODE", "TABLE2_ROWS", "TOY_MANIPULATED",

@@ -10,10 +10,12 @@ the fast engine (``engine.py``) is tested against bit for bit.
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
-import sklearn
-from sklearn.ensemble import RandomForestClassifier
+
+if TYPE_CHECKING:
+    from sklearn.ensemble import RandomForestClassifier
 
 from relaff_jax.errors import UserError
 
@@ -68,6 +70,8 @@ def max_features_value(mf: str | None) -> str | int | float | None:
 
 def make_forest(n_samples: int, seed: int, cfg: ForestConfig = ForestConfig()) -> RandomForestClassifier:
     """An unfitted forest for ``n_samples`` training samples; one process, seeded."""
+    from sklearn.ensemble import RandomForestClassifier  # here: the config is read without it (CLI checks)
+
     return RandomForestClassifier(
         n_estimators=n_trees(n_samples, cfg),
         criterion=cfg.criterion,
@@ -120,4 +124,6 @@ def _fast():
     """Skip scikit-learn's per-tree input and parameter re-validation (inputs are checked
     finite above, parameters by ``check_forest_config``): the same trees, ~10-30 % less
     Python overhead per tree, which dominates at the paper's small training sizes."""
+    import sklearn
+
     return sklearn.config_context(assume_finite=True, skip_parameter_validation=True)

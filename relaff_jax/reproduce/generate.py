@@ -97,7 +97,8 @@ def run(run: Run, forced: bool) -> dict:
         if st.state == "complete":
             items[action] = {"status": "skipped"}
         elif st.state in ("stale", "corrupt"):
-            raise ReproduceError(f"{paths.dataset(action)}: {st.why}; remove it or run with --force generate")
+            raise ReproduceError(f"{paths.dataset(action)}: {st.why}; redo this dataset alone with --redo-dataset "
+                                 f"{action} (the other datasets are kept), or all of them with --force generate")
         else:
             todo.append(action)
     if run.client is None or len(todo) < 2:

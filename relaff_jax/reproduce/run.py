@@ -4,7 +4,8 @@ Takes a preset (``tiny``, ``quick``, ``paper``; ``relaff_jax.runconfig``), ``--s
 a seed and a run folder (``folder.py``), and runs the four stages in order: ``generate`` ->
 ``features`` -> ``experiment`` -> ``report`` (one module each, keeping the contract of
 ``stage.py``). A stage whose status is ``complete`` is skipped; ``--force STAGE`` redoes one
-stage, and later stages follow only if their inputs changed. Every stage writes atomically and
+stage (``--redo-dataset ACTION`` one action's dataset), and later stages follow only if their
+inputs changed. Every stage writes atomically and
 resumes, and every random quantity is seeded from the run seed, so a killed run, rerun, ends
 with the results of an uninterrupted one.
 """
@@ -84,7 +85,8 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
               overrides: Mapping[str, Any] | None = None, cfg: RunConfig | None = None,
               rollout_factory: Callable | None = None, feature_factory: Callable | None = None,
               feature_config_fn: Callable | None = None, argv: Sequence[str] | None = None,
-              stream=None, client: Any = None, rebuild_log: bool = False) -> dict[str, Any]:
+              stream=None, client: Any = None, rebuild_log: bool = False,
+              redo: Sequence[str] = ()) -> dict[str, Any]:
     """Run (or continue) the whole study in ``out``; return the run log.
 
     preset_name: ``tiny``, ``quick`` or ``paper`` (``cfg`` replaces it); ``overrides``: dotted
@@ -98,6 +100,11 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
     the results are those of the run without it, bit for bit.
     rebuild_log: ``out``'s run log is damaged; set it aside and start a new one for these
     settings (``folder.open_log``); the stages' own outputs decide what is skipped.
+    redo: actions whose dataset (and so its features) is deleted and made again, the others
+    kept (``--redo-dataset``: the repair of one damaged dataset); later stages rerun only if
+    their inputs changed (the remade dataset is the lost one, bit for bit).
+
+    One run at a time per folder: a second ``reproduce`` on ``out`` is refused while one runs.
     """
     if preset_name not in PRESETS:
         raise ReproduceError(f"unknown preset {preset_name!r}; expected one of {', '.join(PRESETS)}")
@@ -108,15 +115,40 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
         raise ReproduceError(f"jobs must be an integer >= 0, got {jobs!r}")
     cfg = override(cfg or preset(preset_name), dict(overrides or {}))
     check_config(cfg, seed)
+    redo = tuple(redo)
+    bad = [a for a in redo if a not in cfg.reproduce.actions]
+    if bad:
+        raise ReproduceError(f"--redo-dataset takes an action of this study ({', '.join(cfg.reproduce.actions)}), "
+                             f"got {', '.join(map(str, bad))}")
+    if redo and "generate" in force:
+        raise ReproduceError("--redo-dataset redoes some datasets, --force generate all of them: give one")
     if feature_factory is not None and feature_config_fn is None:
         raise ReproduceError("a custom feature_factory needs feature_config_fn (its config_dict per seed)")
+    paths = Paths(Path(out))
+    root = paths.root
+    try:
+        rio.check_writable_dir(root)
+    except UserError as e:
+        raise ReproduceError(str(e)) from e
+    if rebuild_log and not root.is_dir():
+        raise ReproduceError(f"{root} does not exist: nothing to rebuild")
+    os.makedirs(root, exist_ok=True)
+    with rio.folder_lock(root, f"{root}: another relaff reproduce is running in this folder; wait for it "
+                               "(or stop it) and rerun"):
+        return _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, rollout_factory,
+                                 feature_factory, feature_config_fn, argv, stream, client, rebuild_log, redo)
+
+
+def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, rollout_factory, feature_factory,
+                      feature_config_fn, argv, stream, client, rebuild_log, redo) -> dict[str, Any]:
     cpus = os.cpu_count() or 1
     jobs = jobs or cpus
-    paths = Paths(Path(out))
     log = open_log(paths, preset_name, cfg, seed, rebuild=rebuild_log)
     rio.clean_leftovers(paths.root)
+    for action in redo:  # the other datasets stay; later stages see changed inputs
+        rio.remove_tree(paths.dataset(action))
     entry = {"started": now(), "argv": list(argv) if argv is not None else None, "jobs": jobs,
-             "force": list(force), "status": "running", "stages": {}}
+             "force": list(force), **({"redo": list(redo)} if redo else {}), "status": "running", "stages": {}}
     if client is not None:
         entry["cluster"] = {"scheduler": client.scheduler.address, "threads": nthreads(client)}
     log["runs"].append(entry)
@@ -186,9 +218,15 @@ def status(out: str | os.PathLike) -> dict[str, Any]:
     run = Run(paths, log["preset"], cfg, log["seed"], 1, (), Progress({}, enabled=False),
               generate.rollout_factory_for(cfg), *features.factories_for(cfg), log, {})
     out = {}
+    upstream = None  # the first stage that is not complete: every later one depends on it
     for name, m in STAGE_MODULES.items():
         try:
-            out[name] = m.status(run)
+            st = m.status(run)
         except UserError as e:  # e.g. the experiment's inputs: a corrupt dataset upstream
-            out[name] = Status("stale", f"its inputs cannot be read ({e})")
+            st = Status("stale", f"its inputs cannot be read ({e})")
+        if upstream is not None and st.state == "complete":
+            st = Status("stale", f"its own files are intact, but {upstream} is not complete: it is redone after it")
+        if upstream is None and st.state != "complete":
+            upstream = name
+        out[name] = st
     return out

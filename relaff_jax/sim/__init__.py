@@ -3,6 +3,7 @@ the 6-DOF arm, the nine motor programs and their physics labels, and MuJoCo C re
 
 Modules, in pipeline order:
 
+- ``config``: ``PhysicsConfig``, ``SceneConfig``, ``ArmConfig``, ``ActionConfig`` (no JAX).
 - ``objects``: the 29-object library (``ObjectSpec`` per name) and the 124 scene pairs.
 - ``world``: ``PhysicsConfig`` and ``build_world``: one batched MJX model for every pair.
 - ``contacts``: ``contacts(d)``, the one reader of MJX's contact list.
@@ -21,14 +22,25 @@ Modules, in pipeline order:
 - ``rollouts``: ``make_action_fn`` / ``jitted_action_fn`` and ``make_rollout_fn`` (datasets).
 - ``native``: MuJoCo C references (``settle_native``, ``replay_native``) for cross-checks.
 
-The config and entry-point names other stages use are re-exported here.
+The config and entry-point names other stages use are re-exported here; the configs load
+without JAX, the rest on first use.
 """
-from relaff_jax.sim.arm_model import ArmConfig
-from relaff_jax.sim.native import replay_native, settle_native
-from relaff_jax.sim.rollouts import allowed_pairs, jitted_action_fn, make_action_fn, make_rollout_fn
-from relaff_jax.sim.scenes import SceneConfig
-from relaff_jax.sim.templates import ActionConfig
-from relaff_jax.sim.world import PhysicsConfig, build_world
+from __future__ import annotations
+
+from relaff_jax.lazy import lazy_attributes
+
+from relaff_jax.sim.config import ActionConfig, ArmConfig, PhysicsConfig, SceneConfig
+
+# Everything else loads on first use (PEP 562), so that the command line checks --set action.*
+# before JAX and MJX are imported: name -> submodule.
+_LAZY = {
+    "allowed_pairs": "rollouts", "jitted_action_fn": "rollouts", "make_action_fn": "rollouts",
+    "make_rollout_fn": "rollouts", "replay_native": "native", "settle_native": "native",
+    "build_world": "world",
+}
+
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "ActionConfig", "ArmConfig", "PhysicsConfig", "SceneConfig", "allowed_pairs", "build_world",

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import io
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -58,8 +58,17 @@ def geom_outlines(aabb: np.ndarray, xpos: np.ndarray, xmat: np.ndarray, view: tu
     return out
 
 
-def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, every: int = 10) -> dict[str, Any]:
+def _say(progress, phase: str, done: int, total: int) -> None:
+    if progress is not None:
+        progress(phase, done, total)
+
+
+def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, every: int = 10,
+                   progress: Callable[[str, int, int], None] | None = None) -> dict[str, Any]:
     """Plan and replay one scene's program in MuJoCo C, recording every ``every`` steps.
+
+    ``progress(phase, done, total)``, if given, hears each phase begin and end ("planning":
+    the IK's compile dominates, minutes on two cores; "replaying in MuJoCo C").
 
     qpos: (14,) settled object state (arm-less layout). Returns ``frames_xpos`` (F, G, 3),
     ``frames_xmat`` (F, G, 9), ``model`` (the pair's MjModel of the arm world), ``label``
@@ -76,11 +85,15 @@ def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, ev
     cfg = cfg if cfg is not None else ActionConfig()
     q = np.asarray(qpos, np.float32)[None]
     p = np.asarray([pair], np.int32)
+    _say(progress, "planning (compiles the IK first)", 0, 1)
     plan = jax.jit(make_plan_fn(cfg))(action_id(action), jnp.asarray(p), jnp.asarray(q))
+    _say(progress, "planning (compiles the IK first)", 1, 1)
     result = {"q_way": np.asarray(plan.q_way), "grip_way": np.asarray(plan.grip_way),
               "feasible": np.asarray(plan.feasible)}
     qvel = np.zeros((1, 12), np.float32)  # the objects' velocities: settled scenes start at rest
+    _say(progress, "replaying in MuJoCo C", 0, 1)
     rep = replay_native(action, cfg, p, q, qvel, result, record_every=every)
+    _say(progress, "replaying in MuJoCo C", 1, 1)
     return {"frames_xpos": rep["frames_xpos"][0], "frames_xmat": rep["frames_xmat"][0],
             "model": setup(cfg).world.mj_models[int(pair)], "label": bool(rep["label"][0]),
             "feasible": bool(result["feasible"][0]), "every": every}
@@ -93,8 +106,10 @@ def _visible(model) -> np.ndarray:
     return (np.asarray(model.geom_type) != 0) & (size.max(1) > 0.0015) & (np.asarray(model.geom_rgba)[:, 3] > 0)
 
 
-def write_gif(frames: dict[str, Any], out: str | Path, title: str = "", fps: float | None = None) -> Path:
-    """Draw ``rollout_frames`` output as a GIF (side and top views), written atomically."""
+def write_gif(frames: dict[str, Any], out: str | Path, title: str = "", fps: float | None = None,
+              progress: Callable[[str, int, int], None] | None = None) -> Path:
+    """Draw ``rollout_frames`` output as a GIF (side and top views), written atomically;
+    ``progress("drawing frames", f, F)`` after each frame."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
     from matplotlib.patches import Polygon
@@ -110,6 +125,7 @@ def write_gif(frames: dict[str, Any], out: str | Path, title: str = "", fps: flo
     lo = xs.reshape(-1, 3).min(0) - 0.1
     hi = xs.reshape(-1, 3).max(0) + 0.1
     images: list = []
+    _say(progress, "drawing frames", 0, len(xs))
     for f in range(len(xs)):
         fig = Figure(figsize=(9, 4.2), dpi=80)
         FigureCanvasAgg(fig)
@@ -133,6 +149,7 @@ def write_gif(frames: dict[str, Any], out: str | Path, title: str = "", fps: flo
         fig.suptitle(f"{title}   t = {t:.2f} s", fontsize=9)
         fig.canvas.draw()
         images.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())[..., :3]))
+        _say(progress, "drawing frames", f + 1, len(xs))
     fps = fps or 1.0 / (frames["every"] * STEP_SECONDS)
     buf = io.BytesIO()
     images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
@@ -141,10 +158,12 @@ def write_gif(frames: dict[str, Any], out: str | Path, title: str = "", fps: flo
 
 
 def animate_sample(action: str, pair: int, qpos: np.ndarray, out: str | Path, title: str = "",
-                   cfg: Any = None, every: int = 10) -> dict[str, Any]:
-    """``rollout_frames`` then ``write_gif``; returns the frames dict (label, feasible, ...)."""
-    frames = rollout_frames(action, pair, qpos, cfg, every)
-    write_gif(frames, out, title=title)
+                   cfg: Any = None, every: int = 10,
+                   progress: Callable[[str, int, int], None] | None = None) -> dict[str, Any]:
+    """``rollout_frames`` then ``write_gif``; returns the frames dict (label, feasible, ...);
+    ``progress(phase, done, total)`` hears every phase (see both)."""
+    frames = rollout_frames(action, pair, qpos, cfg, every, progress)
+    write_gif(frames, out, title=title, progress=progress)
     return frames
 
 

@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 
 from .geometry import quat_to_mat
+from .config import ArmConfig  # noqa: F401 (re-exported)
 
 ARM_JOINTS = ("j1", "j2", "j3", "j4", "j5", "j6")
 FINGER_JOINTS = ("jf_l", "jf_r")
@@ -53,24 +54,6 @@ def arm_xml_path() -> pathlib.Path:
 def arm_test_xml_path() -> pathlib.Path:
     """Path of ``arm_test.xml``: table plane + arm + one free 8 cm, 1 kg box named ``obj``."""
     return scenes_dir() / "arm_test.xml"
-
-
-@dataclasses.dataclass(frozen=True)
-class ArmConfig:
-    """Static settings of the IK and the gripper (closed over, never traced)."""
-
-    ik_steps: int = 20  # L-BFGS steps per seed
-    ik_orient_length: float = 0.25  # m: 1 rad of orientation error weighs like this much position
-    ik_pos_tol: float = 0.005  # m: reachable only if the tcp position residual is below
-    ik_ang_tol: float = 0.05  # rad (~2.9 deg): and the orientation residual is below
-    ik_min_sigma: float = 0.03  # m/rad: and the task Jacobian's smallest singular value above
-    ik_continuity: float = 1e-3  # tie-break between good seeds: prefer the one nearest q_init
-    grip_open: float = 0.12  # m, default half opening (finger joint value) when open; max 0.21
-    grip_closed: float = 0.0  # m, command when closing (force-limited, stops at the object)
-    contact_dist: float = 0.002  # m: a pad "touches" a geom if their distance is below
-    # ... and only with its inner face: the contact normal within ~45 deg of the closing axis
-    # (a pad resting on top of an object, or an edge of it on a rim, is no grip)
-    contact_face_cos: float = 0.7
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

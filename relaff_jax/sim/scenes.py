@@ -40,24 +40,7 @@ from .contacts import contacts
 
 from relaff_jax.constants import BESIDE, INSIDE, ON_TOP, RELATIONS  # noqa: F401 (re-exported)
 from relaff_jax.errors import UserError
-
-
-@dataclasses.dataclass(frozen=True)
-class SceneConfig:
-    """Static scene-distribution and settling settings (paper defaults where it gives them)."""
-
-    workspace_radius: float = 1.8
-    min_radius: float = 0.2
-    p_stacked: float = 0.5  # toy+base scenes that drop the toy onto / into the base
-    p_near: float = 0.5  # beside scenes with the toy near the base rather than anywhere
-    near_gap: tuple[float, float] = (0.02, 0.30)
-    p_between: float = 0.7  # toy+obstacle scenes with the obstacle in the robot's way
-    between_gap: tuple[float, float] = (0.01, 0.10)
-    drop_height: float = 0.004  # toys start this far above their support
-    settle_steps: int = 250  # 1 s at the default 4 ms step
-    rest_speed: float = 0.02  # m/s: a body slower than this at the end is "at rest"
-    contact_dist: float = 0.002  # m: a contact closer than this is touching
-    candidates: int = 16  # rejection-sampling draws per placement (static shapes)
+from relaff_jax.sim.config import SceneConfig  # noqa: F401 (re-exported)
 
 
 @chex.dataclass

@@ -18,43 +18,7 @@ from . import scenes as sc
 from . import world as wd
 
 from relaff_jax.constants import ACTIONS
-
-
-@dataclasses.dataclass(frozen=True)
-class ActionConfig:
-    """Static settings of the motor programs and of the outcome rules (lengths in metres)."""
-
-    lift_height: float = 0.25  # lift/take/pour/slide raise the tcp this much
-    tilt_deg: float = 60.0  # pour/slide tilt (tan 60 deg > every friction coefficient)
-    drag_raise: float = 0.02  # pull/push/unobstruct carry the object this high
-    pull_distance: float = 0.25
-    push_distance: float = 0.25
-    unobstruct_distance: float = 0.30
-    move_distance: float = 0.25  # move: the fingers end this far beyond their start beside the toy
-    rake_pull: float = 0.30
-    clearance: float = 0.10  # transit height of the fingertips above the highest object
-    grip_margin: float = 0.02  # pre-grasp opening beyond the object's half width, per finger
-    tip_clearance: float = 0.005  # fingertips this far above the grasped object's bottom
-    rake_gap: float = 0.02  # gap between the toy and the rake head / the sweeping fingers
-    # outcome thresholds
-    lifted: float = 0.05  # "lifted": the centre of mass rose at least this much
-    moved: float = 0.03  # slide: the toy moved at least this much (and was not lifted)
-    closer: float = 0.10  # pull, rake: horizontal distance to the robot shrank this much
-    farther: float = 0.10  # push: grew this much
-    aside: float = 0.08  # move: the toy displaced along the sweep, relative to the base, this much
-    move_rule: str = "apart"  # "apart": toy moved aside from the base; "both": both moved aside
-    take_opening: float = 0.05  # take: fixed pre-grasp half opening (10 cm between the pads)
-    take_align: bool = False  # take: turn the wrist to the toy's narrow side (False: closing
-    # axis across the robot's line of sight, whatever the toy's yaw)
-    corridor: float = 0.05  # unobstruct: clearance of the approach corridor (see docs)
-    # Simulate each action only to the end of its own program (its measuring step), not
-    # through the padding to N_STEPS: lift/take stop after 560 of 815 steps. The labels of
-    # lift, take, pour and slide read the measuring step only, so they cannot change; the
-    # other actions read the end, now the program's end (docs/actions.md, "Tuning").
-    stop_at_program_end: bool = True
-    arm: A.ArmConfig = A.ArmConfig()
-    phys: wd.PhysicsConfig = wd.PhysicsConfig()
-    scene: sc.SceneConfig = sc.SceneConfig()
+from relaff_jax.sim.config import ActionConfig  # noqa: F401 (re-exported)
 
 
 class Template(NamedTuple):

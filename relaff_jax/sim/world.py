@@ -31,55 +31,7 @@ from . import objects as lib
 # Segment labels the camera reports per geom (colour segmentation stand-in).
 from relaff_jax.constants import SEG_BACKGROUND, SEG_HIDDEN, SEG_OTHER, SEG_TOY  # noqa: F401
 from relaff_jax.errors import UserError
-
-
-# PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
-PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
-
-
-@dataclasses.dataclass(frozen=True)
-class PhysicsConfig:
-    """Static physics settings shared by settle and action rollouts.
-
-    ``iterations``/``ls_iterations`` cap the constraint solver: uncapped defaults cost ~3x
-    (REFERENCE section 1) for no visible difference in resting contacts.
-    """
-
-    timestep: float = 0.004
-    iterations: int = 4
-    ls_iterations: int = 6
-    solver: str = "Newton"
-    table_friction: float = 0.8
-    rolling_friction: float = 0.005  # the ball's contacts (condim 6), so it comes to rest
-    # The rake is held by the gripper: during settling it stays at this pose (x, y, z of
-    # the grip point; handle along +x), above the robot, away from any toy.
-    held_rake_pos: tuple[float, float, float] = (0.20, 0.0, 0.55)
-    # Let every container wall touch the table (off: they stand on the base plate's
-    # footprint and never need to; on costs 12 more contact slots, kept for A/B benchmarks).
-    wall_table_contacts: bool = False
-    # The arm world only (the settle world has no arm; docs/actions.md, "Tuning"):
-    # MJX's broad phase keeps, per collision function, the k geom pairs whose bounding spheres
-    # are nearest (MJX's `max_geom_pairs`; -1: all 46 non-plane pairs through the narrow
-    # phase). MuJoCo C ignores it. 6, not 4: a take inside a container touches up to 6 of the
-    # pads' 12 pairs, and 4 lost 8 of 297 takes (docs/actions.md, "Tuning").
-    arm_max_geom_pairs: int = 6
-    # Objects are placed >= SceneConfig.min_radius (0.2 m) plus their radius from the robot,
-    # outside the 0.09 m pedestal; only a pull or rake from the innermost placements could
-    # carry one back to it (off: 7 pairs fewer; labels checked in docs/actions.md, "Tuning").
-    arm_pedestal_contacts: bool = False
-    # The palm against the other object (`obj`): "contact" (every pair, condim 3);
-    # "exclude_other" (no palm-obj pairs; rejected at 2,112 scenes per action: unobstruct's
-    # positives rose from 303 to 484 of 969 feasible); "frictionless" (priority 1, condim 1:
-    # normal forces only, its pairs in a collision function of their own). With "contact" the
-    # palm's 5 pairs with the other join the objects' box-box function (11 pairs), and under
-    # the cap they can push a toy-wall contact out of it: a toy left a tilted baking pan
-    # (docs/actions.md, "Tuning").
-    arm_palm_objects: str = "contact"
-
-    def __post_init__(self):
-        if self.arm_palm_objects not in PALM_MODES:  # refused when the config is made
-            raise UserError(f"action.phys.arm_palm_objects={self.arm_palm_objects!r}: "
-                            f"one of {', '.join(PALM_MODES)}")
+from relaff_jax.sim.config import PALM_MODES, PhysicsConfig  # noqa: F401 (re-exported)
 
 
 def _box_geom(name: str, size, pos, mass: float, rgba, extra: str = "") -> str:

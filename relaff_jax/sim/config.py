@@ -1,0 +1,135 @@
+"""The simulation's settings, without JAX or MuJoCo: ``PhysicsConfig`` (the MJX world),
+``SceneConfig`` (scene sampling and settling), ``ArmConfig`` (IK and gripper) and
+``ActionConfig`` (motor programs and outcome rules, the three others nested inside).
+
+They live apart from the code that uses them (``world``, ``scenes``, ``arm_model``,
+``templates`` re-export them) so that the command line checks ``--set action.*`` in well
+under a second, before the stages are imported.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+from relaff_jax.errors import UserError
+
+
+# PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
+PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
+
+
+@dataclasses.dataclass(frozen=True)
+class PhysicsConfig:
+    """Static physics settings shared by settle and action rollouts.
+
+    ``iterations``/``ls_iterations`` cap the constraint solver: uncapped defaults cost ~3x
+    (REFERENCE section 1) for no visible difference in resting contacts.
+    """
+
+    timestep: float = 0.004
+    iterations: int = 4
+    ls_iterations: int = 6
+    solver: str = "Newton"
+    table_friction: float = 0.8
+    rolling_friction: float = 0.005  # the ball's contacts (condim 6), so it comes to rest
+    # The rake is held by the gripper: during settling it stays at this pose (x, y, z of
+    # the grip point; handle along +x), above the robot, away from any toy.
+    held_rake_pos: tuple[float, float, float] = (0.20, 0.0, 0.55)
+    # Let every container wall touch the table (off: they stand on the base plate's
+    # footprint and never need to; on costs 12 more contact slots, kept for A/B benchmarks).
+    wall_table_contacts: bool = False
+    # The arm world only (the settle world has no arm; docs/actions.md, "Tuning"):
+    # MJX's broad phase keeps, per collision function, the k geom pairs whose bounding spheres
+    # are nearest (MJX's `max_geom_pairs`; -1: all 46 non-plane pairs through the narrow
+    # phase). MuJoCo C ignores it. 6, not 4: a take inside a container touches up to 6 of the
+    # pads' 12 pairs, and 4 lost 8 of 297 takes (docs/actions.md, "Tuning").
+    arm_max_geom_pairs: int = 6
+    # Objects are placed >= SceneConfig.min_radius (0.2 m) plus their radius from the robot,
+    # outside the 0.09 m pedestal; only a pull or rake from the innermost placements could
+    # carry one back to it (off: 7 pairs fewer; labels checked in docs/actions.md, "Tuning").
+    arm_pedestal_contacts: bool = False
+    # The palm against the other object (`obj`): "contact" (every pair, condim 3);
+    # "exclude_other" (no palm-obj pairs; rejected at 2,112 scenes per action: unobstruct's
+    # positives rose from 303 to 484 of 969 feasible); "frictionless" (priority 1, condim 1:
+    # normal forces only, its pairs in a collision function of their own). With "contact" the
+    # palm's 5 pairs with the other join the objects' box-box function (11 pairs), and under
+    # the cap they can push a toy-wall contact out of it: a toy left a tilted baking pan
+    # (docs/actions.md, "Tuning").
+    arm_palm_objects: str = "contact"
+
+    def __post_init__(self):
+        if self.arm_palm_objects not in PALM_MODES:  # refused when the config is made
+            raise UserError(f"action.phys.arm_palm_objects={self.arm_palm_objects!r}: "
+                            f"one of {', '.join(PALM_MODES)}")
+
+
+@dataclasses.dataclass(frozen=True)
+class SceneConfig:
+    """Static scene-distribution and settling settings (paper defaults where it gives them)."""
+
+    workspace_radius: float = 1.8
+    min_radius: float = 0.2
+    p_stacked: float = 0.5  # toy+base scenes that drop the toy onto / into the base
+    p_near: float = 0.5  # beside scenes with the toy near the base rather than anywhere
+    near_gap: tuple[float, float] = (0.02, 0.30)
+    p_between: float = 0.7  # toy+obstacle scenes with the obstacle in the robot's way
+    between_gap: tuple[float, float] = (0.01, 0.10)
+    drop_height: float = 0.004  # toys start this far above their support
+    settle_steps: int = 250  # 1 s at the default 4 ms step
+    rest_speed: float = 0.02  # m/s: a body slower than this at the end is "at rest"
+    contact_dist: float = 0.002  # m: a contact closer than this is touching
+    candidates: int = 16  # rejection-sampling draws per placement (static shapes)
+
+
+@dataclasses.dataclass(frozen=True)
+class ArmConfig:
+    """Static settings of the IK and the gripper (closed over, never traced)."""
+
+    ik_steps: int = 20  # L-BFGS steps per seed
+    ik_orient_length: float = 0.25  # m: 1 rad of orientation error weighs like this much position
+    ik_pos_tol: float = 0.005  # m: reachable only if the tcp position residual is below
+    ik_ang_tol: float = 0.05  # rad (~2.9 deg): and the orientation residual is below
+    ik_min_sigma: float = 0.03  # m/rad: and the task Jacobian's smallest singular value above
+    ik_continuity: float = 1e-3  # tie-break between good seeds: prefer the one nearest q_init
+    grip_open: float = 0.12  # m, default half opening (finger joint value) when open; max 0.21
+    grip_closed: float = 0.0  # m, command when closing (force-limited, stops at the object)
+    contact_dist: float = 0.002  # m: a pad "touches" a geom if their distance is below
+    # ... and only with its inner face: the contact normal within ~45 deg of the closing axis
+    # (a pad resting on top of an object, or an edge of it on a rim, is no grip)
+    contact_face_cos: float = 0.7
+
+
+@dataclasses.dataclass(frozen=True)
+class ActionConfig:
+    """Static settings of the motor programs and of the outcome rules (lengths in metres)."""
+
+    lift_height: float = 0.25  # lift/take/pour/slide raise the tcp this much
+    tilt_deg: float = 60.0  # pour/slide tilt (tan 60 deg > every friction coefficient)
+    drag_raise: float = 0.02  # pull/push/unobstruct carry the object this high
+    pull_distance: float = 0.25
+    push_distance: float = 0.25
+    unobstruct_distance: float = 0.30
+    move_distance: float = 0.25  # move: the fingers end this far beyond their start beside the toy
+    rake_pull: float = 0.30
+    clearance: float = 0.10  # transit height of the fingertips above the highest object
+    grip_margin: float = 0.02  # pre-grasp opening beyond the object's half width, per finger
+    tip_clearance: float = 0.005  # fingertips this far above the grasped object's bottom
+    rake_gap: float = 0.02  # gap between the toy and the rake head / the sweeping fingers
+    # outcome thresholds
+    lifted: float = 0.05  # "lifted": the centre of mass rose at least this much
+    moved: float = 0.03  # slide: the toy moved at least this much (and was not lifted)
+    closer: float = 0.10  # pull, rake: horizontal distance to the robot shrank this much
+    farther: float = 0.10  # push: grew this much
+    aside: float = 0.08  # move: the toy displaced along the sweep, relative to the base, this much
+    move_rule: str = "apart"  # "apart": toy moved aside from the base; "both": both moved aside
+    take_opening: float = 0.05  # take: fixed pre-grasp half opening (10 cm between the pads)
+    take_align: bool = False  # take: turn the wrist to the toy's narrow side (False: closing
+    # axis across the robot's line of sight, whatever the toy's yaw)
+    corridor: float = 0.05  # unobstruct: clearance of the approach corridor (see docs)
+    # Simulate each action only to the end of its own program (its measuring step), not
+    # through the padding to N_STEPS: lift/take stop after 560 of 815 steps. The labels of
+    # lift, take, pour and slide read the measuring step only, so they cannot change; the
+    # other actions read the end, now the program's end (docs/actions.md, "Tuning").
+    stop_at_program_end: bool = True
+    arm: ArmConfig = ArmConfig()
+    phys: PhysicsConfig = PhysicsConfig()
+    scene: SceneConfig = SceneConfig()
