@@ -212,6 +212,23 @@ def project(row: dict, nine: tuple | None = None) -> str:
     return "\n".join(lines)
 
 
+def refusal_seconds(timeout: float = 1.0) -> float:
+    """Seconds until ``cluster.connect`` refuses a scheduler that is not there (port 9, the
+    discard port: nothing listens), with ``timeout``: a bad ``--cluster`` must fail at once,
+    not hang (was a timed assertion in tests/test_cluster.py)."""
+    from relaff_jax import cluster as C
+    from relaff_jax.errors import UserError
+
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        try:
+            with C.connect("tcp://127.0.0.1:9", folder=Path(tmp), timeout=timeout):
+                pass
+        except UserError:
+            return time.perf_counter() - t0
+    raise RuntimeError("connected to a scheduler on port 9")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--engine", help="mjx (default) or native; with --memory a comma list (default mjx,native)")
@@ -271,6 +288,8 @@ def main(argv=None) -> int:
     if all("load" in r for r in rows):
         print("load average (1 min) before/after each mode: " + "; ".join(
             f"{r['mode']} ({r['utc']} UTC) {r['load'][0]:.1f}/{r['load'][1]:.1f}" for r in rows))
+    if not args.from_json:
+        print(f"unreachable scheduler (tcp://127.0.0.1:9) refused in {refusal_seconds(1.0):.2f} s with a 1 s timeout")
     one = [r for r in rows if r["mode"] == "local:1"]
     if one:
         print(project(one[0]))

@@ -109,7 +109,8 @@ def test_obvious_outcomes(results, action):
     for i, want in enumerate(EXPECT[action]):
         if want is not None:
             assert got[i] == want, (action, i, got, results[action]["feasible"])
-    assert got.dtype == bool and got.shape == (B,)
+    assert got.dtype == bool
+    assert got.shape == (B,)
 
 
 @pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
@@ -127,7 +128,8 @@ def test_mjx_stops_at_the_program_end(results):
 def test_infeasible_programs_do_not_move_the_arm(results):
     # base row 4: the toy 1.55 m away cannot be grasped; the arm stays home, nothing moves
     r = results["take"]
-    assert not r["feasible"][4] and r["feasible"][[0, 1, 2, 3, 5, 6, 7]].all()
+    assert not r["feasible"][4]
+    assert r["feasible"][[0, 1, 2, 3, 5, 6, 7]].all()
     np.testing.assert_allclose(r["com_end"][4], r["com0"][4], atol=2e-3)
     assert not results["rake"]["feasible"][2]
 
@@ -140,15 +142,19 @@ def test_lift_raises_both_and_release_after_drag(results):
     # pull ends with the gripper open: the base is back on the table, closer to the robot
     r0 = np.linalg.norm(pull["com0"][0, 1, :2])
     r1 = np.linalg.norm(pull["com_end"][0, 1, :2])
-    assert r0 - r1 > 0.15 and abs(pull["com_end"][0, 1, 2] - pull["com0"][0, 1, 2]) < 0.01
+    assert r0 - r1 > 0.15
+    assert abs(pull["com_end"][0, 1, 2] - pull["com0"][0, 1, 2]) < 0.01
 
 
 @pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
 def test_unobstruct_reachability(results):
     r = results["unobstruct"]
-    assert not r["reach_before"][0] and r["reach_after"][0]  # the brick blocked the way, then not
-    assert r["reach_before"][1] and r["reach_before"][3]  # nothing in the way: no affordance
-    assert not r["reach_before"][2] and not r["reach_after"][2]  # out of the arm's reach
+    assert not r["reach_before"][0]
+    assert r["reach_after"][0]  # the brick blocked the way, then not
+    assert r["reach_before"][1]
+    assert r["reach_before"][3]  # nothing in the way: no affordance
+    assert not r["reach_before"][2]
+    assert not r["reach_after"][2]  # out of the arm's reach
 
 
 @pytest.mark.slow  # compiles and runs the nine programs in MJX (~2 min)
@@ -186,7 +192,8 @@ def test_rollout_fn_simulates_only_feasible_programs(scene_world):
     np.testing.assert_array_equal(out["pair"], np.asarray(pair))
     np.testing.assert_array_equal(out["feasible"], full["feasible"])
     sim, skip = out["simulated"], ~out["simulated"]
-    assert sim.any() and skip.any(), out["feasible"]  # both kinds in this batch
+    assert sim.any(), out["feasible"]
+    assert skip.any(), out["feasible"]  # both kinds in this batch
     np.testing.assert_array_equal(sim, out["feasible"])
     np.testing.assert_array_equal(out["label"], full["label"])
     np.testing.assert_allclose(out["qpos_final"][sim], full["qpos_final"][sim], atol=1e-4)
@@ -203,9 +210,11 @@ def test_rollout_fn_fields_and_errors():
         rollouts.make_rollout_fn("fly", 4)
     with pytest.raises(ValueError, match="batch must be >= 1"):
         rollouts.make_rollout_fn("lift", 0)
-    assert set(ACTIONS) == set(templates.TEMPLATES) and len(ACTIONS) == 9
+    assert set(ACTIONS) == set(templates.TEMPLATES)
+    assert len(ACTIONS) == 9
     for a, tpl in templates.TEMPLATES.items():
-        assert sum(tpl.seg_steps) == templates.N_STEPS and len(tpl.seg_steps) == templates.N_SEGMENTS, a
+        assert sum(tpl.seg_steps) == templates.N_STEPS, a
+        assert len(tpl.seg_steps) == templates.N_SEGMENTS, a
 
 
 def test_cli_generate_bad_input(tmp_path):
@@ -305,13 +314,15 @@ def test_programs_on_hand_built_scenes():
     progs = {a: programs.program(a, st.arm, cfg, st.geo, p, q) for a in
              ("lift", "take", "pull", "push", "pour", "slide", "move")}
     for a, prog in progs.items():
-        assert prog.targets.pos.shape == (templates.N_TARGETS, 3) and bool(jnp.isfinite(prog.targets.pos).all()), a
+        assert prog.targets.pos.shape == (templates.N_TARGETS, 3), a
+        assert bool(jnp.isfinite(prog.targets.pos).all()), a
     toy, oth = bodies.bodies(st.geo, p, q)
 
     def passes_over(prog, xy):
         return float(jnp.min(jnp.linalg.norm(prog.targets.pos[:, :2] - xy, axis=1))) < 0.01
 
-    assert passes_over(progs["lift"], oth.centre[:2]) and passes_over(progs["take"], toy.centre[:2])
+    assert passes_over(progs["lift"], oth.centre[:2])
+    assert passes_over(progs["take"], toy.centre[:2])
     radial = np.asarray(oth.centre[:2]) / np.linalg.norm(np.asarray(oth.centre[:2]))
     np.testing.assert_allclose(np.asarray(progs["pull"].direction[:2]), -radial, atol=1e-6)
     np.testing.assert_allclose(np.asarray(progs["push"].direction[:2]), radial, atol=1e-6)

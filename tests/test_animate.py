@@ -11,7 +11,8 @@ def test_box_outline_side_and_top_views():
     xpos = np.array([[1.0, 2.0, 3.0]])
     eye = np.eye(3).reshape(1, 9)
     (poly, depth), = animate.geom_outlines(aabb, xpos, eye, animate.VIEWS["side (x-z)"])
-    assert depth == 2.0 and len(poly) == 4
+    assert depth == 2.0
+    assert len(poly) == 4
     np.testing.assert_allclose(poly.min(0), [0.9, 2.7])
     np.testing.assert_allclose(poly.max(0), [1.1, 3.3])
     # turned 90 degrees about z: the side view sees the 0.2 half size along x
@@ -44,7 +45,8 @@ def test_rollout_gif_of_a_settled_scene(tmp_path, scene_world, settle):
 
     # a frame every 10 steps of the program, which stops at its end (560 of lift's 815 steps)
     n_run = int(templates.run_steps(templates.ActionConfig())[action_id("lift")])
-    assert n_run == 560 and frames["frames_xpos"].shape[0] == 1 + n_run // 10
+    assert n_run == 560
+    assert frames["frames_xpos"].shape[0] == 1 + n_run // 10
     # every phase is announced and finished; the frames are counted one by one
     phases = list(dict.fromkeys(h[0] for h in heard))
     assert phases == ["planning (compiles the IK first)", "replaying in MuJoCo C", "drawing frames"]

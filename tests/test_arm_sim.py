@@ -80,7 +80,8 @@ def test_grasp_lifts_box_and_miss_holds_nothing(sim):
     grasp = MISS == 0
     assert np.all(z[:, ends[3]] < 0.045)  # still on the table after closing
     assert np.all(z[grasp, -1] - 0.04 > 0.10), z[:, -1]  # lifted (and still held after the tilt)
-    assert np.all(touch[grasp, ends[3]]) and np.all(touch[grasp, -1])  # both pads on the box
+    assert np.all(touch[grasp, ends[3]])
+    assert np.all(touch[grasp, -1])  # both pads on the box
     # the closed gripper beside the box: no contact, box never moved
     assert not touch[~grasp].any()
     np.testing.assert_allclose(obj_pos[~grasp, -1], np.c_[XS, YS, np.full(4, 0.04)][~grasp], atol=2e-3)

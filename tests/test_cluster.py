@@ -114,12 +114,12 @@ def test_parse_address():
 def test_bad_address_fails_before_any_work(tmp_path, capsys):
     out = tmp_path / "d"
     assert main(["generate", "lift", "--samples", "4", "--out", str(out), "--cluster", "local"]) == 2
-    assert "expected local:N" in capsys.readouterr().err and not out.exists()
-    t0 = time.perf_counter()
+    assert "expected local:N" in capsys.readouterr().err
+    assert not out.exists()
+    # how fast it is refused is a benchmark figure (benchmarks/cluster.py, "unreachable scheduler")
     with pytest.raises(UserError, match="cannot reach a Dask scheduler"):
         with C.connect("tcp://127.0.0.1:9", folder=tmp_path, timeout=1):
             pass
-    assert time.perf_counter() - t0 < 5
 
 
 def test_remote_is_built_once_per_process():
@@ -127,7 +127,8 @@ def test_remote_is_built_once_per_process():
     f = C.Remote(rollout_factory, "lift", 4, pick=0)
     g = C.Remote(rollout_factory, "lift", 4, pick=0)
     key = np.asarray([0, 7], np.uint32)
-    assert f.key == g.key and np.array_equal(f(key, 4)["label"], g(key, 4)["label"])
+    assert f.key == g.key
+    assert np.array_equal(f(key, 4)["label"], g(key, 4)["label"])
     assert builds() == before + 1
     with pytest.raises(UserError, match="not picklable"):
         C.Remote(rollout_factory, threading.Lock())
@@ -155,7 +156,8 @@ def test_local2_is_bit_identical(client, baseline, tmp_path):
     log = run(tmp_path / "run", client)
     assert log["runs"][-1]["cluster"]["threads"] == 2
     got = fingerprint(tmp_path / "run")
-    assert any(k.startswith("results/rhf/acc") for k in want) and "report/findings.json" in want
+    assert any(k.startswith("results/rhf/acc") for k in want)
+    assert "report/findings.json" in want
     assert got == want  # datasets, features, accuracy arrays, findings
     check_nothing_extra(tmp_path / "run")
     # each worker built each recipe (2 rollout functions, 1 feature function) at most once
@@ -167,7 +169,9 @@ def test_generation_overshoot_is_discarded_and_said(client, tmp_path):
     fn = C.Remote(rollout_factory, "lift", 4, pick=0)
     serial = D.generate_dataset(tmp_path / "a", "lift", 8, rollout_factory("lift", 4)[0], 5, 4, progress=False)
     par = D.generate_dataset(tmp_path / "b", "lift", 8, fn, 5, 4, progress=False, client=client)
-    assert par["chunks"] == serial["chunks"] and par["discarded_chunks"] >= 1 and serial["discarded_chunks"] == 0
+    assert par["chunks"] == serial["chunks"]
+    assert par["discarded_chunks"] >= 1
+    assert serial["discarded_chunks"] == 0
     a, b = D.load_dataset(tmp_path / "a"), D.load_dataset(tmp_path / "b")
     assert all(np.array_equal(a[k], b[k]) for k in a if isinstance(a[k], np.ndarray))
     assert not (tmp_path / "b" / "chunks" / ".pending").exists()
@@ -203,7 +207,8 @@ def test_worker_killed_mid_run(client, baseline, tmp_path):
     victim = sorted(pids)[0]
     os.kill(pids[victim], signal.SIGKILL)
     th.join(120)
-    assert "log" in box and box["log"]["runs"][-1]["status"] == "complete"
+    assert "log" in box
+    assert box["log"]["runs"][-1]["status"] == "complete"
     assert pids[victim] not in client.run(os.getpid).values()  # the kill did happen, during the run
     assert fingerprint(out) == baseline[1]
     check_nothing_extra(out)
@@ -269,7 +274,8 @@ def test_benchmark_projection_by_hand():
     w32 = next(line for line in lines if line.startswith("| 32 |"))
     assert w32.split(" | ")[1] == f"{(60 + 12 * 129) / 60:.1f} min"  # 26.8 min
     assert w32.endswith("generate: 12 rounds of 129 s |")
-    assert "native engine" in lines[1] and "125 ms per rollout" in lines[1]
+    assert "native engine" in lines[1]
+    assert "125 ms per rollout" in lines[1]
     # the nine actions' (CPU, wall) per rollout replace the one action's: 1024 x 0.25 + 1 = 257 s a chunk
     w8 = next(line for line in bench.project(row, (0.25, 0.3)).splitlines() if line.startswith("| 8 |"))
     assert w8.split(" | ")[1] == f"{(60 + 42 * 257) / 60:.1f} min"  # ceil(333 / 8) = 42 rounds

@@ -21,11 +21,14 @@ def test_tree_has_every_stage_and_sets_nested_keys():
     assert [f.name for f in dataclasses.fields(cfg)] == ["action", "perception", "dataset", "experiment", "reproduce"]
     new = runconfig.resolve(cfg, {"perception.voxel.size": 0.02, "action.scene.settle_steps": 300,
                                   "dataset.n_samples": 50, "experiment.forest.max_trees": 7})
-    assert new.perception.voxel.size == 0.02 and new.action.scene.settle_steps == 300
-    assert new.dataset.n_samples == 50 and new.experiment.forest.max_trees == 7
+    assert new.perception.voxel.size == 0.02
+    assert new.action.scene.settle_steps == 300
+    assert new.dataset.n_samples == 50
+    assert new.experiment.forest.max_trees == 7
     assert cfg.perception.voxel.size == 0.0125  # the original is untouched (frozen)
     assert runconfig.from_json(to_dict(new)) == new
-    assert "perception.voxel.size" in runconfig.keys() and "experiment.forest.max_trees" in runconfig.keys()
+    assert "perception.voxel.size" in runconfig.keys()
+    assert "experiment.forest.max_trees" in runconfig.keys()
 
 
 def test_unknown_or_ill_typed_keys_are_clear_errors():
@@ -51,13 +54,16 @@ def test_unknown_or_ill_typed_keys_are_clear_errors():
 
 def test_presets():
     tiny, quick, study, paper = (runconfig.preset(p) for p in runconfig.PRESETS)
-    assert study.dataset.n_samples == 1000 and study.experiment.sizes == tuple(range(2, 51))
+    assert study.dataset.n_samples == 1000
+    assert study.experiment.sizes == tuple(range(2, 51))
     assert (tiny.dataset.n_samples, tiny.dataset.rollout_batch, tiny.dataset.feature_batch) == (24, 8, 8)
     assert (quick.dataset.n_samples, quick.dataset.rollout_batch, quick.dataset.feature_batch) == (100, 64, 16)
-    assert paper.dataset.n_samples == 10_000 and paper.dataset.rollout_batch == 1024
+    assert paper.dataset.n_samples == 10_000
+    assert paper.dataset.rollout_batch == 1024
     # the paper preset reads the feasible population (issue 24), the others today's reading
     assert (paper.dataset.population, paper.dataset.match_patience, paper.dataset.max_rollouts) == ("feasible", 1.0, 300_000)
     assert {p.dataset.population for p in (tiny, quick, study)} == {"all"}
-    assert tiny.experiment.forest.max_trees == 8 and quick.experiment.sizes == (2,) + tuple(range(4, 26))
+    assert tiny.experiment.forest.max_trees == 8
+    assert quick.experiment.sizes == (2,) + tuple(range(4, 26))
     with pytest.raises(UserError, match="unknown preset"):
         runconfig.preset("fast")

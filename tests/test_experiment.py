@@ -40,7 +40,9 @@ def test_bootstrap_factor_hand_worked():
     assert E.bootstrap_factor(0.55, 0.6) == pytest.approx(0.5)
     assert E.bootstrap_factor(0.7, 0.6, chance=0.4) == pytest.approx(1.5)
     bf = E.bootstrap_factor(np.array([0.8, 0.8, 0.8]), np.array([0.5, 0.45, 0.65]))
-    assert np.isnan(bf[0]) and np.isnan(bf[1]) and bf[2] == pytest.approx(2.0)  # undefined at/below chance
+    assert np.isnan(bf[0])
+    assert np.isnan(bf[1])
+    assert bf[2] == pytest.approx(2.0)  # undefined at/below chance
 
 
 def test_average_bf_over_4_to_25_hand_worked():
@@ -92,13 +94,16 @@ def test_table2_from_hand_built_accuracies():
     np.testing.assert_allclose(t2["DB1 best (in-sample oracle)"], [5 / 3, 1.5, 2.0])
     np.testing.assert_allclose(t2["CB1 best (in-sample oracle)"], [3, 3, 3])
     # no category passed T = 0.5 (identity corr): CBn would be NB relabelled, so it has no value
-    assert np.all(np.isnan(t2["CBn"])) and "no category passed T = 0.5" in an["unmeasurable"]["CBn"]
+    assert np.all(np.isnan(t2["CBn"]))
+    assert "no category passed T = 0.5" in an["unmeasurable"]["CBn"]
     assert "no test outcomes" in an["unmeasurable"]["DB1 best"]  # no halves to choose on
-    assert an["best_db1"][0] == lay["DB1"][1] and an["ten_db1"][0] == lay["DB1"][1]
+    assert an["best_db1"][0] == lay["DB1"][1]
+    assert an["ten_db1"][0] == lay["DB1"][1]
     # with no category above 0.5 (identity corr), Fig. 12's T=0.5 curve is empty, T=0 uses all
     th = an["thresholds"]
     assert th["count"] == [3, 0, 0]
-    assert np.allclose(th["best_curve"][0][1:], 3.0) and np.all(np.isnan(th["best_curve"][2]))
+    assert np.allclose(th["best_curve"][0][1:], 3.0)
+    assert np.all(np.isnan(th["best_curve"][2]))
 
 
 def test_informative_source_bootstraps_and_noise_does_not():
@@ -137,8 +142,11 @@ def test_condition_plan_counts_for_nine_actions():
     corr = np.full((9, 9), 0.3)
     plan = E.condition_plan(L.ACTIONS, 0, corr, cfg, "pca")
     fams = [E.condition_names(L.ACTIONS, cfg.thresholds)[c].split(":")[0] for c, _ in plan]
-    assert fams.count("NB") == 1 and fams.count("DB1") == 8 and fams.count("DBn") == 1
-    assert fams.count("CB1") == 28 and fams.count("CBn") == 3  # C(8, 2): categories without the target
+    assert fams.count("NB") == 1
+    assert fams.count("DB1") == 8
+    assert fams.count("DBn") == 1
+    assert fams.count("CB1") == 28
+    assert fams.count("CBn") == 3  # C(8, 2): categories without the target
     dbn = dict(plan)[int(E.layout(9, 3)["DBn"])]
     assert dbn == tuple(range(1, 9))
     cbn = {c: rows for c, rows in plan if c in E.layout(9, 3)["CBn"]}
@@ -152,17 +160,23 @@ def test_condition_plan_counts_for_nine_actions():
 def test_pools_are_disjoint_and_too_small_data_is_an_error():
     cfg = E.ExperimentConfig()
     p = E.split_pools(10000, 2, cfg, seed=5)
-    assert len(p["source"]) == 2000 and len(p["corr"]) == 500 and len(p["target"]) == 7500
+    assert len(p["source"]) == 2000
+    assert len(p["corr"]) == 500
+    assert len(p["target"]) == 7500
     allidx = np.concatenate([p["source"], p["corr"], p["target"]])
     assert len(np.unique(allidx)) == 10000
     with pytest.raises(ValueError, match="pull: 5000 samples, but the protocol needs 6600"):
         E.split_pools(5000, 2, cfg, seed=5)
     q = E.split_pools(1000, 2, override(cfg, {"shrink_to_data": True}), seed=5)
-    assert len(q["source"]) == 400 and len(q["corr"]) == 100 and int(q["test_size"]) == 400
+    assert len(q["source"]) == 400
+    assert len(q["corr"]) == 100
+    assert int(q["test_size"]) == 400
     labels = np.random.default_rng(0).random(len(q["target"])) < 0.5
     test, order = E.draw_rep(labels, int(q["test_size"]), 100, 0, 2, 1)
-    assert len(np.intersect1d(test, order)) == 0 and len(order) == 100
-    assert labels[test].sum() == len(test) // 2 and len(test) >= int(q["test_size"]) - 1
+    assert len(np.intersect1d(test, order)) == 0
+    assert len(order) == 100
+    assert labels[test].sum() == len(test) // 2
+    assert len(test) >= int(q["test_size"]) - 1
 
 
 def test_source_outputs_are_the_source_predictor_on_target_scenes_in_its_order(data3):
@@ -179,7 +193,8 @@ def test_source_outputs_are_the_source_predictor_on_target_scenes_in_its_order(d
     expect = L.predict_class(f, L.state_features(data3["lift"]["pca"][tgt], None, "take", "pca"))
     np.testing.assert_array_equal(prep["boot:lift"][2], expect)
     assert prep["boot:lift"].shape == (3 + 3, len(tgt))
-    assert prep["corr"].shape == (3, 3) and int(prep["corr_n"]) == 3 * 20
+    assert prep["corr"].shape == (3, 3)
+    assert int(prep["corr_n"]) == 3 * 20
     for a in ACTS3:  # source/corr pools never overlap the target pool
         assert not np.intersect1d(pools[a]["target"], np.concatenate([pools[a]["source"], pools[a]["corr"]])).size
 
@@ -236,7 +251,9 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
     a = np.load(full)
     acc = a["acc"]
     assert acc.shape == (3, E.layout(3, 3)["n"], 4, 2)
-    assert np.all(np.isfinite(acc[:, 0])) and np.all((acc >= 0) | np.isnan(acc)) and np.nanmax(acc) <= 1
+    assert np.all(np.isfinite(acc[:, 0]))
+    assert np.all((acc >= 0) | np.isnan(acc))
+    assert np.nanmax(acc) <= 1
     lay = E.layout(3, 3)
     for t in range(3):
         assert np.all(np.isnan(acc[t, lay["DB1"][t]]))  # no self-bootstrapping
@@ -255,7 +272,8 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
     with pytest.raises(KeyboardInterrupt):
         E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
     blocks = sorted((tmp_path / "b" / "pca" / "blocks").glob("*.npz"))
-    assert len(blocks) == 2 and not (tmp_path / "b" / "pca" / "results.npz").exists()
+    assert len(blocks) == 2
+    assert not (tmp_path / "b" / "pca" / "results.npz").exists()
     monkeypatch.setattr(sweep, "run_block_to_file", real)
     done = {p.name: p.stat().st_mtime_ns for p in blocks}
     b = np.load(E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
@@ -281,9 +299,11 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
     with pytest.raises(ValueError, match=r"different \['pca data'\]"):
         E.run_experiment(changed, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
     # a finished PCA experiment can be extended by the RHF space
-    assert E.is_complete(tmp_path / "b", ["pca"]) and not E.is_complete(tmp_path / "b", ["pca", "rhf"])
+    assert E.is_complete(tmp_path / "b", ["pca"])
+    assert not E.is_complete(tmp_path / "b", ["pca", "rhf"])
     E.run_experiment(data3, tmp_path / "b", cfg, ["rhf"], seed=2, jobs=1, progress=False)
-    assert E.is_complete(tmp_path / "b") and E.load_results(tmp_path / "b")["meta"]["spaces"] == ["pca", "rhf"]
+    assert E.is_complete(tmp_path / "b")
+    assert E.load_results(tmp_path / "b")["meta"]["spaces"] == ["pca", "rhf"]
 
 
 def test_two_processes_give_the_same_bits_as_one(data3, tmp_path):
@@ -329,7 +349,8 @@ def test_cli_experiment_and_report(tmp_path):
                               "--jobs", "1", "--seed", "1", "--no-progress"] + sets)
     assert args.func(args) == 0
     res = E.load_results(tmp_path / "res")
-    assert res["config"].sizes == (2, 10) and res["pca"]["acc"].shape == (9, 50, 2, 1)
+    assert res["config"].sizes == (2, 10)
+    assert res["pca"]["acc"].shape == (9, 50, 2, 1)
     args = parser.parse_args(["report", str(tmp_path / "res"), "--out", str(tmp_path / "rep")])
     assert args.func(args) == 0
     with open(tmp_path / "rep" / "table2.csv", newline="") as f:
@@ -344,7 +365,8 @@ def test_cli_experiment_and_report(tmp_path):
     assert by["DB1 best after ten (online)"][4:7] == ["nan"] * 3  # nor the online row
     assert (tmp_path / "rep" / "table2_rhf.csv").exists()
     md = (tmp_path / "rep" / "table2.md").read_text()
-    assert "| DB1 best after ten |" in md and "Categories built per threshold" in md
+    assert "| DB1 best after ten |" in md
+    assert "Categories built per threshold" in md
     for fig in ("fig06_nb_learning", "fig07_nb_spaces", "fig08_db1_best", "fig09_db1_best_bf",
                 "fig10_average_bf", "fig11_correlation", "fig12_thresholds"):
         assert (tmp_path / "rep" / f"{fig}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -8,9 +8,9 @@ import argparse
 import numpy as np
 import pytest
 
-ds = pytest.importorskip("relaff_jax.data")
-from relaff_jax import learn as E  # noqa: E402
-from relaff_jax.cli import learn as cli_learn  # noqa: E402
+from relaff_jax import data as ds
+from relaff_jax import learn as E
+from relaff_jax.cli import learn as cli_learn
 
 
 def _rollout_fn(key, b):
@@ -57,10 +57,14 @@ def test_experiment_reads_dataset_folders(tmp_path):
     res = E.load_results(tmp_path / "res")
     assert res["meta"]["actions"] == ["lift", "take", "pour"]
     acc = res["pca"]["acc"]
-    assert acc.shape == (3, E.layout(3, 3)["n"], 2, 1) and np.all(np.isfinite(acc[:, 0]))
+    assert acc.shape == (3, E.layout(3, 3)["n"], 2, 1)
+    assert np.all(np.isfinite(acc[:, 0]))
     # shrink_to_data (quick preset): 120 samples -> 48 source, 12 correlation scenes, 50 test
     # scenes asked for, balanced by class (fewer, and even, if the pool lacks one class)
     n, pos = res["pca"]["test_size"], res["pca"]["test_positive"]
-    assert np.all(n <= 50) and np.all(n % 2 == 0) and np.all(n >= 40) and list(pos) == list(n // 2)
+    assert np.all(n <= 50)
+    assert np.all(n % 2 == 0)
+    assert np.all(n >= 40)
+    assert list(pos) == list(n // 2)
     with pytest.raises(ValueError, match="two datasets for action 'lift'"):
         E.load_datasets([dirs[0], dirs[0]])

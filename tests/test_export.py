@@ -56,19 +56,28 @@ def test_export_folder_round_trip(dataset, tmp_path):
 
     schema = json.loads(paths["schema"].read_text())
     pca, rhf = schema["properties"]["pca"], schema["properties"]["rhf"]
-    assert pca["x-shape"] == [18] and pca["x-dtype"] == "float32" and pca["x-feature"] is True
-    assert pca["x-names"][:3] == ["toy_x", "toy_y", "toy_z"] and pca["x-names"][9] == "other_x"
-    assert rhf["x-names"][0] == "dx_bin00" and rhf["x-names"][-1] == "angle_na_d_bin49"
+    assert pca["x-shape"] == [18]
+    assert pca["x-dtype"] == "float32"
+    assert pca["x-feature"] is True
+    assert pca["x-names"][:3] == ["toy_x", "toy_y", "toy_z"]
+    assert pca["x-names"][9] == "other_x"
+    assert rhf["x-names"][0] == "dx_bin00"
+    assert rhf["x-names"][-1] == "angle_na_d_bin49"
     assert [h["range"] for h in rhf["x-histograms"]] == PERCEPTION["perception"]["rhf"]["ranges"]
-    assert schema["properties"]["qpos"]["x-shape"] == [2, 7] and schema["properties"]["qpos"]["x-feature"] is False
+    assert schema["properties"]["qpos"]["x-shape"] == [2, 7]
+    assert schema["properties"]["qpos"]["x-feature"] is False
     card = paths["card"].read_text()
-    assert "action `lift`" in card and "seed 3" in card and "orbax-checkpoint" in card and "| `rhf` |" in card
+    assert "action `lift`" in card
+    assert "seed 3" in card
+    assert "orbax-checkpoint" in card
+    assert "| `rhf` |" in card
 
 
 def test_export_file_path_and_pandas(dataset, tmp_path):
     out = tmp_path / "sets" / "lift.parquet"
     paths = D.export_dataset(dataset, out)
-    assert paths["schema"] == tmp_path / "sets" / "lift.schema.json" and paths["card"] == tmp_path / "sets" / "lift.md"
+    assert paths["schema"] == tmp_path / "sets" / "lift.schema.json"
+    assert paths["card"] == tmp_path / "sets" / "lift.md"
     assert all(p.is_file() for p in paths.values())
     with pytest.raises(UserError, match="already exist"):
         D.export_dataset(dataset, out)
@@ -86,7 +95,8 @@ def test_polars_reads_the_feature_columns_as_fixed_size_arrays(dataset, tmp_path
     paths = D.export_dataset(dataset, tmp_path / "out")
     df = pl.read_parquet(paths["data"])
     d = D.load_dataset(dataset)
-    assert df.schema["pca"] == pl.Array(pl.Float32, 18) and df.schema["rhf"] == pl.Array(pl.Float32, 300)
+    assert df.schema["pca"] == pl.Array(pl.Float32, 18)
+    assert df.schema["rhf"] == pl.Array(pl.Float32, 300)
     np.testing.assert_array_equal(df["pca"].to_numpy(), d["pca"])
     np.testing.assert_array_equal(df["rhf"].to_numpy(), d["rhf"])
 
@@ -105,7 +115,8 @@ def test_export_bad_out_and_input(dataset, tmp_path):
         D.export_dataset(dataset, tmp_path / "o", format="csv")
     with pytest.raises(UserError, match="not a relaff dataset"):
         D.export_dataset(tmp_path, tmp_path / "o2")
-    assert not (tmp_path / "o").exists() and not (tmp_path / "o2").exists()
+    assert not (tmp_path / "o").exists()
+    assert not (tmp_path / "o2").exists()
 
 
 def test_export_cli(dataset, tmp_path, capsys):

@@ -168,7 +168,8 @@ def test_resampled_means_match_a_plain_numpy_loop():
     halves = E.scene_halves(n_test, None, 6)  # alternate scenes; padding -1
     np.testing.assert_array_equal(halves, [[0, 1, 0, 1, 0, 1], [0, 1, 0, 1, 0, -1]])
     got = E.resampled_means(acc, correct, n_test, 7, seed=11, halves=halves)
-    assert got.dtype == np.float64 and got.shape == (7, 2, 2, 3, 2)
+    assert got.dtype == np.float64
+    assert got.shape == (7, 2, 2, 3, 2)
     g = np.random.default_rng(11)
     v = g.multinomial(4, np.full(4, 0.25), size=7)
     for t in range(2):
@@ -247,12 +248,14 @@ def test_test_set_is_balanced_shared_by_repetitions_and_never_trained_on():
     for r in range(4):
         test, order = E.draw_rep(labels, 20, 25, 0, 2, r)
         tests.append(test), trains.append(order)
-        assert labels[test].sum() == len(test) // 2 and len(test) == 20
+        assert labels[test].sum() == len(test) // 2
+        assert len(test) == 20
     assert all(np.array_equal(t, tests[0]) for t in tests)
     assert len(np.intersect1d(np.concatenate(trains), tests[0])) == 0
     assert not np.array_equal(trains[0], trains[1])
     few = E.draw_test(np.array([True] * 3 + [False] * 30), 20, 0, 0)
-    assert len(few) == 6 and few.dtype.kind == "i"  # only 3 positives: 3 + 3
+    assert len(few) == 6
+    assert few.dtype.kind == "i"  # only 3 positives: 3 + 3
 
 
 def test_balanced_training_prefixes_hold_both_classes():
@@ -262,7 +265,8 @@ def test_balanced_training_prefixes_hold_both_classes():
         assert labels[order[:n]].sum() == n // 2
     assert labels[order[20:]].sum() == 0  # positives used up: the rest follow
     plain = E.draw_train(labels, np.arange(40, 50), 30, 0, 0, 1)  # the last 10 scenes are a test set
-    assert len(set(plain)) == 30 and max(plain) < 40
+    assert len(set(plain)) == 30
+    assert max(plain) < 40
 
 
 # ------------------------------------------------------------ same bits from two processes
@@ -285,7 +289,8 @@ def test_two_processes_generate_bit_identical_datasets(tmp_path):
 
     ca, cb = tmp_path / "a" / "chunks", tmp_path / "b" / "chunks"
     ks = chunk_indices(ca)
-    assert ks and ks == chunk_indices(cb)
+    assert ks
+    assert ks == chunk_indices(cb)
     n = 0
     for k in ks:
         a, _ = read_chunk(chunk_path(ca, k))

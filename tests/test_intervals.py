@@ -80,7 +80,8 @@ def test_bc_interval_by_hand():
     assert lo[0] > np.percentile(vals, 2.5)  # moved up, toward where the estimate sits
     # NaN resamples are left out; no finite resample or a NaN estimate: NaN
     lo, hi = E.bc_interval(np.array([[np.nan, 1.0], [np.nan, 2.0], [np.nan, 3.0]]), np.array([1.0, np.nan]), 0.9)
-    assert np.isnan(lo).all() and np.isnan(hi).all()
+    assert np.isnan(lo).all()
+    assert np.isnan(hi).all()
 
 
 def _simulate(rng, p_nb, p_db, p_dbn, reps, n, shared=0.5, rep_sd=0.02):

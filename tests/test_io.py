@@ -25,8 +25,10 @@ def test_files_and_folders_follow_the_umask(tmp_path, umask022):
     rio.atomic_write_bytes(tmp_path / "b.bin", b"x")
     with rio.atomic_directory(tmp_path / "d") as d:
         rio.atomic_write_text(d / "c.txt", "x")
-    assert mode(tmp_path / "a.json") == 0o644 and mode(tmp_path / "b.bin") == 0o644
-    assert mode(tmp_path / "d") == 0o755 and mode(tmp_path / "d" / "c.txt") == 0o644
+    assert mode(tmp_path / "a.json") == 0o644
+    assert mode(tmp_path / "b.bin") == 0o644
+    assert mode(tmp_path / "d") == 0o755
+    assert mode(tmp_path / "d" / "c.txt") == 0o644
     os.umask(0o077)
     rio.atomic_write_json(tmp_path / "private.json", {})
     assert mode(tmp_path / "private.json") == 0o600
@@ -53,7 +55,8 @@ def test_remove_tree_and_leftovers(tmp_path):
     (d / "sub").mkdir(parents=True)
     (d / "sub" / "f").write_text("x")
     rio.remove_tree(d)
-    assert not d.exists() and not list(tmp_path.iterdir())
+    assert not d.exists()
+    assert not list(tmp_path.iterdir())
     (tmp_path / ".out.old.tmp").mkdir()  # what a killed remove_tree leaves
     rio.clean_leftovers(tmp_path)
     assert not list(tmp_path.iterdir())

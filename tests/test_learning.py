@@ -22,8 +22,10 @@ def test_forest_parameters_are_the_papers():
     assert p["max_depth"] == 200
     assert p["min_samples_leaf"] == 1
     assert p["max_features"] == "sqrt"
-    assert p["bootstrap"] is True and p["max_samples"] is None  # N draws with replacement (~63 % distinct)
-    assert p["n_jobs"] == 1 and p["random_state"] == 3
+    assert p["bootstrap"] is True
+    assert p["max_samples"] is None  # N draws with replacement (~63 % distinct)
+    assert p["n_jobs"] == 1
+    assert p["random_state"] == 3
 
 
 def test_fitted_forest_matches_plain_sklearn_and_tries_sqrt_m_features():
@@ -61,7 +63,8 @@ def test_state_puts_manipulated_object_first(action):
     np.testing.assert_array_equal(s[:, :9], first)
     np.testing.assert_array_equal(s[:, 9:], second)
     r = L.state_features(pca, rhf, action, "rhf")
-    assert r.shape == (4, 318) and r.dtype == np.float32
+    assert r.shape == (4, 318)
+    assert r.dtype == np.float32
     np.testing.assert_array_equal(r[:, :18], s)
     np.testing.assert_array_equal(r[:, 18:], rhf)
     np.testing.assert_array_equal(L.state_features(pca, None, None, "pca"), pca)  # canonical (categories)
@@ -94,8 +97,11 @@ def test_augment_repeats_each_input():
 
 def test_category_pairs():
     pairs = L.category_pairs()
-    assert len(pairs) == 36 and pairs[0] == (0, 1) and pairs[-1] == (7, 8)
-    assert len(set(pairs)) == 36 and all(i < j for i, j in pairs)
+    assert len(pairs) == 36
+    assert pairs[0] == (0, 1)
+    assert pairs[-1] == (7, 8)
+    assert len(set(pairs)) == 36
+    assert all(i < j for i, j in pairs)
 
 
 def test_correlation_matrix_matches_numpy_and_handles_constant_outputs():
@@ -105,7 +111,9 @@ def test_correlation_matrix_matches_numpy_and_handles_constant_outputs():
     np.testing.assert_allclose(L.correlation_matrix(o), np.corrcoef(o), atol=1e-12)
     o[3] = 1.0
     c = L.correlation_matrix(o)
-    assert c[3, 3] == 1.0 and np.all(c[3, :3] == 0) and np.all(c[:3, 3] == 0)
+    assert c[3, 3] == 1.0
+    assert np.all(c[3, :3] == 0)
+    assert np.all(c[:3, 3] == 0)
 
 
 def test_categories_above_threshold():
@@ -122,9 +130,11 @@ def test_synthetic_datasets_have_the_dataset_layout_and_are_reproducible():
     for a in ("lift", "take"):
         x = d[a]
         assert x["action"] == a
-        assert x["pca"].shape == (200, 18) and x["pca"].dtype == np.float32
+        assert x["pca"].shape == (200, 18)
+        assert x["pca"].dtype == np.float32
         assert x["rhf"].shape == (200, 300)
-        assert x["label"].dtype == bool and x["label"].mean() == 0.5
+        assert x["label"].dtype == bool
+        assert x["label"].mean() == 0.5
         for k in ("relation", "cog_distance", "toy", "other", "unseen"):
             assert len(x[k]) == 200
     e = L.synthetic_datasets(200, seed=4, actions=("lift", "take"))

@@ -172,10 +172,17 @@ def test_sim_cloud_normals_agree_with_ray_knn_and_open3d():
     # captured: pytest shows it with a failure only, not in every -q run
     print("(median |cos|, fraction > 0.95) window-ray, window-knn, window-open3d, knn-ray:", res)
     (rm, rf), (km, kf), (om, of), (_, kr) = res["none"]
-    assert rm > 0.999 and rf > 0.7 and km > 0.999 and kf > 0.9 and abs(om - km) < 1e-3 and abs(of - kf) < 0.01
+    assert rm > 0.999
+    assert rf > 0.7
+    assert km > 0.999
+    assert kf > 0.9
+    assert abs(om - km) < 1e-3
+    assert abs(of - kf) < 0.01
     assert rf > kr - 0.05  # the window follows the exact normals about as well as kNN does
     (rm, rf), (km, kf), _, _ = res["robwork"]
-    assert 0.8 < rm < res["none"][0][0] and 0.2 < rf < res["none"][0][1] and km > 0.9  # noise reaches them
+    assert 0.8 < rm < res["none"][0][0]
+    assert 0.2 < rf < res["none"][0][1]
+    assert km > 0.9  # noise reaches them
 
 
 @pytest.mark.slow  # compiles the window rule for two buffer sizes (~10 s)
@@ -189,10 +196,12 @@ def test_real_window_normals_agree_with_knn_and_open3d():
         sel = (hand == obj) & c.valid
         p = c.xyz[sel].astype(np.float64)
         nw = window_cloud_normals(c.xyz, sel, 5, 0.025)
-        assert nw.shape == p.shape and np.all(np.sum(nw * -p, 1) >= 0)
+        assert nw.shape == p.shape
+        assert np.all(np.sum(nw * -p, 1) >= 0)
         for ref in (cloud_normals(p, 20), _o3d_normals(p)):
             a = _agree(nw, ref)
-            assert np.median(a) > 0.995 and np.mean(a > 0.95) > 0.94
+            assert np.median(a) > 0.995
+            assert np.mean(a > 0.95) > 0.94
     with pytest.raises(UserError, match="organized"):
         window_cloud_normals(c.xyz.reshape(-1, 3), sel.reshape(-1))
 
@@ -224,7 +233,8 @@ def test_feature_folders_record_cloud_normals_and_keep_old_ray_folders_valid():
     from relaff_jax.reproduce.features import feature_config
 
     ray = feature_config(0, PerceptionConfig())["perception"]
-    assert "normals" not in ray and "voxel" in ray
+    assert "normals" not in ray
+    assert "voxel" in ray
     cloud = dataclasses.replace(PerceptionConfig(), normals=NormalsConfig(source="cloud"))
     assert stored_config(cloud)["normals"] == {"source": "cloud", "window": 5, "radius": 0.025}
     assert feature_config(0, cloud)["perception"] != ray

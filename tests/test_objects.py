@@ -16,13 +16,16 @@ def test_paper_counts():
 
 def test_bases_include_real_containers_and_flat_supports():
     kinds = [lib.get(n).kind for n in lib.members("base")]
-    assert kinds.count("container") >= 4 and kinds.count("flat") >= 4
+    assert kinds.count("container") >= 4
+    assert kinds.count("flat") >= 4
     for n in lib.members("base"):
         spec = lib.get(n)
         if spec.kind == "container":
             ix, iy, rim = spec.inner
             # walls a toy can sit inside: the block toy (5 cm) fits every container
-            assert 2 * ix > 0.05 and 2 * iy > 0.05 and rim > 0.05, n
+            assert 2 * ix > 0.05, n
+            assert 2 * iy > 0.05, n
+            assert rim > 0.05, n
 
 
 def test_rakes_have_handle_and_head():
@@ -30,7 +33,8 @@ def test_rakes_have_handle_and_head():
         parts = dict(lib.get(n).parts)
         assert set(parts) == {"base", "wall_xp"}, n
         handle, head = parts["base"], parts["wall_xp"]
-        assert handle.size[0] > 0.3 and head.size[1] > handle.size[1] * 3, n
+        assert handle.size[0] > 0.3, n
+        assert head.size[1] > handle.size[1] * 3, n
 
 
 def test_colours_unique_and_sizes_realistic():
@@ -44,7 +48,8 @@ def test_colours_unique_and_sizes_realistic():
 
 def test_pairs():
     pairs = lib.pairs()
-    assert len(pairs) == 124 and len(set(pairs)) == 124
+    assert len(pairs) == 124
+    assert len(set(pairs)) == 124
     assert ("cup", "cup", "toy+base") not in pairs
     assert {p[2] for p in pairs} == set(lib.PAIRINGS)
 

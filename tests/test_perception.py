@@ -124,7 +124,8 @@ def test_intrinsics_and_pose_follow_robwork():
     cam = P.CameraConfig()
     fx, fy, cx, cy = P.intrinsics(cam)
     assert fx == pytest.approx(240 / np.tan(np.deg2rad(21.5)))
-    assert fx == pytest.approx(609.3, abs=0.05) and fy == fx
+    assert fx == pytest.approx(609.3, abs=0.05)
+    assert fy == fx
     assert (cx, cy) == (320.0, 240.0)
     pos, rot = P.camera_frame(cam)
     np.testing.assert_allclose(rot.T @ rot, np.eye(3), atol=1e-12)
@@ -194,7 +195,8 @@ def test_render_objects_equals_full_render(random_scenes, rendered):
     cfg = override(SMALL, {"cull.max_tiles": 120})
     part = jax.jit(jax.vmap(lambda s: P.render_objects(s, cfg)))(batch)
     n_active = np.asarray(jax.vmap(lambda s: P.active_tiles(s, cfg))(batch)).sum(1)
-    assert np.all(n_active < 120) and np.all(n_active > 5)
+    assert np.all(n_active < 120)
+    assert np.all(n_active > 5)
     for b in range(len(scenes)):
         assert not bool(part["tile_overflow"][b])
         seg_full = np.asarray(full["seg"][b])
@@ -310,9 +312,11 @@ def test_voxels_match_open3d(random_scenes):
                 assert n == 0
                 continue
             o3_p, o3_n = open3d_voxels(pts, nrm, size)
-            assert n == len(o3_p) and not vox["voxel_overflow"][o]
+            assert n == len(o3_p)
+            assert not vox["voxel_overflow"][o]
             mine = vox["points"][o][:n]
-            assert vox["mask"][o][:n].all() and not vox["mask"][o][n:].any()
+            assert vox["mask"][o][:n].all()
+            assert not vox["mask"][o][n:].any()
             np.testing.assert_allclose(_lexsorted(mine), _lexsorted(o3_p), atol=2e-6)
             # normals: Open3D keeps the unnormalised mean; we normalise it
             o3_n = o3_n / np.linalg.norm(o3_n, axis=1, keepdims=True)
@@ -361,7 +365,8 @@ def test_voxel_and_pixel_overflow_are_flagged_not_silent(chain):
     np.testing.assert_array_equal(np.asarray(out["tile_overflow"]), n_tiles > t_cap)
     tiles_fit = ~np.asarray(out["tile_overflow"])
     np.testing.assert_array_equal(np.asarray(out["pixel_overflow"])[tiles_fit], (n_pix > m_cap)[tiles_fit])
-    assert bool(jnp.any(out["pixel_overflow"])) and not bool(jnp.all(out["pixel_overflow"]))
+    assert bool(jnp.any(out["pixel_overflow"]))
+    assert not bool(jnp.all(out["pixel_overflow"]))
     fits = ~np.asarray(out["pixel_overflow"]) & tiles_fit
     assert fits.any()
     # Where the pixels fit, voxel counts are the true ones and overflow is flagged past 128.
@@ -426,7 +431,8 @@ def test_pca_elongated_box_returns_its_yaw(yaw_deg):
     ref, _ = numpy_pca(pts.astype(np.float32))
     np.testing.assert_allclose(feats, ref, atol=2e-5, rtol=1e-4)
     assert feats[5] == pytest.approx(yaw, abs=0.02)  # the yaw we put in
-    assert abs(feats[3]) < 0.02 and abs(feats[4]) < 0.02
+    assert abs(feats[3]) < 0.02
+    assert abs(feats[4]) < 0.02
     np.testing.assert_allclose(feats[:3], [1.1, -0.3, 0.05], atol=0.01)
     # eigenvalues of a uniform box: extent^2 / 12, largest first
     np.testing.assert_allclose(feats[6:], np.array([0.40, 0.12, 0.03]) ** 2 / 12, rtol=0.1)
@@ -438,7 +444,8 @@ def test_pca_yaw_range_is_half_circle_and_frame_right_handed():
     mu, frame, evals = jax.jit(P.pca_frame)(jnp.asarray(pts, jnp.float32), jnp.ones(len(pts), bool))
     frame = np.asarray(frame)
     assert np.linalg.det(frame) == pytest.approx(1.0, abs=1e-5)
-    assert frame[0, 0] > 0 and frame[2, 2] > 0  # x towards +x (away from the robot), z up
+    assert frame[0, 0] > 0
+    assert frame[2, 2] > 0  # x towards +x (away from the robot), z up
     yaw = float(P.rotation_to_rpy(jnp.asarray(frame))[2])
     assert yaw == pytest.approx(np.deg2rad(120 - 180), abs=0.02)
 
@@ -460,7 +467,8 @@ def test_pca_unseen_below_min_points_is_zero_not_nan():
         assert bool(unseen)
         np.testing.assert_array_equal(np.asarray(feats), 0.0)
     feats, unseen = P.pca_object(pts, jnp.arange(64) < 4, 3)
-    assert not bool(unseen) and bool(jnp.all(jnp.isfinite(feats)))
+    assert not bool(unseen)
+    assert bool(jnp.all(jnp.isfinite(feats)))
 
 
 # ----------------------------------------------------------------------------- RHF
@@ -570,8 +578,11 @@ def test_features_batched_no_retrace_and_sane(random_scenes, chain):
     assert f.jitted._cache_size() == 1  # a second batch of the same shape did not retrace
     for o in (o1, o2):
         B = len(scenes)
-        assert o["pca"].shape == (B, 18) and o["rhf"].shape == (B, 300) and o["unseen"].shape == (B, 2)
-        assert bool(jnp.all(jnp.isfinite(o["pca"]))) and bool(jnp.all(jnp.isfinite(o["rhf"])))
+        assert o["pca"].shape == (B, 18)
+        assert o["rhf"].shape == (B, 300)
+        assert o["unseen"].shape == (B, 2)
+        assert bool(jnp.all(jnp.isfinite(o["pca"])))
+        assert bool(jnp.all(jnp.isfinite(o["rhf"])))
         sums = np.asarray(o["rhf"]).reshape(B, 6, 50).sum(-1)
         seen = ~np.asarray(o["unseen"]).any(1)
         assert seen.any()
@@ -618,21 +629,25 @@ def library_features():
 def test_features_of_library_pair_find_the_objects(library_features):
     out = jax.tree.map(lambda x: x[0], library_features)
     pca = out["pca"]
-    assert not out["unseen"].any() and not out["overflow"]
+    assert not out["unseen"].any()
+    assert not out["overflow"]
     # Centroids of what the camera sees: near the ball's centre / the bowl, on the camera side.
     assert np.linalg.norm(pca[:3] - [1.0, 0.35, 0.035]) < 0.03
-    assert np.linalg.norm(pca[9:11] - [1.0, -0.1]) < 0.06 and 0.0 < pca[11] < 0.07
+    assert np.linalg.norm(pca[9:11] - [1.0, -0.1]) < 0.06
+    assert 0.0 < pca[11] < 0.07
     np.testing.assert_allclose(out["rhf"].reshape(6, 50).sum(1), 1.0, atol=1e-5)
 
 
 def test_unseen_object_gets_flag_and_zero_features(library_features):
     out = jax.tree.map(lambda x: x[1], library_features)
     np.testing.assert_array_equal(out["unseen"], [True, False])
-    assert out["n_pixels"][0] == 0 and out["n_points"][0] == 0
+    assert out["n_pixels"][0] == 0
+    assert out["n_points"][0] == 0
     np.testing.assert_array_equal(out["pca"][:9], 0.0)
     assert np.all(out["pca"][9:12] != 0)
     np.testing.assert_array_equal(out["rhf"], 0.0)
-    assert not np.any(np.isnan(out["pca"])) and not out["overflow"]
+    assert not np.any(np.isnan(out["pca"]))
+    assert not out["overflow"]
 
 
 # ----------------------------------------------------------------------------- errors
@@ -668,8 +683,10 @@ def test_render_scene_png_writes_a_picture(tmp_path, random_scenes):
     out = tmp_path / "scene.png"
     v = P.render_scene_png(P.scene_from_mujoco(m, d, seg), jax.random.key(0), out, SMALL, title="test")
     data = out.read_bytes()
-    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
-    assert v["depth"].shape == (120, 160) and v["seg"].shape == (120, 160)
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(data) > 10_000
+    assert v["depth"].shape == (120, 160)
+    assert v["seg"].shape == (120, 160)
     assert set(np.unique(v["seg"])) <= {-1, 0, 1, 2}
 
 

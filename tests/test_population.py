@@ -53,9 +53,11 @@ def test_select_eligible_and_uniform_hand_worked():
     for seed in range(5):
         sel = ds.select_balanced(label, dist, 4, seed, bins=2, eligible=ok)
         # the only eligible rollouts: positives 0, 1; negatives 3 (in range) and 6 (far)
-        assert sel.selected.tolist() == [0, 1, 3, 6] and sel.borrowed == 1
+        assert sel.selected.tolist() == [0, 1, 3, 6]
+        assert sel.borrowed == 1
         uni = ds.select_balanced(label, dist, 4, seed, bins=2, eligible=ok, negatives="uniform")
-        assert uni.selected.tolist() == [0, 1, 3, 6] and uni.borrowed == 0
+        assert uni.selected.tolist() == [0, 1, 3, 6]
+        assert uni.borrowed == 0
         # every rollout eligible: the draws of the selection without the options
         full = ds.select_balanced(label, dist, 4, seed, bins=2, eligible=np.ones(7, bool))
         assert full.selected.tolist() == ds.select_balanced(label, dist, 4, seed, bins=2).selected.tolist()
@@ -81,14 +83,17 @@ def test_feasible_population_is_feasible_and_balanced(tmp_path):
     gen(tmp_path / "f", population="feasible")
     r = ds.load_rollouts(tmp_path / "f")
     sel = r["selected"]
-    assert sel.sum() == 40 and r["label"][sel].sum() == 20
+    assert sel.sum() == 40
+    assert r["label"][sel].sum() == 20
     assert r["feasible"][sel].all()
     assert not r["feasible"].all()  # the population excluded something
     meta = json.loads((tmp_path / "f" / ds.SIDECAR).read_text())
-    assert meta["selection_scheme"]["population"] == "feasible" and meta["selection"]["population"] == "feasible"
+    assert meta["selection_scheme"]["population"] == "feasible"
+    assert meta["selection"]["population"] == "feasible"
     assert meta["selection"]["eligible_rollouts"] == int(r["feasible"].sum())
     a = ds.anatomy(tmp_path / "f")
-    assert a["selection"]["negatives_infeasible_share"] == 0.0 and a["selection"]["feasible"] == 40
+    assert a["selection"]["negatives_infeasible_share"] == 0.0
+    assert a["selection"]["feasible"] == 40
     # the same folder resumed with the other population is refused, naming the setting
     with pytest.raises(ds.DatasetMismatchError, match="selection_scheme"):
         gen(tmp_path / "f", population="all")
@@ -111,9 +116,12 @@ def test_unmet_matching_is_warned_recorded_and_shown(tmp_path):
     fn = reach_rollout_fn(feasible_close_negatives=False)
     with pytest.warns(UserWarning, match=r"matching was not met \(match_patience 2"):
         res = gen(tmp_path / "u", population="feasible", match_patience=2.0, fn=fn)
-    assert res["matching_met"] is False and res["borrowed"] == 20 and res["rollouts"] < 4000
+    assert res["matching_met"] is False
+    assert res["borrowed"] == 20
+    assert res["rollouts"] < 4000
     idx = json.loads((tmp_path / "u" / ds.SELECTION).read_text())
-    assert idx["matching_met"] is False and idx["borrowed_share"] == 1.0
+    assert idx["matching_met"] is False
+    assert idx["borrowed_share"] == 1.0
     assert "distance matching NOT met" in ds.format_anatomy(ds.anatomy(tmp_path / "u"))
     assert ds.info(tmp_path / "u")["matching_met"] is False
     assert "NOT met" in ds.format_info(ds.info(tmp_path / "u"))
@@ -130,7 +138,8 @@ def test_unmet_matching_is_warned_recorded_and_shown(tmp_path):
         gen(tmp_path / "v", population="feasible", match_patience=2.0, fn=killed)
     with pytest.warns(UserWarning, match="matching was not met"):
         again = gen(tmp_path / "v", population="feasible", match_patience=2.0, fn=fn)
-    assert again["rollouts"] == res["rollouts"] and again["new_chunks"] == res["chunks"] - 2
+    assert again["rollouts"] == res["rollouts"]
+    assert again["new_chunks"] == res["chunks"] - 2
     assert json.loads((tmp_path / "v" / ds.SELECTION).read_text())["selected"] == idx["selected"]
 
 
@@ -165,7 +174,8 @@ def test_anatomy_command(tmp_path, capsys):
     gen(tmp_path / "c")
     assert main(["anatomy", str(tmp_path / "c"), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
-    assert d["population"] == "all" and d["selection"]["n"] == 40
+    assert d["population"] == "all"
+    assert d["selection"]["n"] == 40
     assert main(["anatomy", str(tmp_path / "c")]) == 0
     assert "label = feasible" in capsys.readouterr().out
 
@@ -181,4 +191,5 @@ def test_report_reach_section(tmp_path):
     s = anat["lift"]["selection"]
     assert table[2][0][:4] == ["lift", "all", "cog", 200]
     assert table[2][0][5] == f"{100 * s['negatives_infeasible_share']:.0f} %"
-    assert any(b[0] == "img" for b in blocks) and any("take (no 'feasible' field)" in str(b) for b in blocks)
+    assert any(b[0] == "img" for b in blocks)
+    assert any("take (no 'feasible' field)" in str(b) for b in blocks)

@@ -9,7 +9,9 @@ EST = {"generate": 100.0, "features": 50.0, "experiment": 30.0, "report": 20.0}
 
 
 def test_fmt_time():
-    assert fmt_time(59.4) == "0:59" and fmt_time(3725) == "1:02:05" and fmt_time(None) == "--:--"
+    assert fmt_time(59.4) == "0:59"
+    assert fmt_time(3725) == "1:02:05"
+    assert fmt_time(None) == "--:--"
     assert fmt_time(float("nan")) == "--:--"
 
 
@@ -55,7 +57,8 @@ def test_line_and_messages():
     p.set("pull (3/9)")
     p.tick()
     line = buf.getvalue().strip()
-    assert line.startswith("reproduce [2/4 features] pull (3/9)  25% |") and "ETA" in line
+    assert line.startswith("reproduce [2/4 features] pull (3/9)  25% |")
+    assert "ETA" in line
     p.tick()  # nothing changed: no new line (not a terminal)
     assert buf.getvalue().count("\n") == 1
     p.begin("report", None)

@@ -112,9 +112,12 @@ def test_run_writes_every_expected_file(base):
     assert sorted(p.name for p in (out / "data").iterdir()) == sorted(ACTS)
     for a in ACTS:
         d = D.load_dataset(out / "data" / a)
-        assert len(d["label"]) == 32 and d["label"].sum() == 16 and d["pca"].shape == (32, 18)
+        assert len(d["label"]) == 32
+        assert d["label"].sum() == 16
+        assert d["pca"].shape == (32, 18)
     res = E.load_results(out / "results")
-    assert res["meta"]["actions"] == list(ACTS) and res["meta"]["spaces"] == ["pca", "rhf"]
+    assert res["meta"]["actions"] == list(ACTS)
+    assert res["meta"]["spaces"] == ["pca", "rhf"]
     assert res["pca"]["acc"].shape == (3, E.layout(3, 3)["n"], 2, 2)
     rep = out / "report"
     for f in ("report.md", "report.html", "findings.json", "summary.json", "table2.csv", "table2_rhf.csv",
@@ -126,18 +129,25 @@ def test_run_writes_every_expected_file(base):
 
 def test_run_log(base):
     out, log, _, _ = base
-    assert log["format"] == R.FORMAT and log["preset"] == "tiny" and log["seed"] == 3
-    assert log["config"]["dataset"]["n_samples"] == 32 and log["config"]["experiment"]["forest"]["max_trees"] == 4
+    assert log["format"] == R.FORMAT
+    assert log["preset"] == "tiny"
+    assert log["seed"] == 3
+    assert log["config"]["dataset"]["n_samples"] == 32
+    assert log["config"]["experiment"]["forest"]["max_trees"] == 4
     assert runconfig.from_json(log["config"]) == override(R.preset("tiny"), FAST)
-    assert log["versions"]["numpy"] == np.__version__ and log["versions"]["jax"]
+    assert log["versions"]["numpy"] == np.__version__
+    assert log["versions"]["jax"]
     assert log["seeds"] == R.seeds(3)
     assert len(set(log["seeds"]["datasets"].values())) == 9  # every action its own stream
     for a in ACTS:
         s = log["seeds"]["datasets"][a]
         assert json.loads((out / "data" / a / D.SIDECAR).read_text())["seed"] == s
-    assert set(log["timings"]) == set(R.STAGES) and all(t > 0 for t in log["timings"].values())
+    assert set(log["timings"]) == set(R.STAGES)
+    assert all(t > 0 for t in log["timings"].values())
     run0 = log["runs"][0]
-    assert run0["status"] == "complete" and run0["argv"][:6] == ["relaff", "reproduce", "--preset", "tiny", "--out", str(out)] and run0["jobs"] == 1
+    assert run0["status"] == "complete"
+    assert run0["argv"][:6] == ["relaff", "reproduce", "--preset", "tiny", "--out", str(out)]
+    assert run0["jobs"] == 1
     assert run0["stages"]["generate"]["actions"]["lift"]["rollouts"] >= 32
     assert run0["stages"]["experiment"]["was"] == "absent"  # a fresh folder, not a resumed one
 
@@ -145,7 +155,8 @@ def test_run_log(base):
 def test_second_run_skips_every_stage(base):
     out, first, second, _ = base
     assert statuses(second) == dict.fromkeys(R.STAGES, "skipped")
-    assert len(second["runs"]) == 2 and second["timings"] == first["timings"]
+    assert len(second["runs"]) == 2
+    assert second["timings"] == first["timings"]
     assert second["runs"][1]["stages"]["generate"]["why"] == "3 of 3 complete"
 
 
@@ -179,7 +190,8 @@ def test_interrupted_and_killed_run_continues_to_the_same_results(base, tmp_path
         run(out, rollout_factory=mid)
     log = json.loads((out / R.RUN_LOG).read_text())
     assert log["runs"][0]["status"] == "interrupted (in generate)"
-    assert D.load_dataset(out / "data" / "lift") and not (out / "data" / "take" / D.SELECTION).exists()
+    assert D.load_dataset(out / "data" / "lift")
+    assert not (out / "data" / "take" / D.SELECTION).exists()
 
     script = tmp_path / "go.py"
     script.write_text(KILL_SCRIPT.format(tests=os.path.dirname(__file__)))
@@ -196,7 +208,8 @@ def test_interrupted_and_killed_run_continues_to_the_same_results(base, tmp_path
     assert not E.is_complete(out / "results")
     log = json.loads((out / R.RUN_LOG).read_text())
     gen = log["runs"][1]["stages"]["generate"]["actions"]
-    assert gen["lift"]["status"] == "skipped" and gen["take"]["status"] == "ran"
+    assert gen["lift"]["status"] == "skipped"
+    assert gen["take"]["status"] == "ran"
     assert log["runs"][1]["status"] == "running"  # a SIGKILL leaves no chance to write more
 
     log = run(out)
@@ -237,7 +250,8 @@ def test_a_damaged_run_log_is_rebuilt_and_the_finished_stages_kept(base, tmp_pat
     with pytest.raises(R.ReproduceError, match="damaged.*--rebuild-log"):
         run(out)
     log = run(out, rebuild_log=True)
-    assert set(statuses(log).values()) == {"skipped"} and "rebuilt" in log
+    assert set(statuses(log).values()) == {"skipped"}
+    assert "rebuilt" in log
     assert (out / (R.RUN_LOG + ".damaged")).exists()
     with pytest.raises(R.ReproduceError, match="intact"):
         run(out, rebuild_log=True)
@@ -315,7 +329,8 @@ def test_a_corrupt_feature_chunk_is_reported_and_recomputed(base, tmp_path, monk
                 f.write_bytes(bytes(b))
         st = R.status(out)
         assert st["generate"].state == "complete"
-        assert st["features"].state == "corrupt" and "lift" in st["features"].why
+        assert st["features"].state == "corrupt"
+        assert "lift" in st["features"].why
         log = run(out, force=force)
         assert statuses(log)["features"] == "ran"
         np.testing.assert_array_equal(D.load_dataset(out / "data" / "lift")["pca"],
@@ -332,7 +347,8 @@ def test_stage_progress_comes_from_the_stage_packages(base, tmp_path):
     assert D.generation_progress(out / "data" / "lift", 32) == 1.0
     assert D.features_progress(out / "data" / "lift", 32, cfg.dataset.feature_batch) == 1.0
     assert sweep_progress(out / "results", cfg.experiment, len(ACTS), ("pca", "rhf")) == 1.0
-    assert D.generation_progress(tmp_path / "none", 32) == 0.0 and D.features_progress(tmp_path, 32, 8) == 0.0
+    assert D.generation_progress(tmp_path / "none", 32) == 0.0
+    assert D.features_progress(tmp_path, 32, 8) == 0.0
     assert sweep_progress(tmp_path / "none", cfg.experiment, len(ACTS), ("pca",)) == 0.0
 
 
@@ -390,15 +406,19 @@ def test_missing_actions_module_is_a_clear_error(tmp_path, monkeypatch):
     with pytest.raises(R.ReproduceError, match="needs relaff_jax.sim.rollouts"):
         args.func(args)
     log = json.loads((tmp_path / "r" / R.RUN_LOG).read_text())
-    assert log["runs"][0]["status"].startswith("failed: ReproduceError") and "(in generate)" in log["runs"][0]["status"]
+    assert log["runs"][0]["status"].startswith("failed: ReproduceError")
+    assert "(in generate)" in log["runs"][0]["status"]
 
 
 def test_presets():
     tiny, quick, study, paper = (R.preset(p) for p in R.PRESETS)
     for p in (tiny, quick, study, paper):
         R.check_config(p, 0)
-    assert paper.dataset.n_samples == 10_000 and paper.experiment == E.experiment_preset("paper")
+    assert paper.dataset.n_samples == 10_000
+    assert paper.experiment == E.experiment_preset("paper")
     assert (paper.experiment.reps_pca, paper.experiment.reps_rhf) == (50, 25)
-    assert tiny.experiment.reps_pca == 2 and set(range(4, 11)) <= set(tiny.experiment.sizes) and tiny.dataset.n_samples < 100
+    assert tiny.experiment.reps_pca == 2
+    assert set(range(4, 11)) <= set(tiny.experiment.sizes)
+    assert tiny.dataset.n_samples < 100
     assert quick.experiment.conditions_pca == FAMILIES  # every bootstrapping condition
     assert quick.reproduce.spaces == ("pca", "rhf")

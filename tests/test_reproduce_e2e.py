@@ -47,11 +47,15 @@ def test_tiny_end_to_end(tmp_path):
     for a in R.ACTIONS:
         d = D.load_dataset(out / "data" / a)
         n = cfg.dataset.n_samples
-        assert d["label"].shape == (n,) and d["label"].sum() == n // 2
-        assert d["pca"].shape == (n, 18) and d["rhf"].shape == (n, 300) and np.isfinite(d["pca"]).all()
+        assert d["label"].shape == (n,)
+        assert d["label"].sum() == n // 2
+        assert d["pca"].shape == (n, 18)
+        assert d["rhf"].shape == (n, 300)
+        assert np.isfinite(d["pca"]).all()
         assert d["qpos_settled"].shape == (n, 14)
         info = D.info(out / "data" / a)
-        assert info["status"] == "complete" and info["features"]["status"] == "complete"
+        assert info["status"] == "complete"
+        assert info["features"]["status"] == "complete"
     assert E.is_complete(out / "results", R.SPACES)
     res = E.load_results(out / "results")
     assert res["meta"]["actions"] == list(R.ACTIONS)
@@ -97,7 +101,8 @@ def test_tiny_end_to_end(tmp_path):
     log = cli_run(out2)
     assert statuses(log) == {"generate": "ran", "features": "ran", "experiment": "ran", "report": "ran"}
     gen = log["runs"][-1]["stages"]["generate"]["actions"]
-    assert gen["take"]["status"] == "ran" and gen["lift"]["status"] == "skipped"
+    assert gen["take"]["status"] == "ran"
+    assert gen["lift"]["status"] == "skipped"
     a, b = D.load_dataset(out / "data" / "take"), D.load_dataset(out2 / "data" / "take")
     for k in ("rollout", "label", "qpos_settled", "pca", "rhf"):
         np.testing.assert_array_equal(a[k], b[k])

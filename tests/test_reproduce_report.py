@@ -104,9 +104,11 @@ def test_findings_hand_worked():
     assert f["rhf_faster"]["values"]["sizes"] == [2, 4, 10]
     assert f["rhf_faster"]["values"]["difference"] == pytest.approx(0.08 / 3)
     assert f["rhf_faster"]["claims"][0]["interval"] == [pytest.approx(0.08 / 3)] * 2
-    assert "+0.027" not in f["rhf_faster"]["numbers"] and "0.027 [0.027, 0.027] (claim > 0)" in f["rhf_faster"]["numbers"]
+    assert "+0.027" not in f["rhf_faster"]["numbers"]
+    assert "0.027 [0.027, 0.027] (claim > 0)" in f["rhf_faster"]["numbers"]
     assert f["pruning_cheap"]["values"]["avg_bf"] == [pytest.approx(2.0), pytest.approx(1.9)]
-    assert f["pruning_cheap"]["values"]["built"] == [36, 2] and "ratio 0.95 [" in f["pruning_cheap"]["numbers"]
+    assert f["pruning_cheap"]["values"]["built"] == [36, 2]
+    assert "ratio 0.95 [" in f["pruning_cheap"]["numbers"]
     assert f["best_after_ten"]["values"]["DB1"]["ratio"] == pytest.approx(0.95)
     lo, hi = f["bootstrapping_helps"]["claims"][0]["interval"]  # DB1 best 2.0 +- 0.01
     assert 1.98 < lo < 2.0 < hi < 2.02
@@ -123,7 +125,8 @@ def test_findings_hand_worked():
     # CBn with no category kept at its threshold (T = 0.5): not measurable, whatever number the row holds
     f = {x["id"]: x for x in R.findings(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, CBn=1.0), [2.0] * 3,
                                                  counts=(36, 5, 0)), CFG)}
-    assert f["bootstrapping_helps"]["verdict"] == "not measurable" and f["bootstrapping_helps"]["reproduced"] is None
+    assert f["bootstrapping_helps"]["verdict"] == "not measurable"
+    assert f["bootstrapping_helps"]["reproduced"] is None
     assert "no category passed T = 0.5: CBn is not measurable" in f["bootstrapping_helps"]["numbers"]
     an = _analysis([0.6] * 4, [0.7] * 4, GOOD, [2.0] * 3)
     del an["rhf"]
@@ -146,8 +149,10 @@ def test_verdicts_whose_interval_crosses_the_bound_are_undecided():
         pca["table2_boot"][:, i] = rng.permutation(pca["table2_boot"][:, i])  # break the pairing
     got = {f["id"]: f for f in R.findings(an, CFG)}
     j = got["dbn_below_db1"]["claims"][0]
-    assert j["estimate"] == pytest.approx(-0.05) and j["interval"][0] < 0 < j["interval"][1]
-    assert got["dbn_below_db1"]["verdict"] == "undecided at this scale" and got["dbn_below_db1"]["reproduced"] is None
+    assert j["estimate"] == pytest.approx(-0.05)
+    assert j["interval"][0] < 0 < j["interval"][1]
+    assert got["dbn_below_db1"]["verdict"] == "undecided at this scale"
+    assert got["dbn_below_db1"]["reproduced"] is None
     # RHF 0.01 above PCA, each NB resampled +-0.1 independently: the interval holds 0 -> undecided
     an["rhf"]["nb_boot"] = rng.permutation(an["rhf"]["nb_boot"])
     got = {f["id"]: f for f in R.findings(an, CFG)}
@@ -235,15 +240,20 @@ def test_full_report(scene_run, tmp_path):
     images = re.findall(r"!\[[^\]]*\]\(([^)]+)\)", md)
     assert all((out / p).is_file() for p in images)
     embedded = re.findall(r'src="data:image/png;base64,([^"]+)"', page)
-    assert len(embedded) == len(images) and 'src="http' not in page and "<link" not in page
+    assert len(embedded) == len(images)
+    assert 'src="http' not in page
+    assert "<link" not in page
     assert [base64.b64decode(e) for e in embedded] == [(out / p).read_bytes() for p in images]
 
     # example scenes: two per action, a positive and a negative, drawn by features.show_scene
     examples = sorted((out / "examples").glob("*.png"))
-    assert len(examples) == 4 and all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in examples)
+    assert len(examples) == 4
+    assert all(p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" for p in examples)
     for action in data_dirs:
         caps = re.findall(rf"\*({action}: [^*]+)\*", md)
-        assert len(caps) == 2 and "positive" in caps[0] and "negative" in caps[1]
+        assert len(caps) == 2
+        assert "positive" in caps[0]
+        assert "negative" in caps[1]
 
     # dataset statistics are dataset.info's
     for action, d in data_dirs.items():
@@ -258,12 +268,16 @@ def test_full_report(scene_run, tmp_path):
     t2 = an["pca"]["table2"]
     from relaff_jax.report.formatting import row_cells  # a row without a value reads "not measurable: why"
     row = lambda name: f"| {name} | " + " | ".join(row_cells(an["pca"], E.TABLE2_ROWS.index(name)))
-    assert row("DB1 best") in md and row("CBn") in md and "| 2.819 | 0.976 | 3.657 |" in md
+    assert row("DB1 best") in md
+    assert row("CBn") in md
+    assert "| 2.819 | 0.976 | 3.657 |" in md
     assert "nan" not in row("CBn")
     for i, name in enumerate(E.TABLE2_ROWS):  # every row says how many affordances it averages
         assert f"{row(name)} | {an['pca']['n_targets'][i]} of {len(an['pca']['actions'])} |" in md
-    assert f"of {len(an['pca']['actions'])} affordances, by row (column n)" in md and "bias-corrected (BC) bootstrap" in md
-    assert "## Sizes of the protocol" in md and "| test scenes (per affordance) |" in md
+    assert f"of {len(an['pca']['actions'])} affordances, by row (column n)" in md
+    assert "bias-corrected (BC) bootstrap" in md
+    assert "## Sizes of the protocol" in md
+    assert "| test scenes (per affordance) |" in md
     found = json.loads((out / "findings.json").read_text())["findings"]
     assert [f["id"] for f in found] == [f["id"] for f in R.findings(an, res["config"])]
     by_id = {f["id"]: f for f in found}
@@ -287,7 +301,8 @@ def test_full_report(scene_run, tmp_path):
     assert "load average as the report was written: " in md
 
     # the reach section names the datasets without a 'feasible' field; compare reads the report back
-    assert "Reach or relation" in md and "No anatomy for lift" in md
+    assert "Reach or relation" in md
+    assert "No anatomy for lift" in md
     reach = json.loads((out / "reach.json").read_text())
     assert reach["subsets"] == ["positives", "feasible negatives", "infeasible negatives"]
     cmp_md = tmp_path / "compare.md"

@@ -42,9 +42,11 @@ def test_tuned_world_pairs_and_slots():
     m, pairs = _pairs(CFG.phys)
     mu, pairs_u = _pairs(templates.untuned(CFG).phys)
     ped = [p for p in pairs_u if "arm_pedestal" in p]
-    assert len(ped) == 7 and not [p for p in pairs if "arm_pedestal" in p]
+    assert len(ped) == 7
+    assert not [p for p in pairs if "arm_pedestal" in p]
     assert set(pairs) == set(pairs_u) - set(ped)
-    assert cd._numeric(m, "max_geom_pairs") == 6 and cd._numeric(mu, "max_geom_pairs") == -1
+    assert cd._numeric(m, "max_geom_pairs") == 6
+    assert cd._numeric(mu, "max_geom_pairs") == -1
     # the pads keep condim 4: at 3 they would join the objects' box-box function and share
     # its 4 pairs (docs/actions.md, "Tuning": lift agreement 97.4 %, rake 91.0 %)
     pad = m.geom("arm_pad_l").id
@@ -52,9 +54,11 @@ def test_tuned_world_pairs_and_slots():
     groups = _groups(m)
     # pads apart from the toy/base pairs; the toy's box against the other's 5 boxes and the
     # palm's against all 6 boxes share one function of 11 pairs, which the cap cuts to 6
-    assert groups[((6, 6), 4)] == 12 and groups[((6, 6), 3)] == 11
+    assert groups[((6, 6), 4)] == 12
+    assert groups[((6, 6), 3)] == 11
     # contact slots MJX allocates: every pair's contacts untuned, 6 pairs per function tuned
-    assert len(cd.make_condim(mu)) == 138 and len(cd.make_condim(m)) == 79
+    assert len(cd.make_condim(mu)) == 138
+    assert len(cd.make_condim(m)) == 79
 
 
 def test_palm_modes_pairs():
@@ -71,9 +75,11 @@ def test_palm_modes_pairs():
     m, pairs = modes["frictionless"]
     assert palm(pairs) == palm(modes["contact"][1])  # the same pairs, with the palm's condim 1
     pg = m.geom("arm_palm").id
-    assert m.geom_condim[pg] == 1 and m.geom_priority[pg] == 1
+    assert m.geom_condim[pg] == 1
+    assert m.geom_priority[pg] == 1
     groups = _groups(m)
-    assert groups[((6, 6), 1)] == 6 and groups[((6, 6), 3)] == 5
+    assert groups[((6, 6), 1)] == 6
+    assert groups[((6, 6), 3)] == 5
     with pytest.raises(UserError, match="arm_palm_objects='off': one of contact, frictionless"):
         dataclasses.replace(CFG.phys, arm_palm_objects="off")
 
@@ -136,7 +142,8 @@ def test_chaos_shift_and_interval_by_hand():
 
     chaos = _bench("chaos")
     lo, hi = chaos.wilson(5, 10)
-    assert abs(lo - 0.2366) < 1e-4 and abs(hi - 0.7634) < 1e-4
+    assert abs(lo - 0.2366) < 1e-4
+    assert abs(hi - 0.7634) < 1e-4
     assert chaos.wilson(10, 10)[1] == pytest.approx(1.0)
     q = np.arange(2 * 14, dtype=np.float32).reshape(2, 14)
     z = np.zeros(2)
@@ -144,5 +151,6 @@ def test_chaos_shift_and_interval_by_hand():
     prep = rollouts.Prepared("lift", z, s, None, z, z, z)
     moved = chaos.shifted(prep, 7, 1e-6).scenes.qpos
     diff = moved - q
-    assert np.all(diff[:, 7] > 0) and np.count_nonzero(diff) == 2  # both rows, toy x only
+    assert np.all(diff[:, 7] > 0)
+    assert np.count_nonzero(diff) == 2  # both rows, toy x only
     assert np.array_equal(prep.scenes.qpos, np.arange(28, dtype=np.float32).reshape(2, 14))  # not in place
