@@ -73,7 +73,7 @@ def make_scenes(n: int, seed: int = 0):
 
 # ----------------------------------------------------------------------------- native chain
 
-NUMPY_SIGMA = {  # the REFERENCE section 3 formulas again, in numpy (metres)
+NUMPY_SIGMA = {  # the docs/facts.md "Sensor" formulas again, in numpy (metres)
     "robwork": lambda z, r: np.maximum(
         2.344 - 1.202e-2 * r - 1.734e-3 * (z * 1e3) + 1.818e-5 * r * r + 6.516e-6 * r * (z * 1e3)
         + 1.233e-6 * (z * 1e3) ** 2, 0.0) / 1e3,

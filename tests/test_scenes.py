@@ -190,7 +190,7 @@ HANG_SCRIPT = textwrap.dedent("""
 
 @pytest.mark.slow  # a batch of 1024 scenes
 def test_batch_1024_does_not_deadlock():
-    """jax 0.10 deadlocked vmapped mjx.step at batch 1024 on this machine (REFERENCE 1).
+    """jax 0.10 deadlocked vmapped mjx.step at batch 1024 on this machine (docs/facts.md, "JAX version").
     A separate process with a hard timeout: a deadlock cannot be interrupted in-process."""
     r = subprocess.run([sys.executable, "-c", HANG_SCRIPT], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]

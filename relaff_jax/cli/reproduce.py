@@ -18,8 +18,8 @@ def register(sub) -> None:
                     "stages are skipped. Settings: a preset plus --set overrides of the config tree "
                     "(relaff_jax.runconfig); the run log records the whole resolved tree.")
     p.add_argument("--preset", choices=PRESETS, default="quick",
-                   help="quick: ~9 min on 2 idle cores, ~4.5 with --engine native (default, "
-                        "docs/reproduce.md); study: 29 min with --engine native; paper: the full protocol "
+                   help="quick: 9.2 min on 2 idle cores, 4.4 with --engine native (docs/benchmarks.md, "
+                        "'Engines at 2,000 scenes per action'); study: 29 min with --engine native (docs/results.md); paper: the full protocol "
                         "(projected ~10 h with --cluster local:2, ~4.5 h with --engine native); tiny: for tests")
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
     p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",

@@ -1,6 +1,6 @@
 """Settings of the evaluation protocol (paper section V) and the paper's Table II.
 
-``ExperimentConfig`` is the frozen protocol (defaults are the paper's, REFERENCE section 6);
+``ExperimentConfig`` is the frozen protocol (defaults are the paper's, docs/facts.md, "Evaluation protocol");
 ``experiment_preset`` gives the ``paper``, ``study`` and ``quick`` presets; ``check_config`` fails early
 on settings that cannot give a study. ``TABLE2_ROWS`` / ``PAPER_TABLE2`` are the rows of
 Table II and the paper's numbers (PCA, average bootstrap factor over n = 4..25: avg, min,
@@ -54,7 +54,7 @@ def paper_row(name: str) -> tuple[float, float, float]:
 
 @dataclasses.dataclass(frozen=True)
 class ExperimentConfig:
-    """Protocol settings; defaults are the paper's (section V, REFERENCE section 6)."""
+    """Protocol settings; defaults are the paper's (section V, docs/facts.md, "Evaluation protocol")."""
 
     sizes: tuple[int, ...] = tuple(range(2, 101))  # training sizes n
     reps_pca: int = 50

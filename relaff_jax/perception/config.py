@@ -23,7 +23,7 @@ NORMAL_SOURCES = ("ray", "cloud")
 
 @dataclasses.dataclass(frozen=True)
 class CameraConfig:
-    """Pinhole depth camera (RobWork's simulated Kinect intrinsics, REFERENCE section 3).
+    """Pinhole depth camera (RobWork's simulated Kinect intrinsics, docs/facts.md, "Sensor").
 
     fy = fx = (height / 2) / tan(vfov / 2), cx = width / 2, cy = height / 2; the pose looks from
     ``position`` at ``target`` with the image's "up" towards world +z.

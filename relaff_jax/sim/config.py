@@ -22,7 +22,7 @@ class PhysicsConfig:
     """Static physics settings shared by settle and action rollouts.
 
     ``iterations``/``ls_iterations`` cap the constraint solver: uncapped defaults cost ~3x
-    (REFERENCE section 1) for no visible difference in resting contacts.
+    (docs/facts.md, "Solver cap") for no visible difference in resting contacts.
     """
 
     timestep: float = 0.004
