@@ -67,3 +67,21 @@ def test_presets():
     assert quick.experiment.sizes == (2,) + tuple(range(4, 26))
     with pytest.raises(UserError, match="unknown preset"):
         runconfig.preset("fast")
+
+
+def test_a_criterion_the_engine_cannot_build_is_refused_by_the_config_check(capsys, tmp_path):
+    """entropy used to pass the check and fail inside a sweep worker; now the check refuses it
+    before any work, naming the engine, and the sklearn engine accepts it."""
+    from relaff_jax import cli
+    from relaff_jax.errors import UserError
+    from relaff_jax.learn import ExperimentConfig, check_config
+
+    bad = override(ExperimentConfig(), {"forest.criterion": "entropy"})
+    with pytest.raises(UserError, match="fast engine builds gini trees only"):
+        check_config(bad)
+    check_config(override(bad, {"forest.engine": "sklearn"}))
+    out = tmp_path / "e"
+    assert cli.main(["experiment", "--synthetic", "40", "--out", str(out), "--set",
+                     "experiment.forest.criterion=entropy"]) == 2
+    assert "gini trees only" in capsys.readouterr().err
+    assert not out.exists()

@@ -379,6 +379,9 @@ def test_bad_input(tmp_path):
         run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("lift",)}))
     with pytest.raises(R.ReproduceError, match="rollout_batch"):
         run(tmp_path / "a", overrides=dict(FAST, **{"dataset.rollout_batch": 0}))
+    # a perception value is refused before generation, not when the features stage reaches it
+    with pytest.raises(R.ReproduceError, match="perception: .*voxel"):
+        run(tmp_path / "a", overrides=dict(FAST, **{"perception.voxel.size": -1.0}))
     assert not (tmp_path / "a").exists()
     foreign = tmp_path / "foreign"
     foreign.mkdir()

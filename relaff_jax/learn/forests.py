@@ -114,6 +114,9 @@ def check_forest_config(cfg: ForestConfig = ForestConfig()) -> None:
     """Let scikit-learn validate the forest parameters once (fits then skip re-validation)."""
     if cfg.engine not in ENGINES:
         raise UserError(f"forest.engine {cfg.engine!r}: expected one of {', '.join(ENGINES)}")
+    if cfg.engine != "sklearn" and cfg.criterion != "gini":  # refused here, not in a worker mid-sweep
+        raise UserError(f"forest.criterion {cfg.criterion!r}: the {cfg.engine} engine builds gini trees only (the "
+                        "paper's); set experiment.forest.engine=sklearn for another criterion")
     try:
         make_forest(2, 0, cfg)._validate_params()
     except ValueError as e:

@@ -62,6 +62,12 @@ def check_config(cfg: RunConfig, seed: int) -> None:
         check_dataset_config(d)
     except DatasetError as e:
         raise ReproduceError(f"dataset: {e}") from e
+    from relaff_jax.perception import validate_config as check_perception
+
+    try:  # the features stage's own check, before the datasets are simulated (minutes to hours)
+        check_perception(cfg.perception)
+    except UserError as e:
+        raise ReproduceError(f"perception: {e}") from e
     acts = tuple(cfg.reproduce.actions)
     if len(acts) < 2 or len(set(acts)) != len(acts) or not set(acts) <= set(ACTIONS):
         raise ReproduceError(f"reproduce.actions must be at least two distinct values of {ACTIONS}, got {acts}")
