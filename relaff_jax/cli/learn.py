@@ -53,7 +53,9 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    options.check_in_file(os.path.join(args.results, "experiment.json"),
+    from relaff_jax.learn import folder
+
+    options.check_in_file(folder.meta(args.results),
                           f"{args.results} is not an experiment folder (no experiment.json)")
     check_out_dir(args.out)
     from relaff_jax.report import write_report

@@ -22,6 +22,7 @@ Files, in pipeline order:
   test scene, leave-one-out accuracy at ``select_size``), saved and re-read;
 - ``parallel.py``: forest jobs over worker processes with a progress bar;
 - ``sweep.py``: ``run_experiment``, the resumable sweep of one or both spaces;
+- ``folder.py``: the experiment folder's file names (``experiment.json``, ``SPACE/results.npz``, ...);
 - ``results.py``: ``load_results`` (typed ``Results`` / ``SpaceResults``), ``is_complete``;
 - ``measures.py``: Table II rows (average bf with its defined sizes, accuracy gain), ties;
 - ``online.py``: the online "best after ten" (leave-one-out choice per repetition);

@@ -19,6 +19,7 @@ from relaff_jax import io as rio
 from relaff_jax.config import from_dict
 from relaff_jax.constants import SPACES
 from relaff_jax.errors import UserError
+from relaff_jax.learn import folder as L
 from relaff_jax.learn.config import ExperimentConfig
 
 FORMAT_VERSION = 2  # of experiment.json and results.npz (2: balanced test sets, outcomes, leave-one-out)
@@ -92,25 +93,25 @@ class Results(Mapping[str, Any]):
 def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:
     """Whether ``out`` holds finished results for every one of ``spaces``."""
     out = Path(out)
-    if not (out / "experiment.json").exists():
+    if not L.meta(out).exists():
         return False
     try:
-        done = rio.read_json(out / "experiment.json")["spaces"]
+        done = rio.read_json(L.meta(out))["spaces"]
     except (ValueError, KeyError):
         return False
-    return all(s in done and (out / s / "results.npz").exists() for s in spaces)
+    return all(s in done and L.results(out, s).exists() for s in spaces)
 
 
 def load_results(results_dir: str | os.PathLike) -> Results:
     """The ``Results`` of an experiment folder (every space in its ``experiment.json``)."""
     root = Path(results_dir)
-    meta_path = root / "experiment.json"
+    meta_path = L.meta(root)
     if not meta_path.exists():
         raise ResultsNotFound(f"{root} is not an experiment folder (no experiment.json)")
     meta = rio.read_json(meta_path)
     spaces: dict[str, SpaceResults] = {}
     for space in meta["spaces"]:
-        p = root / space / "results.npz"
+        p = L.results(root, space)
         if not p.exists():
             raise ResultsNotFound(f"{p} missing: the {space} sweep has not finished (rerun `relaff experiment`)")
         with np.load(p) as z:

@@ -15,7 +15,8 @@ from typing import Any, Mapping, Sequence
 from relaff_jax import io as rio
 from relaff_jax.config import to_dict
 
-META = "experiment.json"
+from relaff_jax.learn import folder as L
+from relaff_jax.learn.folder import META  # noqa: F401 (re-exported)
 
 
 def experiment_status(out: str | os.PathLike, datasets: Mapping[str, Mapping[str, Any]], cfg: Any, seed: int,
@@ -72,14 +73,14 @@ def sweep_progress(out: str | os.PathLike, cfg: Any, n_actions: int, spaces: Seq
         width = state_width(s, cfg.state)
         chunk_cost = [sum(forest_cost_ms(n, width) for n in c) for c in chunks]
         w = forests_per_space(cfg, n_actions, s) * sum(chunk_cost) / len(sizes)
-        blocks = out / s / "blocks"
-        if (out / s / "results.npz").exists():
+        blocks = L.blocks(out, s)
+        if L.results(out, s).exists():
             frac = 1.0
         else:
             got = 0.0
             for f in (blocks.glob("*.npz") if blocks.is_dir() else ()):
-                ci = f.stem.rsplit("_c", 1)[-1]
-                got += chunk_cost[int(ci)] if ci.isdigit() and int(ci) < len(chunks) else 0.0
-            frac = 0.1 * (out / s / "prep.npz").exists() + 0.9 * got / (cfg.reps(s) * n_actions * sum(chunk_cost))
+                ci = L.block_chunk(f)
+                got += chunk_cost[ci] if ci is not None and ci < len(chunks) else 0.0
+            frac = 0.1 * L.prep(out, s).exists() + 0.9 * got / (cfg.reps(s) * n_actions * sum(chunk_cost))
         done, total = done + w * frac, total + w
     return done / total if total else 0.0

@@ -39,6 +39,7 @@ from relaff_jax import io as rio
 from relaff_jax.config import to_dict
 from relaff_jax.constants import ACTIONS, SPACES
 from relaff_jax.errors import UserError
+from relaff_jax.learn import folder as L
 from relaff_jax.learn.blocks import SUBSETS, read_block, run_block_to_file
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config
 from relaff_jax.learn.datasets import check_datasets, fingerprint
@@ -84,7 +85,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         "spaces": spaces,
         "fingerprint": fingerprint(datasets, spaces),
     }
-    meta_path = out / "experiment.json"
+    meta_path = L.meta(out)
     if meta_path.exists():
         # same protocol, seed, actions and data; a space may be added to a finished one
         old = rio.read_json(meta_path)
@@ -106,7 +107,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
                                               started=time.strftime("%Y-%m-%d %H:%M:%S")))
     paths = {}
     for space in spaces:
-        paths[space] = run_space(datasets, out / space, cfg, space, actions, seed, jobs, progress)
+        paths[space] = run_space(datasets, L.space_dir(out, space), cfg, space, actions, seed, jobs, progress)
     return paths
 
 
@@ -115,7 +116,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     """One space of ``run_experiment`` in ``sdir``: prep (reused if saved), every block not yet
     on disk, then ``sdir/results.npz``; returns its path."""
     t0 = time.perf_counter()
-    prep_path = sdir / "prep.npz"
+    prep_path = sdir / L.PREP
     if prep_path.exists():
         with np.load(prep_path) as z:
             prep = {k: z[k] for k in z.files}
@@ -147,7 +148,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
             pool = prep[f"target:{t}"]
             draws = None
             for ci, chunk in enumerate(chunks):
-                path = sdir / "blocks" / f"{t}_r{r:03d}_c{ci:02d}.npz"
+                path = L.block(sdir, t, r, ci)
                 fits = block_fits(plans[ti], len(chunk), loo_n if loo_n in chunk else 0, loo_conds)
                 total_fits += fits
                 s0 = sizes.index(chunk[0])
@@ -180,7 +181,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     for (ti, s0, n, r), got in zip(keys, results):
         _store(acc, correct, loo, acc_subset, got, ti, s0, n, r)
     masks = category_masks(corr, actions, cfg)
-    res_path = sdir / "results.npz"
+    res_path = sdir / L.RESULTS
     rio.atomic_save_npz(
         res_path,
         acc=acc,

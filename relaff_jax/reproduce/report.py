@@ -7,6 +7,7 @@ from pathlib import Path
 
 from relaff_jax import data as D
 from relaff_jax import io as rio
+from relaff_jax.learn import folder as L
 from relaff_jax.report.status import clear_stamp, inputs_stamp, report_status, write_stamp
 from relaff_jax.reproduce.stage import Run, Status
 
@@ -15,7 +16,7 @@ NAME = "report"
 
 def _inputs(run: Run) -> list[Path]:
     res = run.paths.results
-    files = [res / "experiment.json"] + [res / s / "results.npz" for s in run.cfg.reproduce.spaces]
+    files = [L.meta(res)] + [L.results(res, s) for s in run.cfg.reproduce.spaces]
     for a in run.cfg.reproduce.actions:
         files += [run.paths.dataset(a) / D.SIDECAR, run.paths.dataset(a) / D.FEATURES_SIDECAR]
     return files

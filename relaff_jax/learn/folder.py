@@ -1,0 +1,47 @@
+"""The experiment folder's layout, named once (``relaff experiment --out``, ``DIR/results``)::
+
+    OUT/experiment.json            protocol, seed, actions, spaces, data fingerprints
+    OUT/SPACE/prep.npz             source predictors, categories, correlations (``prep.py``)
+    OUT/SPACE/blocks/T_rRRR_cCC.npz  one sweep block: target T, repetition R, size chunk C
+    OUT/SPACE/results.npz          the finished space (``results.py``)
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+META = "experiment.json"
+RESULTS = "results.npz"
+PREP = "prep.npz"
+BLOCKS = "blocks"
+
+
+def meta(out: str | os.PathLike) -> Path:
+    return Path(out) / META
+
+
+def space_dir(out: str | os.PathLike, space: str) -> Path:
+    return Path(out) / space
+
+
+def results(out: str | os.PathLike, space: str) -> Path:
+    return space_dir(out, space) / RESULTS
+
+
+def prep(out: str | os.PathLike, space: str) -> Path:
+    return space_dir(out, space) / PREP
+
+
+def blocks(out: str | os.PathLike, space: str) -> Path:
+    return space_dir(out, space) / BLOCKS
+
+
+def block(sdir: str | os.PathLike, target: str, rep: int, chunk: int) -> Path:
+    """One block's file under a space folder ``sdir``."""
+    return Path(sdir) / BLOCKS / f"{target}_r{rep:03d}_c{chunk:02d}.npz"
+
+
+def block_chunk(path: str | os.PathLike) -> int | None:
+    """The size-chunk index of a block file's name (None if the name is not a block's)."""
+    ci = Path(path).stem.rsplit("_c", 1)[-1]
+    return int(ci) if ci.isdigit() else None
