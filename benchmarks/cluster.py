@@ -139,8 +139,8 @@ def run_mode(mode, args, work: Path) -> dict:
         data = synthetic_datasets(args.synthetic, seed=0)
 
         def sweep(name):
-            with C.active(client):
-                run_experiment(data, work / f"sweep-{name}-{tag}", cfg, ["pca"], seed=0, jobs=1, progress=False)
+            run_experiment(data, work / f"sweep-{name}-{tag}", cfg, ["pca"], seed=0, jobs=1, progress=False,
+                           client=client)
             with np.load(work / f"sweep-{name}-{tag}" / "pca" / "results.npz") as z:
                 out["fits"] = int(z["new_fits"])
             return len(list((work / f"sweep-{name}-{tag}" / "pca" / "blocks").iterdir())) + 9  # + 9 source predictors

@@ -7,7 +7,7 @@ of each of the nine actions (``constants.ACTIONS``, ``data.tasks.rollout_chunk``
 ``relaff reproduce --cluster`` does), then one feature chunk of ``--feature-batch`` of those
 scenes (``data.tasks.feature_chunk``, the real perception), then the quick PCA and RHF sweep
 on ``--synthetic`` samples per action (its prep forests and blocks, ``learn.run_experiment``
-under ``cluster.active``). After each step the worker reports its own resident set size from
+given the client). After each step the worker reports its own resident set size from
 ``/proc/self/status``: ``VmRSS`` (now) and ``VmHWM`` (the peak since the process started),
 and the step's wall and CPU time (a chunk's CPU s / batch: the nine actions' cost per rollout,
 which ``cluster.py --nine-actions`` uses in its projection). The place, settle and plan (and
@@ -101,8 +101,8 @@ def measure(engine: str, args, work: Path) -> list[dict]:
         cfg = override(experiment_preset("quick"), {"sizes": (2, 10, 25, 50, 75, 100)})
         data = synthetic_datasets(args.synthetic, seed=0)
         t0 = time.perf_counter()
-        with C.active(client):
-            run_experiment(data, work / f"{engine}-sweep", cfg, ["pca", "rhf"], seed=0, jobs=1, progress=False)
+        run_experiment(data, work / f"{engine}-sweep", cfg, ["pca", "rhf"], seed=0, jobs=1, progress=False,
+                       client=client)
         blocks = sum(len(list((work / f"{engine}-sweep" / s / "blocks").iterdir())) for s in ("pca", "rhf"))
         r = {**client.submit(rss_mb, pure=False).result(), "s": time.perf_counter() - t0}
         rows.append({"step": f"sweep, PCA + RHF ({blocks} blocks)", **r})

@@ -184,11 +184,9 @@ def test_unwritable_folder_fails_before_any_work(client, tmp_path):
 
 
 @pytest.mark.slow
-def test_run_parallel_on_the_active_cluster(client):
+def test_run_parallel_on_the_given_cluster(client):
     calls = [(np.multiply, (np.arange(5), i), {}) for i in range(6)]
-    with C.active(client):
-        got = run_parallel(calls, 1, False, total=6, desc="t", unit="call")
-    assert C.current() is None
+    got = run_parallel(calls, 1, False, total=6, desc="t", unit="call", client=client)
     assert all(np.array_equal(g, np.arange(5) * i) for i, g in enumerate(got))
 
 

@@ -41,11 +41,9 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     else:
         datasets, desc = learn.load_datasets(args.data), list(args.data)
     jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
-    from relaff_jax.cluster import active
-
-    with options.cluster(args, args.out) as client, active(client):  # sweep blocks as cluster tasks
+    with options.cluster(args, args.out) as client:  # with --cluster: sweep blocks as cluster tasks
         paths = learn.run_experiment(datasets, args.out, cfg, spaces, seed=args.seed, jobs=jobs,
-                                     progress=not args.no_progress, data_desc=desc)
+                                     progress=not args.no_progress, data_desc=desc, client=client)
     options.record_config(args.out, tree, "experiment")
     for space, p in paths.items():
         print(f"{space}: {p}")

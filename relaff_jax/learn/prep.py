@@ -55,8 +55,9 @@ def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, a
 
 
 def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: ExperimentConfig, seed: int,
-            jobs: int = 1, progress: bool = False) -> dict[str, np.ndarray]:
-    """Source predictors, categories and the correlation heuristic for one space.
+            jobs: int = 1, progress: bool = False, client: Any = None) -> dict[str, np.ndarray]:
+    """Source predictors, categories and the correlation heuristic for one space (its forests
+    as tasks on ``client``'s cluster when given).
 
     Returns a flat dict of arrays: ``boot:<t>`` (A + K, M_t) 0/1 outputs on target t's pool
     (rows: the A source predictors, then the K categories; NaN rows for categories a space
@@ -80,7 +81,7 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest, cfg.state)
               for p in pairs] if with_cats else []
     desc = f"{space} source predictors" + (" + categories" if with_cats else "")
-    results = run_parallel(calls, jobs, progress, total=len(calls), desc=desc, unit="forest")
+    results = run_parallel(calls, jobs, progress, total=len(calls), desc=desc, unit="forest", client=client)
     sources = results[: len(actions)]
     cats = results[len(actions) :] if with_cats else [[np.full(len(targets[t]), np.nan, np.float32) for t in actions]] * len(pairs)
     out: dict[str, np.ndarray] = {}

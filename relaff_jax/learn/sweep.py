@@ -64,7 +64,7 @@ ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share")  # ExperimentConfig k
 
 def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
                    spaces: Sequence[str] = SPACES, seed: int = 0, jobs: int = 1, progress: bool = True,
-                   data_desc: Sequence[str] = ()) -> dict[str, Path]:
+                   data_desc: Sequence[str] = (), client: Any = None) -> dict[str, Path]:
     """Run (or resume) the protocol; write ``out/<space>/results.npz``; return their paths.
 
     ``out/experiment.json`` records config, seed, actions and a data fingerprint; resuming
@@ -107,21 +107,22 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
                                               started=time.strftime("%Y-%m-%d %H:%M:%S")))
     paths = {}
     for space in spaces:
-        paths[space] = run_space(datasets, L.space_dir(out, space), cfg, space, actions, seed, jobs, progress)
+        paths[space] = run_space(datasets, L.space_dir(out, space), cfg, space, actions, seed, jobs, progress, client)
     return paths
 
 
 def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: ExperimentConfig, space: str,
-              actions: list[str], seed: int, jobs: int, progress: bool) -> Path:
+              actions: list[str], seed: int, jobs: int, progress: bool, client: Any = None) -> Path:
     """One space of ``run_experiment`` in ``sdir``: prep (reused if saved), every block not yet
-    on disk, then ``sdir/results.npz``; returns its path."""
+    on disk, then ``sdir/results.npz``; returns its path. ``client``: run the forests as tasks
+    on that Dask cluster (the same bits)."""
     t0 = time.perf_counter()
     prep_path = sdir / L.PREP
     if prep_path.exists():
         with np.load(prep_path) as z:
             prep = {k: z[k] for k in z.files}
     else:
-        prep = prepare(datasets, space, cfg, seed, jobs, progress)
+        prep = prepare(datasets, space, cfg, seed, jobs, progress, client)
         rio.atomic_save_npz(prep_path, **prep)
     t_prep = time.perf_counter() - t0
     a, sizes, reps = len(actions), list(cfg.sizes), cfg.reps(space)
@@ -177,7 +178,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                 weights.append(fits)
                 keys.append((ti, s0, len(chunk), r))
     results = run_parallel(calls, jobs, progress, total=total_fits, desc=f"{space} sweep", unit="fit",
-                            weights=weights, initial=done_fits)
+                            weights=weights, initial=done_fits, client=client)
     for (ti, s0, n, r), got in zip(keys, results):
         _store(acc, correct, loo, acc_subset, got, ti, s0, n, r)
     masks = category_masks(corr, actions, cfg)

@@ -57,7 +57,8 @@ def run(run: Run, forced: bool) -> dict:
     run.progress.set(f"{' + '.join(s.upper() for s in spaces)} sweeps")
     t0 = time.perf_counter()
     run_experiment(datasets, res, cfg.experiment, list(spaces), seed=run.log["seeds"]["experiment"], jobs=run.jobs,
-                   progress=False, data_desc=[str(run.paths.dataset(x)) for x in cfg.reproduce.actions])
+                   progress=False, data_desc=[str(run.paths.dataset(x)) for x in cfg.reproduce.actions],
+                   client=run.client)
     dt = time.perf_counter() - t0
     run.progress.message(f"experiment: {', '.join(spaces)} sweeps in {dt:.0f} s")
     return {"status": "ran", "was": "forced" if forced else st.state, "seconds": round(dt, 2)}

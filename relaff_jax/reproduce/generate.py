@@ -113,7 +113,7 @@ def run(run: Run, forced: bool) -> dict:
     window = max(1, -(-nthreads(run.client) // len(todo)))
     run.progress.set(f"{len(todo)} actions at once on the cluster")
     with ThreadPoolExecutor(len(todo), thread_name_prefix="generate") as pool:
-        futures = {a: pool.submit(_in_context, run, a, window) for a in todo}
+        futures = {a: pool.submit(_one, run, a, window) for a in todo}
         try:
             for a in todo:
                 items[a] = futures[a].result()
@@ -125,8 +125,3 @@ def run(run: Run, forced: bool) -> dict:
     return dict(sorted(items.items(), key=lambda kv: acts.index(kv[0])))
 
 
-def _in_context(run: Run, action: str, window: int) -> dict:
-    from relaff_jax.cluster import active
-
-    with active(run.client):
-        return _one(run, action, window)

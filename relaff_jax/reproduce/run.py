@@ -19,7 +19,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.cluster import active, nthreads
+from relaff_jax.cluster import nthreads
 from relaff_jax.config import override
 from relaff_jax.constants import ACTIONS, SIM_ENGINES, SPACES, STAGES
 from relaff_jax.data.config import check_dataset_config
@@ -172,27 +172,26 @@ def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, roll
     for stage in run.force:
         log["timings"].pop(stage, None)
     try:
-        with active(client):  # the sweeps' run_parallel sends its blocks to the cluster
-            for stage, module in STAGE_MODULES.items():
-                t0 = time.perf_counter()
-                forced = stage in run.force
-                prog.begin(stage, lambda m=module: m.progress(run))
-                st = None if forced else module.status(run)
-                if st is not None and st.state == "complete":
-                    entry["stages"][stage] = {"status": "skipped", "seconds": round(time.perf_counter() - t0, 2), "why": st.why}
-                    prog.message(f"{stage}: complete, skipped")
-                    run.save()
-                    continue
-                result = module.run(run, forced)
-                dt = time.perf_counter() - t0
-                items = result if stage in ("generate", "features") else None
-                ran = any(v.get("status") == "ran" for v in items.values()) if items is not None else result["status"] == "ran"
-                entry["stages"][stage] = {"status": "ran" if ran else "skipped", "seconds": round(dt, 2),
-                                          **({"actions": items} if items is not None else
-                                             {k: v for k, v in result.items() if k != "status"})}
-                if ran:
-                    log["timings"][stage] = round(log["timings"].get(stage, 0.0) + dt, 2)
+        for stage, module in STAGE_MODULES.items():
+            t0 = time.perf_counter()
+            forced = stage in run.force
+            prog.begin(stage, lambda m=module: m.progress(run))
+            st = None if forced else module.status(run)
+            if st is not None and st.state == "complete":
+                entry["stages"][stage] = {"status": "skipped", "seconds": round(time.perf_counter() - t0, 2), "why": st.why}
+                prog.message(f"{stage}: complete, skipped")
                 run.save()
+                continue
+            result = module.run(run, forced)
+            dt = time.perf_counter() - t0
+            items = result if stage in ("generate", "features") else None
+            ran = any(v.get("status") == "ran" for v in items.values()) if items is not None else result["status"] == "ran"
+            entry["stages"][stage] = {"status": "ran" if ran else "skipped", "seconds": round(dt, 2),
+                                      **({"actions": items} if items is not None else
+                                         {k: v for k, v in result.items() if k != "status"})}
+            if ran:
+                log["timings"][stage] = round(log["timings"].get(stage, 0.0) + dt, 2)
+            run.save()
         entry["status"] = "complete"
     except BaseException as e:
         dt = time.perf_counter() - t0
