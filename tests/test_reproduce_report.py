@@ -16,7 +16,7 @@ from relaff_jax import cli
 from relaff_jax import data as dataset
 from relaff_jax import learn as E
 from relaff_jax import report as R
-from relaff_jax.perception import from_sim as features
+from relaff_jax.reproduce import features as stage_features
 from relaff_jax.sim import scenes as sc
 
 B = 8
@@ -50,7 +50,7 @@ def scene_run(tmp_path_factory, scene_world, settle):
             path = root / "data" / action
             dataset.generate_dataset(path, action, 16, scene_rollout_fn(scene_world, settle), seed=seed, batch=B,
                                      progress=False, dataset_config=dataset.DatasetConfig(borrow_fraction=1.0))
-            features.add_features(path, batch=B, progress=False)
+            stage_features.add_features(path, B, progress=False)
         argv = ["experiment", "--synthetic", "150", "--out", str(root / "results"), "--jobs", "2", "--no-progress",
                 "--set", "experiment.sizes=[4,10]", "--set", "experiment.reps_pca=1", "--set", "experiment.reps_rhf=1",
                 "--set", "experiment.forest.base_trees=4", "--set", "experiment.forest.max_trees=4"]

@@ -3,7 +3,7 @@
 ``register(subparsers)`` adds both subcommands; each sets ``func(args) -> int`` (exit code).
 
 * ``relaff features DIR [--batch B] [--seed S] [--overwrite]``: attach PCA and RHF features
-  to the dataset in DIR (resumable; ``perception.from_sim.add_features``).
+  to the dataset in DIR (resumable; ``reproduce.features.add_features``, what reproduce runs).
 * ``relaff show DIR [--index I] [--out scene.png]``: draw what the robot saw in sample I
   (``perception.from_sim.show_scene``), with the noise key ``show_key(rollout_id)``.
 
@@ -58,21 +58,12 @@ def cmd_features(args) -> int:
     """``relaff features``: attach features, print their shapes."""
     options.precheck(args)
     options.check_in_dir(args.dir)
-    from relaff_jax.perception import from_sim
+    from relaff_jax.reproduce.features import add_features
 
     tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch)})
-    with options.cluster(args, args.dir) as client:
-        if client is None:
-            out = from_sim.add_features(args.dir, tree.dataset.feature_batch, args.seed, config=tree.perception,
-                                        overwrite=args.overwrite)
-        else:  # the same compute function and config record, built once per worker
-            from relaff_jax import data
-            from relaff_jax.cluster import Remote
-            from relaff_jax.reproduce.features import default_feature_factory, feature_config
-
-            fn = Remote(default_feature_factory, args.seed, config=tree.perception, pick=0)
-            out = data.add_features(args.dir, fn, tree.dataset.feature_batch, True,
-                                    feature_config(args.seed, tree.perception), overwrite=args.overwrite, client=client)
+    with options.cluster(args, args.dir) as client:  # the same stage function reproduce runs
+        out = add_features(args.dir, tree.dataset.feature_batch, args.seed, tree.perception,
+                           overwrite=args.overwrite, client=client)
     options.record_config(args.dir, tree, "features")
     print(f"{args.dir}: features for {out['n']} samples: "
           + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))

@@ -46,7 +46,7 @@ Files, in dependency order (this module re-exports their public names):
 - ``descriptors.py``: stages 4-5, PCA values and RHF histograms;
 - ``pipeline.py``: ``point_cloud``, ``features``, ``make_batched_features``;
 - ``plots.py``: ``scene_view`` and ``render_scene_png`` (pyplot-free);
-- ``from_sim.py``: dataset samples -> features (``make_feature_fn``, ``add_features``,
+- ``from_sim.py``: dataset samples -> features (``make_feature_fn``,
   ``show_scene``); not imported here (it needs MJX and the world).
 """
 from __future__ import annotations

@@ -7,9 +7,9 @@ model (batched model fields, as in ``world.py``), then ``perception.features`` s
 The depth-noise key of a sample depends only on the seed and its ``rollout_id``
 (``rollout_keys``), so features do not depend on the batch size or on resuming.
 
-``add_features`` attaches them to a dataset (resumable, progress bar), ``show_scene`` draws
-what the robot saw; ``relaff_jax.cli.perception`` offers both as ``relaff features`` and
-``relaff show``.
+``make_feature_fn`` is the compute function the features stage
+(``reproduce.features.add_features``, ``relaff features``) hands to ``data.add_features``;
+``show_scene`` draws what the robot saw (``relaff show``). Nothing here imports ``data``.
 """
 from __future__ import annotations
 
@@ -21,7 +21,6 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from relaff_jax import config as rconfig
 from relaff_jax import perception as pc
 from relaff_jax.errors import UserError
 from relaff_jax.sim import world as wd
@@ -77,7 +76,8 @@ def show_key(rollout_id: int):
 
 
 @functools.lru_cache(maxsize=4)
-def _jitted_geoms(world: wd.World):
+def jitted_geoms(world: wd.World):
+    """``scene_geoms`` of ``world`` jitted once per world (cached): ``(pair, qpos) -> (size, xpos, xmat)``."""
     return jax.jit(lambda pair, qpos: scene_geoms(world, pair, qpos))
 
 
@@ -89,7 +89,7 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
     if fields are missing or a scene exceeds a perception capacity.
     """
     feats = pc.make_batched_features(world.mj_model.geom_type, world.geom_seg, cfg)
-    geoms = _jitted_geoms(world)
+    geoms = jitted_geoms(world)
     root = jax.random.PRNGKey(seed)
 
     def compute(samples: dict) -> dict:
@@ -115,19 +115,6 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
     return compute
 
 
-def add_features(path, batch: int = 32, seed: int = 0, overrides: dict | None = None,
-                 progress: bool = True, overwrite: bool = False, config: pc.PerceptionConfig | None = None) -> dict:
-    """Attach PCA and RHF features to the dataset at ``path`` (resumable); ``config`` (default
-    the paper's ``PerceptionConfig``) with ``overrides`` applied."""
-    from relaff_jax import data
-
-    cfg = rconfig.override(config or pc.PerceptionConfig(), overrides or {})
-    world = wd.build_world()
-    fn = make_feature_fn(world, cfg, seed)
-    return data.add_features(path, fn, batch, progress,
-                             {"perception": pc.stored_config(cfg), "seed": seed}, overwrite=overwrite)
-
-
 def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, key=None,
                cfg: pc.PerceptionConfig = pc.PerceptionConfig(), title: str = "") -> Path:
     """Draw what the robot saw in one settled scene (``perception.render_scene_png``: noisy
@@ -135,7 +122,7 @@ def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, ke
     ``out`` atomically.
     ``key`` defaults to ``PRNGKey(0)``; ``show_key(rollout_id)`` is the key ``relaff show`` uses."""
     key = jax.random.PRNGKey(0) if key is None else key
-    size, xpos, xmat = jax.device_get(_jitted_geoms(world)(
+    size, xpos, xmat = jax.device_get(jitted_geoms(world)(
         jnp.asarray([pair], jnp.int32), jnp.asarray(qpos, jnp.float32)[None]))
     scene = pc.make_scene(world.mj_model.geom_type, world.geom_seg, size[0], xpos[0], xmat[0])
     toy, other = world.pairs[pair][:2]

@@ -86,12 +86,12 @@ def perception_config(sensor: SimSensor, cfg: SimRelationConfig):
 def _chunk_fn(world, sensor: SimSensor, cfg: SimRelationConfig):
     """``run(c) -> dict of arrays`` for chunk ``c``: settle, perceive, filter."""
     from relaff_jax.perception import make_batched_features
-    from relaff_jax.perception.from_sim import _jitted_geoms, rollout_keys
+    from relaff_jax.perception.from_sim import jitted_geoms, rollout_keys
     from relaff_jax.sim import scenes as sc
 
     pcfg = perception_config(sensor, cfg)
     feats = make_batched_features(world.mj_model.geom_type, world.geom_seg, pcfg)
-    geoms = _jitted_geoms(world)
+    geoms = jitted_geoms(world)
     scfg = sc.SceneConfig(workspace_radius=cfg.workspace_radius)
     allowed = np.asarray([i for i, p in enumerate(world.pairs) if p[2] == "toy+base"])
     root = jax.random.PRNGKey(derive_seed(cfg.seed, 16, 1))

@@ -29,6 +29,22 @@ def feature_config(seed: int, config: Any = None) -> dict:
     return {"perception": pc.stored_config(config if config is not None else pc.PerceptionConfig()), "seed": seed}
 
 
+def add_features(path: Any, batch: int, seed: int = 0, config: Any = None, *, progress: bool = True,
+                 overwrite: bool = False, client: Any = None) -> dict:
+    """The features stage on one dataset folder, as ``relaff features`` and tests run it: the
+    simulated Kinect's PCA and RHF (``config``: a ``PerceptionConfig``, default the paper's)
+    attached by ``data.add_features`` with the config record this module writes for
+    ``reproduce`` too. ``client``: chunks as tasks on that cluster (each worker builds the
+    perception once)."""
+    if client is None:
+        fn = default_feature_factory(seed, config)[0]
+    else:
+        from relaff_jax.cluster import Remote
+
+        fn = Remote(default_feature_factory, seed, config=config, pick=0)
+    return D.add_features(path, fn, batch, progress, feature_config(seed, config), overwrite=overwrite, client=client)
+
+
 def factories_for(cfg: Any):
     """``(feature_factory, feature_config)`` bound to a ``RunConfig``'s perception settings."""
     return (functools.partial(default_feature_factory, config=cfg.perception),
