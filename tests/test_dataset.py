@@ -500,6 +500,28 @@ def feature_fn(kill_after: int | None = None, sizes: list | None = None):
     return compute
 
 
+def test_a_sidecar_of_the_old_generate_record_shape_resumes(tmp_path):
+    """relaff generate recorded {"action": cfg}, reproduce {"action": name, "action_config": cfg};
+    both write the second now, and a dataset with the first is read in it, so it resumes."""
+    from relaff_jax.io import atomic_write_json, read_json
+
+    new_shape = {"action": "lift", "action_config": CFG}
+    p = tmp_path / "d"
+    with pytest.raises(Killed):
+        ds.generate_dataset(p, "lift", 40, synthetic_rollout_fn(kill_after=2), 3, 16, new_shape, progress=False,
+                            dataset_config=EXACT)
+    meta = read_json(p / ds.SIDECAR)
+    meta["config"] = {"action": CFG}  # what relaff generate wrote before
+    atomic_write_json(p / ds.SIDECAR, meta)
+    assert store.read_sidecar(p)["config"] == new_shape
+    res = ds.generate_dataset(p, "lift", 40, synthetic_rollout_fn(), 3, 16, new_shape, progress=False,
+                              dataset_config=EXACT)
+    assert res["new_chunks"] > 0
+    with pytest.raises(ds.DatasetMismatchError, match="config"):
+        ds.generate_dataset(p, "lift", 40, synthetic_rollout_fn(), 3, 16, {"action": "lift", "action_config": {}},
+                            progress=False, dataset_config=EXACT)
+
+
 def test_add_features_round_trip_and_resume(built, tmp_path):
     p = copy(built, tmp_path)
     with pytest.raises(Killed):

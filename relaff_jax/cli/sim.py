@@ -134,7 +134,8 @@ def cmd_generate(args) -> int:
             fn = Remote(make_rollout_fn, args.action, batch, cfg, engine=engine)
         try:
             summary = ds.generate_dataset(
-                args.out, args.action, n, fn, args.seed, batch, {"action": rc.to_dict(cfg)},
+                args.out, args.action, n, fn, args.seed, batch,
+                {"action": args.action, "action_config": rc.to_dict(cfg)},  # reproduce's record shape
                 progress=not args.json, dataset_config=tree.dataset, client=client)
         except ds.DatasetError as e:
             if isinstance(e, UserError):

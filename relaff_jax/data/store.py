@@ -183,7 +183,17 @@ def read_sidecar(path: Path) -> dict[str, Any]:
         if key not in meta:
             raise CorruptDatasetError(f"{path}: sidecar lacks {key!r}")
     meta.setdefault("engine", "mjx")  # sidecars from before the native engine existed are MJX's
+    meta["config"] = config_record(meta.get("config"), meta["action"])
     return meta
+
+
+def config_record(record: Any, action: str) -> Any:
+    """The sidecar's ``config`` in its one shape, ``{"action": NAME, "action_config": {...}}``
+    (what ``relaff generate`` and ``reproduce`` both write); ``relaff generate`` wrote
+    ``{"action": {...}}`` before, read here as the same record so such datasets resume."""
+    if isinstance(record, dict) and isinstance(record.get("action"), dict) and "action_config" not in record:
+        return {**record, "action": action, "action_config": record["action"]}
+    return record
 
 
 @contextlib.contextmanager
