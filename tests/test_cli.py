@@ -53,13 +53,15 @@ def test_quiet_import_and_no_backend_change():
     env = dict(os.environ, MPLBACKEND="svg")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
     assert r.returncode == 0, r.stderr
-    assert r.stdout == "ok\n" and "Failed to import" not in r.stderr + r.stdout
+    assert r.stdout == "ok\n"
+    assert "Failed to import" not in r.stderr + r.stdout
 
 
 def test_objects_output_is_clean():
     r = relaff("objects", "--json")
     assert r.returncode == 0, r.stderr
-    assert r.stdout.startswith(("[", "{")) and r.stderr == ""
+    assert r.stdout.startswith(("[", "{"))
+    assert r.stderr == ""
 
 
 @pytest.mark.parametrize("argv", [
@@ -76,11 +78,13 @@ def test_bad_output_paths_fail_at_once_with_one_line(tmp_path, argv):
     r = relaff(*argv)
     assert r.returncode == 2, (r.returncode, r.stderr[-2000:])
     lines = [x for x in r.stderr.splitlines() if x.strip()]
-    assert len(lines) == 1 and lines[0].startswith(f"relaff {argv[0]}: error:"), r.stderr
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith(f"relaff {argv[0]}: error:"), r.stderr
 
 
 def test_unknown_set_key_lists_valid_keys(tmp_path):
     r = relaff("reproduce", "--preset", "tiny", "--out", str(tmp_path / "r"), "--set", "perception.voxel.sise=0.02")
     assert r.returncode == 2
-    assert "unknown config key 'perception.voxel.sise'" in r.stderr and "'size'" in r.stderr
+    assert "unknown config key 'perception.voxel.sise'" in r.stderr
+    assert "'size'" in r.stderr
     assert not (tmp_path / "r").exists()

@@ -113,11 +113,10 @@ def cmd_generate(args) -> int:
     if batch < 1:
         raise UserError(f"--batch (dataset.rollout_batch) must be >= 1, got {batch}")
 
-    from relaff_jax import config as rc
     from relaff_jax import data as ds
-    from relaff_jax.sim.rollouts import make_rollout_fn
+    from relaff_jax.reproduce.generate import generate_one
 
-    cfg, engine = tree.action, tree.dataset.engine
+    engine = tree.dataset.engine
     ds.config.check_dataset_config(tree.dataset)
     from relaff_jax.reproduce.progress import sample_bound
 
@@ -126,17 +125,8 @@ def cmd_generate(args) -> int:
     if bound:
         raise UserError(bound)
     with options.cluster(args, Path(args.out)) as client:
-        if client is None:
-            fn = make_rollout_fn(args.action, batch, cfg, engine=engine)
-        else:  # each worker builds and compiles the rollout function once
-            from relaff_jax.cluster import Remote
-
-            fn = Remote(make_rollout_fn, args.action, batch, cfg, engine=engine)
-        try:
-            summary = ds.generate_dataset(
-                args.out, args.action, n, fn, args.seed, batch,
-                {"action": args.action, "action_config": rc.to_dict(cfg)},  # reproduce's record shape
-                progress=not args.json, dataset_config=tree.dataset, client=client)
+        try:  # the same stage function reproduce runs for each action
+            summary = generate_one(tree, args.action, args.out, args.seed, client=client, progress=not args.json)
         except ds.DatasetError as e:
             if isinstance(e, UserError):
                 raise

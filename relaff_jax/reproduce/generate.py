@@ -56,17 +56,30 @@ def progress(run: Run) -> float:
     return sum(D.generation_progress(run.paths.dataset(a), run.cfg.dataset.n_samples) for a in acts) / len(acts)
 
 
+def generate_one(tree: Any, action: str, out: Any, seed: int, *, client: Any = None, progress: bool = False,
+                 factory: Any = None, window: int | None = None) -> dict:
+    """One action's dataset in ``out`` (created or resumed) from the config tree ``tree``: what
+    ``relaff generate`` and ``reproduce`` both run. ``factory(action, batch) -> (rollout_fn,
+    config_dict, object_names)`` defaults to the simulation bound to ``tree``
+    (``rollout_factory_for``); with ``client`` the workers build (and compile) it themselves,
+    once each. Returns ``data.generate_dataset``'s summary."""
+    factory = factory or rollout_factory_for(tree)
+    batch = tree.dataset.rollout_batch
+    fn, config_dict, names = factory(action, batch)
+    if client is not None:
+        from relaff_jax.cluster import Remote
+
+        fn = Remote(factory, action, batch, pick=0)
+    return D.generate_dataset(out, action, tree.dataset.n_samples, fn, seed, batch, config_dict, progress=progress,
+                              dataset_config=tree.dataset, object_names=names, client=client, window=window)
+
+
 def _one(run: Run, action: str, window: int | None) -> dict:
     """Generate one action's dataset (resuming); what the run log records for it."""
     cfg = run.cfg
     t0 = time.perf_counter()
-    fn, config_dict, names = run.rollout_factory(action, cfg.dataset.rollout_batch)
-    if run.client is not None:  # the workers build (and compile) it themselves, once each
-        fn = run.remote(run.rollout_factory, action, cfg.dataset.rollout_batch)
-    s = D.generate_dataset(run.paths.dataset(action), action, cfg.dataset.n_samples, fn,
-                           run.log["seeds"]["datasets"][action], cfg.dataset.rollout_batch, config_dict,
-                           progress=False, dataset_config=cfg.dataset, object_names=names, client=run.client,
-                           window=window)
+    s = generate_one(cfg, action, run.paths.dataset(action), run.log["seeds"]["datasets"][action], client=run.client,
+                     factory=run.rollout_factory, window=window)
     dt = time.perf_counter() - t0
     item = {"status": "ran", "seconds": round(dt, 2), "rollouts": s["rollouts"],
             "new_rollouts": s["new_chunks"] * cfg.dataset.rollout_batch,
