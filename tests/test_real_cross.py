@@ -77,6 +77,9 @@ def test_cross_folder_figures_by_hand():
     assert s["accuracy"]["real"]["ci95"] == pytest.approx((0.75, 0.75))
     np.testing.assert_allclose([b for b in s["bf"][2:]], 1.0)
     assert s["split"]["kind"] == "cross" and s["split"]["real_test_counts"] == [3, 2]
+    # test scenes resampled: beside always right, on_top right in 0, 1/2 or all of a resample's
+    # on_top pairs, so the balanced accuracy lies in [0.5, 1]; both ends are reachable
+    assert s["accuracy"]["real"]["ci95_scenes"] == pytest.approx((0.5, 1.0))
     with pytest.raises(UserError, match="test folder needs >= 1 pair of each relation"):
         ex.run_space(real, sim, "pca", cfg, test=dict(test, y=np.zeros(5, int)))
 

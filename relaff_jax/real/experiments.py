@@ -94,6 +94,9 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
     out = {k: np.zeros(cfg.reps) for k in ("sim_fair", "sim_full", "real", "fair_to_real", "full_to_real")}
     out["curve_sl"] = np.zeros((len(sizes), cfg.reps))
     out["curve_bl"] = np.zeros((len(sizes), cfg.reps))
+    if test is not None:  # per test pair and repetition: right or wrong (an interval over test scenes)
+        for k in HITS:
+            out[f"hits_{k}"] = np.zeros((cfg.reps, len(yt)), bool)
     bar = progress_bar(progress, cfg.reps, f"{space} experiments ({kind})", unit="rep")
     for r in range(cfg.reps):
         rng = np.random.default_rng(derive_seed(cfg.seed, 17, code, r))
@@ -105,6 +108,8 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
             out[f"sim_{name}"][r] = float(np.mean(predict(forest, Xs[te]) == ys[te]))
             pred_t = predict(forest, Xt)
             out[f"{name}_to_real"][r] = balanced_accuracy(pred_t, yt)
+            if test is not None:
+                out[f"hits_{name}_to_real"][r] = (np.asarray(pred_t) > 0.5) == yt
             if name == "full":  # the bootstrap input, on the training pairs and on the test pairs
                 boot_r, boot_t = (pred_t, pred_t) if test is None else (predict(forest, Xr), pred_t)
         # 2: real forests; within a folder on a split of it, across folders on the whole train folder
@@ -116,7 +121,10 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
             tr, te = splits.train_pool(rng, yr), None
         Xte, yte = (Xr[te], yr[te]) if te is not None else (Xt, yt)
         forest = fit(Xr[tr], yr[tr], derive_seed(cfg.seed, 17, code, r, 2), fcfg)
-        out["real"][r] = balanced_accuracy(predict(forest, Xte), yte)
+        pred = predict(forest, Xte)
+        out["real"][r] = balanced_accuracy(pred, yte)
+        if test is not None:
+            out["hits_real"][r] = (np.asarray(pred) > 0.5) == yte
         # 4: learning curves without / with the SIM_full prediction
         Xb = augment(Xr, boot_r[None], rep)
         Xbt = Xb[te] if te is not None else augment(Xt, boot_t[None], rep)
@@ -132,7 +140,37 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
     out["split"] = np.asarray([sz["pool"], sz["train"], sz["test"], n_fair, 2 * half_full])
     out["kind"] = np.asarray(kind)
     out["test_counts"] = np.asarray([int((~yte).sum()), int(yte.sum())])
+    if test is not None:
+        out["test_y"], out["test_scene"] = yt, np.asarray(test["scene"]).astype(str)
     return out
+
+
+HITS = ("real", "fair_to_real", "full_to_real")  # the accuracies measured on a fixed test folder
+
+
+def scene_interval(hits: np.ndarray, y: np.ndarray, scene: np.ndarray, rng: np.random.Generator,
+                   n_boot: int, level: float = 0.95) -> tuple[float, float] | None:
+    """Percentile interval of a cross-folder balanced accuracy when the *test scenes* are
+    resampled (with replacement, whole scenes: pairs of a scene are not independent) on top of
+    the repetitions: ``hits (R, N)`` right/wrong per repetition and test pair, ``y``, ``scene``
+    (N,). It says how far another folder of such scenes may land; the interval over
+    repetitions alone (``interval``) only says how well the mean over forests is known.
+    Resamples without both relations are drawn again; None if most are."""
+    y, scene = np.asarray(y).astype(bool), np.asarray(scene)
+    names = np.unique(scene)
+    rows = [np.flatnonzero(scene == s) for s in names]
+    per_pair = np.asarray(hits, float).mean(axis=0)  # (N,) mean over repetitions
+    vals = []
+    for _ in range(n_boot):
+        idx = np.concatenate([rows[i] for i in rng.integers(0, len(names), len(names))])
+        yi = y[idx]
+        if yi.all() or not yi.any():
+            continue
+        vals.append(0.5 * (per_pair[idx][yi].mean() + per_pair[idx][~yi].mean()))
+    if len(vals) < n_boot / 2:
+        return None
+    lo, hi = np.quantile(vals, [(1 - level) / 2, (1 + level) / 2])
+    return float(lo), float(hi)
 
 
 SIM_PAIRS = (("beside", "on_top"), ("beside", "inside"), ("on_top", "inside"))
@@ -197,6 +235,8 @@ def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> 
         x = np.asarray(res[k])
         acc[k] = dict(mean=float(x.mean()), std=float(x.std(ddof=1)) if len(x) > 1 else 0.0,
                       ci95=interval(x, rng, cfg.n_boot))
+        if f"hits_{k}" in res:
+            acc[k]["ci95_scenes"] = scene_interval(res[f"hits_{k}"], res["test_y"], res["test_scene"], rng, cfg.n_boot)
     sl, bl = res["curve_sl"].mean(axis=1), res["curve_bl"].mean(axis=1)
     bf = bootstrap_factor(bl, sl)
     sizes = np.asarray(res["sizes"])
