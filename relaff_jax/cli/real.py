@@ -66,6 +66,7 @@ def register(subparsers) -> None:
     p.add_argument("--pictures", type=Path, default=None, help="folder for one PNG per pair")
     p.add_argument("--corrections", type=Path, default=None,
                    help="CSV scene,object_a,object_b,relation (beside, on_top or none) overriding the rule")
+    add_set(p, "rule.contact_tol=0.04")
     p.set_defaults(func=cmd_propose)
 
     p = sub.add_parser("check", help="validate a labels file against its scenes and count the pairs")
@@ -186,6 +187,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_propose(args) -> int:
+    cfg = real_config(args)
     _check_inputs(args)
     from relaff_jax.real import labels as lab
     from relaff_jax.real.labelling import propose_folder
@@ -194,7 +196,7 @@ def cmd_propose(args) -> int:
     if args.pictures is not None:
         check_out_dir(args.pictures, "--pictures")
     corrections = _corrections(args.corrections)
-    labels, record = propose_folder(args.scenes, args.pictures, corrections)
+    labels, record = propose_folder(args.scenes, args.pictures, corrections, cfg.rule)
     lab.write_labels(args.out, labels)
     counts = lab.relation_counts(labels)
     left = sum(r[2] == "none" for r in record)

@@ -11,6 +11,8 @@ import dataclasses
 from relaff_jax.errors import UserError
 from relaff_jax.perception.config import PerceptionConfig, VoxelConfig
 
+from .propose import RuleConfig
+
 
 @dataclasses.dataclass(frozen=True)
 class PlaneConfig:
@@ -176,10 +178,12 @@ class RealExperimentConfig:
 @dataclasses.dataclass(frozen=True)
 class RealRunConfig:
     """The one tree of every ``relaff real`` setting (``--set dotted.key=value``):
-    ``pipeline`` the real scenes' segmentation and features, ``sim`` the simulated relation
-    data, ``experiment`` the four experiments, ``tolerance`` the reuse of simulated data."""
+    ``pipeline`` the real scenes' segmentation and features, ``rule`` the relation proposal
+    rule (``real propose``), ``sim`` the simulated relation data, ``experiment`` the four
+    experiments, ``tolerance`` the reuse of simulated data."""
 
     pipeline: RealConfig = RealConfig()
+    rule: RuleConfig = RuleConfig()
     sim: SimRelationConfig = SimRelationConfig()
     experiment: RealExperimentConfig = RealExperimentConfig()
     tolerance: SensorTolerance = SensorTolerance()
