@@ -80,6 +80,9 @@ def test_cross_folder_figures_by_hand():
     # test scenes resampled: beside always right, on_top right in 0, 1/2 or all of a resample's
     # on_top pairs, so the balanced accuracy lies in [0.5, 1]; both ends are reachable
     assert s["accuracy"]["real"]["ci95_scenes"] == pytest.approx((0.5, 1.0))
+    # the curves' hits at n >= 4 are those of REAL, so bf = 1 in every resample that defines it
+    assert res["hits_curve_sl"].shape == (5, 3, 5)
+    np.testing.assert_array_equal(res["hits_curve_bl"][2:], res["hits_real"][None].repeat(3, 0))
     with pytest.raises(UserError, match="test folder needs >= 1 pair of each relation"):
         ex.run_space(real, sim, "pca", cfg, test=dict(test, y=np.zeros(5, int)))
 

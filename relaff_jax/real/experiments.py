@@ -97,6 +97,8 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
     if test is not None:  # per test pair and repetition: right or wrong (an interval over test scenes)
         for k in HITS:
             out[f"hits_{k}"] = np.zeros((cfg.reps, len(yt)), bool)
+        out["hits_curve_sl"] = np.zeros((len(sizes), cfg.reps, len(yt)), bool)
+        out["hits_curve_bl"] = np.zeros((len(sizes), cfg.reps, len(yt)), bool)
     bar = progress_bar(progress, cfg.reps, f"{space} experiments ({kind})", unit="rep")
     for r in range(cfg.reps):
         rng = np.random.default_rng(derive_seed(cfg.seed, 17, code, r))
@@ -132,8 +134,12 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
             sub = tr[:n]
             f_sl = fit(Xr[sub], yr[sub], derive_seed(cfg.seed, 17, code, r, 3, n), fcfg)
             f_bl = fit(Xb[sub], yr[sub], derive_seed(cfg.seed, 17, code, r, 4, n), fcfg)
-            out["curve_sl"][s, r] = balanced_accuracy(predict(f_sl, Xte), yte)
-            out["curve_bl"][s, r] = balanced_accuracy(predict(f_bl, Xbt), yte)
+            p_sl, p_bl = predict(f_sl, Xte), predict(f_bl, Xbt)
+            out["curve_sl"][s, r] = balanced_accuracy(p_sl, yte)
+            out["curve_bl"][s, r] = balanced_accuracy(p_bl, yte)
+            if test is not None:
+                out["hits_curve_sl"][s, r] = (np.asarray(p_sl) > 0.5) == yte
+                out["hits_curve_bl"][s, r] = (np.asarray(p_bl) > 0.5) == yte
         bar.update(1)
     bar.close()
     out["sizes"] = sizes
@@ -148,6 +154,41 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
 HITS = ("real", "fair_to_real", "full_to_real")  # the accuracies measured on a fixed test folder
 
 
+def _balanced(per_pair: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Balanced accuracy of per-pair hit rates ``(..., N)`` against ``y (N,)``: (...,)."""
+    return 0.5 * (per_pair[..., y].mean(-1) + per_pair[..., ~y].mean(-1))
+
+
+def scene_resamples(y: np.ndarray, scene: np.ndarray, rng: np.random.Generator, n_boot: int) -> list[np.ndarray]:
+    """Index sets of test pairs, whole test scenes drawn with replacement; those without both
+    relations are dropped (so fewer than ``n_boot`` may come back)."""
+    y, scene = np.asarray(y).astype(bool), np.asarray(scene)
+    names = np.unique(scene)
+    rows = [np.flatnonzero(scene == s) for s in names]
+    out = []
+    for _ in range(n_boot):
+        idx = np.concatenate([rows[i] for i in rng.integers(0, len(names), len(names))])
+        if y[idx].any() and not y[idx].all():
+            out.append(idx)
+    return out
+
+
+def bf_scene_interval(res: dict, early: np.ndarray, rng: np.random.Generator, n_boot: int) -> tuple[float, float] | None:
+    """95 % interval of the early mean bootstrap factor across folders with the test scenes
+    resampled (``scene_resamples``), the curves' per-pair hits averaged over repetitions."""
+    y = np.asarray(res["test_y"]).astype(bool)
+    sl, bl = np.asarray(res["hits_curve_sl"], float).mean(1), np.asarray(res["hits_curve_bl"], float).mean(1)  # (S, N)
+    vals = []
+    for idx in scene_resamples(y, res["test_scene"], rng, n_boot):
+        bf = bootstrap_factor(_balanced(bl[:, idx], y[idx]), _balanced(sl[:, idx], y[idx]))[early]
+        if np.isfinite(bf).any():
+            vals.append(np.nanmean(bf))
+    if len(vals) < n_boot / 2:
+        return None
+    lo, hi = np.quantile(vals, [0.025, 0.975])
+    return float(lo), float(hi)
+
+
 def scene_interval(hits: np.ndarray, y: np.ndarray, scene: np.ndarray, rng: np.random.Generator,
                    n_boot: int, level: float = 0.95) -> tuple[float, float] | None:
     """Percentile interval of a cross-folder balanced accuracy when the *test scenes* are
@@ -156,17 +197,9 @@ def scene_interval(hits: np.ndarray, y: np.ndarray, scene: np.ndarray, rng: np.r
     (N,). It says how far another folder of such scenes may land; the interval over
     repetitions alone (``interval``) only says how well the mean over forests is known.
     Resamples without both relations are drawn again; None if most are."""
-    y, scene = np.asarray(y).astype(bool), np.asarray(scene)
-    names = np.unique(scene)
-    rows = [np.flatnonzero(scene == s) for s in names]
+    y = np.asarray(y).astype(bool)
     per_pair = np.asarray(hits, float).mean(axis=0)  # (N,) mean over repetitions
-    vals = []
-    for _ in range(n_boot):
-        idx = np.concatenate([rows[i] for i in rng.integers(0, len(names), len(names))])
-        yi = y[idx]
-        if yi.all() or not yi.any():
-            continue
-        vals.append(0.5 * (per_pair[idx][yi].mean() + per_pair[idx][~yi].mean()))
+    vals = [_balanced(per_pair[idx], y[idx]) for idx in scene_resamples(y, scene, rng, n_boot)]
     if len(vals) < n_boot / 2:
         return None
     lo, hi = np.quantile(vals, [(1 - level) / 2, (1 + level) / 2])
@@ -245,6 +278,7 @@ def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> 
     with np.errstate(invalid="ignore"):
         bf_early = float(np.nanmean(bf[early])) if np.isfinite(bf[early]).any() else float("nan")
     bf_ci = _bf_interval(res["curve_sl"], res["curve_bl"], early, rng, cfg.n_boot)
+    bf_ci_scenes = bf_scene_interval(res, early, rng, cfg.n_boot) if "hits_curve_sl" in res else None
     sim_only = {k: dict(mean=float(np.mean(res[k])), std=float(np.std(res[k], ddof=1)) if len(res[k]) > 1 else 0.0,
                         ci95=interval(res[k], rng, cfg.n_boot), n_train=int(res[k + "_n"]))
                 for k in (f"{a}_vs_{b}" for a, b in SIM_PAIRS) if k in res}
@@ -254,7 +288,7 @@ def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> 
                 curve_bl_std=res["curve_bl"].std(axis=1, ddof=1).tolist(),
                 bf=[None if not np.isfinite(v) else float(v) for v in bf],
                 bf_undefined_sizes=undefined.tolist(), bf_early_sizes=sizes[early].tolist(), bf_early_mean=bf_early,
-                bf_early_ci95=bf_ci,
+                bf_early_ci95=bf_ci, bf_early_ci95_scenes=bf_ci_scenes,
                 split=dict(kind=str(res.get("kind", "pair")), real_pool_per_class=pool, real_train_per_class=train,
                            real_test=test, real_test_counts=[int(v) for v in res.get("test_counts", (test, test))],
                            sim_fair_train=n_fair, sim_full_train=n_full), reps=len(res["real"]),

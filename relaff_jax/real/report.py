@@ -152,8 +152,9 @@ def claims(summary: dict) -> list[dict]:
 
 
 def _bf_ci(s: dict) -> str:
-    ci = s.get("bf_early_ci95")
-    return f" (CI {ci[0]:.3f}-{ci[1]:.3f})" if ci else ""
+    ci, sc = s.get("bf_early_ci95"), s.get("bf_early_ci95_scenes")
+    extra = f"; test scenes resampled {sc[0]:.3f}-{sc[1]:.3f}" if sc else ""
+    return f" (CI {ci[0]:.3f}-{ci[1]:.3f}{extra})" if ci else ""
 
 
 def side_by_side(summary: dict, cross: dict) -> list[str]:

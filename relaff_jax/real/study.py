@@ -170,7 +170,7 @@ def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path, cfg:
         raw[space] = _experiments(out / f"raw_{space}.npz", key, within)
         summary[space] = ex.summarise(raw[space], exp_cfg)
         if real_t is not None:
-            ckey = key + "+cross+hits" + lab.rows_sha256(rows["test"])
+            ckey = key + "+cross+hits2" + lab.rows_sha256(rows["test"])
             craw[space] = _experiments(out / f"raw_{space}_cross.npz", ckey,
                                        lambda space=space: ex.run_space(real, sim, space, exp_cfg, progress, test=real_t))
             cross[space] = ex.summarise(craw[space], exp_cfg)
