@@ -173,7 +173,8 @@ def scene_resamples(y: np.ndarray, scene: np.ndarray, rng: np.random.Generator, 
     return out
 
 
-def bf_scene_interval(res: dict, early: np.ndarray, rng: np.random.Generator, n_boot: int) -> tuple[float, float] | None:
+def bf_scene_interval(res: dict, early: np.ndarray, rng: np.random.Generator,
+                      n_boot: int) -> tuple[float, float] | None:
     """95 % interval of the early mean bootstrap factor across folders with the test scenes
     resampled (``scene_resamples``), the curves' per-pair hits averaged over repetitions."""
     y = np.asarray(res["test_y"]).astype(bool)

@@ -9,8 +9,8 @@ Object Segmentation Database defines them), ``relation`` ``beside`` or ``on_top`
 
 ``read_labels(path) -> list[Label]`` checks the format; ``validate(labels, folder,
 object_ids)`` checks the rows against a scenes folder (unknown scene, object id missing from
-the scene, checksum mismatch); ``write_labels(path, labels)`` writes atomically; ``present(labels, folder)`` keeps the rows of
-the scenes a folder holds. Every
+the scene, checksum mismatch); ``write_labels(path, labels)`` writes atomically;
+``present(labels, folder)`` keeps the rows of the scenes a folder holds. Every
 problem is a ``UserError`` naming the file, the row and what is wrong.
 """
 from __future__ import annotations
