@@ -87,7 +87,7 @@ def register(subparsers) -> None:
     p.add_argument("--test-labels", type=Path, default=None, help="the test folder's labels CSV")
     p.add_argument("--only-present", action="store_true",
                    help="use the labelled scenes each folder holds (one labels file may then serve both folders)")
-    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--out", type=Path, required=True, help="output folder (resumable: finished steps are kept)")
     p.add_argument("--sim", type=Path, default=None,
                    help="simulated relation folder (default OUT/sim); reused when its sensor lies within "
                         "tolerance.* of the training folder's (defaults 0.01 m, 2.5 deg, 0.5 deg fov)")
@@ -100,14 +100,15 @@ def register(subparsers) -> None:
     p.add_argument("--split", choices=("scene", "pair"), default="scene",
                    help="within a folder: every pair of a scene on one side (default), or pairs one by one "
                         "(experiment.split)")
-    p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"])
+    p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"],
+                   help="state spaces (default both)")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulation and the experiments (default 0)")
     p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk (sim.chunk; default 256)")
     p.add_argument("--sim-normals", choices=("ray", "cloud"), default="ray",
                    help="RHF normals of the simulated scenes: exact ray hits, or the cloud rule (5x5 pixel window)")
     p.add_argument("--real-normals", choices=("knn", "window"), default="knn",
                    help="RHF normals of the real scenes: 20 nearest neighbours, or the simulation's window rule")
-    add_set(p, "experiment.split=pair")
+    add_set(p, "tolerance.tilt_deg=3 (tree: pipeline.*, rule.*, sim.*, experiment.*, tolerance.*)")
     p.set_defaults(func=cmd_study)
 
 
