@@ -164,9 +164,6 @@ def test_train_test_study_through_the_cli(tmp_path, monkeypatch, capsys):
     base = ["real", "study", str(a), "--labels", str(labels), "--test", str(b), "--test-labels", str(labels),
             "--out", str(out), "--spaces", "pca", "--reps", "2", "--trees", "5", "--n-full", "4",
             "--per-relation", "4", "--chunk", "8", "--set", "sim.feature_batch=8"]
-    # A's scenes cannot be cut by scene with both relations on both sides: said before any work
-    assert cli.main(base + ["--only-present"]) == 2
-    assert "split by scene needs whole scenes" in capsys.readouterr().err
     assert cli.main(base + ["--split", "pair"]) == 2  # the labels name scenes the folders lack
     assert "unknown scene" in capsys.readouterr().err
     assert cli.main(base + ["--split", "pair", "--only-present"]) == 0
@@ -208,6 +205,9 @@ def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
     assert "unknown experiment.split 'scenes'" in capsys.readouterr().err
     assert cli.main(argv + ["--test", str(b)]) == 2
     assert "--test needs --test-labels" in capsys.readouterr().err
+    # A's scenes cannot be cut by scene with both relations on both sides (the within-folder figures)
+    assert cli.main(argv + ["--test", str(b), "--test-labels", str(labels)]) == 2
+    assert "split by scene needs whole scenes" in capsys.readouterr().err
     only_beside = tmp_path / "beside.csv"
     only_beside.write_text("\n".join(x for x in labels.read_text().splitlines() if "on_top" not in x) + "\n")
     assert cli.main(argv + ["--split", "pair", "--test", str(b), "--test-labels", str(only_beside)]) == 2

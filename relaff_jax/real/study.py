@@ -68,7 +68,7 @@ def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path, c
     """Raise ``UserError`` for any problem ``run_study`` would otherwise meet only after minutes
     of work; return ``dict(train=rows, test=rows or None, skipped_train=[names], skipped_test=[names])``.
     Reads the labels files and the scenes' object ids only."""
-    from relaff_jax.constants import SPACES
+    from relaff_jax.constants import RELATIONS, SPACES
 
     from . import splits
     from .config import validate_run_config
@@ -85,8 +85,6 @@ def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path, c
     exp_cfg, sim_cfg = cfg.experiment, cfg.sim
     full = 2 * (exp_cfg.n_full // 2)
     sim_dir = Path(sim_folder) if sim_folder else Path(out) / "sim"
-    from relaff_jax.constants import RELATIONS
-
     have = _counts(sim_dir)[1] if sim_dir.is_dir() else np.zeros(len(RELATIONS), np.int64)
     held = min(int(have[RELATIONS.index(r)]) for r in ("beside", "on_top"))
     if sim_cfg.per_relation < full and held < full:  # the simulation would stop short of SIM_full
@@ -94,13 +92,11 @@ def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path, c
                         f"as many to test), but per_relation is {sim_cfg.per_relation}: raise --per-relation or lower --n-full")
     rows, skipped = _rows(scenes, labels_path, only_present, "training folder")
     y = np.asarray([int(x.relation == "on_top") for x in rows])
-    try:  # the real pairs are the labelled ones, so their split is known now
-        if test is None:
-            sz = splits.split_sizes(y, exp_cfg.train_fraction)
-            if exp_cfg.split == "scene":
-                splits.scene_splits(y, [x.scene for x in rows], sz, exp_cfg.seed, exp_cfg.reps)
-        else:
-            splits.train_pool(np.random.default_rng(0), y)
+    try:  # the real pairs are the labelled ones, so their split is known now (a cross study splits its
+        # training folder too, for the within-folder figures beside the cross-folder ones)
+        sz = splits.split_sizes(y, exp_cfg.train_fraction)
+        if exp_cfg.split == "scene":
+            splits.scene_splits(y, [x.scene for x in rows], sz, exp_cfg.seed, exp_cfg.reps)
     except UserError as e:
         raise UserError(f"{labels_path}: {e}") from None
     out_rows = dict(train=lab.validate(rows, scenes, object_ids), test=None, skipped_train=skipped, skipped_test=[])
