@@ -223,3 +223,21 @@ def test_check_only_present(capsys):
     assert "unknown scene 'learn1.pcd'" in capsys.readouterr().err
     assert cli.main(["real", "check", str(OSD), "--labels", str(shipped), "--only-present"]) == 0
     assert "valid; 4 beside, 1 on_top in 3 scenes; 42 labelled scenes not in" in capsys.readouterr().out
+
+
+def test_claim_d_is_undefined_when_bf_mostly_is():
+    """The real learner at chance (P_sl <= 0.5) at most early sizes: bf is undefined there, and a
+    mean over the one size left is not a verdict (C -> D of docs/real.md section 9)."""
+    from relaff_jax.real import experiments as ex
+    from relaff_jax.real import report
+
+    sizes = np.arange(2, 8)  # early: n = 2..4
+    sl = np.tile(np.array([0.5, 0.45, 0.6, 0.7, 0.8, 0.8])[:, None], (1, 4))
+    bl = np.tile(np.array([0.7, 0.7, 0.9, 0.8, 0.8, 0.8])[:, None], (1, 4))
+    res = dict(sim_fair=np.ones(4), sim_full=np.ones(4), real=np.full(4, 0.5), fair_to_real=np.ones(4),
+               full_to_real=np.full(4, 0.6), curve_sl=sl, curve_bl=bl, sizes=sizes, split=np.array([8, 5, 3, 10, 60]))
+    s = ex.summarise(res, RealExperimentConfig(n_boot=50))
+    assert s["bf_early_sizes"] == [2, 3, 4] and s["bf_undefined_sizes"] == [2, 3] and s["bf_early_mean"] == pytest.approx(4.0)
+    d = [c for c in report.claims({"pca": s}) if c["claim"].startswith("d)")][0]
+    assert d["holds"] is None and "defined at 1 of 3" in d["numbers"]
+    assert "| undefined |" in report.markdown({"pca": s}, {})
