@@ -27,7 +27,7 @@ def synthetic(n, p_on_top, margin, seed=0):
 
 def make(real_n=24, real_p=0.34, sim_n=200, margin=5.0, seed=0):
     p, r, y = synthetic(real_n, real_p, margin, seed=seed)
-    real = dict(pca=p, rhf=r, y=y)
+    real = dict(pca=p, rhf=r, y=y, scene=np.asarray([f"s{i}.pcd" for i in range(real_n)]))  # a scene per pair
     p, r, y = synthetic(sim_n, 0.5, margin, seed=seed + 1)
     rel = np.where(y == 1, 1, 0)
     rel[:10] = 2  # inside scenes are left out of beside vs on top
@@ -195,8 +195,10 @@ def test_sim_relations_build_resume_and_guard(tmp_path, monkeypatch):
     assert data["pca"].shape == (12, 18) and data["relation"].tolist().count(1) == 3
     again = sr.build_sim_relations(tmp_path / "sim", sensor, dataclasses.replace(cfg, per_relation=4), progress=False)
     assert calls == [0, 1, 2, 3] and again["counts"]["on_top"] == 6 and again["chunks_timed"] == 4  # resumed
-    with pytest.raises(UserError, match="another sensor or config"):
+    with pytest.raises(UserError, match=r"another sensor \(height 0.59 vs 0.8 .*tilt_deg 50.8 vs 40.0"):
         sr.build_sim_relations(tmp_path / "sim", sr.SimSensor(0.8, 40.0), cfg, progress=False)
+    with pytest.raises(UserError, match="another config .seed 0 there, 1 asked"):
+        sr.build_sim_relations(tmp_path / "sim", sensor, dataclasses.replace(cfg, seed=1), progress=False)
     with pytest.raises(UserError, match="no simulated relation chunks"):
         sr.load_sim_relations(tmp_path / "empty")
     with pytest.raises(UserError, match="multiple of feature_batch"):

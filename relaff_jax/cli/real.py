@@ -9,9 +9,18 @@
 * ``propose SCENES --out labels.csv [--pictures DIR] [--corrections C.csv]``: the geometric
   rule's relation for every pair, pictures to check them by eye, corrections applied, the
   labels file with checksums (``real.labelling``);
-* ``check SCENES --labels L``: validate a labels file against the scenes, count the pairs;
-* ``study SCENES --labels L --out DIR``: real features, simulated relation scenes from the real
-  sensor's pose, the four experiments, the report (``real.study``; resumable).
+* ``check SCENES --labels L [--only-present]``: validate a labels file against the scenes, count
+  the pairs;
+* ``study SCENES --labels L --out DIR [--test T --test-labels TL] [--only-present]``: real
+  features, simulated relation scenes from the training folder's sensor pose, the four
+  experiments within the folder (split by scene unless ``--set experiment.split=pair``) and,
+  with a test folder, trained on one folder and tested on the other; the report
+  (``real.study``; resumable).
+
+Every setting of the real stages is one key of ``real.config.RealRunConfig``: ``--set
+pipeline.kmeans.background=false``, ``--set experiment.split=pair``, ``--set sim.per_relation=500``,
+``--set tolerance.tilt_deg=3``; the flags are shorthands for keys of that tree (``--set`` wins).
+The tree is resolved without JAX, so a mistyped key is reported at once.
 """
 from __future__ import annotations
 
@@ -19,8 +28,10 @@ import csv
 import json
 from pathlib import Path
 
-from relaff_jax.cli.options import check_in_dir, check_in_file, check_out_dir, check_out_file
+from relaff_jax.cli.options import add_set, check_in_dir, check_in_file, check_out_dir, check_out_file
 from relaff_jax.errors import UserError
+
+SET_EXAMPLE = "pipeline.kmeans.background=false"
 
 
 def register(subparsers) -> None:
@@ -34,9 +45,14 @@ def register(subparsers) -> None:
 
     p = sub.add_parser("segment", help="score the paper's segmentation against the hand labels (IoU)")
     p.add_argument("scenes", type=Path, help="folder of scene files (.pcd, .ply, .npz) with labels")
-    p.add_argument("--known-count", action="store_true", help="k = objects + 1 instead of 3")
-    p.add_argument("--seed", type=int, default=0, help="seed of the k-means initialisation")
+    p.add_argument("--known-count", action="store_true",
+                   help="k = objects + 1 clusters (objects + background) instead of pipeline.kmeans.k (3)")
+    p.add_argument("--no-background", action="store_true",
+                   help="no background cluster: every cluster is an object (with --known-count k = objects); "
+                        "the same as --set pipeline.kmeans.background=false")
+    p.add_argument("--seed", type=int, default=0, help="k-means seed (scene i gets fold_in(key(seed), i); default 0)")
     p.add_argument("--out", type=Path, default=None, help="write the per-scene figures as JSON")
+    add_set(p, SET_EXAMPLE)
     p.set_defaults(func=cmd_segment)
 
     p = sub.add_parser("show", help="draw a real scene: colour, segmentation, voxel clouds, PCA frames")
@@ -47,6 +63,7 @@ def register(subparsers) -> None:
     p.add_argument("--source", choices=("hand", "pipeline"), default="hand",
                    help="objects from the hand segmentation, or from the paper's pipeline (k-means)")
     p.add_argument("--seed", type=int, default=0, help="seed of the pipeline's k-means")
+    add_set(p, SET_EXAMPLE)
     p.set_defaults(func=cmd_show)
 
     p = sub.add_parser("propose", help="propose relation labels by the geometric rule (+ pictures)")
@@ -55,30 +72,59 @@ def register(subparsers) -> None:
     p.add_argument("--pictures", type=Path, default=None, help="folder for one PNG per pair")
     p.add_argument("--corrections", type=Path, default=None,
                    help="CSV scene,object_a,object_b,relation (beside, on_top or none) overriding the rule")
+    add_set(p, "rule.contact_tol=0.04")
     p.set_defaults(func=cmd_propose)
 
     p = sub.add_parser("check", help="validate a labels file against its scenes and count the pairs")
     p.add_argument("scenes", type=Path, help="folder of scene files")
     p.add_argument("--labels", type=Path, required=True, help="labels CSV (relaff real propose, or by hand)")
+    p.add_argument("--only-present", action="store_true",
+                   help="check only the labelled scenes the folder holds (and say how many were skipped)")
     p.set_defaults(func=cmd_check)
 
-    p = sub.add_parser("study", help="the four experiments of paper VI and their report (resumable)")
-    p.add_argument("scenes", type=Path, help="folder of scene files")
-    p.add_argument("--labels", type=Path, required=True, help="labels CSV of its pairs")
-    p.add_argument("--out", type=Path, required=True, help="study folder (created, or resumed)")
-    p.add_argument("--sim", type=Path, default=None, help="simulated relation folder (default OUT/sim)")
-    p.add_argument("--per-relation", type=int, default=1000, help="simulated scenes per relation (paper: thousands)")
-    p.add_argument("--n-full", type=int, default=1000, help="SIM_full training samples (paper: 6500)")
-    p.add_argument("--reps", type=int, default=50, help="repetitions of every train/test split")
-    p.add_argument("--trees", type=int, default=100, help="trees per relation classifier")
-    p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"], help="state spaces")
-    p.add_argument("--seed", type=int, default=0, help="seed of the simulated scenes, splits and forests")
-    p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk")
+    p = sub.add_parser("study", help="the four experiments of paper VI and their report (resumable)",
+                       description="Real features, simulated relation data seen from the training folder's "
+                                   "camera pose, the four experiments of paper VI within the training folder "
+                                   "(split by scene by default) and, with --test, trained on the training folder "
+                                   "and tested on the test folder; the report with claims a-d.")
+    p.add_argument("scenes", type=Path, help="training folder of scene files")
+    p.add_argument("--labels", type=Path, required=True, help="the training folder's labels CSV")
+    p.add_argument("--test", type=Path, default=None, help="test folder of scene files (cross-folder figures)")
+    p.add_argument("--test-labels", type=Path, default=None, help="the test folder's labels CSV")
+    p.add_argument("--only-present", action="store_true",
+                   help="use the labelled scenes each folder holds (one labels file may then serve both folders)")
+    p.add_argument("--out", type=Path, required=True, help="output folder (resumable: finished steps are kept)")
+    p.add_argument("--sim", type=Path, default=None,
+                   help="simulated relation folder (default OUT/sim); reused when its sensor lies within "
+                        "tolerance.* of the training folder's (defaults 0.01 m, 2.5 deg, 0.5 deg fov)")
+    p.add_argument("--per-relation", type=int, default=1000,
+                   help="simulated scenes per relation (sim.per_relation; default 1000, paper: thousands)")
+    p.add_argument("--n-full", type=int, default=1000, help="SIM_full training samples (experiment.n_full; "
+                                                             "default 1000, paper: 6500)")
+    p.add_argument("--reps", type=int, default=50, help="repetitions (experiment.reps; default 50)")
+    p.add_argument("--trees", type=int, default=100, help="trees per forest (experiment.trees; default 100)")
+    p.add_argument("--split", choices=("scene", "pair"), default="scene",
+                   help="within a folder: every pair of a scene on one side (default), or pairs one by one "
+                        "(experiment.split)")
+    p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"],
+                   help="state spaces (default both)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the simulation and the experiments (default 0)")
+    p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk (sim.chunk; default 256)")
     p.add_argument("--sim-normals", choices=("ray", "cloud"), default="ray",
                    help="RHF normals of the simulated scenes: exact ray hits, or the cloud rule (5x5 pixel window)")
     p.add_argument("--real-normals", choices=("knn", "window"), default="knn",
                    help="RHF normals of the real scenes: 20 nearest neighbours, or the simulation's window rule")
+    add_set(p, "tolerance.tilt_deg=3 (tree: pipeline.*, rule.*, sim.*, experiment.*, tolerance.*)")
     p.set_defaults(func=cmd_study)
+
+
+def real_config(args, extra: dict | None = None):
+    """The resolved ``RealRunConfig``: the command's flags (``extra``, dotted keys), then ``--set``
+    (which wins); checked without importing JAX."""
+    from relaff_jax.config import parse_set
+    from relaff_jax.real.config import resolve
+
+    return resolve({**(extra or {}), **parse_set(getattr(args, "set", None) or [])})
 
 
 def _corrections(path: Path | None) -> dict:
@@ -109,25 +155,31 @@ def _check_inputs(args) -> None:
 
 
 def cmd_segment(args) -> int:
+    cfg = real_config(args, {"pipeline.kmeans.background": False} if args.no_background else {})
     _check_inputs(args)
+    if args.out:
+        check_out_file(args.out)  # before the segmentation (about a minute)
     from relaff_jax.real import score_scenes
     from relaff_jax.real.scene_source import scene_files
 
-    if args.out:
-        check_out_file(args.out)  # before the segmentation (about a minute)
-    res = score_scenes(scene_files(args.scenes), seed=args.seed, known_count=args.known_count)
+    res = score_scenes(scene_files(args.scenes), seed=args.seed, cfg=cfg.pipeline, known_count=args.known_count,
+                       progress=True)
     for s in res["scenes"]:
         print(f"{s['scene']}: mean object IoU {s['mean']:.3f}, table {s['table']:.3f}")
-    print(f"mean IoU over scenes {res['mean_iou']:.3f}, over objects {res['mean_iou_objects']:.3f}, "
+    k = cfg.pipeline.kmeans
+    variant = ("k = objects" + (" + 1" if k.background else "") if args.known_count else f"k = {k.k}") + \
+        (", smallest cluster = background" if k.background else ", no background cluster")
+    print(f"{variant}: mean IoU over scenes {res['mean_iou']:.3f}, over objects {res['mean_iou_objects']:.3f}, "
           f"table {res['mean_table_iou']:.3f}")
     if args.out:
         from relaff_jax.io import atomic_write_json
 
-        atomic_write_json(args.out, res)
+        atomic_write_json(args.out, dict(res, variant=variant))
     return 0
 
 
 def cmd_show(args) -> int:
+    cfg = real_config(args)
     check_in_file(args.scene, f"scene file {args.scene} does not exist")
     check_out_file(args.out)
     import jax
@@ -135,12 +187,14 @@ def cmd_show(args) -> int:
     from relaff_jax.real import read_cloud, render_real_scene_png
 
     cloud = read_cloud(args.scene)
-    render_real_scene_png(cloud, jax.random.PRNGKey(args.seed), args.out, pair=args.pair, source=args.source)
+    render_real_scene_png(cloud, jax.random.PRNGKey(args.seed), args.out, cfg.pipeline, pair=args.pair,
+                          source=args.source)
     print(args.out)
     return 0
 
 
 def cmd_propose(args) -> int:
+    cfg = real_config(args)
     _check_inputs(args)
     from relaff_jax.real import labels as lab
     from relaff_jax.real.labelling import propose_folder
@@ -149,7 +203,7 @@ def cmd_propose(args) -> int:
     if args.pictures is not None:
         check_out_dir(args.pictures, "--pictures")
     corrections = _corrections(args.corrections)
-    labels, record = propose_folder(args.scenes, args.pictures, corrections)
+    labels, record = propose_folder(args.scenes, args.pictures, corrections, cfg.rule)
     lab.write_labels(args.out, labels)
     counts = lab.relation_counts(labels)
     left = sum(r[2] == "none" for r in record)
@@ -163,30 +217,42 @@ def cmd_check(args) -> int:
     from relaff_jax.real import labels as lab
     from relaff_jax.real.scene_source import object_ids
 
-    labels = lab.validate(lab.read_labels(args.labels), args.scenes, object_ids)
+    labels = lab.read_labels(args.labels)
+    skipped = []
+    if args.only_present:
+        labels, skipped = lab.present(labels, args.scenes)
+    labels = lab.validate(labels, args.scenes, object_ids)
     counts = lab.relation_counts(labels)
+    note = f"; {len(skipped)} labelled scenes not in {args.scenes} skipped" if args.only_present else ""
     print(f"{args.labels}: valid; {counts['beside']} beside, {counts['on_top']} on_top in "
-          f"{len({x.scene for x in labels})} scenes")
+          f"{len({x.scene for x in labels})} scenes{note}")
     return 0
 
 
 def cmd_study(args) -> int:
+    cfg = real_config(args, {
+        "sim.per_relation": args.per_relation, "sim.chunk": args.chunk, "sim.seed": args.seed,
+        "sim.normals": args.sim_normals, "experiment.reps": args.reps, "experiment.trees": args.trees,
+        "experiment.n_full": args.n_full, "experiment.seed": args.seed, "experiment.split": args.split,
+        "pipeline.normals.method": args.real_normals})
     _check_inputs(args)
-    from relaff_jax.real import experiments as ex
-    from relaff_jax.real import sim_relations as sr
+    if args.test is not None:
+        check_in_dir(args.test, f"test folder {args.test} does not exist")
+        if args.test_labels is None:
+            raise UserError("--test needs --test-labels (the test folder's labels file)")
+        check_in_file(args.test_labels, f"labels file {args.test_labels} does not exist")
+    elif args.test_labels is not None:
+        raise UserError("--test-labels needs --test (the test folder)")
+    from relaff_jax.cli.options import record_config
     from relaff_jax.real.study import run_study
 
-    from relaff_jax.real.config import NormalConfig, RealConfig
-
-    sim_cfg = sr.SimRelationConfig(per_relation=args.per_relation, chunk=args.chunk, seed=args.seed,
-                                   normals=args.sim_normals)
-    exp_cfg = ex.RealExperimentConfig(reps=args.reps, trees=args.trees, n_full=args.n_full, seed=args.seed)
-    real_cfg = RealConfig(normals=NormalConfig(method=args.real_normals))
-    summary = run_study(args.scenes, args.labels, args.out, sim_cfg, exp_cfg, tuple(args.spaces), args.sim,
-                        real_cfg=real_cfg)
-    for space, s in summary.items():
-        acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
-        print(f"{space}: {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
+    res = run_study(args.scenes, args.labels, args.out, cfg, tuple(args.spaces), args.sim, args.test,
+                    args.test_labels, args.only_present)
+    for where, summary in (("within", res["within"]), ("cross", res["cross"])):
+        for space, s in (summary or {}).items():
+            acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
+            print(f"{space} {where} ({s['split']['kind']}): {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
+    record_config(args.out, cfg, "real study")
     print(f"report: {args.out / 'results.md'}")
     return 0
 

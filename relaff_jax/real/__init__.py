@@ -29,19 +29,81 @@ Relations and section VI's experiments (on top of the above):
 """
 from __future__ import annotations
 
-from .cloud import FIRST_OBJECT, SEG_NONE, SEG_TABLE, RealCloud, estimate_intrinsics, make_cloud
-from .cloud_features import cloud_normals, object_pair_features, object_points, pair_features
-from .config import CropConfig, KMeansConfig, NormalConfig, PlaneConfig, RealConfig, validate_real_config
-from .frame import camera_pose, camera_pose_stats, sim_camera, table_frame, to_table, vectors_to_table
-from .pcd import read_pcd, write_pcd
-from .ply import read_ply, write_ply
-from .readers import FORMATS, read_cloud, read_npz, write_npz
-from .score import object_ious, score_scene, score_scenes
-from .segment import fit_table_plane, hand_segmentation, object_ids, segment_scene
-from .show import real_scene_view, render_real_scene_png
-from .survey import camera_poses, read_speed
-from .experiments import RealExperimentConfig, run_sim_only, run_space, summarise
-from .labels import Label, read_labels, relation_counts, validate, write_labels
-from .propose import RuleConfig, propose_scene
-from .sim_relations import SimRelationConfig, SimSensor, build_sim_relations, load_sim_relations
-from .study import run_study
+import importlib
+
+# Names are loaded on first use (PEP 562), so that ``relaff_jax.real.config`` and the labels
+# file can be read without importing JAX (a ``--set`` mistake is reported at once).
+_WHERE = {
+    "FIRST_OBJECT": "cloud",
+    "SEG_NONE": "cloud",
+    "SEG_TABLE": "cloud",
+    "RealCloud": "cloud",
+    "estimate_intrinsics": "cloud",
+    "make_cloud": "cloud",
+    "cloud_normals": "cloud_features",
+    "object_pair_features": "cloud_features",
+    "object_points": "cloud_features",
+    "pair_features": "cloud_features",
+    "CropConfig": "config",
+    "KMeansConfig": "config",
+    "NormalConfig": "config",
+    "PlaneConfig": "config",
+    "RealConfig": "config",
+    "validate_real_config": "config",
+    "camera_pose": "frame",
+    "camera_pose_stats": "frame",
+    "sim_camera": "frame",
+    "table_frame": "frame",
+    "to_table": "frame",
+    "vectors_to_table": "frame",
+    "read_pcd": "pcd",
+    "write_pcd": "pcd",
+    "read_ply": "ply",
+    "write_ply": "ply",
+    "FORMATS": "readers",
+    "read_cloud": "readers",
+    "read_npz": "readers",
+    "write_npz": "readers",
+    "object_ious": "score",
+    "score_scene": "score",
+    "score_scenes": "score",
+    "fit_table_plane": "segment",
+    "hand_segmentation": "segment",
+    "object_ids": "segment",
+    "segment_scene": "segment",
+    "real_scene_view": "show",
+    "render_real_scene_png": "show",
+    "camera_poses": "survey",
+    "read_speed": "survey",
+    "RealExperimentConfig": "config",
+    "run_sim_only": "experiments",
+    "run_space": "experiments",
+    "summarise": "experiments",
+    "Label": "labels",
+    "read_labels": "labels",
+    "relation_counts": "labels",
+    "validate": "labels",
+    "write_labels": "labels",
+    "RuleConfig": "propose",
+    "propose_scene": "propose",
+    "SimRelationConfig": "config",
+    "SimSensor": "config",
+    "build_sim_relations": "sim_relations",
+    "load_sim_relations": "sim_relations",
+    "run_study": "study",
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_WHERE))
+
+
+__all__ = sorted(_WHERE)

@@ -9,7 +9,8 @@ Object Segmentation Database defines them), ``relation`` ``beside`` or ``on_top`
 
 ``read_labels(path) -> list[Label]`` checks the format; ``validate(labels, folder,
 object_ids)`` checks the rows against a scenes folder (unknown scene, object id missing from
-the scene, checksum mismatch); ``write_labels(path, labels)`` writes atomically. Every
+the scene, checksum mismatch); ``write_labels(path, labels)`` writes atomically;
+``present(labels, folder)`` keeps the rows of the scenes a folder holds. Every
 problem is a ``UserError`` naming the file, the row and what is wrong.
 """
 from __future__ import annotations
@@ -142,6 +143,21 @@ def validate(labels: Sequence[Label], folder: str | Path,
                 raise UserError(f"{lab.scene} has no object id {oid} (its objects: "
                                 f"{sorted(ids_cache[lab.scene])})")
     return list(labels)
+
+
+def present(labels: Sequence[Label], folder: str | Path) -> tuple[list[Label], list[str]]:
+    """The rows whose scene file is in ``folder`` and the names of the labelled scenes it does
+    not hold (``--only-present``: work on the scenes a folder holds)."""
+    folder = Path(folder)
+    names = sorted({lab.scene for lab in labels})
+    missing = [n for n in names if not (folder / n).is_file()]
+    gone = set(missing)
+    return [lab for lab in labels if lab.scene not in gone], missing
+
+
+def rows_sha256(labels: Sequence[Label]) -> str:
+    """Hex sha256 of the rows as a labels file would hold them (a key for caches)."""
+    return hashlib.sha256(format_labels(labels).encode()).hexdigest()
 
 
 def relation_counts(labels: Sequence[Label]) -> dict[str, int]:

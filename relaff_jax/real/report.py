@@ -7,8 +7,12 @@ summary); ``write_report(folder, raw, summary, context)`` writes, atomically,
 SIM_full -> REAL over the repetitions), ``fig15_<space>.png`` (top: REAL and REAL <- SIM
 learning curves, mean +- std; bottom: the bootstrap factor, sizes where it is undefined
 marked and counted), ``results.json`` (everything) and ``results.md`` (tables and the claims
-with verdicts). ``claims(summary)`` states each claim with the test applied to the numbers;
-the thresholds are fixed here, before any result, and never tuned to the paper.
+with verdicts). With a test folder (``cross_raw``, ``cross``: the same experiments trained on
+the training folder and tested on the test folder) the figures come twice (``*_cross.png``),
+``results.md`` puts the within-folder and cross-folder figures side by side and the claims are
+decided on the cross-folder ones. ``claims(summary)`` states each claim with the test applied
+to the numbers and their intervals; the thresholds are fixed here, before any result, and
+never tuned to the paper.
 """
 from __future__ import annotations
 
@@ -41,7 +45,7 @@ def _png(fig) -> bytes:
     return buf.getvalue()
 
 
-def fig14(raw: dict, space: str) -> bytes:
+def fig14(raw: dict, space: str, where: str = "") -> bytes:
     fig, ax = _figure(1, (7, 4))
     data = [np.asarray(raw[k]) for k, _ in BOXES]
     box = ax.boxplot(data, patch_artist=True)
@@ -51,12 +55,12 @@ def fig14(raw: dict, space: str) -> bytes:
     ax.axhline(0.5, color="0.5", ls=":", lw=1)
     ax.set_ylabel("accuracy (balanced for ->REAL)")
     ax.set_ylim(0.0, 1.02)
-    ax.set_title(f"beside vs on top, {space.upper()} space, {len(data[0])} repetitions")
+    ax.set_title(f"beside vs on top, {space.upper()} space{where}, {len(data[0])} repetitions")
     fig.tight_layout()
     return _png(fig)
 
 
-def fig15(summary: dict, space: str) -> bytes:
+def fig15(summary: dict, space: str, where: str = "") -> bytes:
     n = np.asarray(summary["sizes"])
     fig, (top, bot) = _figure(2, (7, 6), sharex=True)
     for key, label, colour in (("curve_sl", "REAL", "tab:green"), ("curve_bl", "REAL<-SIM", "tab:blue")):
@@ -66,7 +70,7 @@ def fig15(summary: dict, space: str) -> bytes:
     top.axhline(0.5, color="0.5", ls=":", lw=1)
     top.set_ylabel("accuracy")
     top.legend(loc="lower right")
-    top.set_title(f"real learning curves, {space.upper()} space (mean +- std)")
+    top.set_title(f"real learning curves, {space.upper()} space{where} (mean +- std)")
     bf = np.array([np.nan if v is None else v for v in summary["bf"]], float)
     bot.plot(n, bf, "o-", color="tab:blue", label="bootstrap factor")
     und = ~np.isfinite(bf)
@@ -81,31 +85,63 @@ def fig15(summary: dict, space: str) -> bytes:
     return _png(fig)
 
 
+def _ci(a: dict) -> str:
+    sc = a.get("ci95_scenes")
+    extra = f"; test scenes resampled {sc[0]:.3f}-{sc[1]:.3f}" if sc else ""
+    return f"{a['mean']:.3f} (CI {a['ci95'][0]:.3f}-{a['ci95'][1]:.3f}{extra})"
+
+
+def _widest(a: dict) -> tuple[float, float]:
+    """The interval a claim is decided on: over test scenes when measured (cross-folder), else over repetitions."""
+    return tuple(a.get("ci95_scenes") or a["ci95"])
+
+
+def split_note(sp: dict) -> str:
+    """One line saying how the real pairs were split (``summarise``'s ``split``)."""
+    kind = sp.get("kind", "pair")
+    if kind == "cross":
+        b, o = sp["real_test_counts"]
+        return (f"Across folders: REAL trains on {sp['real_train_per_class']} pairs per class of the training folder "
+                f"(all of its smaller class), every classifier is tested on the test folder's {b} beside + {o} "
+                "on_top pairs (balanced accuracy)")
+    if kind == "scene":
+        return (f"Real split by scene (every pair of a scene on one side, a new grouping per repetition): train "
+                f"{sp['real_train_per_class']} per class, test {sp['real_test']} per class")
+    return (f"Real split by pair (pairs of one scene may fall on both sides): pool {sp['real_pool_per_class']} "
+            f"per class, train {sp['real_train_per_class']}, test {sp['real_test']}")
+
+
 def claims(summary: dict) -> list[dict]:
-    """Claims a-d of paper VI-C (and the VI-B observations) on the PCA space, with verdicts."""
+    """Claims a-d of paper VI-C (and the VI-B observations) on the PCA space, with verdicts
+    (decided on the figures given: the cross-folder ones when the study has a test folder,
+    whose intervals then resample the test scenes)."""
     acc = summary["pca"]["accuracy"]
     real, fair, full = acc["real"], acc["sim_fair"], acc["sim_full"]
     s2r = acc["full_to_real"]
-    good = lambda a: a["mean"] >= GOOD and a["ci95"][0] > 0.5
+    good = lambda a: a["mean"] >= GOOD and _widest(a)[0] > 0.5  # noqa: E731
     bfe = summary["pca"]["bf_early_mean"]
+    early = summary["pca"]["bf_early_sizes"]
+    defined = [n for n in early if n not in summary["pca"]["bf_undefined_sizes"]]
     out = [
         dict(claim="a) PCA states give good results on noisy real data",
              test=f"REAL mean >= {GOOD} and its 95 % interval above 0.5",
-             numbers=f"REAL {real['mean']:.3f} (std {real['std']:.3f}, CI {real['ci95'][0]:.3f}-{real['ci95'][1]:.3f})",
+             numbers=f"REAL {_ci(real)}, std {real['std']:.3f}",
              holds=bool(good(real))),
         dict(claim="b) real and simulation classifiers do not differ by a large margin",
              test=f"abs(SIM_fair - REAL) <= {MARGIN}",
-             numbers=f"SIM_fair {fair['mean']:.3f}, REAL {real['mean']:.3f}",
+             numbers=f"SIM_fair {_ci(fair)}, REAL {_ci(real)}",
              holds=bool(abs(fair["mean"] - real["mean"]) <= MARGIN)),
         dict(claim="c) simulation-trained classifiers apply to real scenes (good, competitive with REAL)",
              test=f"SIM_full->REAL good and >= REAL - {MARGIN}",
-             numbers=f"SIM_full->REAL {s2r['mean']:.3f} (std {s2r['std']:.3f}), REAL {real['mean']:.3f}",
+             numbers=f"SIM_full->REAL {_ci(s2r)} (std {s2r['std']:.3f}), REAL {_ci(real)}",
              holds=bool(good(s2r) and s2r["mean"] >= real["mean"] - MARGIN)),
         dict(claim="d) bootstrapping from simulation helps real learning early",
-             test="mean bootstrap factor over the early sizes > 1",
-             numbers=f"bf {bfe:.3f} over n = {summary['pca']['bf_early_sizes']}; undefined at n = "
-                     f"{summary['pca']['bf_undefined_sizes']}",
-             holds=bool(np.isfinite(bfe) and bfe > 1.0)),
+             test="mean bootstrap factor over the early sizes > 1 (undefined unless bf is defined at most of them)",
+             numbers=f"bf {bfe:.3f}{_bf_ci(summary['pca'])} over n = {early}; defined at {len(defined)} of "
+                     f"{len(early)}; undefined at n = {summary['pca']['bf_undefined_sizes']}",
+             # P_sl <= 0.5 (the real learner at chance) leaves bf undefined: a mean over the few
+             # sizes where it is defined says nothing
+             holds=None if 2 * len(defined) <= len(early) else bool(np.isfinite(bfe) and bfe > 1.0)),
         dict(claim="VI-B: real classifiers lower and more variable than simulation ones",
              test="REAL mean < SIM_fair mean and REAL std > SIM_fair std",
              numbers=f"REAL {real['mean']:.3f} +- {real['std']:.3f}; SIM_fair {fair['mean']:.3f} +- {fair['std']:.3f}; "
@@ -113,58 +149,96 @@ def claims(summary: dict) -> list[dict]:
              holds=bool(real["mean"] < fair["mean"] and real["std"] > fair["std"])),
         dict(claim="VI-B: SIM->REAL drops significantly from SIM",
              test="SIM_full->REAL interval entirely below SIM_full's",
-             numbers=f"SIM_full {full['mean']:.3f} (CI {full['ci95'][0]:.3f}-{full['ci95'][1]:.3f}); "
-                     f"SIM_full->REAL {s2r['mean']:.3f} (CI {s2r['ci95'][0]:.3f}-{s2r['ci95'][1]:.3f})",
-             holds=bool(s2r["ci95"][1] < full["ci95"][0])),
+             numbers=f"SIM_full {_ci(full)}; SIM_full->REAL {_ci(s2r)}",
+             holds=bool(_widest(s2r)[1] < full["ci95"][0])),
     ]
     return out
 
 
-def markdown(summary: dict, context: dict) -> str:
+def _bf_ci(s: dict) -> str:
+    ci, sc = s.get("bf_early_ci95"), s.get("bf_early_ci95_scenes")
+    extra = f"; test scenes resampled {sc[0]:.3f}-{sc[1]:.3f}" if sc else ""
+    return f" (CI {ci[0]:.3f}-{ci[1]:.3f}{extra})" if ci else ""
+
+
+def side_by_side(summary: dict, cross: dict) -> list[str]:
+    """Markdown rows: each condition within the training folder and across folders, per space."""
+    lines = ["| space | condition | within the training folder | across folders (test folder) |", "|---|---|---|---|"]
+    for space in summary:
+        for k, name in BOXES:
+            lines.append(f"| {space.upper()} | {name} | {_ci(summary[space]['accuracy'][k])} | "
+                         f"{_ci(cross[space]['accuracy'][k])} |")
+        lines.append(f"| {space.upper()} | bf, early n | {summary[space]['bf_early_mean']:.3f}{_bf_ci(summary[space])} | "
+                     f"{cross[space]['bf_early_mean']:.3f}{_bf_ci(cross[space])} |")
+    return lines
+
+
+def _space_section(space: str, s: dict, title: str) -> list[str]:
+    sp = s["split"]
+    lines = ["", f"## {title}{space.upper()} space ({s['reps']} repetitions)", "",
+             f"{split_note(sp)}; SIM_fair trains on {sp['sim_fair_train']}, SIM_full on "
+             f"{sp['sim_full_train']} (each tested on as many other simulated scenes).", "",
+             "| condition | mean | std | 95 % CI of the mean |", "|---|---:|---:|---|"]
+    for k, name in BOXES:
+        a = s["accuracy"][k]
+        lines.append(f"| {name} | {a['mean']:.3f} | {a['std']:.3f} | {a['ci95'][0]:.3f}-{a['ci95'][1]:.3f} |")
+    if s.get("sim_only"):
+        lines += ["", "Simulation only (SIM -> SIM, every pair of relations):", "",
+                  "| relations | train = test scenes | mean | std | 95 % CI |", "|---|---:|---:|---:|---|"]
+        for k, a in s["sim_only"].items():
+            lines.append(f"| {k.replace('_vs_', ' vs ')} | {a['n_train']} | {a['mean']:.3f} | {a['std']:.3f} | "
+                         f"{a['ci95'][0]:.3f}-{a['ci95'][1]:.3f} |")
+    lines += ["", "| n | REAL | REAL<-SIM | bf |", "|---:|---:|---:|---:|"]
+    for n, a, b, f in zip(s["sizes"], s["curve_sl"], s["curve_bl"], s["bf"]):
+        lines.append(f"| {n} | {a:.3f} | {b:.3f} | {'undefined' if f is None else f'{f:.3f}'} |")
+    lines += ["", f"bf undefined (P_sl <= 0.5) at n = {s['bf_undefined_sizes']} "
+                  f"({len(s['bf_undefined_sizes'])} of {len(s['sizes'])} sizes); mean bf over n = "
+                  f"{s['bf_early_sizes']}: {s['bf_early_mean']:.3f}{_bf_ci(s)}"]
+    return lines
+
+
+def markdown(summary: dict, context: dict, cross: dict | None = None) -> str:
+    """``results.md``: context, (with a test folder) the side-by-side table, each space's
+    tables within the training folder (and across folders), the claims."""
     lines = ["# Sim-to-real: relation classifiers (paper section VI)", ""]
     for key, value in context.items():
         lines.append(f"- {key}: {value}")
+    if cross:
+        lines += ["", "## Within the training folder and across folders", ""] + side_by_side(summary, cross)
     for space, s in summary.items():
-        sp = s["split"]
-        lines += ["", f"## {space.upper()} space ({s['reps']} repetitions)", "",
-                  f"Real split per class: pool {sp['real_pool_per_class']}, train {sp['real_train_per_class']}, "
-                  f"test {sp['real_test_per_class']}; SIM_fair trains on {sp['sim_fair_train']}, SIM_full on "
-                  f"{sp['sim_full_train']} (each tested on as many other simulated scenes).", "",
-                  "| condition | mean | std | 95 % CI of the mean |", "|---|---:|---:|---|"]
-        for k, name in BOXES:
-            a = s["accuracy"][k]
-            lines.append(f"| {name} | {a['mean']:.3f} | {a['std']:.3f} | {a['ci95'][0]:.3f}-{a['ci95'][1]:.3f} |")
-        if s.get("sim_only"):
-            lines += ["", "Simulation only (SIM -> SIM, every pair of relations):", "",
-                      "| relations | train = test scenes | mean | std | 95 % CI |", "|---|---:|---:|---:|---|"]
-            for k, a in s["sim_only"].items():
-                lines.append(f"| {k.replace('_vs_', ' vs ')} | {a['n_train']} | {a['mean']:.3f} | {a['std']:.3f} | "
-                             f"{a['ci95'][0]:.3f}-{a['ci95'][1]:.3f} |")
-        lines += ["", "| n | REAL | REAL<-SIM | bf |", "|---:|---:|---:|---:|"]
-        for n, a, b, f in zip(s["sizes"], s["curve_sl"], s["curve_bl"], s["bf"]):
-            lines.append(f"| {n} | {a:.3f} | {b:.3f} | {'undefined' if f is None else f'{f:.3f}'} |")
-        lines += ["", f"bf undefined (P_sl <= 0.5) at n = {s['bf_undefined_sizes']} "
-                      f"({len(s['bf_undefined_sizes'])} of {len(s['sizes'])} sizes); mean bf over n = "
-                      f"{s['bf_early_sizes']}: {s['bf_early_mean']:.3f}"]
-    if "pca" in summary:
-        lines += ["", "## Claims of section VI-C (PCA space)", "", "| claim | test | numbers | verdict |",
-                  "|---|---|---|---|"]
-        for c in claims(summary):
-            lines.append(f"| {c['claim']} | {c['test']} | {c['numbers']} | {'holds' if c['holds'] else 'does not hold'} |")
+        lines += _space_section(space, s, "Within the training folder, " if cross else "")
+    for space, s in (cross or {}).items():
+        lines += _space_section(space, s, "Across folders, ")
+    decided = cross or summary
+    if "pca" in decided:
+        where = "across folders (trained on the training folder, tested on the test folder)" if cross else \
+            f"within one folder ({decided['pca']['split'].get('kind', 'pair')} split)"
+        lines += ["", f"## Claims of section VI-C (PCA space), decided {where}", "",
+                  "| claim | test | numbers | verdict |", "|---|---|---|---|"]
+        for c in claims(decided):
+            verdict = "undefined" if c["holds"] is None else "holds" if c["holds"] else "does not hold"
+            lines.append(f"| {c['claim']} | {c['test']} | {c['numbers']} | {verdict} |")
     return "\n".join(lines) + "\n"
 
 
-def write_report(folder: str | Path, raw: dict, summary: dict, context: dict) -> list[Path]:
-    """Write figures, ``results.json`` and ``results.md`` into ``folder``; returns the paths."""
+def write_report(folder: str | Path, raw: dict, summary: dict, context: dict,
+                 cross_raw: dict | None = None, cross: dict | None = None) -> list[Path]:
+    """Write figures, ``results.json`` and ``results.md`` into ``folder``; returns the paths.
+    With a test folder (``cross_raw``, ``cross``) its figures are ``fig14_<space>_cross.png``
+    and ``fig15_<space>_cross.png`` and the claims are decided on them."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
-    for space in summary:
-        for name, data in ((f"fig14_{space}.png", fig14(raw[space], space)),
-                           (f"fig15_{space}.png", fig15(summary[space], space))):
-            rio.atomic_write_bytes(folder / name, data)
-            paths.append(folder / name)
-    doc = dict(context=context, summary=summary, claims=claims(summary) if "pca" in summary else [])
+    for tag, r, sm in (("", raw, summary), ("_cross", cross_raw, cross)):
+        for space in sm or {}:
+            where = ", across folders" if tag else ""
+            for name, data in ((f"fig14_{space}{tag}.png", fig14(r[space], space, where)),
+                               (f"fig15_{space}{tag}.png", fig15(sm[space], space, where))):
+                rio.atomic_write_bytes(folder / name, data)
+                paths.append(folder / name)
+    decided = cross or summary
+    doc = dict(context=context, summary=summary, cross=cross,
+               claims=claims(decided) if "pca" in decided else [], claims_decided_on="cross" if cross else "within")
     rio.atomic_write_json(folder / "results.json", doc)
-    rio.atomic_write_text(folder / "results.md", markdown(summary, context))
+    rio.atomic_write_text(folder / "results.md", markdown(summary, context, cross))
     return paths + [folder / "results.json", folder / "results.md"]

@@ -65,7 +65,8 @@ def score_scene(cloud, key, cfg: RealConfig = RealConfig(), known_count: bool = 
     return out
 
 
-def score_scenes(paths, seed: int = 0, cfg: RealConfig = RealConfig(), known_count: bool = False) -> dict:
+def score_scenes(paths, seed: int = 0, cfg: RealConfig = RealConfig(), known_count: bool = False,
+                 progress: bool = False) -> dict:
     """``score_scene`` on every file of ``paths`` (scene i gets ``fold_in(key(seed), i)``).
 
     Returns dict(scenes [per-scene dicts without seg], mean_iou (mean over scenes of the
@@ -73,12 +74,18 @@ def score_scenes(paths, seed: int = 0, cfg: RealConfig = RealConfig(), known_cou
     paths = list(paths)
     if not paths:
         raise UserError("no scenes to score")
+    from relaff_jax.data.progress import progress_bar
+
     base = jax.random.key(seed)
     rows = []
+    bar = progress_bar(progress, len(paths), "segment (first scene compiles)", unit="scene")
     for i, p in enumerate(paths):
         r = score_scene(read_cloud(p), jax.random.fold_in(base, i), cfg, known_count)
         r.pop("seg")
         rows.append(r)
+        bar.set_description("segment")
+        bar.update(1)
+    bar.close()
     all_obj = [v for r in rows for v in r["ious"].values()]
     return dict(scenes=rows, mean_iou=float(np.mean([r["mean"] for r in rows])),
                 mean_iou_objects=float(np.mean(all_obj)) if all_obj else float("nan"),

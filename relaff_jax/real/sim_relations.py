@@ -16,6 +16,11 @@ overflow; dropped scenes are counted, never silently. ``build_sim_relations(fold
 works chunk by chunk, each chunk an atomic ``chunk_XXXXX.npz`` in ``folder``, so a killed run
 resumes; it stops once every relation of ``need`` has enough scenes. ``load_sim_relations``
 concatenates the chunks.
+
+The guard ``sim_relations.json`` (sensor + config) is written *before* the first chunk, so a
+killed build cannot take chunks of another sensor: ``guard`` refuses a folder whose config
+differs in a ``GUARD_KEYS`` setting or whose sensor lies outside ``SensorTolerance`` of the one
+asked for (naming what differs), and reuses it, with its own sensor, otherwise.
 """
 from __future__ import annotations
 
@@ -33,37 +38,16 @@ from relaff_jax.constants import RELATIONS
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed
 
+from relaff_jax.data.progress import progress_bar
+
 from . import frame as rframe
+from .config import SensorTolerance, SimRelationConfig, SimSensor, sensor_mismatch
 from .scene_source import TARGET
 
-
-@dataclasses.dataclass(frozen=True)
-class SimSensor:
-    """The simulated camera's pose over the table and its vertical field of view (degrees)."""
-
-    height: float
-    tilt_deg: float
-    vfov_deg: float = 43.0
-
-
-@dataclasses.dataclass(frozen=True)
-class SimRelationConfig:
-    """Simulated relation data: scenes per chunk, workspace radius (m, around the robot),
-    the least scenes of each relation in ``need`` to stop at, a cap on chunks, the seed;
-    ``normals``: the RHF normals, "ray" (exact ray-hit geometry) or "cloud" (window PCA of the
-    noisy points, ``perception.NormalsConfig``)."""
-
-    per_relation: int = 1000
-    need: tuple[str, ...] = ("beside", "on_top")
-    chunk: int = 256
-    workspace_radius: float = 1.1
-    max_chunks: int = 200
-    noise: str = "robwork"
-    feature_batch: int = 32  # scenes per perception call (memory: ~1 GB at these capacities)
-    max_tiles: int = 600  # of 1200 16 x 16 tiles: objects 0.6 m from the camera are large
-    max_object_pixels: int = 65536
-    seed: int = 0
-    normals: str = "ray"
+# Settings that change what a chunk holds: a folder's chunks must share them (the others, e.g.
+# per_relation or feature_batch, only say how many chunks or how they are computed).
+GUARD_KEYS = ("seed", "chunk", "workspace_radius", "normals", "noise", "max_tiles", "max_object_pixels")
+GUARD = "sim_relations.json"
 
 
 def perception_config(sensor: SimSensor, cfg: SimRelationConfig):
@@ -126,21 +110,48 @@ def _counts(folder: Path) -> tuple[list[Path], np.ndarray]:
     return files, counts
 
 
-def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRelationConfig(),
-                        progress: bool = True) -> dict:
-    """Fill ``folder`` with chunks until each relation of ``cfg.need`` has ``cfg.per_relation``
-    kept scenes (resumable; same sensor and config required). Returns a summary dict."""
+def guard(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRelationConfig(),
+          tol: SensorTolerance = SensorTolerance(), write: bool = True) -> SimSensor:
+    """The sensor whose data ``folder`` holds (or will hold): the stored one when the folder's
+    guard matches ``cfg`` and lies within ``tol`` of ``sensor``, else ``UserError`` with the
+    reason. A new folder gets its guard now (``write``), before any chunk."""
     folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    meta = dict(sensor=dataclasses.asdict(sensor), config=dataclasses.asdict(cfg))
-    meta_path = folder / "sim_relations.json"
+    meta_path = folder / GUARD
     if meta_path.exists():
-        old = rio.read_json(meta_path)
-        if old["sensor"] != rio.jsonable(meta["sensor"]) or old["config"]["seed"] != cfg.seed or \
-                old["config"]["chunk"] != cfg.chunk or old["config"]["workspace_radius"] != cfg.workspace_radius or \
-                old["config"].get("normals", "ray") != cfg.normals:  # folders from before the option: ray
-            raise UserError(f"{folder} holds simulated relation data of another sensor or config; "
+        try:
+            old = rio.read_json(meta_path)
+            stored = SimSensor(**old["sensor"])
+            conf = old["config"]
+        except (ValueError, KeyError, TypeError) as e:
+            raise UserError(f"{meta_path} is not a simulated relation guard ({e}); delete the folder") from None
+        ask, dflt = dataclasses.asdict(cfg), dataclasses.asdict(SimRelationConfig())
+        differs = [f"{k} {conf.get(k, dflt[k])!r} there, {ask[k]!r} asked" for k in GUARD_KEYS
+                   if rio.jsonable(conf.get(k, dflt[k])) != rio.jsonable(ask[k])]  # older folders: defaults
+        if differs:
+            raise UserError(f"{folder} holds simulated relation data of another config ({'; '.join(differs)}); "
                             "use another folder or delete it")
+        why = sensor_mismatch(stored, sensor, tol)
+        if why:
+            raise UserError(f"{folder} holds simulated relation data of another sensor ({why}); use another "
+                            "folder, delete it, or widen --set tolerance.<key>")
+        return stored
+    chunks = sorted(folder.glob("chunk_*.npz"))
+    if chunks:
+        raise UserError(f"{folder} holds {len(chunks)} simulated chunks but no {GUARD}, so which sensor made them "
+                        "is unknown (a build killed before the guard was written first); delete them")
+    if write:
+        folder.mkdir(parents=True, exist_ok=True)
+        rio.atomic_write_json(meta_path, dict(sensor=dataclasses.asdict(sensor), config=dataclasses.asdict(cfg),
+                                              status="building"))
+    return sensor
+
+
+def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRelationConfig(),
+                        progress: bool = True, tol: SensorTolerance = SensorTolerance()) -> dict:
+    """Fill ``folder`` with chunks until each relation of ``cfg.need`` has ``cfg.per_relation``
+    kept scenes (resumable; ``guard`` first: the same config, a sensor within ``tol``; chunks
+    are made with the folder's own sensor). Returns a summary dict, ``sensor`` the one simulated."""
+    folder = Path(folder)
     if cfg.normals not in ("ray", "cloud"):
         raise UserError(f"unknown normals {cfg.normals!r}; valid: ['ray', 'cloud']")
     if cfg.chunk % cfg.feature_batch:
@@ -148,17 +159,26 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
     bad = [r for r in cfg.need if r not in RELATIONS]
     if bad:
         raise UserError(f"unknown relations {bad}; valid: {', '.join(RELATIONS)}")
+    sensor = guard(folder, sensor, cfg, tol)
+    meta_path = folder / GUARD
+    meta = dict(sensor=dataclasses.asdict(sensor), config=dataclasses.asdict(cfg))
     need = np.asarray([RELATIONS.index(r) for r in cfg.need])
     files, counts = _counts(folder)
+    # the bar counts kept scenes of the relations still needed (a chunk's worth at a time)
+    held = lambda: int(np.minimum(counts[need], cfg.per_relation).sum())  # noqa: E731
+    bar = progress_bar(progress, cfg.per_relation * len(need), "sim relations", unit="scene")
+    bar.update(held())
     run, seconds, done_now = None, 0.0, 0
     while (counts[need] < cfg.per_relation).any():
         c = len(files)
         if c >= cfg.max_chunks:
+            bar.close()
             raise UserError(f"{c} chunks ({c * cfg.chunk} scenes) gave only {dict(zip(RELATIONS, counts.tolist()))}; "
                             "raise max_chunks or lower per_relation")
         if run is None:
             from relaff_jax.sim import world as wd
 
+            bar.set_description("sim relations: compiling, first chunk")
             run = _chunk_fn(wd.build_world(), sensor, cfg)
         t0 = time.perf_counter()
         out = run(c)
@@ -166,13 +186,14 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
         done_now += 1
         rio.atomic_save_npz(folder / f"chunk_{c:05d}.npz", **out)
         files, counts = _counts(folder)
-        if progress:
-            print(f"sim relations: chunk {c}: {dict(zip(RELATIONS, counts.tolist()))} "
-                  f"({seconds / done_now:.1f} s per chunk of {cfg.chunk})", flush=True)
+        bar.set_description("sim relations")
+        bar.update(held() - bar.n)
+        bar.set_postfix(chunk=c, s_per_chunk=f"{seconds / done_now:.1f}", **dict(zip(RELATIONS, counts.tolist())))
+    bar.close()
     prev = rio.read_json(meta_path) if meta_path.exists() else {}
     timed_s = prev.get("seconds_timed", 0.0) + seconds  # over every run that built chunks
     timed_c = prev.get("chunks_timed", 0) + done_now
-    summary = dict(meta, counts=dict(zip(RELATIONS, counts.tolist())), chunks=len(files),
+    summary = dict(meta, status="complete", counts=dict(zip(RELATIONS, counts.tolist())), chunks=len(files),
                    scenes=len(files) * cfg.chunk, dropped=_dropped(files),
                    seconds_timed=round(timed_s, 2), chunks_timed=timed_c,
                    seconds_per_scene=round(timed_s / max(timed_c * cfg.chunk, 1), 4))
