@@ -1,0 +1,185 @@
+"""Many forests per call, compiled (numba): scikit-learn 1.9.1's ``DepthFirstTreeBuilder``
+for each tree of each ``RandomForestClassifier`` (``rng.py`` for the draws, ``split.py`` for
+a node's split).
+
+``build_tree`` is ``DepthFirstTreeBuilder.build`` without monotonic constraints or missing
+values: a stack of ``(start, end, depth, parent, is_left, impurity, n_constant_features)``,
+the right child pushed before the left (node ids are depth-first preorder, left first); a
+node is a leaf when ``depth >= max_depth``, ``n < min_samples_split``, ``n < 2
+min_samples_leaf``, its impurity is ``<= EPSILON`` (the root's from ``node_impurity``, a
+child's from its parent's split), no split is valid, or ``improvement + EPSILON <
+min_impurity_decrease`` (0). Leaves get feature -2, threshold -2.0, children -1, as
+``Tree._add_node``; every node gets its value ``class counts / weight`` (``node_value``).
+``n`` counts a node's samples of positive weight (the splitter drops the others).
+
+``build_forests`` loops over forests and trees: forest seeds, bootstrap counts
+(``np.bincount`` of the draws) and the splitter seed as ``rng.py`` describes, then
+``build_tree``. Output node arrays are flat over all trees of all forests, children ids
+local to their tree (as ``Tree.children_left``), ``tree_start: (T_all + 1,)`` the first
+node of each tree.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, mt_seed, randint
+from relaff_jax.learn.compiled.split import best_split, node_impurity
+
+EPSILON = np.finfo(np.float64).eps  # sklearn/tree/_tree.pyx
+LEAF = -1  # _TREE_LEAF
+UNDEFINED = -2  # _TREE_UNDEFINED
+
+
+@njit(cache=True)
+def build_tree(XT, y, w, K, max_features, min_leaf, min_split, max_depth, state, work, out, base):
+    """One tree on ``XT: (D, N)`` with weights ``w: (N,)``; nodes written from ``base``.
+
+    ``work`` holds scratch arrays sized for the call; ``out`` the node arrays
+    ``(feature, threshold, left, right, value)``. Returns the tree's node count.
+    """
+    samples, fv, features, constant, left, total, stk_i, stk_f = work
+    feature_o, thr_o, left_o, right_o, value_o = out
+    n = y.shape[0]
+    d = XT.shape[0]
+    m = 0
+    w_all = 0.0
+    for i in range(n):
+        if w[i] != 0.0:
+            samples[m] = i
+            m += 1
+        w_all += w[i]
+    for j in range(d):
+        features[j] = j
+    # stack rows: start, end, depth, parent, is_left, n_constant | impurity
+    top = 0
+    stk_i[0, 0], stk_i[0, 1], stk_i[0, 2], stk_i[0, 3], stk_i[0, 4], stk_i[0, 5] = 0, m, 0, -1, 0, 0
+    stk_f[0] = np.inf
+    top = 1
+    count = 0
+    first = True
+    pos, feat, thr, imp_l, imp_r, improvement = 0, 0, 0.0, 0.0, 0.0, 0.0
+    while top > 0:
+        top -= 1
+        start, end, depth, parent, is_left, n_const = (stk_i[top, 0], stk_i[top, 1], stk_i[top, 2],
+                                                      stk_i[top, 3], stk_i[top, 4], stk_i[top, 5])
+        impurity = stk_f[top]
+        nn = end - start
+        for c in range(K):
+            total[c] = 0.0
+        wn = 0.0
+        for p in range(start, end):
+            s = samples[p]
+            total[y[s]] += w[s]
+            wn += w[s]
+        is_leaf = depth >= max_depth or nn < min_split or nn < 2 * min_leaf
+        if first:
+            impurity = node_impurity(total, wn)
+            first = False
+        is_leaf = is_leaf or impurity <= EPSILON
+        if not is_leaf:
+            pos, feat, thr, imp_l, imp_r, improvement, n_const = best_split(
+                XT, y, w, samples, fv, features, constant, left, total, start, end, wn, w_all,
+                impurity, n_const, max_features, min_leaf, state)
+            is_leaf = pos >= end or improvement + EPSILON < 0.0
+        node = base + count
+        if parent >= 0:
+            if is_left:
+                left_o[base + parent] = count
+            else:
+                right_o[base + parent] = count
+        if is_leaf:
+            feature_o[node] = UNDEFINED
+            thr_o[node] = UNDEFINED
+            left_o[node] = LEAF
+            right_o[node] = LEAF
+        else:
+            feature_o[node] = feat
+            thr_o[node] = thr
+        for c in range(K):
+            value_o[node, c] = total[c] / wn
+        if not is_leaf:
+            stk_i[top, 0], stk_i[top, 1], stk_i[top, 2], stk_i[top, 3], stk_i[top, 4], stk_i[top, 5] = (
+                pos, end, depth + 1, count, 0, n_const)
+            stk_f[top] = imp_r
+            top += 1
+            stk_i[top, 0], stk_i[top, 1], stk_i[top, 2], stk_i[top, 3], stk_i[top, 4], stk_i[top, 5] = (
+                start, pos, depth + 1, count, 1, n_const)
+            stk_f[top] = imp_l
+            top += 1
+        count += 1
+    return count
+
+
+@njit(cache=True)
+def _grow(a, size):
+    b = np.empty((size,) + a.shape[1:], a.dtype)
+    b[: a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_features,
+                  min_leaf, min_split, max_depth, bootstrap):
+    """Every tree of F forests. Forest f: ``XT = xs[x_start[f]:][:d n].reshape(d, n)``
+    (features by row), class codes ``ys[sum(ns[:f]):][:n]`` in [0, ks[f]), seed
+    ``seeds[f]`` in [0, 2**32), ``n_trees[f]`` trees of ``n_boot[f]`` draws each,
+    ``max_features[f]`` features per split. Returns ``(feature, threshold, left, right,
+    value, tree_start)``: ``(M,)`` int32, float64, int32, int32, ``(M, 2)`` float64 (class
+    k in column k < ks[f]) and ``(sum(n_trees) + 1,)`` int64."""
+    F = ns.shape[0]
+    n_max = max(1, ns.max())
+    d_max = max(1, ds.max())
+    cap = 0
+    for f in range(F):
+        cap += n_trees[f] * (min(ns[f], n_boot[f]) + 1)
+    feature_o = np.empty(cap, np.int32)
+    thr_o = np.empty(cap, np.float64)
+    left_o = np.empty(cap, np.int32)
+    right_o = np.empty(cap, np.int32)
+    value_o = np.zeros((cap, 2), np.float64)
+    tree_start = np.zeros(n_trees.sum() + 1, np.int64)
+    work = (np.empty(n_max, np.int64), np.empty(n_max, np.float32), np.empty(d_max, np.int64),
+            np.empty(d_max, np.int64), np.empty(2, np.float64), np.empty(2, np.float64),
+            np.empty((n_max + 2, 6), np.int64), np.empty(n_max + 2, np.float64))
+    mt = np.zeros(625, np.int64)
+    tree_seeds = np.empty(n_trees.max() if F else 0, np.int64)
+    state = np.zeros(1, np.int64)
+    w = np.empty(n_max, np.float64)
+    used = 0
+    t_all = 0
+    y0 = 0
+    for f in range(F):
+        n, d, K = ns[f], ds[f], ks[f]
+        XT = xs[x_start[f]: x_start[f] + d * n].reshape(d, n)
+        y = ys[y0: y0 + n]
+        y0 += n
+        mt_seed(mt, seeds[f])
+        for t in range(n_trees[f]):  # _set_random_states: one draw per tree
+            tree_seeds[t] = randint(mt, 0, MAX_INT)
+        wk = (work[0], work[1], work[2], work[3], work[4][:K], work[5][:K], work[6], work[7])
+        for t in range(n_trees[f]):
+            mt_seed(mt, tree_seeds[t])
+            wt = w[:n]
+            if bootstrap:
+                wt[:] = 0.0
+                for _ in range(n_boot[f]):
+                    wt[randint(mt, 0, n)] += 1.0
+                mt_seed(mt, tree_seeds[t])  # the splitter's fresh RandomState(s_i)
+            else:
+                wt[:] = 1.0
+            state[0] = randint(mt, 0, RAND_R_MAX)
+            m = 0
+            for i in range(n):
+                if wt[i] != 0.0:
+                    m += 1
+            need = used + 2 * m - 1
+            if need > feature_o.shape[0]:
+                size = max(need, 2 * feature_o.shape[0])
+                feature_o, thr_o = _grow(feature_o, size), _grow(thr_o, size)
+                left_o, right_o, value_o = _grow(left_o, size), _grow(right_o, size), _grow(value_o, size)
+            out = (feature_o, thr_o, left_o, right_o, value_o)
+            used += build_tree(XT, y, wt, K, max_features[f], min_leaf, min_split, max_depth, state, wk, out, used)
+            t_all += 1
+            tree_start[t_all] = used
+    return feature_o[:used], thr_o[:used], left_o[:used], right_o[:used], value_o[:used], tree_start

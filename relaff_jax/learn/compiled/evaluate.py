@@ -1,0 +1,2 @@
+"""placeholder"""
+votes = proba = None
