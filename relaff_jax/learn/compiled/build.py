@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, mt_seed, randint
+from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, first_randint, mt_seed, randint
 from relaff_jax.learn.compiled.split import best_split, node_impurity
 
 EPSILON = np.finfo(np.float64).eps  # sklearn/tree/_tree.pyx
@@ -32,16 +32,13 @@ UNDEFINED = -2  # _TREE_UNDEFINED
 
 
 @njit(cache=True)
-def build_tree(XT, y, w, K, max_features, min_leaf, min_split, max_depth, state, work, out, base):
-    """One tree on ``XT: (D, N)`` with weights ``w: (N,)``; nodes written from ``base``.
-
-    ``work`` holds scratch arrays sized for the call; ``out`` the node arrays
-    ``(feature, threshold, left, right, value)``. Returns the tree's node count.
-    """
-    samples, fv, features, constant, left, total, stk_i, stk_f = work
+def build_tree(fo, sc, stk_i, stk_f, y1, w, K, max_features, min_leaf, min_split, max_depth, state, out, base):
+    """One tree on the forest ``fo`` (``split.py``) with weights ``w: (N,)``; nodes written
+    to ``out = (feature, threshold, left, right, value)`` from ``base``. ``stk_i: (N + 2, 6)``
+    int64 and ``stk_f: (N + 2,)`` float64 are the stack. Returns the tree's node count."""
+    samples, features = sc[0], sc[7]
     feature_o, thr_o, left_o, right_o, value_o = out
-    n = y.shape[0]
-    d = XT.shape[0]
+    n = y1.shape[0]
     m = 0
     w_all = 0.0
     for i in range(n):
@@ -49,10 +46,9 @@ def build_tree(XT, y, w, K, max_features, min_leaf, min_split, max_depth, state,
             samples[m] = i
             m += 1
         w_all += w[i]
-    for j in range(d):
+    for j in range(features.shape[0]):
         features[j] = j
     # stack rows: start, end, depth, parent, is_left, n_constant | impurity
-    top = 0
     stk_i[0, 0], stk_i[0, 1], stk_i[0, 2], stk_i[0, 3], stk_i[0, 4], stk_i[0, 5] = 0, m, 0, -1, 0, 0
     stk_f[0] = np.inf
     top = 1
@@ -65,22 +61,21 @@ def build_tree(XT, y, w, K, max_features, min_leaf, min_split, max_depth, state,
                                                       stk_i[top, 3], stk_i[top, 4], stk_i[top, 5])
         impurity = stk_f[top]
         nn = end - start
-        for c in range(K):
-            total[c] = 0.0
         wn = 0.0
+        t1 = 0.0
         for p in range(start, end):
             s = samples[p]
-            total[y[s]] += w[s]
             wn += w[s]
+            t1 += w[s] * y1[s]
+        t0 = wn - t1
         is_leaf = depth >= max_depth or nn < min_split or nn < 2 * min_leaf
         if first:
-            impurity = node_impurity(total, wn)
+            impurity = node_impurity(t0, t1, wn)
             first = False
         is_leaf = is_leaf or impurity <= EPSILON
         if not is_leaf:
             pos, feat, thr, imp_l, imp_r, improvement, n_const = best_split(
-                XT, y, w, samples, fv, features, constant, left, total, start, end, wn, w_all,
-                impurity, n_const, max_features, min_leaf, state)
+                fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_const, max_features, min_leaf, state)
             is_leaf = pos >= end or improvement + EPSILON < 0.0
         node = base + count
         if parent >= 0:
@@ -96,8 +91,9 @@ def build_tree(XT, y, w, K, max_features, min_leaf, min_split, max_depth, state,
         else:
             feature_o[node] = feat
             thr_o[node] = thr
-        for c in range(K):
-            value_o[node, c] = total[c] / wn
+        value_o[node, 0] = t0 / wn
+        if K == 2:
+            value_o[node, 1] = t1 / wn
         if not is_leaf:
             stk_i[top, 0], stk_i[top, 1], stk_i[top, 2], stk_i[top, 3], stk_i[top, 4], stk_i[top, 5] = (
                 pos, end, depth + 1, count, 0, n_const)
@@ -121,15 +117,15 @@ def _grow(a, size):
 @njit(cache=True)
 def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_features,
                   min_leaf, min_split, max_depth, bootstrap):
-    """Every tree of F forests. Forest f: ``XT = xs[x_start[f]:][:d n].reshape(d, n)``
-    (features by row), class codes ``ys[sum(ns[:f]):][:n]`` in [0, ks[f]), seed
+    """Every tree of F >= 1 forests. Forest f: ``XT = xs[x_start[f]:][:d n].reshape(d, n)``
+    (features by row), class codes ``ys[sum(ns[:f]):][:n]`` in [0, ks[f]) (ks <= 2), seed
     ``seeds[f]`` in [0, 2**32), ``n_trees[f]`` trees of ``n_boot[f]`` draws each,
     ``max_features[f]`` features per split. Returns ``(feature, threshold, left, right,
     value, tree_start)``: ``(M,)`` int32, float64, int32, int32, ``(M, 2)`` float64 (class
     k in column k < ks[f]) and ``(sum(n_trees) + 1,)`` int64."""
     F = ns.shape[0]
-    n_max = max(1, ns.max())
-    d_max = max(1, ds.max())
+    n_max = ns.max()
+    d_max = ds.max()
     cap = 0
     for f in range(F):
         cap += n_trees[f] * (min(ns[f], n_boot[f]) + 1)
@@ -139,36 +135,51 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
     right_o = np.empty(cap, np.int32)
     value_o = np.zeros((cap, 2), np.float64)
     tree_start = np.zeros(n_trees.sum() + 1, np.int64)
-    work = (np.empty(n_max, np.int64), np.empty(n_max, np.float32), np.empty(d_max, np.int64),
-            np.empty(d_max, np.int64), np.empty(2, np.float64), np.empty(2, np.float64),
-            np.empty((n_max + 2, 6), np.int64), np.empty(n_max + 2, np.float64))
+    order_all = np.empty((d_max, n_max), np.int64)
+    rank_all = np.empty((d_max, n_max), np.int64)
+    ready = np.zeros(d_max, np.uint8)
+    sc = (np.empty(n_max, np.int64), np.empty(n_max, np.float32), np.empty(n_max, np.float64),
+          np.empty(n_max, np.float64), np.zeros(n_max, np.uint8), np.empty(n_max + 1, np.int64),
+          np.empty(n_max + 1, np.float32), np.empty(d_max, np.int64), np.empty(d_max, np.int64))
+    stk_i = np.empty((n_max + 2, 6), np.int64)
+    stk_f = np.empty(n_max + 2, np.float64)
     mt = np.zeros(625, np.int64)
-    tree_seeds = np.empty(n_trees.max() if F else 0, np.int64)
+    mt2 = np.zeros(625, np.int64)
+    tree_seeds = np.empty(n_trees.max(), np.int64)
     state = np.zeros(1, np.int64)
     w = np.empty(n_max, np.float64)
+    y1 = np.empty(n_max, np.float64)
     used = 0
     t_all = 0
     y0 = 0
     for f in range(F):
         n, d, K = ns[f], ds[f], ks[f]
         XT = xs[x_start[f]: x_start[f] + d * n].reshape(d, n)
-        y = ys[y0: y0 + n]
+        yf = y1[:n]
+        for i in range(n):
+            yf[i] = np.float64(ys[y0 + i])
         y0 += n
+        rf = ready[:d]
+        rf[:] = 0
+        fo = (XT, order_all[:d, :n], rank_all[:d, :n], rf)
+        scf = (sc[0][:n], sc[1][:n], sc[2][:n], sc[3][:n], sc[4][:n], sc[5][: n + 1], sc[6][: n + 1],
+               sc[7][:d], sc[8][:d])
         mt_seed(mt, seeds[f])
         for t in range(n_trees[f]):  # _set_random_states: one draw per tree
             tree_seeds[t] = randint(mt, 0, MAX_INT)
-        wk = (work[0], work[1], work[2], work[3], work[4][:K], work[5][:K], work[6], work[7])
         for t in range(n_trees[f]):
             mt_seed(mt, tree_seeds[t])
+            state[0] = first_randint(mt, 0, RAND_R_MAX)  # the splitter's fresh RandomState(s_i)
+            if state[0] < 0:
+                mt_seed(mt2, tree_seeds[t])
+                state[0] = randint(mt2, 0, RAND_R_MAX)
             wt = w[:n]
             if bootstrap:
                 wt[:] = 0.0
                 for _ in range(n_boot[f]):
                     wt[randint(mt, 0, n)] += 1.0
-                mt_seed(mt, tree_seeds[t])  # the splitter's fresh RandomState(s_i)
             else:
                 wt[:] = 1.0
-            state[0] = randint(mt, 0, RAND_R_MAX)
             m = 0
             for i in range(n):
                 if wt[i] != 0.0:
@@ -179,7 +190,8 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
                 feature_o, thr_o = _grow(feature_o, size), _grow(thr_o, size)
                 left_o, right_o, value_o = _grow(left_o, size), _grow(right_o, size), _grow(value_o, size)
             out = (feature_o, thr_o, left_o, right_o, value_o)
-            used += build_tree(XT, y, wt, K, max_features[f], min_leaf, min_split, max_depth, state, wk, out, used)
+            used += build_tree(fo, scf, stk_i, stk_f, yf, wt, K, max_features[f], min_leaf, min_split, max_depth,
+                               state, out, used)
             t_all += 1
             tree_start[t_all] = used
     return feature_o[:used], thr_o[:used], left_o[:used], right_o[:used], value_o[:used], tree_start

@@ -46,14 +46,26 @@ def mt_seed(mt, seed):
 
 @njit(cache=True)
 def mt_gen(mt):
-    """``mt19937_gen``: the next 624 words, in place (the modular form of numpy's loops)."""
-    for i in range(N_MT):
-        y = (mt[i] & 0x80000000) | (mt[(i + 1) % N_MT] & 0x7FFFFFFF)
-        v = mt[(i + 397) % N_MT] ^ (y >> 1)
-        if y & 1:
-            v ^= 0x9908B0DF
-        mt[i] = v
+    """``mt19937_gen``: the next 624 words, in place (numpy's three loops)."""
+    for i in range(N_MT - 397):
+        y = (mt[i] & 0x80000000) | (mt[i + 1] & 0x7FFFFFFF)
+        mt[i] = mt[i + 397] ^ (y >> 1) ^ ((y & 1) * 0x9908B0DF)
+    for i in range(N_MT - 397, N_MT - 1):
+        y = (mt[i] & 0x80000000) | (mt[i + 1] & 0x7FFFFFFF)
+        mt[i] = mt[i + 397 - N_MT] ^ (y >> 1) ^ ((y & 1) * 0x9908B0DF)
+    y = (mt[N_MT - 1] & 0x80000000) | (mt[0] & 0x7FFFFFFF)
+    mt[N_MT - 1] = mt[396] ^ (y >> 1) ^ ((y & 1) * 0x9908B0DF)
     mt[N_MT] = 0
+
+
+@njit(cache=True)
+def temper(y):
+    """MT19937's output tempering of one word."""
+    y ^= y >> 11
+    y ^= (y << 7) & 0x9D2C5680
+    y ^= (y << 15) & 0xEFC60000
+    y ^= y >> 18
+    return y & MASK32
 
 
 @njit(cache=True)
@@ -63,11 +75,28 @@ def mt_next(mt):
         mt_gen(mt)
     y = mt[mt[N_MT]]
     mt[N_MT] += 1
-    y ^= y >> 11
-    y ^= (y << 7) & 0x9D2C5680
-    y ^= (y << 15) & 0xEFC60000
-    y ^= y >> 18
-    return y & MASK32
+    return temper(y)
+
+
+@njit(cache=True)
+def first_randint(mt, low, high):
+    """What ``randint(low, high)`` of a freshly seeded ``mt`` gives, without consuming it:
+    ``mt`` is generated (``mt_gen``) if it was not, and read from word 0 (an exact peek only
+    right after ``mt_seed``). Saves seeding a second ``RandomState(s_i)`` per tree."""
+    if mt[N_MT] >= N_MT:
+        mt_gen(mt)
+    rng = high - low - 1
+    if rng == 0:
+        return low
+    mask = mask_of(rng)
+    k = 0
+    while True:
+        if k == N_MT:  # (probability ~2**-19000) fall back to a real stream
+            return -1
+        v = temper(mt[k]) & mask
+        k += 1
+        if v <= rng:
+            return low + v
 
 
 @njit(cache=True)

@@ -25,10 +25,15 @@ for every order, the thresholds depend only on them, the children are the sets `
 float64 in any order. Only the sets of samples per node, the persistent ``features`` array
 and the ``rand_r`` state carry from node to node.
 
-Arrays: ``XT: (D, N)`` float32 features by row; ``y: (N,)`` int64 class codes; ``w: (N,)``
-float64 integer weights; ``samples: (N,)`` int64 the node's samples at ``[start, end)``;
-``fv: (N,)`` float32 scratch; ``features, constant: (D,)`` int64 splitter state;
-``total: (K,)`` the node's weighted class counts; ``left: (K,)`` scratch.
+Arrays: ``XT: (D, N)`` float32 features by row; ``y1: (N,)`` float64 1.0 for class 1, else
+0.0; ``w: (N,)`` float64 integer weights. ``fo = (XT, order, rank, ready)``: the forest's
+features presorted on first use (``order, rank: (D, N)`` int64 samples in ascending order of
+each feature and their ranks, ``ready: (D,)`` uint8). ``sc = (samples, fv, ws, wy, mark,
+tmp_s, tmp_v, features, constant)``: the splitter's ``samples: (N,)`` int64 (the node's at
+``[start, end)``), and scratch: ``fv: (N,)`` float32 the sorted values, ``ws, wy: (N,)``
+float64 their weights and class-1 weights, ``mark: (N,)`` uint8 zeros, ``tmp_s, tmp_v: (N +
+1,)``, and the persistent ``features, constant: (D,)`` int64. Splits are searched for binary
+nodes only (a node of one class has impurity 0 and is a leaf), so counts are scalars.
 """
 from __future__ import annotations
 
@@ -38,69 +43,105 @@ from numba import njit
 from relaff_jax.learn.compiled.rng import rand_int
 
 FEATURE_THRESHOLD = np.float32(1e-7)  # sklearn/tree/_partitioner.pxd
-INSERTION = 24  # segments up to this length are insertion-sorted
+SIGN = np.uint32(0x80000000)
 
 
 @njit(cache=True)
-def sort_segment(fv, samples, start, end):
-    """Sort ``fv[start:end]`` ascending, moving ``samples`` along (ties in any order)."""
+def presort(fo, j):
+    """Sort feature j of the forest once (``order[j]``, ``rank[j]``), on first use."""
+    XT, order, rank, ready = fo
+    if ready[j]:
+        return
+    n = XT.shape[1]
+    bits = XT[j].view(np.uint32)
+    keys = np.empty(n, np.int64)
+    for i in range(n):  # float32 order as unsigned keys, the sample in the low word
+        b = bits[i]
+        k = ~b if b & SIGN else b | SIGN
+        keys[i] = ((np.int64(k) - 0x80000000) << 32) | i  # high word signed: no overflow
+    keys.sort()
+    for r in range(n):
+        s = keys[r] & 0xFFFFFFFF
+        order[j, r] = s
+        rank[j, s] = r
+    ready[j] = 1
+
+
+@njit(cache=True)
+def sort_node(fo, sc, j, y1, w, start, end):
+    """``samples[start:end]`` in ascending order of feature j (ties in any order), with
+    ``fv``, ``ws``, ``wy`` along: insertion sort for small nodes, else read off the
+    forest's presorted order in O(N) without branches."""
+    XT, order, rank, ready = fo
+    samples, fv, ws, wy, mark, tmp_s, tmp_v = sc[0], sc[1], sc[2], sc[3], sc[4], sc[5], sc[6]
+    row = XT[j]
     m = end - start
-    if m <= INSERTION:
+    n = XT.shape[1]
+    if m <= 8 or m * m + 10 * m < 3 * n:
+        for p in range(start, end):
+            fv[p] = row[samples[p]]
         for i in range(start + 1, end):
             v = fv[i]
             s = samples[i]
-            j = i - 1
-            while j >= start and fv[j] > v:
-                fv[j + 1] = fv[j]
-                samples[j + 1] = samples[j]
-                j -= 1
-            fv[j + 1] = v
-            samples[j + 1] = s
-        return
-    order = np.argsort(fv[start:end])
-    v = fv[start:end].copy()
-    s = samples[start:end].copy()
-    for i in range(m):
-        fv[start + i] = v[order[i]]
-        samples[start + i] = s[order[i]]
+            k = i - 1
+            while k >= start and fv[k] > v:
+                fv[k + 1] = fv[k]
+                samples[k + 1] = samples[k]
+                k -= 1
+            fv[k + 1] = v
+            samples[k + 1] = s
+    else:
+        presort(fo, j)
+        oj = order[j]
+        rj = rank[j]
+        for p in range(start, end):
+            mark[rj[samples[p]]] = 1
+        k = start
+        for r in range(n):  # write every sample, advance past the node's own
+            s = oj[r]
+            tmp_s[k] = s
+            tmp_v[k] = row[s]
+            k += mark[r]
+            mark[r] = 0
+        for p in range(start, end):
+            samples[p] = tmp_s[p]
+            fv[p] = tmp_v[p]
+    for p in range(start, end):
+        s = samples[p]
+        ws[p] = w[s]
+        wy[p] = w[s] * y1[s]
 
 
 @njit(cache=True)
-def gini_pair(left, total, wl, wr):
-    """``children_impurity``: (impurity_left, impurity_right) for left counts ``left``."""
-    sql = 0.0
-    sqr = 0.0
-    for c in range(total.shape[0]):
-        cl = left[c]
-        sql += cl * cl
-        cr = total[c] - cl
-        sqr += cr * cr
+def gini_pair(l0, l1, t0, t1, wl, wr):
+    """``children_impurity`` for left class counts (l0, l1) of totals (t0, t1)."""
+    r0 = t0 - l0
+    r1 = t1 - l1
     gl = 0.0
-    gl += 1.0 - sql / (wl * wl)
+    gl += 1.0 - (l0 * l0 + l1 * l1) / (wl * wl)
     gr = 0.0
-    gr += 1.0 - sqr / (wr * wr)
+    gr += 1.0 - (r0 * r0 + r1 * r1) / (wr * wr)
     return gl / 1.0, gr / 1.0
 
 
 @njit(cache=True)
-def node_impurity(total, wn):
-    """``Gini.node_impurity`` of a node with class counts ``total`` and weight ``wn``."""
-    sq = 0.0
-    for c in range(total.shape[0]):
-        sq += total[c] * total[c]
+def node_impurity(t0, t1, wn):
+    """``Gini.node_impurity`` of a node with class counts (t0, t1) (t1 = 0 for one class)."""
     g = 0.0
-    g += 1.0 - sq / (wn * wn)
+    g += 1.0 - (t0 * t0 + t1 * t1) / (wn * wn)
     return g / 1.0
 
 
 @njit(cache=True)
-def best_split(XT, y, w, samples, fv, features, constant, left, total, start, end, wn, w_all,
-               impurity, n_known, max_features, min_leaf, state):
-    """``node_split_best`` on ``samples[start:end]`` (partitioned in place when a split is
-    found). Returns ``(pos, feature, threshold, impurity_left, impurity_right, improvement,
-    n_constant)``; ``pos == end`` when no split is valid."""
+def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, max_features, min_leaf,
+               state):
+    """``node_split_best`` on ``samples[start:end]`` of class-count totals (t0, t1) and
+    weight ``wn`` (``samples`` partitioned in place when a split is found). Returns ``(pos,
+    feature, threshold, impurity_left, impurity_right, improvement, n_constant)``; ``pos ==
+    end`` when no split is valid."""
+    XT = fo[0]
+    samples, fv, ws, wy, features, constant = sc[0], sc[1], sc[2], sc[3], sc[7], sc[8]
     n_features = XT.shape[0]
-    K = total.shape[0]
     best_pos = end
     best_feature = 0
     best_thr = 0.0
@@ -124,10 +165,7 @@ def best_split(XT, y, w, samples, fv, features, constant, left, total, start, en
             continue
         f_j += n_found
         feat = features[f_j]
-        row = XT[feat]
-        for p in range(start, end):
-            fv[p] = row[samples[p]]
-        sort_segment(fv, samples, start, end)
+        sort_node(fo, sc, feat, y1, w, start, end)
         if fv[end - 1] <= fv[start] + FEATURE_THRESHOLD:
             features[f_j] = features[n_total]
             features[n_total] = feat
@@ -138,32 +176,24 @@ def best_split(XT, y, w, samples, fv, features, constant, left, total, start, en
         t = features[f_i]
         features[f_i] = features[f_j]
         features[f_j] = t
-        for c in range(K):
-            left[c] = 0.0
         wl = 0.0
-        pos = start  # the criterion's position: samples [start, pos) are in left
-        p = start
-        while p < end:
-            p += 1
-            while p < end and fv[p] <= fv[p - 1] + FEATURE_THRESHOLD:
-                p += 1
-            if p == end:
+        l1 = 0.0
+        for i in range(start, end - 1):  # candidate p = i + 1: positions not tied with p - 1
+            wl += ws[i]
+            l1 += wy[i]
+            p = i + 1
+            if fv[p] <= fv[i] + FEATURE_THRESHOLD:
                 continue
             if p - start < min_leaf or end - p < min_leaf:
                 continue
-            for q in range(pos, p):
-                s = samples[q]
-                left[y[s]] += w[s]
-                wl += w[s]
-            pos = p
             wr = wn - wl
-            gl, gr = gini_pair(left, total, wl, wr)
+            gl, gr = gini_pair(wl - l1, l1, t0, t1, wl, wr)
             proxy = -wr * gr - wl * gl
             if proxy > best_proxy:
                 best_proxy = proxy
                 best_pos = p
                 best_feature = feat
-                best_thr = fv[p - 1] / 2.0 + fv[p] / 2.0
+                best_thr = fv[i] / 2.0 + fv[p] / 2.0
     if best_pos < end:
         row = XT[best_feature]
         a = start
@@ -176,15 +206,14 @@ def best_split(XT, y, w, samples, fv, features, constant, left, total, start, en
                 t = samples[a]
                 samples[a] = samples[b]
                 samples[b] = t
-        for c in range(K):
-            left[c] = 0.0
         wl = 0.0
+        l1 = 0.0
         for q in range(start, best_pos):
             s = samples[q]
-            left[y[s]] += w[s]
             wl += w[s]
+            l1 += w[s] * y1[s]
         wr = wn - wl
-        imp_l, imp_r = gini_pair(left, total, wl, wr)
+        imp_l, imp_r = gini_pair(wl - l1, l1, t0, t1, wl, wr)
         improvement = (wn / w_all) * (impurity - (wr / wn * imp_r) - (wl / wn * imp_l))
     for i in range(n_known):
         features[i] = constant[i]
