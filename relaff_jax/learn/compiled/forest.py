@@ -52,16 +52,41 @@ class Forest:
 
 
 _KERNELS: dict = {}  # numba is imported (and the kernels loaded or compiled) on first use
+SOURCES = ("rng.py", "split.py", "build.py", "evaluate.py")
 
 
 def kernels() -> dict:
-    """The compiled kernels, imported on first call. numba compiles them then (~10-20 s) or
-    loads them from its on-disk cache (``cache=True``, next to the sources)."""
+    """The compiled kernels, imported on first call: numba compiles them then (~30-40 s on
+    two shared cores) or loads them from its on-disk cache (``cache=True``, in
+    ``__pycache__`` next to the sources, or ``NUMBA_CACHE_DIR``). numba keys a function's
+    cache on its own file only, and the kernels call across files, so a stamp of all four
+    sources clears the cache when any of them changed (a development concern only)."""
     if not _KERNELS:
+        _clear_stale_cache()
         from relaff_jax.learn.compiled import build, evaluate
 
-        _KERNELS.update(build_forests=build.build_forests, votes=evaluate.votes, proba=evaluate.proba)
+        _KERNELS.update(build_forests=build.build_forests, forest_sums=evaluate.forest_sums,
+                        block_codes=evaluate.block_codes)
     return _KERNELS
+
+
+def _clear_stale_cache() -> None:
+    import hashlib
+    from pathlib import Path
+
+    here = Path(__file__).parent
+    cache = here / "__pycache__"
+    digest = hashlib.sha256(b"".join((here / f).read_bytes() for f in SOURCES)).hexdigest()
+    stamp = cache / "compiled.stamp"
+    try:
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+        for f in cache.glob("*.nb[ci]"):
+            f.unlink()
+        cache.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:  # a read-only install: its sources do not change either
+        pass
 
 
 def _settings(cfg: ForestConfig, n: int) -> tuple[int, int, int]:
@@ -131,3 +156,54 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
 def fit(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig()) -> Forest:
     """One forest (``fit_many`` of one)."""
     return fit_many([X], [y], [seed], cfg)[0]
+
+
+def _columns(X: np.ndarray, n_features: int) -> np.ndarray:
+    X = np.asarray(X, dtype=np.float32)
+    if X.ndim != 2 or X.shape[1] != n_features:
+        raise ValueError(f"X must be (N, {n_features}), got {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError("predict_class: X contains NaN or inf")
+    return np.ascontiguousarray(X.T)
+
+
+def predict_proba(forest: Forest, X: np.ndarray) -> np.ndarray:
+    """``(N, K)`` float64, bit-identical to ``RandomForestClassifier.predict_proba``; ``X: (N, D)``."""
+    ZT = _columns(X, forest.n_features)
+    s = kernels()["forest_sums"](forest.feature, forest.threshold, forest.left, forest.right,
+                                 _value2(forest), forest.tree_start, ZT, np.arange(forest.n_features))
+    return s[:, : len(forest.classes)] / forest.n_trees
+
+
+def predict_labels(forest: Forest, X: np.ndarray) -> np.ndarray:
+    """Predicted labels ``(N,)`` (the training labels' dtype), as ``predict``."""
+    return forest.classes.take(np.argmax(predict_proba(forest, X), axis=1), axis=0)
+
+
+def predict_block(forests: Sequence[Forest], ZT: np.ndarray, colmaps: Sequence[np.ndarray]) -> np.ndarray:
+    """Predicted labels ``(F, N)`` of F forests on the N columns of ``ZT: (Dz, N)`` float32
+    (finite where referenced); ``colmaps[f]: (D_f,)`` forest f's features as rows of ``ZT``.
+    One kernel call; the same labels as each forest's ``predict``."""
+    ZT = np.ascontiguousarray(ZT, dtype=np.float32)
+    if not forests:
+        return np.zeros((0, ZT.shape[1]))
+    counts = np.asarray([f.n_trees for f in forests])
+    sizes = np.asarray([len(f.feature) for f in forests])
+    node0 = np.concatenate([[0], np.cumsum(sizes)])
+    tree_start = np.concatenate([forests[0].tree_start[:1]] + [f.tree_start[1:] + o for f, o in zip(forests, node0)])
+    cm = [np.asarray(c, dtype=np.int64) for c in colmaps]
+    codes = kernels()["block_codes"](
+        np.concatenate([f.feature for f in forests]), np.concatenate([f.threshold for f in forests]),
+        np.concatenate([f.left for f in forests]), np.concatenate([f.right for f in forests]),
+        np.concatenate([_value2(f) for f in forests]), tree_start.astype(np.int64),
+        np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+        np.asarray([len(f.classes) for f in forests], np.int64), np.concatenate(cm),
+        np.concatenate([[0], np.cumsum([len(c) for c in cm])]).astype(np.int64), ZT)
+    return np.stack([f.classes.take(c.astype(np.intp) if len(f.classes) > 1 else np.zeros(len(c), np.intp))
+                     for f, c in zip(forests, codes)])
+
+
+def _value2(forest: Forest) -> np.ndarray:
+    """``value`` as ``(M, 2)`` (a forest of one class gets a zero second column)."""
+    v = forest.value
+    return v if v.shape[1] == 2 else np.concatenate([v, np.zeros_like(v)], axis=1)
