@@ -108,8 +108,22 @@ def build_tree(fo, sc, stk_i, stk_f, y1, w, K, max_features, min_leaf, min_split
 
 
 @njit(cache=True)
-def _grow(a, size):
-    b = np.empty((size,) + a.shape[1:], a.dtype)
+def _grow_i(a, size):
+    b = np.empty(size, np.int32)
+    b[: a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def _grow_f(a, size):
+    b = np.empty(size, np.float64)
+    b[: a.shape[0]] = a
+    return b
+
+
+@njit(cache=True)
+def _grow_v(a, size):
+    b = np.zeros((size, 2), np.float64)
     b[: a.shape[0]] = a
     return b
 
@@ -135,8 +149,8 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
     right_o = np.empty(cap, np.int32)
     value_o = np.zeros((cap, 2), np.float64)
     tree_start = np.zeros(n_trees.sum() + 1, np.int64)
-    order_all = np.empty((d_max, n_max), np.int64)
-    rank_all = np.empty((d_max, n_max), np.int64)
+    order_all = np.empty(d_max * n_max, np.int64)
+    rank_all = np.empty(d_max * n_max, np.int64)
     ready = np.zeros(d_max, np.uint8)
     sc = (np.empty(n_max, np.int64), np.empty(n_max, np.float32), np.empty(n_max, np.float64),
           np.empty(n_max, np.float64), np.zeros(n_max, np.uint8), np.empty(n_max + 1, np.int64),
@@ -161,7 +175,7 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
         y0 += n
         rf = ready[:d]
         rf[:] = 0
-        fo = (XT, order_all[:d, :n], rank_all[:d, :n], rf)
+        fo = (XT, order_all[: d * n].reshape(d, n), rank_all[: d * n].reshape(d, n), rf)  # C-contiguous
         scf = (sc[0][:n], sc[1][:n], sc[2][:n], sc[3][:n], sc[4][:n], sc[5][: n + 1], sc[6][: n + 1],
                sc[7][:d], sc[8][:d])
         mt_seed(mt, seeds[f])
@@ -187,8 +201,8 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
             need = used + 2 * m - 1
             if need > feature_o.shape[0]:
                 size = max(need, 2 * feature_o.shape[0])
-                feature_o, thr_o = _grow(feature_o, size), _grow(thr_o, size)
-                left_o, right_o, value_o = _grow(left_o, size), _grow(right_o, size), _grow(value_o, size)
+                feature_o, left_o, right_o = _grow_i(feature_o, size), _grow_i(left_o, size), _grow_i(right_o, size)
+                thr_o, value_o = _grow_f(thr_o, size), _grow_v(value_o, size)
             out = (feature_o, thr_o, left_o, right_o, value_o)
             used += build_tree(fo, scf, stk_i, stk_f, yf, wt, K, max_features[f], min_leaf, min_split, max_depth,
                                state, out, used)
