@@ -5,8 +5,8 @@ scikit-learn sends a row left at a node when ``x <= threshold`` (float32 ``x`` p
 float64, ``Tree.apply``), adds each tree's leaf value (class fractions) into float64 zeros
 in tree order, divides by T (``ForestClassifier.predict_proba``) and predicts the class of
 the first maximum. ``forest_sums`` does the same additions in the same order (the division
-is left to the caller), so the probabilities are bit-identical; ``block_codes`` turns them
-into class codes (class 1 iff ``s1 / T > s0 / T``) for many forests on shared columns.
+is left to the caller), so the probabilities are bit-identical; ``block_sums`` gives them
+for many forests on shared columns in one call.
 
 A tree's exit leaf for all rows is found QuickScorer-style when it has <= 64 leaves: leaves
 are numbered left to right (node ids are depth-first preorder, left first, so a node's left
@@ -110,25 +110,18 @@ def forest_sums(feature, threshold, left, right, value, tree_start, ZT, colmap):
 
 
 @njit(cache=True)
-def block_codes(feature, threshold, left, right, value, tree_start, forest_trees, n_classes, colmaps,
-                colmap_start, ZT):
-    """Class codes ``(F, N)`` int8 of F forests: forest f's trees are ``forest_trees[f]:
-    forest_trees[f + 1]`` of ``tree_start`` (node ids global over the block), its features
-    ``colmaps[colmap_start[f]:colmap_start[f + 1]]``; code 1 iff ``s1 / T > s0 / T``."""
+def block_sums(feature, threshold, left, right, value, tree_start, forest_trees, colmaps, colmap_start, ZT):
+    """``(F, N, 2)`` leaf-value sums (``forest_sums``) of F forests: forest f's trees are
+    ``forest_trees[f]:forest_trees[f + 1]`` of ``tree_start`` (node ids global over the
+    block), its features ``colmaps[colmap_start[f]:colmap_start[f + 1]]``. The class code
+    is 1 iff ``s1 / T > s0 / T`` (numpy's first maximum of ``predict_proba``)."""
     F = forest_trees.shape[0] - 1
-    n = ZT.shape[1]
-    codes = np.zeros((F, n), np.int8)
+    out = np.empty((F, ZT.shape[1], 2), np.float64)
     for f in range(F):
-        if n_classes[f] < 2:
-            continue
         t0 = forest_trees[f]
         t1 = forest_trees[f + 1]
         a = tree_start[t0]
-        ts = tree_start[t0: t1 + 1] - a
         b = tree_start[t1]
-        s = forest_sums(feature[a:b], threshold[a:b], left[a:b], right[a:b], value[a:b], ts, ZT,
-                        colmaps[colmap_start[f]: colmap_start[f + 1]])
-        T = np.float64(t1 - t0)
-        for r in range(n):
-            codes[f, r] = 1 if s[r, 1] / T > s[r, 0] / T else 0
-    return codes
+        out[f] = forest_sums(feature[a:b], threshold[a:b], left[a:b], right[a:b], value[a:b],
+                             tree_start[t0: t1 + 1] - a, ZT, colmaps[colmap_start[f]: colmap_start[f + 1]])
+    return out

@@ -65,8 +65,7 @@ def kernels() -> dict:
         _clear_stale_cache()
         from relaff_jax.learn.compiled import build, evaluate
 
-        _KERNELS.update(build_forests=build.build_forests, forest_sums=evaluate.forest_sums,
-                        block_codes=evaluate.block_codes)
+        _KERNELS.update(build_forests=build.build_forests, block_sums=evaluate.block_sums)
     return _KERNELS
 
 
@@ -169,9 +168,7 @@ def _columns(X: np.ndarray, n_features: int) -> np.ndarray:
 
 def predict_proba(forest: Forest, X: np.ndarray) -> np.ndarray:
     """``(N, K)`` float64, bit-identical to ``RandomForestClassifier.predict_proba``; ``X: (N, D)``."""
-    ZT = _columns(X, forest.n_features)
-    s = kernels()["forest_sums"](forest.feature, forest.threshold, forest.left, forest.right,
-                                 _value2(forest), forest.tree_start, ZT, np.arange(forest.n_features))
+    s = _sums([forest], _columns(X, forest.n_features), [np.arange(forest.n_features)])[0]
     return s[:, : len(forest.classes)] / forest.n_trees
 
 
@@ -187,20 +184,27 @@ def predict_block(forests: Sequence[Forest], ZT: np.ndarray, colmaps: Sequence[n
     ZT = np.ascontiguousarray(ZT, dtype=np.float32)
     if not forests:
         return np.zeros((0, ZT.shape[1]))
+    s = _sums(forests, ZT, colmaps)
+    out = []
+    for f, sf in zip(forests, s):
+        T = float(f.n_trees)
+        code = (sf[:, 1] / T > sf[:, 0] / T) if len(f.classes) > 1 else np.zeros(len(sf), bool)
+        out.append(f.classes.take(code.astype(np.intp)))
+    return np.stack(out)
+
+
+def _sums(forests: Sequence[Forest], ZT: np.ndarray, colmaps: Sequence[np.ndarray]) -> np.ndarray:
+    """``(F, N, 2)`` per-forest leaf-value sums in tree order (``evaluate.block_sums``)."""
     counts = np.asarray([f.n_trees for f in forests])
-    sizes = np.asarray([len(f.feature) for f in forests])
-    node0 = np.concatenate([[0], np.cumsum(sizes)])
+    node0 = np.concatenate([[0], np.cumsum([len(f.feature) for f in forests])])
     tree_start = np.concatenate([forests[0].tree_start[:1]] + [f.tree_start[1:] + o for f, o in zip(forests, node0)])
     cm = [np.asarray(c, dtype=np.int64) for c in colmaps]
-    codes = kernels()["block_codes"](
+    return kernels()["block_sums"](
         np.concatenate([f.feature for f in forests]), np.concatenate([f.threshold for f in forests]),
         np.concatenate([f.left for f in forests]), np.concatenate([f.right for f in forests]),
         np.concatenate([_value2(f) for f in forests]), tree_start.astype(np.int64),
-        np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
-        np.asarray([len(f.classes) for f in forests], np.int64), np.concatenate(cm),
+        np.concatenate([[0], np.cumsum(counts)]).astype(np.int64), np.concatenate(cm),
         np.concatenate([[0], np.cumsum([len(c) for c in cm])]).astype(np.int64), ZT)
-    return np.stack([f.classes.take(c.astype(np.intp) if len(f.classes) > 1 else np.zeros(len(c), np.intp))
-                     for f, c in zip(forests, codes)])
 
 
 def _value2(forest: Forest) -> np.ndarray:
