@@ -42,19 +42,30 @@ CTZ = _debruijn_table()  # index of the lowest set bit of b: CTZ[((b & -b) * DEB
 
 
 @njit(cache=True)
-def tree_exits(feature, threshold, left, right, a, b, ZT, colmap, alive, rank, leaf_of, exits):
-    """Exit leaf (global node id) of every row for the tree of nodes ``[a, b)``, into
-    ``exits: (N,)``. Scratch: ``alive: (N,)`` uint64, ``rank, leaf_of: (M_t,)`` int64."""
+def add_tree(feature, threshold, left, right, value, a, b, ZT, colmap, alive, rank, leaf_of, out):
+    """Add the leaf value of every row's exit leaf, for the tree of nodes ``[a, b)``, to
+    ``out: (2, N)``. Scratch: ``alive: (N,)`` uint64, ``rank, leaf_of: (M_t,)`` int64. A tree
+    whose leaves are all pure (values exactly (1, 0) or (0, 1)) adds 1.0 to one column from
+    its exit bit alone (the same float64 additions without looking the leaf up)."""
     n = ZT.shape[1]
     n_leaves = 0
+    pure = True
+    ones = np.uint64(0)
     for i in range(a, b):
         rank[i - a] = n_leaves
         if left[i] == -1:
             leaf_of[n_leaves] = i
+            v0, v1 = value[i, 0], value[i, 1]
+            if v0 == 0.0 and v1 == 1.0:
+                if n_leaves < WIDTH:
+                    ones |= ONE << np.uint64(n_leaves)
+            elif not (v0 == 1.0 and v1 == 0.0):
+                pure = False
             n_leaves += 1
     if n_leaves == 1:
         for r in range(n):
-            exits[r] = a
+            out[0, r] += value[a, 0]
+            out[1, r] += value[a, 1]
         return
     if n_leaves <= WIDTH:
         for r in range(n):
@@ -63,18 +74,24 @@ def tree_exits(feature, threshold, left, right, a, b, ZT, colmap, alive, rank, l
             if left[i] == -1:
                 continue
             lo = np.uint64(rank[left[i]])
-            hi = np.uint64(rank[right[i]])
-            clear = ((ONE << hi) - ONE) if hi < np.uint64(64) else FULL
-            clear ^= (ONE << lo) - ONE
-            m = ~clear
+            hi = np.uint64(rank[right[i]])  # < 64: the right subtree holds a leaf
+            m = ~(((ONE << hi) - ONE) ^ ((ONE << lo) - ONE))
             row = ZT[colmap[feature[i]]]
             t = threshold[i]
             for r in range(n):
                 alive[r] &= m if np.float64(row[r]) > t else FULL
+        if pure:
+            for r in range(n):
+                v = alive[r]
+                c1 = (v & (~v + ONE) & ones) != np.uint64(0)
+                out[0, r] += 0.0 if c1 else 1.0
+                out[1, r] += 1.0 if c1 else 0.0
+            return
         for r in range(n):
             v = alive[r]
-            low = v & (~v + ONE)
-            exits[r] = leaf_of[CTZ[(low * DEBRUIJN) >> SHIFT]]
+            leaf = leaf_of[CTZ[((v & (~v + ONE)) * DEBRUIJN) >> SHIFT]]
+            out[0, r] += value[leaf, 0]
+            out[1, r] += value[leaf, 1]
         return
     for r in range(n):
         node = a
@@ -83,40 +100,36 @@ def tree_exits(feature, threshold, left, right, a, b, ZT, colmap, alive, rank, l
                 node = a + left[node]
             else:
                 node = a + right[node]
-        exits[r] = node
+        out[0, r] += value[node, 0]
+        out[1, r] += value[node, 1]
 
 
 @njit(cache=True)
 def forest_sums(feature, threshold, left, right, value, tree_start, ZT, colmap):
-    """``(N, 2)`` float64 sums of the trees' leaf values in tree order (divide by T for
-    ``predict_proba``)."""
+    """``(2, N)`` float64 sums of the trees' leaf values in tree order, class by row
+    (divide by T for ``predict_proba``)."""
     n = ZT.shape[1]
-    out = np.zeros((n, 2), np.float64)
+    out = np.zeros((2, n), np.float64)
     big = 1
     for t in range(tree_start.shape[0] - 1):
         big = max(big, tree_start[t + 1] - tree_start[t])
     alive = np.empty(n, np.uint64)
     rank = np.empty(big, np.int64)
     leaf_of = np.empty(big, np.int64)
-    exits = np.empty(n, np.int64)
     for t in range(tree_start.shape[0] - 1):
-        a = tree_start[t]
-        b = tree_start[t + 1]
-        tree_exits(feature, threshold, left, right, a, b, ZT, colmap, alive, rank, leaf_of, exits)
-        for r in range(n):
-            out[r, 0] += value[exits[r], 0]
-            out[r, 1] += value[exits[r], 1]
+        add_tree(feature, threshold, left, right, value, tree_start[t], tree_start[t + 1], ZT, colmap, alive, rank,
+                 leaf_of, out)
     return out
 
 
 @njit(cache=True)
 def block_sums(feature, threshold, left, right, value, tree_start, forest_trees, colmaps, colmap_start, ZT):
-    """``(F, N, 2)`` leaf-value sums (``forest_sums``) of F forests: forest f's trees are
+    """``(F, 2, N)`` leaf-value sums (``forest_sums``) of F forests: forest f's trees are
     ``forest_trees[f]:forest_trees[f + 1]`` of ``tree_start`` (node ids global over the
     block), its features ``colmaps[colmap_start[f]:colmap_start[f + 1]]``. The class code
     is 1 iff ``s1 / T > s0 / T`` (numpy's first maximum of ``predict_proba``)."""
     F = forest_trees.shape[0] - 1
-    out = np.empty((F, ZT.shape[1], 2), np.float64)
+    out = np.empty((F, 2, ZT.shape[1]), np.float64)
     for f in range(F):
         t0 = forest_trees[f]
         t1 = forest_trees[f + 1]

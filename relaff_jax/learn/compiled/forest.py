@@ -169,7 +169,7 @@ def _columns(X: np.ndarray, n_features: int) -> np.ndarray:
 def predict_proba(forest: Forest, X: np.ndarray) -> np.ndarray:
     """``(N, K)`` float64, bit-identical to ``RandomForestClassifier.predict_proba``; ``X: (N, D)``."""
     s = _sums([forest], _columns(X, forest.n_features), [np.arange(forest.n_features)])[0]
-    return s[:, : len(forest.classes)] / forest.n_trees
+    return s[: len(forest.classes)].T / forest.n_trees
 
 
 def predict_labels(forest: Forest, X: np.ndarray) -> np.ndarray:
@@ -188,13 +188,13 @@ def predict_block(forests: Sequence[Forest], ZT: np.ndarray, colmaps: Sequence[n
     out = []
     for f, sf in zip(forests, s):
         T = float(f.n_trees)
-        code = (sf[:, 1] / T > sf[:, 0] / T) if len(f.classes) > 1 else np.zeros(len(sf), bool)
+        code = (sf[1] / T > sf[0] / T) if len(f.classes) > 1 else np.zeros(sf.shape[1], bool)
         out.append(f.classes.take(code.astype(np.intp)))
     return np.stack(out)
 
 
 def _sums(forests: Sequence[Forest], ZT: np.ndarray, colmaps: Sequence[np.ndarray]) -> np.ndarray:
-    """``(F, N, 2)`` per-forest leaf-value sums in tree order (``evaluate.block_sums``)."""
+    """``(F, 2, N)`` per-forest leaf-value sums in tree order (``evaluate.block_sums``)."""
     counts = np.asarray([f.n_trees for f in forests])
     node0 = np.concatenate([[0], np.cumsum([len(f.feature) for f in forests])])
     tree_start = np.concatenate([forests[0].tree_start[:1]] + [f.tree_start[1:] + o for f, o in zip(forests, node0)])
