@@ -36,7 +36,7 @@ def build_tree(fo, sc, stk_i, stk_f, y1, w, K, max_features, min_leaf, min_split
     """One tree on the forest ``fo`` (``split.py``) with weights ``w: (N,)``; nodes written
     to ``out = (feature, threshold, left, right, value)`` from ``base``. ``stk_i: (N + 2, 6)``
     int64 and ``stk_f: (N + 2,)`` float64 are the stack. Returns the tree's node count."""
-    samples, features = sc[0], sc[7]
+    samples, features = sc[0], sc[5]
     feature_o, thr_o, left_o, right_o, value_o = out
     n = y1.shape[0]
     m = 0
@@ -153,8 +153,8 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
     rank_all = np.empty(d_max * n_max, np.int64)
     ready = np.zeros(d_max, np.uint8)
     sc = (np.empty(n_max, np.int64), np.empty(n_max, np.float32), np.empty(n_max, np.float64),
-          np.empty(n_max, np.float64), np.zeros(n_max, np.uint8), np.empty(n_max + 1, np.int64),
-          np.empty(n_max + 1, np.float32), np.empty(d_max, np.int64), np.empty(d_max, np.int64))
+          np.empty(n_max, np.float64), np.zeros((n_max + 63) // 64, np.uint64), np.empty(d_max, np.int64),
+          np.empty(d_max, np.int64))
     stk_i = np.empty((n_max + 2, 6), np.int64)
     stk_f = np.empty(n_max + 2, np.float64)
     mt = np.zeros(625, np.int64)
@@ -176,8 +176,7 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
         rf = ready[:d]
         rf[:] = 0
         fo = (XT, order_all[: d * n].reshape(d, n), rank_all[: d * n].reshape(d, n), rf)  # C-contiguous
-        scf = (sc[0][:n], sc[1][:n], sc[2][:n], sc[3][:n], sc[4][:n], sc[5][: n + 1], sc[6][: n + 1],
-               sc[7][:d], sc[8][:d])
+        scf = (sc[0][:n], sc[1][:n], sc[2][:n], sc[3][:n], sc[4][: (n + 63) // 64], sc[5][:d], sc[6][:d])
         mt_seed(mt, seeds[f])
         for t in range(n_trees[f]):  # _set_random_states: one draw per tree
             tree_seeds[t] = randint(mt, 0, MAX_INT)

@@ -28,11 +28,11 @@ and the ``rand_r`` state carry from node to node.
 Arrays: ``XT: (D, N)`` float32 features by row; ``y1: (N,)`` float64 1.0 for class 1, else
 0.0; ``w: (N,)`` float64 integer weights. ``fo = (XT, order, rank, ready)``: the forest's
 features presorted on first use (``order, rank: (D, N)`` int64 samples in ascending order of
-each feature and their ranks, ``ready: (D,)`` uint8). ``sc = (samples, fv, ws, wy, mark,
-tmp_s, tmp_v, features, constant)``: the splitter's ``samples: (N,)`` int64 (the node's at
+each feature and their ranks, ``ready: (D,)`` uint8). ``sc = (samples, fv, ws, wy, bm,
+features, constant)``: the splitter's ``samples: (N,)`` int64 (the node's at
 ``[start, end)``), and scratch: ``fv: (N,)`` float32 the sorted values, ``ws, wy: (N,)``
-float64 their weights and class-1 weights, ``mark: (N,)`` uint8 zeros, ``tmp_s, tmp_v: (N +
-1,)``, and the persistent ``features, constant: (D,)`` int64. Splits are searched for binary
+float64 their weights and class-1 weights, ``bm: (ceil(N / 64),)`` uint64 zeros, and the
+persistent ``features, constant: (D,)`` int64. Splits are searched for binary
 nodes only (a node of one class has impurity 0 and is a leaf), so counts are scalars.
 """
 from __future__ import annotations
@@ -43,6 +43,13 @@ from numba import njit
 from relaff_jax.learn.compiled.rng import rand_int
 
 FEATURE_THRESHOLD = np.float32(1e-7)  # sklearn/tree/_partitioner.pxd
+INSERTION = 12  # nodes up to this size are insertion-sorted
+ONE = np.uint64(1)
+DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
+SHIFT = np.uint64(58)
+CTZ = np.zeros(64, np.int64)  # index of the lowest set bit b: CTZ[(b * DEBRUIJN) >> 58]
+for _i in range(64):
+    CTZ[((int(DEBRUIJN) << _i) & 0xFFFFFFFFFFFFFFFF) >> 58] = _i
 SIGN = np.uint32(0x80000000)
 
 
@@ -70,14 +77,14 @@ def presort(fo, j):
 @njit(cache=True)
 def sort_node(fo, sc, j, y1, w, start, end):
     """``samples[start:end]`` in ascending order of feature j (ties in any order), with
-    ``fv``, ``ws``, ``wy`` along: insertion sort for small nodes, else read off the
-    forest's presorted order in O(N) without branches."""
+    ``fv``, ``ws``, ``wy`` along: insertion sort for small nodes; else the node's ranks in
+    the forest's presorted order are set in a bitmap and read back in order (lowest set bit
+    first), O(m + N / 64)."""
     XT, order, rank, ready = fo
-    samples, fv, ws, wy, mark, tmp_s, tmp_v = sc[0], sc[1], sc[2], sc[3], sc[4], sc[5], sc[6]
+    samples, fv, ws, wy, bm = sc[0], sc[1], sc[2], sc[3], sc[4]
     row = XT[j]
     m = end - start
-    n = XT.shape[1]
-    if m <= 8 or m * m + 10 * m < 3 * n:
+    if m <= INSERTION:
         for p in range(start, end):
             fv[p] = row[samples[p]]
         for i in range(start + 1, end):
@@ -95,17 +102,19 @@ def sort_node(fo, sc, j, y1, w, start, end):
         oj = order[j]
         rj = rank[j]
         for p in range(start, end):
-            mark[rj[samples[p]]] = 1
+            r = rj[samples[p]]
+            bm[r >> 6] |= ONE << np.uint64(r & 63)
         k = start
-        for r in range(n):  # write every sample, advance past the node's own
-            s = oj[r]
-            tmp_s[k] = s
-            tmp_v[k] = row[s]
-            k += mark[r]
-            mark[r] = 0
-        for p in range(start, end):
-            samples[p] = tmp_s[p]
-            fv[p] = tmp_v[p]
+        for wi in range(bm.shape[0]):
+            v = bm[wi]
+            bm[wi] = np.uint64(0)
+            while v != np.uint64(0):
+                low = v & (~v + ONE)
+                s = oj[wi * 64 + CTZ[(low * DEBRUIJN) >> SHIFT]]
+                samples[k] = s
+                fv[k] = row[s]
+                k += 1
+                v ^= low
     for p in range(start, end):
         s = samples[p]
         ws[p] = w[s]
@@ -140,7 +149,7 @@ def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
     feature, threshold, impurity_left, impurity_right, improvement, n_constant)``; ``pos ==
     end`` when no split is valid."""
     XT = fo[0]
-    samples, fv, ws, wy, features, constant = sc[0], sc[1], sc[2], sc[3], sc[7], sc[8]
+    samples, fv, ws, wy, features, constant = sc[0], sc[1], sc[2], sc[3], sc[5], sc[6]
     n_features = XT.shape[0]
     best_pos = end
     best_feature = 0
