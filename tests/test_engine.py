@@ -102,13 +102,21 @@ def _test_rows(X, forest_trees, m, seed):
 
 
 def _same_trees(forest, estimators):
-    """A compiled ``Forest``'s trees equal the estimators' ``tree_`` arrays."""
-    assert forest.n_trees == len(estimators)
-    for t, e in enumerate(estimators):
-        got = forest.tree(t)
-        assert got["node_count"] == e.tree_.node_count
-        for k in ("feature", "threshold", "children_left", "children_right", "value"):
-            np.testing.assert_array_equal(got[k], getattr(e.tree_, k), err_msg=f"tree {t}: {k}")
+    """A compiled ``Forest``'s trees equal the estimators' ``tree_`` arrays (compared for
+    the whole forest at once; tree by tree when they differ, to name the first)."""
+    trees = [e.tree_ for e in estimators]
+    assert forest.n_trees == len(trees)
+    np.testing.assert_array_equal(np.diff(forest.tree_start), [t.node_count for t in trees])
+    cat = {k: np.concatenate([getattr(t, k) for t in trees]) for k in ("feature", "threshold", "children_left",
+                                                                       "children_right", "value")}
+    got = {"feature": forest.feature, "threshold": forest.threshold, "children_left": forest.left,
+           "children_right": forest.right, "value": forest.value[:, None, :]}
+    if all(np.array_equal(got[k], cat[k]) for k in cat):
+        return
+    for t, tree in enumerate(trees):
+        mine = forest.tree(t)
+        for k in cat:
+            np.testing.assert_array_equal(mine[k], getattr(tree, k), err_msg=f"tree {t}: {k}")
 
 
 def _check(X, y, seed, cfg=L.ForestConfig(), m=300):
@@ -132,9 +140,7 @@ def _check(X, y, seed, cfg=L.ForestConfig(), m=300):
     np.testing.assert_array_equal(predict_labels(fast, Xt), labels)
     np.testing.assert_array_equal(predict_block([fast], Xt.T, [np.arange(X.shape[1])])[0], labels)
     np.testing.assert_array_equal(engine.predict(fast, Xt), labels.astype(np.float32))
-    np.testing.assert_array_equal(compiled.predict_labels(comp, Xt), labels)
-    np.testing.assert_array_equal(compiled.predict_block([comp], Xt.T, [np.arange(X.shape[1])])[0], labels)
-    np.testing.assert_array_equal(engine.predict(comp, Xt), labels.astype(np.float32))
+    np.testing.assert_array_equal(engine.predict(comp, Xt), labels.astype(np.float32))  # compiled.predict_block
     return fast
 
 
@@ -287,5 +293,6 @@ def test_compiled_many_forests_per_call_and_large_trees():
     assert leaves.max() > 64
     Xt = rng.normal(size=(500, 6)).astype(np.float32)
     assert np.array_equal(compiled.predict_proba(comp, Xt), ref.predict_proba(Xt))
+    np.testing.assert_array_equal(compiled.predict_labels(comp, Xt), ref.predict(Xt))
     got = engine.predict_many([comp, compiled.fit(X[:30], y[:30], 4)], Xt.T, [np.arange(6)] * 2)
     np.testing.assert_array_equal(got[0], ref.predict(Xt).astype(np.float32))

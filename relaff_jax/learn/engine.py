@@ -76,7 +76,12 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
 def predict(forest, X: np.ndarray) -> np.ndarray:
     """Predicted class as 0/1 float32 ``(N,)`` of one forest from ``fit``."""
     if isinstance(forest, compiled.Forest):
-        return compiled.predict_labels(forest, X).astype(np.float32)
+        X = np.asarray(X, dtype=np.float32)
+        if X.ndim != 2 or X.shape[1] != forest.n_features:
+            raise ValueError(f"X must be (N, {forest.n_features}), got {X.shape}")
+        if not np.all(np.isfinite(X)):
+            raise ValueError("predict_class: X contains NaN or inf")
+        return compiled.predict_block([forest], X.T, [np.arange(forest.n_features)])[0].astype(np.float32)
     if not isinstance(forest, Trees):
         return predict_class(forest, X)
     X = np.asarray(X, dtype=np.float32)
