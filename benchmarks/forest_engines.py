@@ -11,7 +11,7 @@ Each engine is timed in ``--rounds`` interleaved rounds and its best round is ke
 machine may be shared: the ratios come from the same run); the engines' predictions are
 checked equal. The compiled kernels are compiled (or loaded from numba's cache) before timing.
 
-    PYTHONPATH=. python benchmarks/forest_engines.py [--forests 128] [--rounds 3] [--sizes 25 100]
+    PYTHONPATH=. python benchmarks/forest_engines.py [--forests 128] [--rounds 3] [--sizes 25 100] [--learner nb]
 
 The last line is ``forest_speedup=<compiled / fast per forest, fit + evaluation, n = 25, PCA>``.
 """
@@ -32,11 +32,12 @@ DIMS = {"pca": 18, "rhf": 318}
 ENGINES = ("compiled", "fast", "sklearn")
 
 
-def inputs(space: str, n: int, k: int, seed: int = 0):
-    """k learners at size n: (fits [(X, y, seed)], ZT (D0 + k, 4000), colmaps)."""
+def inputs(space: str, n: int, k: int, seed: int = 0, learner: str = "db1"):
+    """k learners at size n: (fits [(X, y, seed)], ZT (D0 + k, 4000), colmaps); ``nb``: the
+    state alone (18 or 318 columns)."""
     rng = np.random.default_rng(seed)
     cfg = L.ExperimentConfig()
-    rep = cfg.repeats(space)
+    rep = cfg.repeats(space) if learner == "db1" else 0
     m = 4000 + n
     X = rng.normal(size=(m, DIMS[space])).astype(np.float32)
     y = X[:, 0] + X[:, 1] > 0
@@ -66,9 +67,9 @@ def time_engine(engine: str, fits, ZT, maps, chunk: int = 256) -> tuple[float, f
     return t_fit, t_eval, np.concatenate(preds)
 
 
-def measure(space: str, n: int, k: int, k_sklearn: int, rounds: int) -> dict[str, tuple[float, float]]:
+def measure(space: str, n: int, k: int, k_sklearn: int, rounds: int, learner: str = "db1") -> dict[str, tuple[float, float]]:
     """Best-round seconds per forest ``{engine: (fit, eval)}``; checks the predictions agree."""
-    fits, ZT, maps = inputs(space, n, k)
+    fits, ZT, maps = inputs(space, n, k, learner=learner)
     for e in ("compiled", "fast"):  # warm: JAX program shapes (fast), numba kernels (compiled)
         time_engine(e, fits[:8], ZT, maps[:8])
     best: dict[str, tuple[float, float]] = {}
@@ -94,6 +95,8 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--sizes", type=int, nargs="+", default=[25, 100])
     ap.add_argument("--spaces", nargs="+", default=["pca", "rhf"])
+    ap.add_argument("--learner", choices=["db1", "nb"], default="db1",
+                    help="db1: state + one bootstrap input repeated (the sweep's usual learner); nb: the state alone")
     args = ap.parse_args()
     t = time.perf_counter()
     compiled.kernels()
@@ -109,9 +112,9 @@ def main() -> None:
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     res = {}
     for s in args.spaces:
-        cols = DIMS[s] + L.ExperimentConfig().repeats(s)
+        cols = DIMS[s] + (L.ExperimentConfig().repeats(s) if args.learner == "db1" else 0)
         for n in args.sizes:
-            r = res[(s, n)] = measure(s, n, args.forests, args.sklearn_forests, args.rounds)
+            r = res[(s, n)] = measure(s, n, args.forests, args.sklearn_forests, args.rounds, args.learner)
             (cf, ce), (ff, fe), (sf, se) = r["compiled"], r["fast"], r["sklearn"]
             print(f"| {s.upper()} ({cols}) | {n} | {L.n_trees(n)} | {1e3 * cf:.2f} | {1e3 * ce:.2f} | {1e3 * ff:.2f} | "
                   f"{1e3 * fe:.2f} | {1e3 * (sf + se):.1f} | {ff / cf:.1f}x | {(ff + fe) / (cf + ce):.1f}x | "
