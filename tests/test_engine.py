@@ -1,5 +1,6 @@
-"""The fast forest engine against RandomForestClassifier: the same trees, bit-identical
-predict_proba and classes (relaff_jax.learn.engine, engine_fit, engine_eval)."""
+"""The fast and compiled forest engines against RandomForestClassifier: the same trees,
+bit-identical predict_proba and classes (relaff_jax.learn.engine, engine_fit, engine_eval,
+relaff_jax.learn.compiled)."""
 import contextlib
 import inspect
 
@@ -11,7 +12,7 @@ from sklearn.ensemble import RandomForestClassifier
 from relaff_jax import learn as L
 from relaff_jax.config import override
 from relaff_jax.errors import UserError
-from relaff_jax.learn import blocks, engine
+from relaff_jax.learn import blocks, compiled, engine
 from relaff_jax.learn.engine_eval import pack_forest, predict_block, predict_labels, predict_proba, round_down_f32
 from relaff_jax.learn.engine_fit import fit_trees
 
@@ -76,6 +77,10 @@ def _data(n, d, seed, kind="plain"):
         y[-k:] = ~y[:k]
     elif kind == "constant":
         X[:, ::2] = 1.5
+    elif kind == "ties":  # equal values, and values apart by less than FEATURE_THRESHOLD (1e-7)
+        X = np.round(X, 1)
+        X[:, 1] = np.float32(0.01) + rng.integers(0, 3, n).astype(np.float32) * np.float32(5e-8)
+        X[:, 2] = np.float32(0.01) + rng.integers(0, 2, n).astype(np.float32) * np.float32(2e-7)
     return X, y
 
 
@@ -96,23 +101,46 @@ def _test_rows(X, forest_trees, m, seed):
     return np.concatenate(rows).astype(np.float32)
 
 
+def _same_trees(forest, estimators):
+    """A compiled ``Forest``'s trees equal the estimators' ``tree_`` arrays (compared for
+    the whole forest at once; tree by tree when they differ, to name the first)."""
+    trees = [e.tree_ for e in estimators]
+    assert forest.n_trees == len(trees)
+    np.testing.assert_array_equal(np.diff(forest.tree_start), [t.node_count for t in trees])
+    cat = {k: np.concatenate([getattr(t, k) for t in trees]) for k in ("feature", "threshold", "children_left",
+                                                                       "children_right", "value")}
+    got = {"feature": forest.feature, "threshold": forest.threshold, "children_left": forest.left,
+           "children_right": forest.right, "value": forest.value[:, None, :]}
+    if all(np.array_equal(got[k], cat[k]) for k in cat):
+        return
+    for t, tree in enumerate(trees):
+        mine = forest.tree(t)
+        for k in cat:
+            np.testing.assert_array_equal(mine[k], getattr(tree, k), err_msg=f"tree {t}: {k}")
+
+
 def _check(X, y, seed, cfg=L.ForestConfig(), m=300):
     ref = L.fit_forest(X, y, seed, cfg)
     fast = fit_trees(X, y, seed, cfg)
+    comp = compiled.fit(X, y, seed, cfg)
     assert len(fast.trees) == len(ref.estimators_) == L.n_trees(len(y), cfg)
     np.testing.assert_array_equal(fast.classes, ref.classes_)
+    np.testing.assert_array_equal(comp.classes, ref.classes_)
     for a, b in zip(ref.estimators_, fast.trees):
         assert a.tree_.node_count == b.node_count
         np.testing.assert_array_equal(a.tree_.feature, b.feature)
         np.testing.assert_array_equal(a.tree_.threshold, b.threshold)
         np.testing.assert_array_equal(a.tree_.value, b.value)
+    _same_trees(comp, ref.estimators_)
     Xt = _test_rows(X, fast.trees, m, seed)
     p_ref = ref.predict_proba(Xt)
     assert np.array_equal(predict_proba(fast, Xt), p_ref)  # bit for bit, not approx
+    assert np.array_equal(compiled.predict_proba(comp, Xt), p_ref)
     labels = ref.predict(Xt)
     np.testing.assert_array_equal(predict_labels(fast, Xt), labels)
     np.testing.assert_array_equal(predict_block([fast], Xt.T, [np.arange(X.shape[1])])[0], labels)
     np.testing.assert_array_equal(engine.predict(fast, Xt), labels.astype(np.float32))
+    np.testing.assert_array_equal(engine.predict(comp, Xt), labels.astype(np.float32))  # compiled.predict_block
     return fast
 
 
@@ -126,7 +154,7 @@ def test_same_forest_and_predictions_as_sklearn(n, d):
 
 
 @pytest.mark.parametrize("kind, n", [("one_class", 2), ("one_class", 25), ("duplicates", 25), ("duplicates", 100),
-                                     ("constant", 3), ("constant", 25)])
+                                     ("constant", 3), ("constant", 25), ("ties", 25), ("ties", 100)])
 def test_edge_cases_match_sklearn(kind, n):
     fast = _check(*_data(n, 24, 1, kind), seed=7)
     if kind == "one_class":
@@ -186,6 +214,12 @@ def test_run_block_same_accuracies_with_both_engines(monkeypatch):
     got = blocks.run_block(*args, L.ForestConfig(engine="fast"), (1, 2))
     assert np.array_equal(ref, got, equal_nan=True)
     assert np.isnan(got[5]).all() and np.array_equal(got[4], got[1])
+    kw = dict(loo_size=25, loo_conditions=(1, 2, 3))  # the leave-one-out forests too
+    fast = blocks.block_outcomes(*args, L.ForestConfig(engine="fast"), (1, 2), **kw)
+    comp = blocks.block_outcomes(*args, L.ForestConfig(engine="compiled"), (1, 2), **kw)
+    assert np.array_equal(comp["acc"], ref, equal_nan=True)
+    for k in fast:
+        assert np.array_equal(fast[k], comp[k], equal_nan=True), k
 
 
 def test_engine_setting():
@@ -194,9 +228,71 @@ def test_engine_setting():
     assert L.ForestConfig().engine == "fast"
     cfg = runconfig.resolve(None, {"experiment.forest.engine": "sklearn"}).experiment.forest
     assert isinstance(engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, cfg), RandomForestClassifier)
+    cfg = runconfig.resolve(None, {"experiment.forest.engine": "compiled"}).experiment.forest
+    L.check_forest_config(cfg)
+    assert isinstance(engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, cfg), compiled.Forest)
     with pytest.raises(UserError, match="forest.engine 'turbo'"):
         L.check_forest_config(L.ForestConfig(engine="turbo"))
     with pytest.raises(UserError, match="forest engine 'turbo'"):
         engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, L.ForestConfig(engine="turbo"))
-    with pytest.raises(ValueError, match="NaN"):
-        engine.fit(np.full((3, 2), np.nan, np.float32), np.array([0, 1, 1]), 0, engine="fast")
+    for eng in ("fast", "compiled"):
+        with pytest.raises(ValueError, match="NaN"):
+            engine.fit(np.full((3, 2), np.nan, np.float32), np.array([0, 1, 1]), 0, engine=eng)
+    X = np.eye(3, dtype=np.float32)
+    with pytest.raises(ValueError, match="2\\*\\*32"):
+        compiled.fit(X, np.array([0, 1, 1]), 2**32)
+    with pytest.raises(ValueError, match="3 classes"):
+        compiled.fit(X, np.array([0, 1, 2]), 0)
+    with pytest.raises(ValueError, match="max_features"):
+        compiled.fit(X, np.array([0, 1, 1]), 0, L.ForestConfig(max_features="5"))
+    with pytest.raises(ValueError, match="gini"):
+        compiled.fit(X, np.array([0, 1, 1]), 0, L.ForestConfig(criterion="entropy"))
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        compiled.predict_proba(compiled.fit(X, np.array([0, 1, 1]), 0), np.eye(2, dtype=np.float32))
+
+
+def test_compiled_random_streams_are_numpys_and_sklearns():
+    """rng.py: legacy MT19937 seeding and masked randint as numpy's RandomState, rand_r as
+    scikit-learn's our_rand_r, the splitter seed peeked without a second seeding."""
+    from sklearn.utils._random import _our_rand_r_py
+
+    from relaff_jax.learn.compiled import rng
+
+    mt = np.zeros(625, np.int64)
+    for seed in (0, 1, 12345, 2**31 - 2, 2**32 - 1):
+        rng.mt_seed(mt, seed)
+        assert [rng.randint(mt, 0, rng.MAX_INT) for _ in range(700)] == list(
+            np.random.RandomState(seed).randint(rng.MAX_INT, size=700))  # crosses a 624-word block
+        for high in (1, 2, 3, 25, 100, 4000):
+            rng.mt_seed(mt, seed)
+            assert [rng.randint(mt, 0, high) for _ in range(50)] == list(np.random.RandomState(seed).randint(0, high, 50))
+        rng.mt_seed(mt, seed)
+        assert rng.first_randint(mt, 0, rng.RAND_R_MAX) == np.random.RandomState(seed).randint(0, rng.RAND_R_MAX)
+        assert rng.randint(mt, 0, 7) == np.random.RandomState(seed).randint(0, 7)  # the peek consumed nothing
+    for s in (0, 1, 12345, 2**31 - 1, 2**32 - 1):
+        state = np.array([s], np.int64)
+        assert rng.rand_r(state) == _our_rand_r_py(s)
+    assert rng.rand_r(np.array([0], np.int64)) == rng.rand_r(np.array([1], np.int64))  # a zero state is 1
+
+
+def test_compiled_many_forests_per_call_and_large_trees():
+    """fit_many over forests of different sizes and widths = each forest alone; trees with
+    more than 64 leaves (the node walk of evaluate.py) predict as scikit-learn's."""
+    rng = np.random.default_rng(5)
+    sets = [(rng.normal(size=(n, d)).astype(np.float32), s) for s, (n, d) in enumerate([(25, 24), (25, 348), (3, 5), (25, 7)])]
+    data = [(X, X[:, 0] + 0.5 * rng.normal(size=len(X)) > 0, s) for X, s in sets]
+    many = compiled.fit_many([d[0] for d in data], [d[1] for d in data], [d[2] for d in data])
+    for f, (X, y, s) in zip(many, data):
+        one = compiled.fit(X, y, s)
+        for k in ("feature", "threshold", "left", "right", "value", "tree_start"):
+            np.testing.assert_array_equal(getattr(f, k), getattr(one, k))
+    X = rng.normal(size=(400, 6)).astype(np.float32)
+    y = rng.random(400) < 0.5  # noise: deep trees
+    comp, ref = compiled.fit(X, y, 3), L.fit_forest(X, y, 3)
+    leaves = np.diff(comp.tree_start) - np.add.reduceat(comp.left != -1, comp.tree_start[:-1])
+    assert leaves.max() > 64
+    Xt = rng.normal(size=(500, 6)).astype(np.float32)
+    assert np.array_equal(compiled.predict_proba(comp, Xt), ref.predict_proba(Xt))
+    np.testing.assert_array_equal(compiled.predict_labels(comp, Xt), ref.predict(Xt))
+    got = engine.predict_many([comp, compiled.fit(X[:30], y[:30], 4)], Xt.T, [np.arange(6)] * 2)
+    np.testing.assert_array_equal(got[0], ref.predict(Xt).astype(np.float32))

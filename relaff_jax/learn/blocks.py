@@ -2,7 +2,7 @@
 
 Takes a target pool's states ``X: (M, D)``, labels ``y: (M,)``, bootstrap inputs ``boot: (R,
 M)``, the target's condition plan and one repetition's draw; ``block_outcomes`` fits one
-forest per distinct bootstrap input set and size (``engine.fit``), predicts the test set with
+forest per distinct bootstrap input set and size (``engine.fit_many``), predicts the test set with
 all of them at once (``engine.predict_many``) and gives the test accuracies ``(C, sizes)``,
 every test scene's outcome ``(C, sizes, T)`` and, at the selection size, each candidate's
 leave-one-out accuracy on its own training samples ``(C,)`` (what an agent knows after n
@@ -19,12 +19,12 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.learn.engine import fit, predict_many
+from relaff_jax.learn.engine import fit_many, predict_many
 from relaff_jax.learn.forests import ForestConfig
 from relaff_jax.learn.states import augment
 from relaff_jax.provenance import derive_seed
 
-FLUSH = 256  # fast-engine forests evaluated together (bounds the trees held in memory)
+FLUSH = 256  # fast / compiled forests fitted and evaluated together (bounds the trees held in memory)
 # test subsets an accuracy is broken down by: what a negative label is made of (issue 24)
 SUBSETS = ("positives", "feasible negatives", "infeasible negatives")
 
@@ -57,28 +57,31 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
     # the test rows' columns, shared by every forest of the block: the state, then every
     # bootstrap input row once; forest features map to them (augment repeats input columns)
     ZT = np.concatenate([X[test_idx].T, boot[:, test_idx]])
-    forests, colmaps, slots = [], [], []
+    fits, colmaps, slots = [], [], []  # forests to fit: (X, y, seed), evaluated at each flush
     loo_n = int(loo_size) if loo_size is not None and loo_size in sizes else None
     if loo_n is not None:
         tr_loo = np.asarray(train_order[:loo_n])
         ZL = np.concatenate([X[tr_loo].T, boot[:, tr_loo]])  # the n training scenes' columns
-    loo_forests, loo_maps, loo_slots = [], [], []
+    loo_fits, loo_maps, loo_slots = [], [], []
 
-    def flush():  # predict the fitted forests at once (the sklearn engine one by one)
-        for (c, si), p in zip(slots, predict_many(forests, ZT, colmaps)):
+    def fit_all(batch):
+        return fit_many([b[0] for b in batch], [b[1] for b in batch], [b[2] for b in batch], forest)
+
+    def flush():  # fit and predict the pending forests at once (the sklearn engine one by one)
+        for (c, si), p in zip(slots, predict_many(fit_all(fits), ZT, colmaps)):
             correct[c, si] = p.astype(bool) == y_test
             acc[c, si] = np.mean(correct[c, si])
-        forests.clear(), colmaps.clear(), slots.clear()
+        fits.clear(), colmaps.clear(), slots.clear()
 
     def flush_loo():  # each leave-one-out forest predicts its held-out training scene
-        if loo_forests:
-            p = predict_many(loo_forests, ZL, loo_maps)
+        if loo_fits:
+            p = predict_many(fit_all(loo_fits), ZL, loo_maps)
             for k, (c, i) in enumerate(loo_slots):
                 loo_hits[c].append(bool(p[k, i]) == bool(y[tr_loo[i]]))
-        loo_forests.clear(), loo_maps.clear(), loo_slots.clear()
+        loo_fits.clear(), loo_maps.clear(), loo_slots.clear()
 
     loo_hits: dict[int, list[bool]] = {}
-    batch = FLUSH if forest.engine == "fast" else 1
+    batch = 1 if forest.engine == "sklearn" else FLUSH
     for cond, rows in plan:
         if rows in first:
             continue
@@ -89,20 +92,20 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
         colmap = np.concatenate([np.arange(d0), d0 + np.repeat(np.asarray(rows, dtype=np.intp), repeats)])
         for si, n in enumerate(sizes):
             tr = train_order[:n]
-            forests.append(fit(augment(X[tr], inputs[:, tr], repeats), y[tr], derive_seed(*seed_keys, n, cond), forest))
+            fits.append((augment(X[tr], inputs[:, tr], repeats), y[tr], derive_seed(*seed_keys, n, cond)))
             colmaps.append(colmap)
             slots.append((cond, si))
-            if len(forests) >= batch:
+            if len(fits) >= batch:
                 flush()
         if loo_n is not None and any(c in loo_conditions for c, r in plan if r == rows):
             loo_hits[cond] = []
             for i in range(loo_n):
                 keep = np.delete(tr_loo, i)
-                loo_forests.append(fit(augment(X[keep], inputs[:, keep], repeats), y[keep],
-                                       derive_seed(*seed_keys, loo_n, cond, i + 1), forest))
+                loo_fits.append((augment(X[keep], inputs[:, keep], repeats), y[keep],
+                                  derive_seed(*seed_keys, loo_n, cond, i + 1)))
                 loo_maps.append(colmap)
                 loo_slots.append((cond, i))
-                if len(loo_forests) >= batch:
+                if len(loo_fits) >= batch:
                     flush_loo()
     flush()
     flush_loo()

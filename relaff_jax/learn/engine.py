@@ -1,12 +1,14 @@
-"""The forest engine the learning stages use: ``fast`` (default) or ``sklearn`` (reference).
+"""The forest engine the learning stages use: ``fast`` (default), ``compiled`` or ``sklearn`` (reference).
 
 Takes states ``X: (N, D)`` float32 and labels ``y: (N,)`` bool; gives fitted forests
 (``fit``) and their 0/1 predictions, one forest (``predict``) or a block of forests on
-shared test columns (``predict_many``). Both engines give bit-identical forests and
+shared test columns (``predict_many``). All three engines give bit-identical forests and
 predictions (``tests/test_engine.py``): ``fast`` builds the trees with scikit-learn's own
 Cython builder without the estimator (``engine_fit``) and evaluates many forests in one
 jitted program (``engine_eval``); ``sklearn`` is ``RandomForestClassifier``
-(``forests.fit_forest`` / ``predict_class``).
+(``forests.fit_forest`` / ``predict_class``); ``compiled`` builds the same trees with
+scikit-learn's algorithm re-expressed in numba, many forests per kernel call
+(``fit_many``), and predicts them in one compiled call (``learn/compiled/``).
 
 The engine is ``ForestConfig.engine`` (``--set experiment.forest.engine=sklearn``), part of
 the config tree like every setting, although it changes no result.
@@ -18,32 +20,68 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax.errors import UserError
+from relaff_jax.learn import compiled
 from relaff_jax.learn.engine_eval import predict_block
 from relaff_jax.learn.engine_fit import Trees, fit_trees
 from relaff_jax.learn.forests import ENGINES, ForestConfig, fit_forest, predict_class
 
-__all__ = ["ENGINES", "Trees", "fit", "predict", "predict_many"]
+__all__ = ["ENGINES", "Trees", "fit", "fit_many", "predict", "predict_many"]
 
 
-def fit(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig(), engine: str | None = None):
-    """A fitted forest on ``X: (N, D)``, ``y: (N,)`` bool (``Trees`` or ``RandomForestClassifier``);
-    ``engine`` (default ``cfg.engine``) picks how it is built."""
+def _engine(cfg: ForestConfig, engine: str | None) -> str:
     engine = engine or cfg.engine
     if engine not in ENGINES:
         raise UserError(f"forest engine {engine!r}: expected one of {', '.join(ENGINES)}")
-    if engine == "sklearn":
-        return fit_forest(X, y, seed, cfg)
+    return engine
+
+
+def _checked(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     X = np.asarray(X, dtype=np.float32)
     y = np.asarray(y).astype(bool)
     if X.ndim != 2 or y.shape != (X.shape[0],):
         raise ValueError(f"fit_forest: X must be (N, D) and y (N,), got {X.shape} and {y.shape}")
     if not np.all(np.isfinite(X)):
         raise ValueError("fit_forest: X contains NaN or inf")
-    return fit_trees(X, y, seed, cfg)
+    return X, y
+
+
+def fit(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig(), engine: str | None = None):
+    """A fitted forest on ``X: (N, D)``, ``y: (N,)`` bool (``Trees``, ``compiled.Forest`` or
+    ``RandomForestClassifier``); ``engine`` (default ``cfg.engine``) picks how it is built."""
+    return fit_many([X], [y], [seed], cfg, engine)[0]
+
+
+def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence[int],
+             cfg: ForestConfig = ForestConfig(), engine: str | None = None) -> list:
+    """F fitted forests, forest f on ``Xs[f]: (N_f, D_f)``, ``ys[f]: (N_f,)`` bool with seed
+    ``seeds[f]``: what F calls of ``fit`` give. The compiled engine builds them in one kernel
+    call per distinct N (its settings resolve per N); the others one by one."""
+    engine = _engine(cfg, engine)
+    if engine == "sklearn":
+        return [fit_forest(X, y, s, cfg) for X, y, s in zip(Xs, ys, seeds)]
+    pairs = [_checked(X, y) for X, y in zip(Xs, ys)]
+    if engine == "fast":
+        return [fit_trees(X, y, s, cfg) for (X, y), s in zip(pairs, seeds)]
+    out: list = [None] * len(pairs)
+    by_n: dict[int, list[int]] = {}
+    for i, (X, _) in enumerate(pairs):
+        by_n.setdefault(X.shape[0], []).append(i)
+    for ids in by_n.values():
+        for i, f in zip(ids, compiled.fit_many([pairs[i][0] for i in ids], [pairs[i][1] for i in ids],
+                                               [seeds[i] for i in ids], cfg)):
+            out[i] = f
+    return out
 
 
 def predict(forest, X: np.ndarray) -> np.ndarray:
     """Predicted class as 0/1 float32 ``(N,)`` of one forest from ``fit``."""
+    if isinstance(forest, compiled.Forest):
+        X = np.asarray(X, dtype=np.float32)
+        if X.ndim != 2 or X.shape[1] != forest.n_features:
+            raise ValueError(f"X must be (N, {forest.n_features}), got {X.shape}")
+        if not np.all(np.isfinite(X)):
+            raise ValueError("predict_class: X contains NaN or inf")
+        return compiled.predict_block([forest], X.T, [np.arange(forest.n_features)])[0].astype(np.float32)
     if not isinstance(forest, Trees):
         return predict_class(forest, X)
     X = np.asarray(X, dtype=np.float32)
@@ -66,4 +104,6 @@ def predict_many(forests: Sequence, ZT: np.ndarray, colmaps: Sequence[np.ndarray
         raise ValueError("predict_class: X contains NaN or inf")
     if all(isinstance(f, Trees) for f in forests):
         return predict_block(forests, ZT, colmaps).astype(np.float32)
+    if all(isinstance(f, compiled.Forest) for f in forests):
+        return compiled.predict_block(forests, ZT, colmaps).astype(np.float32)
     return np.stack([predict(f, np.ascontiguousarray(ZT[np.asarray(cm)].T)) for f, cm in zip(forests, colmaps)])

@@ -84,7 +84,7 @@ def n_bootstrap(n_samples: int, cfg: ForestConfig) -> int:
 def check_engine_config(cfg: ForestConfig) -> None:
     """The engine builds what ``make_forest`` configures only for these settings."""
     if cfg.criterion != "gini":
-        raise ValueError(f"the fast forest engine builds gini trees only, got criterion={cfg.criterion!r}")
+        raise ValueError(f"the fast and compiled forest engines build gini trees only, got criterion={cfg.criterion!r}")
     if not cfg.bootstrap and cfg.max_samples is not None:
         raise ValueError("`max_sample` cannot be set if `bootstrap=False`.")
 

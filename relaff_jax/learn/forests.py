@@ -41,7 +41,9 @@ class ForestConfig:
     max_samples: float | None = None
     # "fast": the same trees built by scikit-learn's Cython builder without the estimator and
     # evaluated in one jitted program (learn/engine.py), bit-identical to "sklearn", the
-    # RandomForestClassifier reference (tests/test_engine.py)
+    # RandomForestClassifier reference (tests/test_engine.py); "compiled": the same trees and
+    # predictions from scikit-learn's builder re-expressed in numba, many forests per call
+    # (learn/compiled/, docs/learning.md)
     engine: str = "fast"
 
 
@@ -107,7 +109,7 @@ def predict_class(forest: RandomForestClassifier, X: np.ndarray) -> np.ndarray:
         return np.asarray(forest.predict(X), dtype=np.float32)
 
 
-ENGINES = ("fast", "sklearn")
+ENGINES = ("fast", "sklearn", "compiled")
 
 
 def check_forest_config(cfg: ForestConfig = ForestConfig()) -> None:

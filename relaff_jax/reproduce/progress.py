@@ -26,6 +26,7 @@ COST = {
     "feature_scenes_per_s": 12.0,
     "cpu_s_per_fit": 0.01,  # a forest of ~100 trees, fit + predict, fast engine (docs/learning.md)
     "cpu_s_per_fit_sklearn": 0.15,  # the same with experiment.forest.engine=sklearn
+    "cpu_s_per_fit_compiled": 0.003,  # the same with the compiled engine (docs/benchmarks.md, issue 26)
     "report_fixed": 60.0,
     "report_per_example": 1.5,
 }
@@ -49,7 +50,8 @@ def estimate_seconds(cfg: Any, jobs: int, cpus: int) -> dict[str, float]:
     gen = COST["sim_compile"] + a * n * COST["rollouts_per_sample"] / rate
     feat = COST["feature_compile"] + a * n / COST["feature_scenes_per_s"]
     fits = sum(forests_per_space(cfg.experiment, a, s) for s in cfg.reproduce.spaces)
-    per_fit = COST["cpu_s_per_fit_sklearn" if cfg.experiment.forest.engine == "sklearn" else "cpu_s_per_fit"]
+    per_fit = COST[{"sklearn": "cpu_s_per_fit_sklearn", "compiled": "cpu_s_per_fit_compiled"}.get(
+        cfg.experiment.forest.engine, "cpu_s_per_fit")]
     exp = fits * per_fit / max(1, min(jobs, cpus))
     rep = COST["report_fixed"] + a * cfg.reproduce.examples_per_action * COST["report_per_example"]
     return {"generate": gen, "features": feat, "experiment": exp, "report": rep}
