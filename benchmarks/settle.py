@@ -90,14 +90,14 @@ def _angle(qa, qb):
     return 2 * np.arccos(np.clip(dot, 0.0, 1.0))
 
 
-def agreement(w, cfg, n, threads, batch=256):
+def agreement(w, cfg, n, threads, batch=250):
     """MJX settle against the native engine's C settle on the same n placements per pairing."""
     place, settle, _ = sc.jitted_scene_fns(w, cfg)
     pairing = np.asarray([pg for _, _, pg in w.pairs])
     print(f"\nnative (C, {threads} threads) vs MJX settle, the same {n} placements per pairing group")
     for g, pg in enumerate(dict.fromkeys(pairing)):
         allowed = np.flatnonzero(pairing == pg)
-        rel, rel_c, dpos, dang, t_mjx, t_c = [], [], [], [], 0.0, 0.0
+        rel, rel_c, rest, rest_c, dcog, dpos, dang, t_mjx, t_c = [], [], [], [], [], [], [], 0.0, 0.0
         for c in range(-(-n // batch)):
             pair = sc.sample_pairs(jax.random.PRNGKey(3000 + 100 * g + c), allowed, w, batch)
             qpos0, intended = place(jax.random.PRNGKey(4000 + 100 * g + c), pair)
@@ -109,18 +109,27 @@ def agreement(w, cfg, n, threads, batch=256):
             t_mjx += t1 - t0 if c else 0.0  # the first call compiles
             rel.append(out.relation)
             rel_c.append(nat.relation)
-            for q in (w.toy_qpos, w.obj_qpos):
-                dpos.append(np.linalg.norm(out.qpos[:, q:q + 3] - nat.qpos[:, q:q + 3], axis=-1))
-                dang.append(_angle(out.qpos[:, q + 3:q + 7], nat.qpos[:, q + 3:q + 7]))
+            rest.append(out.at_rest)
+            rest_c.append(nat.at_rest)
+            dcog.append(np.abs(out.cog_distance - nat.cog_distance))
+            # per scene: the toy's and the other object's differences side by side (B, 2)
+            dpos.append(np.stack([np.linalg.norm(out.qpos[:, q:q + 3] - nat.qpos[:, q:q + 3], axis=-1)
+                                  for q in (w.toy_qpos, w.obj_qpos)], 1))
+            dang.append(np.stack([_angle(out.qpos[:, q + 3:q + 7], nat.qpos[:, q + 3:q + 7])
+                                  for q in (w.toy_qpos, w.obj_qpos)], 1))
         rel, rel_c = np.concatenate(rel)[:n], np.concatenate(rel_c)[:n]
-        dpos = np.concatenate([d[:n] for d in dpos])
-        dang = np.degrees(np.concatenate([d[:n] for d in dang]))
+        rest, rest_c = np.concatenate(rest)[:n], np.concatenate(rest_c)[:n]
+        dcog = np.concatenate(dcog)[:n]
+        dpos = np.concatenate(dpos)[:n].ravel()  # both objects of the n scenes
+        dang = np.degrees(np.concatenate(dang)[:n].ravel())
         conf = " ".join(f"{a}->{b}:{int(np.sum((rel == i) & (rel_c == j)))}" for i, a in enumerate(sc.RELATIONS)
                         for j, b in enumerate(sc.RELATIONS) if i != j and np.any((rel == i) & (rel_c == j)))
-        print(f"  {pg:13s} relation agreement {100 * np.mean(rel == rel_c):5.1f} % "
-              f"(MJX->C differing: {conf or 'none'}); |dpos| median {1000 * np.median(dpos):.2f} mm, "
-              f"95th {1000 * np.percentile(dpos, 95):.1f} mm, <1 cm {100 * np.mean(dpos < 0.01):.1f} %; "
-              f"|dangle| median {np.median(dang):.2f} deg, 95th {np.percentile(dang, 95):.1f} deg; "
+        um = lambda x: f"median {1e6 * np.median(x):.1f} um, 95th {1e6 * np.percentile(x, 95):.1f} um, max {1e3 * np.max(x):.2f} mm"
+        print(f"  {pg:13s} {n} scenes: relation agreement {100 * np.mean(rel == rel_c):.2f} % "
+              f"(MJX->C differing: {conf or 'none'}); |dpos| (both objects) {um(dpos)}, <1 cm {100 * np.mean(dpos < 0.01):.2f} %; "
+              f"|dangle| median {np.median(dang):.4f} deg, 95th {np.percentile(dang, 95):.4f} deg, max {np.max(dang):.2f} deg; "
+              f"|dcog| {um(dcog)}; "
+              f"at rest: MJX {100 * np.mean(rest):.2f} %, C {100 * np.mean(rest_c):.2f} %, agree {100 * np.mean(rest == rest_c):.2f} %; "
               f"settle s/1000 scenes: MJX {1000 * t_mjx / max(batch * (c), 1):.1f}, C {1000 * t_c / (batch * (c + 1)):.2f}", flush=True)
 
 

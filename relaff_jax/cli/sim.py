@@ -109,6 +109,7 @@ def cmd_generate(args) -> int:
     from relaff_jax import config as rc
     from relaff_jax import data as ds
     from relaff_jax.sim.rollouts import make_rollout_fn
+    from relaff_jax.sim.templates import stored_config
 
     cfg, engine = tree.action, tree.dataset.engine
     ds.config.check_dataset_config(tree.dataset)
@@ -127,7 +128,7 @@ def cmd_generate(args) -> int:
             fn = Remote(make_rollout_fn, args.action, args.batch, cfg, engine=engine)
         try:
             summary = ds.generate_dataset(
-                args.out, args.action, args.samples, fn, args.seed, args.batch, {"action": rc.to_dict(cfg)},
+                args.out, args.action, args.samples, fn, args.seed, args.batch, {"action": stored_config(cfg)},
                 progress=not args.json, dataset_config=tree.dataset, client=client)
         except ds.DatasetError as e:
             if isinstance(e, UserError):

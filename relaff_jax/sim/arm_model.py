@@ -60,6 +60,10 @@ class ArmConfig:
     """Static settings of the IK and the gripper (closed over, never traced)."""
 
     ik_steps: int = 20  # L-BFGS steps per seed
+    # "lbfgs" (the default: optax L-BFGS, zoom line search, ``ik_steps`` steps) or "lm"
+    # (Levenberg-Marquardt, ``ik_lm_steps`` steps, ``ik_lm.py``; other plans, ~10x faster)
+    ik_solver: str = "lbfgs"
+    ik_lm_steps: int = 12  # LM steps per seed (ik_solver="lm")
     ik_orient_length: float = 0.25  # m: 1 rad of orientation error weighs like this much position
     ik_pos_tol: float = 0.005  # m: reachable only if the tcp position residual is below
     ik_ang_tol: float = 0.05  # rad (~2.9 deg): and the orientation residual is below

@@ -33,7 +33,7 @@ from .native_batch import default_threads, execute_native
 from .native_settle import settle_batch
 from .planning import Plan
 from .simulate import make_prepare_fn, make_simulate_fn
-from .templates import ActionConfig
+from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config: for reproduce)
 
 from relaff_jax.constants import PAIRING, SIM_ENGINES, action_id
 from relaff_jax.errors import UserError
