@@ -190,3 +190,32 @@ def test_ik_path_solves_only_the_used_targets(arm):
     np.testing.assert_array_equal(q[:, 4:], np.repeat(q[:, 3:4], 2, axis=1))
     assert not np.asarray(part.reachable)[:, 4:].any() and not np.asarray(part.pos_err)[:, 4:].any()
     assert not np.array_equal(q[:, 4:], np.asarray(full.q)[:, 4:])  # the skipped rows were not solved
+
+
+def test_lm_solver_reaches_the_same_targets(model, arm):
+    """``ik_solver="lm"`` (Levenberg-Marquardt, ``ik_lm.py``): the random top-down targets and
+    the far ones give L-BFGS's reachability, the joints within limits, C's tcp on the targets;
+    the default config records no solver (``templates.stored_config``), "lm" does."""
+    import dataclasses
+
+    from relaff_jax.sim import templates
+
+    cfg = dataclasses.replace(A.ArmConfig(), ik_solver="lm")
+    ik_lm = jax.jit(jax.vmap(lambda t, q: A.solve_ik(arm, cfg, t, q)))
+    targets = random_workspace_targets(np.random.default_rng(1), 8)
+    res = ik_lm(targets, jnp.zeros((8, 6)))
+    assert np.asarray(res.reachable).all()
+    check_against_c(model, arm, res, targets)
+    far = jax.vmap(A.top_down_target)(jnp.array([[1.6, 0.0, 0.05], [0.0, 1.6, 0.2], [1.25, 0.0, 0.05], [0.8, 0.0, 0.05]]),
+                                      jnp.zeros(4))
+    res = ik_lm(jax.tree_util.tree_map(lambda x: jnp.concatenate([x, x]), far), jnp.zeros((8, 6)))
+    assert list(np.asarray(res.reachable)) == [False, False, False, True] * 2
+    q = np.asarray(res.q)
+    assert np.all(q >= arm.q_lo) and np.all(q <= arm.q_hi)
+    with pytest.raises(ValueError, match="ik_solver"):
+        A.solve_ik(arm, dataclasses.replace(cfg, ik_solver="newton"), jax.tree_util.tree_map(lambda x: x[0], far),
+                   jnp.zeros(6))
+    action = templates.ActionConfig()
+    assert "ik_solver" not in templates.stored_config(action)["arm"]
+    lm = dataclasses.replace(action, arm=cfg)
+    assert templates.stored_config(lm)["arm"]["ik_solver"] == "lm"

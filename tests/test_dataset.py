@@ -853,3 +853,23 @@ def test_generation_progress_of_a_killed_run_reads_samples_in_hand(tmp_path):
     assert c["chunks"] == 2
     assert 0 < c["in_hand"] < 40
     assert generation_progress(path, 40) == c["in_hand"] / 40
+
+
+def test_native_settle_recorded_and_old_native_refused(tmp_path):
+    """A native dataset records the C settle; one begun before it (no ``settle``: its scenes
+    were settled by MJX) is refused rather than resumed with C-settled chunks."""
+    import dataclasses
+
+    from relaff_jax.io import atomic_write_json, read_json
+    from relaff_jax.sim.native_settle import SETTLE_NAME
+
+    assert generate.SETTLE_OF_ENGINE["native"] == SETTLE_NAME
+    native = dataclasses.replace(EXACT, engine="native")
+    p = tmp_path / "n"
+    gen(p, dataset_config=native)
+    meta = read_json(p / ds.SIDECAR)
+    assert meta["settle"] == SETTLE_NAME
+    del meta["settle"]
+    atomic_write_json(p / ds.SIDECAR, meta)
+    with pytest.raises(ds.DatasetMismatchError, match=f"settled by mjx.*{SETTLE_NAME}"):
+        gen(p, dataset_config=native)

@@ -144,3 +144,18 @@ def test_voxel_size_set_from_the_cli_changes_the_features(small_dataset, tmp_pat
     rec = json.loads((other / "relaff_config.json").read_text())
     assert rec["command"] == "features" and rec["config"]["perception"]["voxel"]["size"] == 0.025
     assert rec["config"]["dataset"]["feature_batch"] == 4
+
+
+def test_sub_batches_give_the_same_features(small_dataset, scene_world):
+    """A chunk perceived in calls of 3 scenes (the last one padded) or of 4 (the default
+    ``SUB_BATCH``, one call here) gives the same features, bit for bit (one more compile)."""
+    ds = dataset.load_dataset(small_dataset, features=False)
+    i = np.arange(4) % len(ds["pair"])
+    s = {"pair": ds["pair"][i], "qpos_settled": ds["qpos_settled"][i], "rollout_id": ds["rollout_id"][i]}
+    assert features.SUB_BATCH == 4
+    want = features.make_feature_fn(scene_world)(s)
+    got = features.make_feature_fn(scene_world, sub_batch=3)(s)
+    for k in want:
+        np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+    with pytest.raises(UserError, match="sub_batch"):
+        features.make_feature_fn(scene_world, sub_batch=0)

@@ -13,7 +13,7 @@ from test_actions import BASE_ROWS, OBST_ROWS, RAKE_ROWS, hand_built
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.errors import UserError
 from relaff_jax.sim import arm as A
-from relaff_jax.sim import native, native_batch, native_program, rollouts, templates
+from relaff_jax.sim import native, native_batch, native_program, native_settle, rollouts, templates
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
@@ -165,17 +165,21 @@ def test_tiny_native_dataset_through_the_cli(tmp_path):
 
 @pytest.mark.slow  # compiles placement and settling (MJX)
 def test_native_rollout_fn_equals_replay(scene_world):
-    """``make_rollout_fn(engine="native")``: the dataset fields, and labels and final states
-    equal to the C replay of the same sampled, settled and planned scenes."""
+    """``make_rollout_fn(engine="native")``: the dataset fields, scenes settled in C equal to
+    ``settle_native``, and labels and final states equal to the C replay of the same sampled,
+    settled and planned scenes."""
     B = 8
     key = jax.random.PRNGKey(5)
     out = rollouts.make_rollout_fn("pull", B, engine="native")(key, B)
     kp, ks, _ = jax.random.split(key, 3)
     place, settle, _ = sc.jitted_scene_fns(scene_world)
     pair = sc.sample_pairs(kp, rollouts.allowed_pairs(scene_world, "pull"), scene_world, B)
-    s = jax.device_get(settle(pair, *place(ks, pair)))
+    q0, intended = jax.device_get(place(ks, pair))
+    s = native_settle.settle_batch(scene_world, np.asarray(pair), q0, intended)  # the engine settles in C
+    q_ref, rel_ref = native.settle_native(scene_world, np.asarray(pair), q0)
     np.testing.assert_array_equal(out["pair"], np.asarray(pair))
-    np.testing.assert_array_equal(out["qpos_settled"], np.asarray(s.qpos, np.float32))
+    np.testing.assert_array_equal(out["qpos_settled"], q_ref.astype(np.float32))
+    np.testing.assert_array_equal(out["relation"], rel_ref)
     run = np.flatnonzero(out["feasible"])
     assert 0 < len(run) < B and np.array_equal(out["simulated"], out["feasible"]), out["feasible"]
     prepare_fn, _ = rollouts.jitted_stage_fns(CFG)
@@ -188,6 +192,21 @@ def test_native_rollout_fn_equals_replay(scene_world):
     assert not out["label"][~out["feasible"]].any()
     np.testing.assert_array_equal(out["qpos_final"][~out["feasible"]], out["qpos_settled"][~out["feasible"]])
     assert out["label"].dtype == bool and out["rollout_id"].dtype == np.int64
+
+
+@pytest.mark.parametrize("nthread", [1, 2])
+def test_settle_batch_equals_settle_native(scene_world, nthread):
+    """The C settle on a thread pool equals ``settle_native`` (one MjData per scene, rake
+    pinned) bit for bit, with held rakes and without, at any thread count."""
+    for seed, allowed in ((0, np.arange(scene_world.n_pairs)), (1, rollouts.allowed_pairs(scene_world, "lift"))):
+        pair = np.asarray(sc.sample_pairs(jax.random.PRNGKey(seed), allowed, scene_world, 12))
+        q0, intended = jax.device_get(sc.jitted_scene_fns(scene_world)[0](jax.random.PRNGKey(seed + 7), pair))
+        got = native_settle.settle_batch(scene_world, pair, q0, intended, nthread=nthread)
+        q, rel = native.settle_native(scene_world, pair, q0)
+        np.testing.assert_array_equal(got.qpos, q.astype(np.float32))
+        np.testing.assert_array_equal(got.relation, rel)
+        assert got.qvel.dtype == np.float32 and got.at_rest.dtype == bool and got.cog_distance.shape == (12,)
+    assert seed == 1 and not any(scene_world.pairs[p][2] == "toy+rake" for p in pair)  # the nstep branch ran
 
 
 @pytest.mark.slow  # C executions of two actions, full and stopped

@@ -15,6 +15,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -106,26 +107,43 @@ def add_features(
         # without a cluster chunks are written in place, as always (unless a cluster run left some pending)
         stage = pending if client is not None or pending.is_dir() else fdir
 
+        # Without a cluster, chunk f is written on this thread while chunk f + 1's perception
+        # runs (orbax's save is ~1/4 of a chunk's time); chunks land and count in order.
+        writer = ThreadPoolExecutor(1, thread_name_prefix="feature-writer") if client is None else None
+
         def task(f: int) -> tuple:
             lo, hi = f * batch, min((f + 1) * batch, n)
             idx = np.minimum(np.arange(lo, lo + batch), hi - 1)  # pad by repeating the last sample
-            return feature_chunk, (compute_fn, {k: v[idx] for k, v in samples.items()}, f, batch, lo, hi, str(stage), schema)
+            return feature_chunk, (compute_fn, {k: v[idx] for k, v in samples.items()}, f, batch, lo, hi, str(stage),
+                                   schema, writer)
+
+        def landed(f: int, got: dict) -> None:  # chunk f is on disk: count it
+            if "written" in got:
+                got["written"].result()
+            if stage != fdir:
+                promote(stage, fdir, f)
+            fmeta["chunks"] = f + 1
+            rio.atomic_write_json(fside, fmeta)
+            bar.update(min((f + 1) * batch, n) - f * batch)
 
         runner = Ordered(client, task, n_chunks)
+        last = None
         try:
             for f in range(len(done), n_chunks):
                 got = runner.get(f)
                 check_schema(f"feature chunk {f}", got["schema"], schema)
                 schema = schema or got["schema"]
-                if stage != fdir:
-                    promote(stage, fdir, f)
-                fmeta["chunks"] = f + 1
-                rio.atomic_write_json(fside, fmeta)
-                bar.update(min((f + 1) * batch, n) - f * batch)
+                if last is not None:
+                    landed(*last)
+                last = (f, got)
+            if last is not None:
+                landed(*last)
         except BaseException:
             runner.cancel()  # tasks already running still finish into features/.pending, kept for a rerun
             raise
         finally:
+            if writer is not None:
+                writer.shutdown(wait=True)  # a write in flight finishes (atomically) before we return or raise
             bar.close()
         discard_pending(pending)
         feats = load_feature_chunks(path, fmeta, n)

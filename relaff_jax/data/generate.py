@@ -54,6 +54,10 @@ from relaff_jax.data.store import (check_rollout_ids, chunk_dirs_exist, chunk_in
 from relaff_jax.data.tasks import PENDING, discard_pending, promote, rollout_chunk
 from relaff_jax.data.validate import check_schema, schema_of
 
+# The settle each engine's rollout_fn uses, recorded in the sidecar and compared on resume
+# (the native name is ``relaff_jax.sim.native_settle.SETTLE_NAME``; tests check they match).
+SETTLE_OF_ENGINE = {"mjx": "mjx", "native": "mujoco_c_batch/1"}
+
 
 def generate_dataset(
     out_dir: str | os.PathLike,
@@ -104,6 +108,7 @@ def generate_dataset(
         "object_names": list(object_names) if object_names is not None else None,
         "selection_scheme": selection_scheme(dcfg),
         "engine": dcfg.engine,  # the caller's rollout_fn must use it (cli and reproduce build both from one config)
+        "settle": SETTLE_OF_ENGINE[dcfg.engine],
     }
     path = Path(out_dir)
     created = prepare_dir(path)
@@ -130,6 +135,13 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
                 f"{path}: was generated with the {meta['engine']} engine; resuming it with the {header['engine']} "
                 f"engine would mix two simulators in one dataset. Rerun with --engine {meta['engine']} "
                 f"(--set dataset.engine={meta['engine']}) or write to a new folder")
+        settled = meta.get("settle", "mjx")  # a sidecar without it predates the C settle: MJX settled it
+        if settled != header["settle"]:
+            raise DatasetMismatchError(
+                f"{path}: its scenes were settled by {settled}, this version's {header['engine']} engine settles "
+                f"them by {header['settle']}; resuming would mix two settles in one dataset. Write to a new "
+                f"folder (or finish it with the version that began it)")
+        meta["settle"] = settled
         diff = mismatch(meta, header, ("action", "n_samples", "seed", "batch", "config", "object_names", "selection_scheme"))
         if diff:
             raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff))

@@ -73,10 +73,12 @@ def _for_driver(arrays: Mapping[str, Any], schema: Mapping[str, list]) -> dict[s
 
 
 def feature_chunk(compute_fn: Callable, samples: Mapping[str, np.ndarray], f: int, batch: int, lo: int, hi: int,
-                  pending: str, ref: Mapping[str, list] | None = None) -> dict[str, Any]:
+                  pending: str, ref: Mapping[str, list] | None = None, writer: Any = None) -> dict[str, Any]:
     """Features of selected samples ``[lo, hi)`` (``samples``: their ``batch`` padded rows) into
     ``pending`` as feature chunk ``f``; returns its ``schema`` (not written if it differs
-    from ``ref``)."""
+    from ``ref``). With ``writer`` (a one-thread ``concurrent.futures`` executor, in the
+    driver only) the write runs there, so that the next chunk's perception overlaps it, and
+    ``written`` is its future: the chunk is on disk once that future is done."""
     path = chunk_path(Path(pending), f)
     if path.is_dir():
         arrays, _ = read_chunk(path)
@@ -84,7 +86,10 @@ def feature_chunk(compute_fn: Callable, samples: Mapping[str, np.ndarray], f: in
     arrays = standardize_features(compute_fn(dict(samples)), batch, set(samples))
     arrays = {k: a[: hi - lo] for k, a in arrays.items()}
     check_schema(f"feature chunk {f}", schema_of(arrays), ref)
-    _write_once(path, arrays, {"chunk": f, "batch": batch, "start": lo, "stop": hi})
+    extra = {"chunk": f, "batch": batch, "start": lo, "stop": hi}
+    if writer is not None:
+        return {"schema": schema_of(arrays), "written": writer.submit(_write_once, path, arrays, extra)}
+    _write_once(path, arrays, extra)
     return {"schema": schema_of(arrays)}
 
 

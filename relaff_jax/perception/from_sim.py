@@ -58,12 +58,19 @@ def rollout_keys(root, rollout_ids):
     differ by a multiple of 2^32 used to share a noise stream and no longer do.
     """
     lo, hi = split_ids(rollout_ids)
+    return _keys_of(root, jnp.asarray(lo), jnp.asarray(hi))
+
+
+@jax.jit
+def _keys_of(root, lo, hi):
+    """(B, 2) keys of ``rollout_keys`` from the ids' 32-bit halves (B,): one compiled dispatch
+    (integer ops, the same bits as eager)."""
 
     def one(lo, hi):
         k = jax.random.fold_in(root, lo)
         return jnp.where(hi == 0, k, jax.random.fold_in(k, hi))
 
-    return jax.vmap(one)(jnp.asarray(lo), jnp.asarray(hi))
+    return jax.vmap(one)(lo, hi)
 
 
 def show_key(rollout_id: int):
@@ -81,16 +88,37 @@ def jitted_geoms(world: wd.World):
     return jax.jit(lambda pair, qpos: scene_geoms(world, pair, qpos))
 
 
-def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionConfig(), seed: int = 0):
+# Scenes per perception call inside a feature chunk. The chain's per-scene cost grows with the
+# batch (640 x 480 rays per scene: a call of 32 scenes streams ~8x the working set of 4 through
+# the caches); features do not depend on it, bit for bit (tests/test_features.py), so a chunk
+# of ``feature_batch`` samples is perceived in calls of this many (docs/perception.md, "Cost").
+SUB_BATCH = 4
+
+
+def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionConfig(), seed: int = 0,
+                    sub_batch: int = SUB_BATCH):
     """``compute(samples) -> dict of numpy arrays`` for ``relaff_jax.data.add_features``.
 
     ``samples`` needs ``pair`` (B,), ``qpos_settled`` (B, nq) and ``rollout_id`` (B,) int64;
-    a sample's noise key is ``rollout_keys(PRNGKey(seed), rollout_id)``. Raises ``UserError``
-    if fields are missing or a scene exceeds a perception capacity.
+    a sample's noise key is ``rollout_keys(PRNGKey(seed), rollout_id)``. The B scenes are
+    perceived in calls of ``sub_batch`` (the last one padded by repeating its last scene; the
+    features are the same at any ``sub_batch``). Raises ``UserError`` if fields are missing or
+    a scene exceeds a perception capacity.
     """
+    if int(sub_batch) < 1:
+        raise UserError(f"sub_batch must be >= 1, got {sub_batch}")
     feats = pc.make_batched_features(world.mj_model.geom_type, world.geom_seg, cfg)
     geoms = jitted_geoms(world)
     root = jax.random.PRNGKey(seed)
+
+    def perceive(size, xpos, xmat, keys) -> dict:
+        """The chain on (B, ...) inputs in calls of ``sub_batch`` scenes, dispatched back to back."""
+        b = size.shape[0]
+        sb = min(int(sub_batch), b)
+        idx = np.minimum(np.arange(-(-b // sb) * sb), b - 1)  # pad by repeating the last scene
+        parts = [feats.jitted(size[i], xpos[i], xmat[i], keys[i]) for i in np.split(idx, len(idx) // sb)]
+        parts = jax.device_get(parts)
+        return {k: np.concatenate([p[k] for p in parts])[:b] for k in parts[0]}
 
     def compute(samples: dict) -> dict:
         missing = {"pair", "qpos_settled", "rollout_id"} - set(samples)
@@ -100,7 +128,7 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
                                  jnp.asarray(samples["qpos_settled"], jnp.float32))
         ids = np.asarray(samples["rollout_id"])
         keys = rollout_keys(root, ids)
-        out = jax.device_get(feats(size, xpos, xmat, keys))
+        out = perceive(size, xpos, xmat, keys)
         if out["overflow"].any():
             bad = np.flatnonzero(out["overflow"])
             flags = {k: np.asarray(out[k])[bad].tolist() for k in

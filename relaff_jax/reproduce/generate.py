@@ -9,7 +9,6 @@ from typing import Any
 
 from relaff_jax import data as D
 from relaff_jax import io as rio
-from relaff_jax.config import to_dict
 from relaff_jax.reproduce.folder import ReproduceError
 from relaff_jax.reproduce.stage import Run, Status
 
@@ -29,7 +28,7 @@ def default_rollout_factory(action: str, batch: int, config: Any = None, engine:
                 "rollouts), which this installation does not have; the datasets cannot be generated") from e
         raise
     cfg = config if config is not None else sim.ActionConfig()
-    return sim.make_rollout_fn(action, batch, cfg, engine=engine), {"action": action, "action_config": to_dict(cfg)}, None
+    return sim.make_rollout_fn(action, batch, cfg, engine=engine), {"action": action, "action_config": sim.stored_config(cfg)}, None
 
 
 def rollout_factory_for(cfg: Any):

@@ -85,6 +85,10 @@ class ArmConfig:
     """Static settings of the IK and the gripper (closed over, never traced)."""
 
     ik_steps: int = 20  # L-BFGS steps per seed
+    # "lbfgs" (the default: optax L-BFGS, zoom line search, ``ik_steps`` steps) or "lm"
+    # (Levenberg-Marquardt, ``ik_lm_steps`` steps, ``ik_lm.py``; other plans, ~10x faster)
+    ik_solver: str = "lbfgs"
+    ik_lm_steps: int = 12  # LM steps per seed (ik_solver="lm")
     ik_orient_length: float = 0.25  # m: 1 rad of orientation error weighs like this much position
     ik_pos_tol: float = 0.005  # m: reachable only if the tcp position residual is below
     ik_ang_tol: float = 0.05  # rad (~2.9 deg): and the orientation residual is below
@@ -96,6 +100,10 @@ class ArmConfig:
     # ... and only with its inner face: the contact normal within ~45 deg of the closing axis
     # (a pad resting on top of an object, or an edge of it on a rim, is no grip)
     contact_face_cos: float = 0.7
+
+    def __post_init__(self):
+        if self.ik_solver not in ("lbfgs", "lm"):  # kinematics.IK_SOLVERS; refused when the config is made
+            raise UserError(f"action.arm.ik_solver={self.ik_solver!r}: one of lbfgs, lm")
 
 
 @dataclasses.dataclass(frozen=True)

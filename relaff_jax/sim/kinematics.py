@@ -5,7 +5,8 @@ Takes the ``Arm`` tables (``arm_model.arm_from_model``) and joint angles or tcp 
 - ``fk_chain`` / ``fk_tcp``: body and tcp poses from the six arm joint angles, a
   differentiable JAX chain (checked against MuJoCo C ``mj_kinematics`` in the tests).
 - ``solve_ik(arm, cfg, target, q_init)``: inverse kinematics of one ``IKTarget``: projected
-  L-BFGS (optax) on the tcp pose error from two seeds (a closed-form geometric guess and the
+  L-BFGS (optax; or Levenberg-Marquardt with ``ArmConfig.ik_solver="lm"``, ``ik_lm.py``) on
+  the tcp pose error from two seeds (a closed-form geometric guess and the
   current joints); returns an ``IKResult``: the joints, the residuals, the task Jacobian's
   conditioning and a ``reachable`` flag. There is no path planning (paper IV-D): an
   unreachable or badly conditioned target is a failed action, and that failure is data.
@@ -23,6 +24,9 @@ import optax
 
 from .arm_model import Arm, ArmConfig
 from .geometry import axis_rotation
+from .ik_lm import descend_lm
+
+IK_SOLVERS = ("lbfgs", "lm")  # ArmConfig.ik_solver
 
 
 def fk_chain(arm: Arm, q: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -193,9 +197,14 @@ def solve_ik(arm: Arm, cfg: ArmConfig, target: IKTarget, q_init: jax.Array) -> I
     a motor program), the other at ``analytic_seed``. Among the seeds that meet the
     tolerances the one nearest ``q_init`` wins, else the one with the smallest error.
     """
+    if cfg.ik_solver not in IK_SOLVERS:
+        raise ValueError(f"unknown ik_solver {cfg.ik_solver!r}; valid: {', '.join(IK_SOLVERS)}")
     q_init = jnp.clip(jnp.asarray(q_init, jnp.float32), arm.q_lo, arm.q_hi)
     seeds = jnp.stack([analytic_seed(arm, target, q_init[5]), q_init])
-    qs = jax.vmap(lambda s: _descend(arm, cfg, s, target))(seeds)
+    if cfg.ik_solver == "lm":
+        qs = jax.vmap(lambda s: descend_lm(arm, cfg, s, target, _residual))(seeds)
+    else:
+        qs = jax.vmap(lambda s: _descend(arm, cfg, s, target))(seeds)
     pos_err, ang_err = jax.vmap(lambda q: _errors(arm, q, target))(qs)
     ok = (pos_err < cfg.ik_pos_tol) & (ang_err < cfg.ik_ang_tol)
     cost = pos_err + cfg.ik_orient_length * ang_err

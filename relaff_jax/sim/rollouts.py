@@ -9,7 +9,8 @@ and settle them (``scenes.py`` on the arm-less world), plan, simulate the feasib
 label (``make_batch_prepare_fn`` then ``execute_batch``, also usable apart: the benchmark
 executes one prepared batch with several engines). Two engines execute the programs (``ENGINES``): ``"mjx"`` (default; it also runs on an
 accelerator) and ``"native"`` (MuJoCo C on a thread pool, ``native_batch.execute_native``);
-sampling, settling and planning are the same JAX code for both.
+sampling and planning are the same JAX code for both; the native engine also settles the
+scenes in MuJoCo C (``native_settle``), so its scenes are C's (docs/scenes.md, "Native settle").
 
 Pipeline of one batch: ``planning.make_plan_fn`` (tcp waypoints from the settled poses, batched
 IK; infeasible programs keep the arm home), ``simulate.make_simulate_fn`` (MJX, ``lax.scan``
@@ -28,10 +29,11 @@ import numpy as np
 from . import scenes as sc
 from . import world as wd
 from .bodies import geometry
-from .native_batch import execute_native
+from .native_batch import default_threads, execute_native
+from .native_settle import settle_batch
 from .planning import Plan
 from .simulate import make_prepare_fn, make_simulate_fn
-from .templates import ActionConfig
+from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config: for reproduce)
 
 from relaff_jax.constants import PAIRING, SIM_ENGINES, action_id
 from relaff_jax.errors import UserError
@@ -126,9 +128,10 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     ``batch`` is the batch size the caller will use (compiled on the first call).
 
     ``engine``: ``"mjx"`` runs the programs in MJX in calls of ``sim_batch`` scenes;
-    ``"native"`` runs all feasible programs of the batch in one ``mujoco.batch`` on ``nthread``
-    C threads (default: every CPU of the process; ``sim_batch`` unused). Only the execution
-    differs: the same scenes, plans and outcome rules (``docs/actions.md``, "Engines").
+    ``"native"`` settles the scenes and runs all feasible programs of the batch in
+    ``mujoco.batch`` on ``nthread`` C threads (default: every CPU of the process; ``sim_batch``
+    unused). The same placements, planner and outcome rules (``docs/actions.md``, "Engines");
+    the settled scenes are C's (``docs/scenes.md``, "Native settle").
     """
     action_id(action)  # an unknown action raises here, before any compile
     if int(batch) < 1:
@@ -141,7 +144,8 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     if nthread is not None and int(nthread) < 1:
         raise UserError(f"nthread must be >= 1, got {nthread}")
     cfg = config or ActionConfig()
-    prepare = make_batch_prepare_fn(action, cfg)
+    # the native engine settles in C too (native_settle); MJX's settle stays MJX's, bit for bit
+    prepare = make_batch_prepare_fn(action, cfg, settle="native" if engine == "native" else "mjx", nthread=nthread)
 
     def rollout_fn(key, batch_size: int) -> dict[str, np.ndarray]:
         return execute_batch(prepare(key, batch_size), cfg, engine, sim_batch, nthread)
@@ -163,11 +167,18 @@ class Prepared(NamedTuple):
     names: np.ndarray
 
 
-def make_batch_prepare_fn(action: str, cfg: ActionConfig) -> Callable:
-    """``prepare(key, batch_size) -> Prepared``: the engine-independent half of a rollout batch
-    (sample pairs of the action's pairing, place, settle in MJX, plan in JAX). Its results do
-    not depend on the arm world's tuning (``PhysicsConfig.arm_*``), only on the settle world
-    and the arm's kinematics."""
+def make_batch_prepare_fn(action: str, cfg: ActionConfig, settle: str = "mjx",
+                          nthread: int | None = None) -> Callable:
+    """``prepare(key, batch_size) -> Prepared``: the half of a rollout batch before execution
+    (sample pairs of the action's pairing, place, settle, plan in JAX). Its results do not
+    depend on the arm world's tuning (``PhysicsConfig.arm_*``), only on the settle world and
+    the arm's kinematics.
+
+    ``settle``: ``"mjx"`` (the jitted ``scenes.make_settle_fn``) or ``"native"`` (MuJoCo C,
+    ``native_settle.settle_batch`` on ``nthread`` threads, default every CPU): the same
+    placements, settled by another simulator (agreement: docs/scenes.md, "Native settle")."""
+    if settle not in ENGINES:
+        raise UserError(f"unknown settle {settle!r}; valid: {', '.join(ENGINES)}")
     aid = action_id(action)
     scene_world = wd.build_world(cfg.phys)
     place_fn, settle_fn, _ = sc.jitted_scene_fns(scene_world, cfg.scene)
@@ -179,8 +190,12 @@ def make_batch_prepare_fn(action: str, cfg: ActionConfig) -> Callable:
         kp, ks, kid = jax.random.split(key, 3)
         pair = sc.sample_pairs(kp, allowed, scene_world, int(batch_size))
         qpos0, intended = place_fn(ks, pair)
-        scenes = settle_fn(pair, qpos0, intended)
-        plan, before = prepare_fn(aid, pair, scenes.qpos)
+        if settle == "native":
+            scenes = settle_batch(scene_world, *jax.device_get((pair, qpos0, intended)), cfg.scene,
+                                  default_threads() if nthread is None else int(nthread))
+        else:
+            scenes = settle_fn(pair, qpos0, intended)
+        plan, before = prepare_fn(aid, pair, jnp.asarray(scenes.qpos))
         s, plan, before = jax.device_get((scenes, plan, before))
         p = np.asarray(pair)
         base = int(jax.random.bits(kid, (), jnp.uint32))

@@ -99,3 +99,19 @@ def untuned(cfg: ActionConfig = ActionConfig()) -> ActionConfig:
     phys = dataclasses.replace(cfg.phys, arm_max_geom_pairs=-1, arm_pedestal_contacts=True,
                                arm_palm_objects="contact")
     return dataclasses.replace(cfg, phys=phys, stop_at_program_end=False)
+
+
+def stored_config(cfg: ActionConfig) -> dict:
+    """``cfg`` as a dataset's sidecar records it (``config.action_config``, compared on resume).
+
+    The default IK solver (``ArmConfig.ik_solver="lbfgs"``) is recorded by the absence of
+    ``ik_solver`` and ``ik_lm_steps``, as in every dataset written before the option existed,
+    so that those stay valid and resumable; ``"lm"`` is recorded with its step count, so a
+    dataset is never resumed with the other solver's plans."""
+    from relaff_jax.config import to_dict
+
+    d = to_dict(cfg)
+    if cfg.arm.ik_solver == "lbfgs":
+        d["arm"].pop("ik_solver")
+        d["arm"].pop("ik_lm_steps")
+    return d

@@ -1,0 +1,71 @@
+"""Scenes settled by MuJoCo C on a thread pool (``mujoco.batch``): the settle of the native engine.
+
+Takes the arm-less ``World`` (``World.mj_models``, one model per pair), placements
+(``scenes.place``) and a ``SceneConfig``; gives ``settle_batch``, the ``scenes.Scenes`` of
+``scenes.make_settle_fn`` (settled state, relation, COG distance, at rest) computed by
+``mj_step`` in float64, with a held rake pinned after every step exactly as MJX and
+``native.settle_native`` pin it. It equals ``settle_native`` (one ``MjData`` per scene) bit
+for bit at any thread count (``tests/test_native_engine.py``); how far it agrees with MJX's
+settle is measured in ``docs/scenes.md`` ("Native settle").
+"""
+from __future__ import annotations
+
+import mujoco
+import mujoco.batch
+import numpy as np
+
+from . import scenes as sc
+from . import world as wd
+from .native import relation_native
+
+# What a native dataset records as its settle (sidecar ``settle``): bump when it changes.
+SETTLE_NAME = "mujoco_c_batch/1"
+
+
+def settle_batch(world: wd.World, pair: np.ndarray, qpos0: np.ndarray, intended: np.ndarray,
+                 cfg: sc.SceneConfig = sc.SceneConfig(), nthread: int = 1) -> sc.Scenes:
+    """Settle B scenes in one ``mujoco.batch`` of ``nthread`` C threads.
+
+    Args:
+      pair: (B,) pair indices; qpos0: (B, nq) placements; intended: (B,) sampler's relation.
+    Returns ``scenes.Scenes`` of numpy arrays: ``qpos``/``qvel`` float32 (as MJX gives them),
+    ``relation`` int32, ``cog_distance`` float32, ``at_rest`` bool; ``pair``/``qpos0``/``intended``
+    as given.
+    """
+    pair = np.asarray(pair)
+    q0 = np.asarray(qpos0, np.float64)
+    n = len(pair)
+    models = [world.mj_models[int(p)] for p in pair]
+    batch = mujoco.batch.Batch(models[0], nsim=n, nthread=int(nthread))
+    batch.set_models(models)
+    qpos, qvel, xipos = batch.bind("qpos"), batch.bind("qvel"), batch.bind("xipos")
+    qpos[:] = q0
+    qvel[:] = 0.0
+    oq, od, td = world.obj_qpos, world.obj_dof, world.toy_dof
+    held = np.flatnonzero([world.pairs[int(p)][2] == "toy+rake" for p in pair])
+    if len(held):
+        obj7 = q0[held, oq:oq + 7]
+        for _ in range(cfg.settle_steps):
+            batch.step()
+            # the rake stays in the gripper: hold it at its pose, as MJX's settle does
+            qpos[held, oq:oq + 7] = obj7
+            qvel[held, od:od + 6] = 0.0
+    else:
+        batch.step(nstep=cfg.settle_steps)  # the same mj_step calls, one dispatch
+    batch.forward()
+    q, v, com = qpos.copy(), qvel.copy(), xipos.copy()
+    rel = np.zeros(n, np.int32)
+    datas: dict[int, mujoco.MjData] = {}
+    for i in range(n):  # contacts are not bound: one forward pass per scene, on its pair's data
+        m, p = models[i], int(pair[i])
+        if p not in datas:
+            datas[p] = mujoco.MjData(m)
+        d = datas[p]
+        d.qpos[:], d.qvel[:] = q[i], v[i]
+        mujoco.mj_forward(m, d)
+        rel[i] = relation_native(world, p, m, d, cfg)
+    cog = np.linalg.norm(com[:, world.toy_body] - com[:, world.obj_body], axis=-1)
+    speed = np.maximum(np.linalg.norm(v[:, td:td + 3], axis=-1), np.linalg.norm(v[:, od:od + 3], axis=-1))
+    return sc.Scenes(pair=pair, qpos0=np.asarray(qpos0), qpos=q.astype(np.float32), qvel=v.astype(np.float32),
+                     relation=rel, intended=np.asarray(intended), cog_distance=cog.astype(np.float32),
+                     at_rest=speed < cfg.rest_speed)
