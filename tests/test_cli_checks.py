@@ -22,7 +22,8 @@ def no_work(*args, **kwargs):
 def one_line_error(capsys, command: str) -> str:
     err = capsys.readouterr().err
     lines = [x for x in err.splitlines() if x.strip()]
-    assert len(lines) == 1 and lines[0].startswith(f"relaff {command}: error: "), err
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"relaff {command}: error: "), err
     return lines[0]
 
 
@@ -88,7 +89,8 @@ def test_real_study_checks_the_labels_before_any_work(monkeypatch, capsys, tmp_p
     argv = ["real", "study", str(scenes), "--labels", str(labels), "--out", str(tmp_path / "study")]
     assert cli.main(argv) == 2
     line = one_line_error(capsys, "real study")
-    assert ">= 2 pairs of each relation" in line and "1 on_top" in line
+    assert ">= 2 pairs of each relation" in line
+    assert "1 on_top" in line
     assert not (tmp_path / "study").exists()
 
 
@@ -133,7 +135,9 @@ def test_reproduce_status_with_a_damaged_run_log_says_how_to_rebuild_it(capsys, 
     for argv in (["reproduce", "--status", "--out", str(out)], ["reproduce", "--status", str(out)]):
         assert cli.main(argv) == 2
         line = one_line_error(capsys, "reproduce")
-        assert "run.json is damaged" in line and "--rebuild-log" in line and "use a new --out" not in line
+        assert "run.json is damaged" in line
+        assert "--rebuild-log" in line
+        assert "use a new --out" not in line
     assert cli.main(["reproduce", "--preset", "tiny", "--out", str(out)]) == 2  # a run says the same
     assert "--rebuild-log" in one_line_error(capsys, "reproduce")
 
@@ -151,8 +155,10 @@ def test_resuming_with_other_settings_names_only_the_keys_that_differ(capsys, tm
     argv = ["reproduce", "--preset", "tiny", "--out", str(out), "--set", "dataset.borrow_fraction=0.25"]
     assert cli.main(argv) == 2
     line = one_line_error(capsys, "reproduce")
-    assert "1 key(s) differ: dataset.borrow_fraction: stored" in line and "requested 0.25" in line
-    assert "perception" not in line and "experiment" not in line  # not the whole stored tree
+    assert "1 key(s) differ: dataset.borrow_fraction: stored" in line
+    assert "requested 0.25" in line
+    assert "perception" not in line
+    assert "experiment" not in line  # not the whole stored tree
 
 
 PROBE = """
@@ -184,7 +190,8 @@ def test_a_config_mistake_is_reported_before_jax_is_imported(tmp_path, argv):
     argv = [a.format(tmp=tmp_path) for a in argv]
     r = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, timeout=120)
     assert r.stdout == "2 []\n", (r.stdout, r.stderr)  # exit code 2, and no JAX, MuJoCo or sklearn loaded
-    assert r.stderr.startswith(f"relaff {argv[0]}: error: ") and "config key" in r.stderr
+    assert r.stderr.startswith(f"relaff {argv[0]}: error: ")
+    assert "config key" in r.stderr
     assert not any(tmp_path.iterdir())
 
 
@@ -205,7 +212,8 @@ def test_a_missing_input_is_reported_before_the_stage_is_imported(tmp_path, argv
     r = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, timeout=120)
     assert r.stdout == "2 []\n", (r.stdout, r.stderr)
     command = " ".join(argv[:2]) if argv[0] == "real" else argv[0]
-    assert r.stderr.startswith(f"relaff {command}: error: ") and str(tmp_path) in r.stderr, r.stderr
+    assert r.stderr.startswith(f"relaff {command}: error: "), r.stderr
+    assert str(tmp_path) in r.stderr, r.stderr
     assert not any(tmp_path.iterdir())
 
 
@@ -219,7 +227,8 @@ def test_generate_refuses_a_sample_count_beyond_the_rollout_cap_with_the_project
     argv = ["generate", "lift", "--samples", "1000000000000", "--out", str(tmp_path / "d")]
     assert cli.main(argv) == 2
     line = one_line_error(capsys, "generate")
-    assert "needs at least N rollouts" in line and "caps them at 200,192" in line  # 200,000 in chunks of 256
+    assert "needs at least N rollouts" in line
+    assert "caps them at 200,192" in line  # 200,000 in chunks of 256
     assert "years at ~5 rollouts/s" in line
     assert cli.main(argv[:3] + ["300", "--max-rollouts", "256", "--batch", "64", "--engine", "native",
                                 "--out", str(tmp_path / "d")]) == 2
@@ -234,7 +243,8 @@ def test_reproduce_refuses_a_sample_count_beyond_the_rollout_cap(monkeypatch, ca
     argv = ["reproduce", "--preset", "tiny", "--out", str(tmp_path / "r"), "--set", "dataset.n_samples=5000"]
     assert cli.main(argv) == 2
     line = one_line_error(capsys, "reproduce")
-    assert "dataset.n_samples 5,000 cannot be reached" in line and "dataset.max_rollouts caps them at 2,000" in line
+    assert "dataset.n_samples 5,000 cannot be reached" in line
+    assert "dataset.max_rollouts caps them at 2,000" in line
     assert not (tmp_path / "r").exists()
 
 
@@ -260,7 +270,9 @@ def test_generate_help_prints_a_plain_percent(capsys):
     with pytest.raises(SystemExit):
         cli.main(["generate", "--help"])
     out = " ".join(capsys.readouterr().out.split())
-    assert "50% positives" in out and "%%" not in out and "--engine native" in out
+    assert "50% positives" in out
+    assert "%%" not in out
+    assert "--engine native" in out
 
 
 def test_a_run_begun_before_a_setting_existed_resumes_at_its_default(tmp_path):
@@ -293,5 +305,6 @@ def test_a_flag_and_a_set_of_its_key_that_disagree_are_refused(capsys, tmp_path,
     argv = [a.format(tmp=tmp_path) for a in argv]
     assert cli.main(argv) == 2
     line = one_line_error(capsys, argv[0])
-    assert flag in line and "disagree" in line
+    assert flag in line
+    assert "disagree" in line
     assert not any(tmp_path.iterdir())  # refused before anything is written

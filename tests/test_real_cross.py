@@ -24,10 +24,12 @@ def test_scene_splits_never_put_a_scene_on_both_sides():
     y = (rng.random(len(scene)) < 0.3).astype(int)
     sz = splits.split_sizes(y, 0.625)
     out, n_train = splits.scene_splits(y, scene, sz, seed=3, reps=40)
-    assert 1 <= n_train <= sz["train"] and len(out) == 40
+    assert 1 <= n_train <= sz["train"]
+    assert len(out) == 40
     for tr, te in out:
         assert not set(scene[tr]) & set(scene[te])
-        assert len(tr) == 2 * n_train and len(te) == 2 * sz["test"]
+        assert len(tr) == 2 * n_train
+        assert len(te) == 2 * sz["test"]
         assert y[tr].tolist() == [1, 0] * n_train  # interleaved: its first n are balanced
         assert y[te].sum() == sz["test"]
     # a new grouping per repetition, the same ones for the same seed
@@ -69,14 +71,17 @@ def test_cross_folder_figures_by_hand():
         np.testing.assert_allclose(res[k], 0.75)
     np.testing.assert_allclose(res["sim_fair"], 1.0)
     np.testing.assert_allclose(res["sim_full"], 1.0)
-    assert res["sizes"].tolist() == [2, 3, 4, 5, 6] and str(res["kind"]) == "cross"
+    assert res["sizes"].tolist() == [2, 3, 4, 5, 6]
+    assert str(res["kind"]) == "cross"
     np.testing.assert_allclose(res["curve_sl"][2:], 0.75)  # n >= 4: both classes twice
     np.testing.assert_allclose(res["curve_bl"][2:], 0.75)
-    assert res["split"].tolist() == [3, 3, 5, 6, 8] and res["test_counts"].tolist() == [3, 2]
+    assert res["split"].tolist() == [3, 3, 5, 6, 8]
+    assert res["test_counts"].tolist() == [3, 2]
     s = ex.summarise(res, cfg)
     assert s["accuracy"]["real"]["ci95"] == pytest.approx((0.75, 0.75))
     np.testing.assert_allclose([b for b in s["bf"][2:]], 1.0)
-    assert s["split"]["kind"] == "cross" and s["split"]["real_test_counts"] == [3, 2]
+    assert s["split"]["kind"] == "cross"
+    assert s["split"]["real_test_counts"] == [3, 2]
     # test scenes resampled: beside always right, on_top right in 0, 1/2 or all of a resample's
     # on_top pairs, so the balanced accuracy lies in [0.5, 1]; both ends are reachable
     assert s["accuracy"]["real"]["ci95_scenes"] == pytest.approx((0.5, 1.0))
@@ -119,8 +124,11 @@ def test_guard_on_a_killed_build(tmp_path, monkeypatch):
     # within the tolerance (2 mm, 2 deg: the issue's unseen folder): resumed with the folder's own sensor
     near = SimSensor(0.588, 48.8, 49.1)
     s = sr.build_sim_relations(tmp_path / "sim", near, cfg, progress=False)
-    assert [c for c, _ in calls] == [0, 1, 2] and {x for _, x in calls} == {a}
-    assert s["sensor"]["tilt_deg"] == 50.8 and s["status"] == "complete" and s["counts"]["on_top"] == 6
+    assert [c for c, _ in calls] == [0, 1, 2]
+    assert {x for _, x in calls} == {a}
+    assert s["sensor"]["tilt_deg"] == 50.8
+    assert s["status"] == "complete"
+    assert s["counts"]["on_top"] == 6
     with pytest.raises(UserError, match="another sensor"):  # tolerance 0 asks for the exact sensor
         sr.guard(tmp_path / "sim", near, cfg, SensorTolerance(0.0, 0.0, 0.0))
     # chunks without a guard (a build killed before issue 28): which sensor made them is unknown
@@ -168,28 +176,36 @@ def test_train_test_study_through_the_cli(tmp_path, monkeypatch, capsys):
     assert "unknown scene" in capsys.readouterr().err
     assert cli.main(base + ["--split", "pair", "--only-present"]) == 0
     res = json.loads((out / "results.json").read_text())
-    assert res["claims_decided_on"] == "cross" and res["summary"]["pca"]["split"]["kind"] == "pair"
+    assert res["claims_decided_on"] == "cross"
+    assert res["summary"]["pca"]["split"]["kind"] == "pair"
     cross = res["cross"]["pca"]
-    assert cross["split"]["kind"] == "cross" and cross["split"]["real_test_counts"] == [1, 1]
-    assert cross["split"]["real_train_per_class"] == 2 and cross["sizes"] == [2, 3, 4]
+    assert cross["split"]["kind"] == "cross"
+    assert cross["split"]["real_test_counts"] == [1, 1]
+    assert cross["split"]["real_train_per_class"] == 2
+    assert cross["sizes"] == [2, 3, 4]
     # by hand: one beside and one on_top test pair, so each balanced accuracy is 0, 0.5 or 1
     raw = np.load(out / "raw_pca_cross.npz")
     for k in ("real", "fair_to_real", "full_to_real"):
         assert set(np.round(raw[k] * 2).tolist()) <= {0.0, 1.0, 2.0}
         assert cross["accuracy"][k]["mean"] == pytest.approx(raw[k].mean())
     sensor = json.loads((out / "sensor.json").read_text())
-    assert sensor["source"].startswith("the training folder") and sensor["scenes"] == 2
-    assert sensor["test"]["scenes"] == 2 and sensor["simulated"]["height"] == sensor["height"]
+    assert sensor["source"].startswith("the training folder")
+    assert sensor["scenes"] == 2
+    assert sensor["test"]["scenes"] == 2
+    assert sensor["simulated"]["height"] == sensor["height"]
     md = (out / "results.md").read_text()
-    assert "| PCA | REAL |" in md and "across folders (test folder)" in md
-    assert "4 labelled scenes" not in md and "2 labelled scenes not in the folder skipped" in md
+    assert "| PCA | REAL |" in md
+    assert "across folders (test folder)" in md
+    assert "4 labelled scenes" not in md
+    assert "2 labelled scenes not in the folder skipped" in md
     assert {p.name for p in out.glob("fig1*_pca*.png")} == {"fig14_pca.png", "fig15_pca.png", "fig14_pca_cross.png",
                                                           "fig15_pca_cross.png"}
     assert len(calls) == 2  # 4 on_top scenes at 2 a chunk
     # the real features of both folders are kept; a rerun skips every step
     assert np.load(out / "real_features_test.npz")["y"].tolist() == [1, 0]
     capsys.readouterr()
-    assert cli.main(base + ["--split", "pair", "--only-present"]) == 0 and len(calls) == 2
+    assert cli.main(base + ["--split", "pair", "--only-present"]) == 0
+    assert len(calls) == 2
 
 
 def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
@@ -200,7 +216,8 @@ def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
     argv = ["real", "study", str(a), "--labels", str(labels), "--out", str(tmp_path / "s"), "--only-present"]
     assert cli.main(argv + ["--set", "experiment.splt=pair"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("relaff real study: error: unknown config key 'experiment.splt'") and "split" in err
+    assert err.startswith("relaff real study: error: unknown config key 'experiment.splt'")
+    assert "split" in err
     assert cli.main(argv + ["--set", "experiment.split=scenes"]) == 2
     assert "unknown experiment.split 'scenes'" in capsys.readouterr().err
     assert cli.main(argv + ["--test", str(b)]) == 2
@@ -237,7 +254,10 @@ def test_claim_d_is_undefined_when_bf_mostly_is():
     res = dict(sim_fair=np.ones(4), sim_full=np.ones(4), real=np.full(4, 0.5), fair_to_real=np.ones(4),
                full_to_real=np.full(4, 0.6), curve_sl=sl, curve_bl=bl, sizes=sizes, split=np.array([8, 5, 3, 10, 60]))
     s = ex.summarise(res, RealExperimentConfig(n_boot=50))
-    assert s["bf_early_sizes"] == [2, 3, 4] and s["bf_undefined_sizes"] == [2, 3] and s["bf_early_mean"] == pytest.approx(4.0)
+    assert s["bf_early_sizes"] == [2, 3, 4]
+    assert s["bf_undefined_sizes"] == [2, 3]
+    assert s["bf_early_mean"] == pytest.approx(4.0)
     d = [c for c in report.claims({"pca": s}) if c["claim"].startswith("d)")][0]
-    assert d["holds"] is None and "defined at 1 of 3" in d["numbers"]
+    assert d["holds"] is None
+    assert "defined at 1 of 3" in d["numbers"]
     assert "| undefined |" in report.markdown({"pca": s}, {})

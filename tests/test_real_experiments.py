@@ -64,7 +64,8 @@ def test_sim_only_covers_inside():
     sim = {"pca": (0.1 * rng.normal(size=(82, 18)) + 3.0 * rel[:, None]).astype(np.float32),
            "rhf": np.zeros((82, 300), np.float32), "relation": rel}
     res = ex.run_sim_only(sim, "pca", ex.RealExperimentConfig(reps=2, n_full=20, trees=10))
-    assert res["beside_vs_inside_n"] == 12 and res["beside_vs_on_top_n"] == 20  # min(n_full / 2, half the smaller)
+    assert res["beside_vs_inside_n"] == 12
+    assert res["beside_vs_on_top_n"] == 20  # min(n_full / 2, half the smaller)
     for pair in ("beside_vs_on_top", "beside_vs_inside", "on_top_vs_inside"):
         np.testing.assert_array_equal(res[pair], 1.0)
 
@@ -115,7 +116,9 @@ def test_report_files(tmp_path):
     assert {p.name for p in paths} == {"fig14_pca.png", "fig15_pca.png", "results.json", "results.md"}
     doc = json.loads((tmp_path / "results.json").read_text())
     verdicts = {c["claim"][:2]: c["holds"] for c in doc["claims"]}
-    assert verdicts["a)"] and verdicts["b)"] and verdicts["c)"]  # everything at accuracy 1
+    assert verdicts["a)"]
+    assert verdicts["b)"]
+    assert verdicts["c)"]  # everything at accuracy 1
     assert "| REAL | 1.000 |" in (tmp_path / "results.md").read_text()
 
 
@@ -135,7 +138,8 @@ def test_sim_camera_sits_where_the_real_one_does():
     h, tilt = 0.59, 50.8
     cam = sr.perception_config(sr.SimSensor(h, tilt, 49.1), sr.SimRelationConfig()).camera
     np.testing.assert_allclose(cam.position, (TARGET[0] + h * np.tan(np.radians(tilt)), 0.0, h), atol=1e-9)
-    assert cam.target == TARGET and cam.vfov_deg == 49.1
+    assert cam.target == TARGET
+    assert cam.vfov_deg == 49.1
     # a real camera with the same pose: table plane n . p + d = 0 in camera coordinates
     n = np.array([0.0, -np.sin(np.radians(tilt)), -np.cos(np.radians(tilt))])
     fr = real_data.sim_aligned_frame(np.r_[n, h])
@@ -157,13 +161,16 @@ def test_real_features_put_the_upper_object_first(tmp_path):
             lab.Label("learn0.pcd", 2, 3, "beside", lab.file_sha256(osd / "learn0.pcd"))]
     path = lab.write_labels(tmp_path / "l.csv", rows)
     data = real_data.real_features(osd, path, progress=False)
-    assert data["pca"].shape == (2, 18) and data["rhf"].shape == (2, 300)
+    assert data["pca"].shape == (2, 18)
+    assert data["rhf"].shape == (2, 300)
     assert data["y"].tolist() == [1, 0]  # scenes in the labels file's first-seen order: learn17 first
     on = data["y"] == 1
     assert data["pca"][on, 2] > data["pca"][on, 11] + 0.03  # centroid of a 3 cm above b's
     np.testing.assert_allclose(data["rhf"].reshape(2, 6, 50).sum(-1), 1.0, atol=1e-5)
     s = real_data.sensor(data)
-    assert 0.55 < s.height < 0.65 and 30 < s.tilt_deg < 60 and abs(s.vfov_deg - 49.13) < 0.1
+    assert 0.55 < s.height < 0.65
+    assert 30 < s.tilt_deg < 60
+    assert abs(s.vfov_deg - 49.13) < 0.1
 
 
 def test_sim_relations_build_resume_and_guard(tmp_path, monkeypatch):
@@ -190,11 +197,15 @@ def test_sim_relations_build_resume_and_guard(tmp_path, monkeypatch):
     s = sr.build_sim_relations(tmp_path / "sim", sensor, cfg, progress=False)
     assert calls == [0, 1, 2]  # on_top 0, 1, 3: stops once beside (6) and on_top (3) reach 3
     assert s["counts"] == {"beside": 6, "on_top": 3, "inside": 3}
-    assert s["dropped"] == {"not_at_rest": 0, "unseen": 6, "overflow": 3} and s["scenes"] == 24
+    assert s["dropped"] == {"not_at_rest": 0, "unseen": 6, "overflow": 3}
+    assert s["scenes"] == 24
     data = sr.load_sim_relations(tmp_path / "sim")
-    assert data["pca"].shape == (12, 18) and data["relation"].tolist().count(1) == 3
+    assert data["pca"].shape == (12, 18)
+    assert data["relation"].tolist().count(1) == 3
     again = sr.build_sim_relations(tmp_path / "sim", sensor, dataclasses.replace(cfg, per_relation=4), progress=False)
-    assert calls == [0, 1, 2, 3] and again["counts"]["on_top"] == 6 and again["chunks_timed"] == 4  # resumed
+    assert calls == [0, 1, 2, 3]
+    assert again["counts"]["on_top"] == 6
+    assert again["chunks_timed"] == 4  # resumed
     with pytest.raises(UserError, match=r"another sensor \(height 0.59 vs 0.8 .*tilt_deg 50.8 vs 40.0"):
         sr.build_sim_relations(tmp_path / "sim", sr.SimSensor(0.8, 40.0), cfg, progress=False)
     with pytest.raises(UserError, match="another config .seed 0 there, 1 asked"):

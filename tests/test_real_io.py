@@ -34,7 +34,8 @@ def test_pcd_round_trip(tmp_path, data, with_rgb):
     c = _organized(rgb=with_rgb)
     write_pcd(tmp_path / "s.pcd", c, data=data)
     r = read_pcd(tmp_path / "s.pcd")
-    assert r.xyz.shape == (6, 8, 3) and r.organized
+    assert r.xyz.shape == (6, 8, 3)
+    assert r.organized
     np.testing.assert_array_equal(r.xyz, c.xyz)  # NaN == NaN here
     assert (r.rgb is None) == (not with_rgb)
     if with_rgb:
@@ -62,7 +63,9 @@ def test_pcd_unorganized_any_types_and_counts(tmp_path):
             f"WIDTH {n}\nHEIGHT 1\nPOINTS {n}\nDATA binary\n")
     (tmp_path / "u.pcd").write_bytes(head.encode() + rec.tobytes())
     r = read_pcd(tmp_path / "u.pcd")
-    assert r.xyz.shape == (n, 3) and not r.organized and r.intrinsics is None
+    assert r.xyz.shape == (n, 3)
+    assert not r.organized
+    assert r.intrinsics is None
     np.testing.assert_array_equal(r.xyz, xyz.astype(np.float32))
     np.testing.assert_array_equal(r.rgb, col)
     np.testing.assert_array_equal(r.fields["ring"], np.arange(n) - 2)
@@ -150,10 +153,13 @@ def test_npz_round_trip_and_errors(tmp_path):
     np.testing.assert_array_equal(r.xyz, c.xyz)
     np.testing.assert_array_equal(r.rgb, c.rgb)
     np.testing.assert_array_equal(r.label, c.label)
-    assert r.intrinsics == K and r.intrinsics_source == "file"
+    assert r.intrinsics == K
+    assert r.intrinsics_source == "file"
     np.savez(tmp_path / "only.npz", xyz=c.xyz.reshape(-1, 3))
     r = read_cloud(tmp_path / "only.npz")
-    assert r.rgb is None and r.label is None and r.xyz.shape == (48, 3)
+    assert r.rgb is None
+    assert r.label is None
+    assert r.xyz.shape == (48, 3)
     np.savez(tmp_path / "bad.npz", points=c.xyz)
     with pytest.raises(UserError, match="no 'xyz'"):
         read_cloud(tmp_path / "bad.npz")
@@ -198,7 +204,8 @@ def test_real_scene_matches_open3d(path):
     pc = o3d.io.read_point_cloud(str(path), remove_nan_points=False, remove_infinite_points=False)
     np.testing.assert_array_equal(np.asarray(pc.points), c.xyz.reshape(-1, 3).astype(np.float64))
     np.testing.assert_array_equal(np.round(np.asarray(pc.colors) * 255), c.rgb.reshape(-1, 3))
-    assert c.xyz.shape == (480, 640, 3) and c.label.shape == (480, 640)
+    assert c.xyz.shape == (480, 640, 3)
+    assert c.label.shape == (480, 640)
     np.testing.assert_array_equal(c.valid, c.label > 0)  # label 0 marks exactly the NaN pixels
     np.testing.assert_allclose(c.intrinsics, (525.0, 525.0, 319.5, 239.5), atol=1e-3)
     assert c.intrinsics_source == "estimated"

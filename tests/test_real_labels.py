@@ -77,7 +77,8 @@ def test_shipped_labels_parse():
     path = Path(str(files("relaff_jax.assets").joinpath("osd_learn_relations.csv")))
     rows = lab.read_labels(path)
     counts = lab.relation_counts(rows)
-    assert counts["beside"] > 0 and counts["on_top"] > 0
+    assert counts["beside"] > 0
+    assert counts["on_top"] > 0
     assert all(r.scene.startswith("learn") for r in rows)
 
 

@@ -28,7 +28,8 @@ def _plane_for(height, tilt_deg):
 def test_table_frame_and_camera_pose_hand_worked():
     plane = _plane_for(0.8, 40.0)
     pose = camera_pose(plane)
-    assert pose["height"] == pytest.approx(0.8) and pose["tilt_deg"] == pytest.approx(40.0)
+    assert pose["height"] == pytest.approx(0.8)
+    assert pose["tilt_deg"] == pytest.approx(40.0)
     # the camera sits height m up and height * tan(tilt) behind the optical axis' hit point
     np.testing.assert_allclose(pose["position"], [-0.8 * np.tan(np.radians(40)), 0, 0.8], atol=1e-12)
     f = table_frame(plane)
@@ -47,7 +48,8 @@ def test_table_frame_and_camera_pose_hand_worked():
     flipped = table_frame(plane, flip=True)["rotation"]
     np.testing.assert_allclose(flipped[:2], -R[:2])
     stats = camera_pose_stats([plane, _plane_for(0.6, 50.0)])
-    assert stats["height_mean"] == pytest.approx(0.7) and stats["tilt_std_deg"] == pytest.approx(5.0)
+    assert stats["height_mean"] == pytest.approx(0.7)
+    assert stats["tilt_std_deg"] == pytest.approx(5.0)
     cam = sim_camera(0.8, 40.0, target=(0.7, 0.0, 0.0))
     assert cam.position == pytest.approx((0.7 + 0.8 * np.tan(np.radians(40)), 0.0, 0.8))
     with pytest.raises(UserError, match="optical axis"):
@@ -61,7 +63,8 @@ def test_hand_segmentation_and_iou_hand_worked():
     pred = np.array([1, 0, 5, 5, 4, 4, 4, 4])  # 5 matches 2 (IoU 2/3), 4 matches 3 (IoU 2/4)
     r = object_ious(pred, truth)
     assert r["match"] == {2: 5, 3: 4}
-    assert r["ious"][2] == pytest.approx(2 / 3) and r["ious"][3] == pytest.approx(0.5)
+    assert r["ious"][2] == pytest.approx(2 / 3)
+    assert r["ious"][3] == pytest.approx(0.5)
     assert r["table"] == pytest.approx(0.5)
     # one-to-one: a single predicted blob over both objects matches only one of them
     r = object_ious(np.array([0, 0, 7, 7, 7, 7, 7, 0]), truth)
@@ -111,7 +114,8 @@ def test_pair_features_voxels_match_numpy_and_normals_match_open3d():
     pc = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p_cam))
     pc.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
     dots = np.abs(np.sum(np.asarray(pc.normals) * n_cam, axis=1))
-    assert np.median(dots) > 0.9999 and np.mean(dots > 0.99) > 0.99
+    assert np.median(dots) > 0.9999
+    assert np.mean(dots > 0.99) > 0.99
     assert np.all(np.sum(n_cam * -p_cam, axis=1) >= 0)  # oriented towards the camera
     frame = table_frame(fit_table_plane(c.xyz[c.valid], jax.random.key(0))["plane"])
     pa, na = to_table(p_cam, frame), vectors_to_table(n_cam, frame)
@@ -128,7 +132,9 @@ def test_pair_features_voxels_match_numpy_and_normals_match_open3d():
         np.testing.assert_allclose(f["pca"][9 * o: 9 * o + 3], cent.mean(0), atol=2e-5)
         w = np.linalg.eigvalsh(np.cov(cent.T, bias=True))[::-1]
         np.testing.assert_allclose(f["pca"][9 * o + 6: 9 * o + 9], w, rtol=1e-3, atol=1e-7)
-    assert f["pca"].shape == (18,) and f["rhf"].shape == (300,) and not f["overflow"]
+    assert f["pca"].shape == (18,)
+    assert f["rhf"].shape == (300,)
+    assert not f["overflow"]
     np.testing.assert_allclose(f["rhf"].reshape(6, 50).sum(1), 1.0, rtol=1e-5)
     # the upper box (object 3) sits above the lower one: dz of b - a mostly positive
     assert f["pca"][9 + 2] > f["pca"][2]
@@ -147,16 +153,19 @@ def test_real_scene_plane_matches_open3d_and_segmentation_scores(name):
     model, idx = pc.segment_plane(distance_threshold=0.01, ransac_n=3, num_iterations=1000)
     model = np.asarray(model) * (1 if model[3] > 0 else -1)
     angle = np.degrees(np.arccos(np.clip(ours["plane"][:3] @ model[:3] / np.linalg.norm(model[:3]), -1, 1)))
-    assert angle < 1.0 and abs(ours["plane"][3] - model[3] / np.linalg.norm(model[:3])) < 0.005
+    assert angle < 1.0
+    assert abs(ours["plane"][3] - model[3] / np.linalg.norm(model[:3])) < 0.005
     theirs = np.zeros(len(pts), bool)
     theirs[np.asarray(idx)] = True
     assert np.count_nonzero(ours["inliers"] & theirs) / np.count_nonzero(ours["inliers"] | theirs) > 0.95
     pose = camera_pose(ours["plane"])
-    assert 0.3 < pose["height"] < 1.5 and 20 < pose["tilt_deg"] < 80
+    assert 0.3 < pose["height"] < 1.5
+    assert 20 < pose["tilt_deg"] < 80
     r = score_scene(c, jax.random.key(2), known_count=True)
     assert r["table"] > 0.95  # RANSAC finds the hand-labelled table
     assert r["n_true"] == {"learn0.pcd": 2, "learn17.pcd": 2, "learn34.pcd": 3}[name]
-    assert 0.0 <= r["mean"] <= 1.0 and len(r["ious"]) == r["n_true"]
+    assert 0.0 <= r["mean"] <= 1.0
+    assert len(r["ious"]) == r["n_true"]
 
 
 def test_errors_no_points_no_table_one_object():
@@ -184,6 +193,8 @@ def test_figure_of_a_real_scene(tmp_path):
     c = read_cloud(DATA / "learn17.pcd")
     v = render_real_scene_png(c, jax.random.key(0), tmp_path / "s.png")
     png = (tmp_path / "s.png").read_bytes()
-    assert png[:8] == b"\x89PNG\r\n\x1a\n" and len(png) > 50_000
-    assert v["pair"] == (2, 3) and v["feats"]["pca"].shape == (18,)
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert len(png) > 50_000
+    assert v["pair"] == (2, 3)
+    assert v["feats"]["pca"].shape == (18,)
     assert v["pipeline"]["seg"].shape == (480, 640)
