@@ -20,7 +20,7 @@ def register(sub) -> None:
     p.add_argument("--preset", choices=PRESETS, default="quick",
                    help="quick: ~9 min on 2 idle cores, ~4.5 with --engine native (default, "
                         "docs/reproduce.md); study: 29 min with --engine native; paper: the full protocol "
-                        "(projected ~10 h with --cluster local:2, ~4.5 h with --engine native); tiny: for tests")
+                        "(projected ~10 h with --cluster local:2, ~4.1 h with --engine native); tiny: for tests")
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
     p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",
                    help="the run folder, as a positional argument for --status (same as --out DIR)")
