@@ -117,7 +117,7 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
         b = size.shape[0]
         sb = min(int(sub_batch), b)
         idx = np.minimum(np.arange(-(-b // sb) * sb), b - 1)  # pad by repeating the last scene
-        parts = [feats.jitted(size[i], xpos[i], xmat[i], keys[i]) for i in np.split(idx, len(idx) // sb)]
+        parts = [feats(size[i], xpos[i], xmat[i], keys[i]) for i in np.split(idx, len(idx) // sb)]
         parts = jax.device_get(parts)
         return {k: np.concatenate([p[k] for p in parts])[:b] for k in parts[0]}
 
