@@ -91,7 +91,8 @@ def jitted_geoms(world: wd.World):
 # Scenes per perception call inside a feature chunk. The chain's per-scene cost grows with the
 # batch (640 x 480 rays per scene: a call of 32 scenes streams ~8x the working set of 4 through
 # the caches); features do not depend on it, bit for bit (tests/test_features.py), so a chunk
-# of ``feature_batch`` samples is perceived in calls of this many (docs/perception.md, "Cost").
+# of ``feature_batch`` samples is perceived in calls of this many (docs/perception.md,
+# "Performance notes").
 SUB_BATCH = 4
 
 
@@ -116,7 +117,7 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
         b = size.shape[0]
         sb = min(int(sub_batch), b)
         idx = np.minimum(np.arange(-(-b // sb) * sb), b - 1)  # pad by repeating the last scene
-        parts = [feats.jitted(size[i], xpos[i], xmat[i], keys[i]) for i in np.split(idx, len(idx) // sb)]
+        parts = [feats(size[i], xpos[i], xmat[i], keys[i]) for i in np.split(idx, len(idx) // sb)]
         parts = jax.device_get(parts)
         return {k: np.concatenate([p[k] for p in parts])[:b] for k in parts[0]}
 
