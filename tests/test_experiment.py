@@ -218,14 +218,18 @@ def _count_fits(monkeypatch):
     from relaff_jax.learn import blocks, engine, prep
 
     n = {"fits": 0}
-    real = engine.fit  # what the sweep and prep fit with (either engine)
+    real, real_many = engine.fit, engine.fit_many  # what prep and the sweep fit with (any engine)
 
     def counting(*args, **kwargs):
         n["fits"] += 1
         return real(*args, **kwargs)
 
+    def counting_many(Xs, *args, **kwargs):
+        n["fits"] += len(Xs)
+        return real_many(Xs, *args, **kwargs)
+
     monkeypatch.setattr(prep, "fit", counting)
-    monkeypatch.setattr(blocks, "fit", counting)
+    monkeypatch.setattr(blocks, "fit_many", counting_many)
     return n
 
 

@@ -9,7 +9,9 @@ Files, in pipeline order:
 - ``forests.py``: ``ForestConfig``, ``n_trees``, ``make_forest``, ``fit_forest``, ``predict_class``;
 - ``engine_fit.py``: the same forests built by scikit-learn's Cython tree builder directly;
 - ``engine_eval.py``: their exact predictions, many forests at once in one jitted program;
-- ``engine.py``: the engine the sweep and prep use (``ForestConfig.engine``: fast | sklearn);
+- ``compiled/``: the same forests and predictions from scikit-learn's builder in numba, many
+  forests per kernel call (issue 26);
+- ``engine.py``: the engine the sweep and prep use (``ForestConfig.engine``: fast | compiled | sklearn);
 - ``states.py``: ``state_features`` (manipulated object first), ``augment`` (bootstrap inputs);
 - ``correlation.py``: the categories and the correlation heuristic;
 - ``synthetic.py``: synthetic datasets in ``load_dataset``'s layout (``--synthetic``, tests);

@@ -4,6 +4,9 @@ many forests, and the fitted forests as node arrays.
 Takes forests to fit as ``X: (N, D)`` float32 finite states, ``y: (N,)`` labels and seeds;
 ``fit_many`` gives one ``Forest`` each, the trees of ``RandomForestClassifier(random_state=
 seed)`` with the settings of ``ForestConfig`` (``build.py``); ``fit`` is one forest.
+Takes fitted forests and test rows ``X: (N, D)`` (or shared columns ``ZT: (Dz, N)``); gives
+``predict_proba`` ``(N, K)`` float64 and labels, bit-identical to scikit-learn's
+(``evaluate.py``), many forests per call (``predict_block``).
 """
 from __future__ import annotations
 

@@ -82,11 +82,10 @@ def sort_node(fo, sc, j, y1, w, start, end):
     first), O(m + N / 64)."""
     XT, order, rank, ready = fo
     samples, fv, ws, wy, bm = sc[0], sc[1], sc[2], sc[3], sc[4]
-    row = XT[j]
     m = end - start
     if m <= INSERTION:
         for p in range(start, end):
-            fv[p] = row[samples[p]]
+            fv[p] = XT[j, samples[p]]
         for i in range(start + 1, end):
             v = fv[i]
             s = samples[i]
@@ -99,10 +98,8 @@ def sort_node(fo, sc, j, y1, w, start, end):
             samples[k + 1] = s
     else:
         presort(fo, j)
-        oj = order[j]
-        rj = rank[j]
-        for p in range(start, end):
-            r = rj[samples[p]]
+        for p in range(start, end):  # 2-D indexing, no row views (each costs reference counting)
+            r = rank[j, samples[p]]
             bm[r >> 6] |= ONE << np.uint64(r & 63)
         k = start
         for wi in range(bm.shape[0]):
@@ -110,9 +107,9 @@ def sort_node(fo, sc, j, y1, w, start, end):
             bm[wi] = np.uint64(0)
             while v != np.uint64(0):
                 low = v & (~v + ONE)
-                s = oj[wi * 64 + CTZ[(low * DEBRUIJN) >> SHIFT]]
+                s = order[j, wi * 64 + CTZ[(low * DEBRUIJN) >> SHIFT]]
                 samples[k] = s
-                fv[k] = row[s]
+                fv[k] = XT[j, s]
                 k += 1
                 v ^= low
     for p in range(start, end):
@@ -204,11 +201,10 @@ def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
                 best_feature = feat
                 best_thr = fv[i] / 2.0 + fv[p] / 2.0
     if best_pos < end:
-        row = XT[best_feature]
         a = start
         b = end
         while a < b:  # partition_samples_final
-            if np.float64(row[samples[a]]) <= best_thr:
+            if np.float64(XT[best_feature, samples[a]]) <= best_thr:
                 a += 1
             else:
                 b -= 1
