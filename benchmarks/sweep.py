@@ -47,8 +47,9 @@ def _block_inputs(space: str, m: int = 4100 + 100, seed: int = 0):
 
 def _one_call(space: str, n: int, k: int, seed: int, engine: str = "fast") -> tuple[int, float]:
     """k DB1-style learners (one bootstrap input each) at size n; returns (fits, CPU seconds)."""
-    os.environ[G.ENV] = engine  # set in the worker process itself (loky reuses its workers)
-    cfg = E.ExperimentConfig()
+    from relaff_jax.config import override
+
+    cfg = override(E.ExperimentConfig(), {"forest.engine": engine})  # the engine travels in the config
     X, y, boot, test_idx, order = _block_inputs(space, seed=seed)
     plan = [(1 + s, (s,)) for s in range(k)]
     c = time.process_time()

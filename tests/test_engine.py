@@ -38,7 +38,8 @@ def test_scikit_learn_is_the_pinned_version_and_its_private_api_unchanged():
     assert "random_state.randint(np.iinfo(np.int32).max)" in inspect.getsource(_base._set_random_states)
     assert "random_instance.randint(0, n_samples, n_samples_bootstrap)" in inspect.getsource(_forest._generate_sample_indices)
     src = inspect.getsource(_classes.BaseDecisionTree._fit)
-    assert "DepthFirstTreeBuilder(" in src and "min_samples_split = max(min_samples_split, 2 * min_samples_leaf)" in src
+    assert "DepthFirstTreeBuilder(" in src
+    assert "min_samples_split = max(min_samples_split, 2 * min_samples_leaf)" in src
     # the Cython constructors take what engine_fit passes
     crit = Gini(1, np.array([2], dtype=np.intp))
     split = BestSplitter(crit, 1, 1, 0.0, np.random.RandomState(0), None)
@@ -158,7 +159,8 @@ def test_same_forest_and_predictions_as_sklearn(n, d):
 def test_edge_cases_match_sklearn(kind, n):
     fast = _check(*_data(n, 24, 1, kind), seed=7)
     if kind == "one_class":
-        assert len(fast.classes) == 1 and pack_forest(fast) is None
+        assert len(fast.classes) == 1
+        assert pack_forest(fast) is None
     if kind == "duplicates" and n >= 25:
         assert pack_forest(fast) is None  # impure leaves: the exact float64 path
 
@@ -213,7 +215,8 @@ def test_run_block_same_accuracies_with_both_engines(monkeypatch):
     ref = blocks.run_block(*args, L.ForestConfig(engine="sklearn"), (1, 2))
     got = blocks.run_block(*args, L.ForestConfig(engine="fast"), (1, 2))
     assert np.array_equal(ref, got, equal_nan=True)
-    assert np.isnan(got[5]).all() and np.array_equal(got[4], got[1])
+    assert np.isnan(got[5]).all()
+    assert np.array_equal(got[4], got[1])
     kw = dict(loo_size=25, loo_conditions=(1, 2, 3))  # the leave-one-out forests too
     fast = blocks.block_outcomes(*args, L.ForestConfig(engine="fast"), (1, 2), **kw)
     comp = blocks.block_outcomes(*args, L.ForestConfig(engine="compiled"), (1, 2), **kw)
