@@ -55,7 +55,8 @@ def test_reach_and_geometry(model, arm):
     np.testing.assert_allclose(r[:, 2], [0, 0, -1], atol=1e-9)
     # Joint limits and actuator ranges agree (inheritrange).
     np.testing.assert_allclose(model.actuator_ctrlrange[arm.act_arm], np.stack([arm.q_lo, arm.q_hi], 1), atol=1e-6)
-    assert np.all(arm.q_lo >= model.jnt_range[:6, 0]) and np.all(arm.q_hi <= model.jnt_range[:6, 1])
+    assert np.all(arm.q_lo >= model.jnt_range[:6, 0])
+    assert np.all(arm.q_hi <= model.jnt_range[:6, 1])
 
 
 def random_workspace_targets(rng, n):
@@ -70,7 +71,8 @@ def random_workspace_targets(rng, n):
 
 def check_against_c(model, arm, res, targets, tol_pos=0.005, tol_ang=0.05):
     q = np.asarray(res.q)
-    assert np.all(q >= arm.q_lo - 1e-6) and np.all(q <= arm.q_hi + 1e-6)
+    assert np.all(q >= arm.q_lo - 1e-6)
+    assert np.all(q <= arm.q_hi + 1e-6)
     errs = []
     for i in range(q.shape[0]):
         pc, rc = c_tcp(model, arm, q[i])
@@ -123,7 +125,8 @@ def test_far_target_is_unreachable_and_limits_hold(arm, ik):
     assert list(np.asarray(res.reachable)) == [False, False, False, True]
     assert float(res.pos_err[0]) > 0.2  # ~0.4 m beyond the reach
     q = np.asarray(res.q)
-    assert np.all(q >= arm.q_lo) and np.all(q <= arm.q_hi)  # float32 limits lie inside the model's
+    assert np.all(q >= arm.q_lo)
+    assert np.all(q <= arm.q_hi)  # float32 limits lie inside the model's
 
 
 @pytest.mark.slow  # another IK path compile
@@ -188,7 +191,8 @@ def test_ik_path_solves_only_the_used_targets(arm):
         np.testing.assert_array_equal(np.asarray(p)[:, :4], np.asarray(f)[:, :4])
     q = np.asarray(part.q)
     np.testing.assert_array_equal(q[:, 4:], np.repeat(q[:, 3:4], 2, axis=1))
-    assert not np.asarray(part.reachable)[:, 4:].any() and not np.asarray(part.pos_err)[:, 4:].any()
+    assert not np.asarray(part.reachable)[:, 4:].any()
+    assert not np.asarray(part.pos_err)[:, 4:].any()
     assert not np.array_equal(q[:, 4:], np.asarray(full.q)[:, 4:])  # the skipped rows were not solved
 
 
@@ -211,7 +215,8 @@ def test_lm_solver_reaches_the_same_targets(model, arm):
     res = ik_lm(jax.tree_util.tree_map(lambda x: jnp.concatenate([x, x]), far), jnp.zeros((8, 6)))
     assert list(np.asarray(res.reachable)) == [False, False, False, True] * 2
     q = np.asarray(res.q)
-    assert np.all(q >= arm.q_lo) and np.all(q <= arm.q_hi)
+    assert np.all(q >= arm.q_lo)
+    assert np.all(q <= arm.q_hi)
     with pytest.raises(ValueError, match="ik_solver"):
         A.solve_ik(arm, dataclasses.replace(cfg, ik_solver="newton"), jax.tree_util.tree_map(lambda x: x[0], far),
                    jnp.zeros(6))

@@ -83,14 +83,16 @@ def test_select_balanced_hand_worked():
     dist = np.array([1.0, 2.0, 1.1, 1.9, 5.0])
     sel = ds.select_balanced(label, dist, 4, seed=0, bins=2)
     assert sel.selected.tolist() == [0, 1, 2, 3]
-    assert sel.bin_edges.tolist() == [1.0, 1.5, 2.0] and sel.borrowed == 0
+    assert sel.bin_edges.tolist() == [1.0, 1.5, 2.0]
+    assert sel.borrowed == 0
     # bin 0 has no negative: its quota is filled by the nearest leftover (1.6 or 1.9, both
     # nearer to [1, 1.5] than 0.5 is), the other one fills bin 1
     label = np.array([1, 1, 0, 0, 0, 0], bool)
     dist = np.array([1.0, 2.0, 1.6, 1.9, 0.5, 3.0])
     for seed in range(5):
         sel = ds.select_balanced(label, dist, 4, seed=seed, bins=2)
-        assert sel.selected.tolist() == [0, 1, 2, 3] and sel.borrowed == 1
+        assert sel.selected.tolist() == [0, 1, 2, 3]
+        assert sel.borrowed == 1
         assert sel.negative_bin_counts.tolist() == [0, 1]
     # odd N: one more negative than positive; too few of a class: None
     sel = ds.select_balanced(np.array([1, 1, 0, 0, 0]), np.arange(5.0), 5, seed=0, bins=2)
@@ -101,14 +103,16 @@ def test_select_balanced_hand_worked():
 def test_balance_and_distance_histogram(built):
     path, summary = built
     d = ds.load_dataset(path)
-    assert d["label"].shape == (40,) and d["label"].dtype == bool
+    assert d["label"].shape == (40,)
+    assert d["label"].dtype == bool
     assert d["label"].sum() == 20  # exactly 50 %
     # independent check: 8 equal-width bins over the positives' distance range (np.histogram)
     pos, neg = d["cog_distance"][d["label"]], d["cog_distance"][~d["label"]]
     edges = np.linspace(pos.min(), pos.max(), 9)
     hp, _ = np.histogram(pos, edges)
     hn, _ = np.histogram(neg, edges)
-    assert hp.tolist() == hn.tolist() and hn.sum() == 20
+    assert hp.tolist() == hn.tolist()
+    assert hn.sum() == 20
     # ... whereas the unselected negatives are distributed differently (far "beside" scenes)
     r = ds.load_rollouts(path)
     all_neg = r["cog_distance"][~r["label"]]
@@ -121,11 +125,16 @@ def test_loaded_fields(built):
     path, _ = built
     d = ds.load_dataset(path)
     r = ds.load_rollouts(path)
-    assert d["action"] == "lift" and r["action"] == "lift"
-    assert set(d["relation"]) <= set(ds.RELATIONS) and d["relation"].dtype.kind == "U"
-    assert set(d["toy"]) <= set(TOYS) and set(d["other"]) <= set(OTHERS)
-    assert d["qpos"].shape == (40, 2, 7) and d["qpos"].dtype == np.float32
-    assert d["sample_seed"].dtype == np.uint32 and d["pair"].dtype == np.int32
+    assert d["action"] == "lift"
+    assert r["action"] == "lift"
+    assert set(d["relation"]) <= set(ds.RELATIONS)
+    assert d["relation"].dtype.kind == "U"
+    assert set(d["toy"]) <= set(TOYS)
+    assert set(d["other"]) <= set(OTHERS)
+    assert d["qpos"].shape == (40, 2, 7)
+    assert d["qpos"].dtype == np.float32
+    assert d["sample_seed"].dtype == np.uint32
+    assert d["pair"].dtype == np.int32
     assert r["rollout"].tolist() == list(range(len(r["label"])))
     assert r["selected"].sum() == 40
     for k in ("label", "relation", "cog_distance", "toy", "other", "qpos"):
@@ -173,7 +182,8 @@ def test_resume_after_kill_is_identical(built, tmp_path):
     res = gen(part, fn=synthetic_rollout_fn(calls=calls))
     assert res["new_chunks"] == summary["chunks"] - 2 == len(calls)
     assert res["rollouts"] == summary["rollouts"]
-    assert not junk.exists() and not (part / ".relaff_dataset.json.xyz.tmp").exists()
+    assert not junk.exists()
+    assert not (part / ".relaff_dataset.json.xyz.tmp").exists()
     names = sorted(p.name for p in (part / "chunks").iterdir())
     assert names == [f"chunk_{k:06d}" for k in range(summary["chunks"])]
     a, b = ds.load_dataset(path), ds.load_dataset(part)
@@ -185,7 +195,8 @@ def test_resume_after_kill_is_identical(built, tmp_path):
     assert len(np.unique(rb["rollout"])) == len(rb["rollout"])
     # a finished dataset rerun with the same arguments simulates nothing
     again = gen(part, fn=synthetic_rollout_fn(kill_after=0))
-    assert again["new_chunks"] == 0 and again["rollouts"] == summary["rollouts"]
+    assert again["new_chunks"] == 0
+    assert again["rollouts"] == summary["rollouts"]
 
 
 def test_cap_borrowing_records_and_warns(tmp_path):
@@ -199,7 +210,8 @@ def test_cap_borrowing_records_and_warns(tmp_path):
     cfg = ds.DatasetConfig(max_rollouts=64, distance_bins=4, borrow_fraction=0.0)
     with pytest.warns(UserWarning, match="negatives come from outside"):
         res = gen(tmp_path / "b", n=10, fn=fn, dataset_config=cfg)
-    assert res["rollouts"] == 64 and res["borrowed"] == 5
+    assert res["rollouts"] == 64
+    assert res["borrowed"] == 5
     d = ds.load_dataset(tmp_path / "b")
     assert d["label"].sum() == 5
     # the borrowed negatives are the nearest ones to the positives' range (just above 0.3)
@@ -228,8 +240,10 @@ def test_int_codes_and_object_ids(tmp_path):
 
     gen(tmp_path / "i", n=4, batch=4, fn=fn, object_names=names)
     d = ds.load_dataset(tmp_path / "i")
-    assert set(d["toy"]) == {"ball"} and set(d["other"]) == {"plate"}
-    assert d["label"].dtype == bool and set(d["tag"]) <= {"x", "y"}
+    assert set(d["toy"]) == {"ball"}
+    assert set(d["other"]) == {"plate"}
+    assert d["label"].dtype == bool
+    assert set(d["tag"]) <= {"x", "y"}
     r = ds.load_rollouts(tmp_path / "i")
     import jax
 
@@ -445,8 +459,11 @@ def test_info_values_and_cli(built, capsys):
     path, summary = built
     d = ds.info(path)
     data, r = ds.load_dataset(path), ds.load_rollouts(path)
-    assert d["action"] == "lift" and d["n"] == 40 and d["positive_rate"] == 0.5
-    assert d["rollouts"] == summary["rollouts"] == len(r["label"]) and d["status"] == "complete"
+    assert d["action"] == "lift"
+    assert d["n"] == 40
+    assert d["positive_rate"] == 0.5
+    assert d["rollouts"] == summary["rollouts"] == len(r["label"])
+    assert d["status"] == "complete"
     for rel in ds.RELATIONS:
         labs = [l for l, x in zip(data["label"], data["relation"]) if x == rel]
         assert d["count_by_relation"][rel] == {"n": len(labs), "positives": sum(labs)}
@@ -456,19 +473,24 @@ def test_info_values_and_cli(built, capsys):
     pairs = {f"{t}/{o}" for t, o in zip(data["toy"], data["other"])}
     assert set(d["positive_rate_by_pair"]) == pairs
     assert sum(c["n"] for c in d["count_by_pair"].values()) == 40
-    assert d["features"] is None and d["borrowed"] == 0
-    assert d["config"] == CFG and d["versions"]["orbax-checkpoint"]
+    assert d["features"] is None
+    assert d["borrowed"] == 0
+    assert d["config"] == CFG
+    assert d["versions"]["orbax-checkpoint"]
 
     parser = argparse.ArgumentParser()
     cli_data.register(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["info", str(path), "--json"])
     assert args.func(args) == 0
     j = json.loads(capsys.readouterr().out)
-    assert j["n"] == 40 and j["positive_rate_by_relation"] == d["positive_rate_by_relation"]
+    assert j["n"] == 40
+    assert j["positive_rate_by_relation"] == d["positive_rate_by_relation"]
     args = parser.parse_args(["info", str(path)])
     assert args.func(args) == 0
     text = capsys.readouterr().out
-    assert "on_top" in text and "features: none" in text and f"{summary['rollouts']} rollouts" in text
+    assert "on_top" in text
+    assert "features: none" in text
+    assert f"{summary['rollouts']} rollouts" in text
 
 
 def test_info_while_generating(tmp_path):
@@ -476,8 +498,11 @@ def test_info_while_generating(tmp_path):
     with pytest.raises(Killed):
         gen(p, fn=synthetic_rollout_fn(kill_after=1))
     d = ds.info(p)
-    assert d["status"] == "generating" and d["n"] == 0 and d["rollouts"] == 16
-    assert d["positive_rate"] is None and d["rollouts_positive_rate"] is not None
+    assert d["status"] == "generating"
+    assert d["n"] == 0
+    assert d["rollouts"] == 16
+    assert d["positive_rate"] is None
+    assert d["rollouts_positive_rate"] is not None
     assert "generating" in ds.format_info(d)
 
 
@@ -530,14 +555,19 @@ def test_add_features_round_trip_and_resume(built, tmp_path):
     assert ds.info(p)["features"]["status"] == "generating"
     sizes: list = []
     res = ds.add_features(p, feature_fn(sizes=sizes), batch=12, progress=False, config_dict={"voxel": 0.0125})
-    assert sizes == [12, 12] and res["new_chunks"] == 2 and res["chunks"] == 4  # 40 = 12+12+12+4 (padded)
+    assert sizes == [12, 12]
+    assert res["new_chunks"] == 2
+    assert res["chunks"] == 4  # 40 = 12+12+12+4 (padded)
     d = ds.load_dataset(p)
     want = feature_fn()({k: v for k, v in d.items() if k not in ("pca", "rhf", "unseen", "action")})
-    assert d["pca"].shape == (40, 18) and d["rhf"].shape == (40, 300) and d["unseen"].shape == (40, 2)
+    assert d["pca"].shape == (40, 18)
+    assert d["rhf"].shape == (40, 300)
+    assert d["unseen"].shape == (40, 2)
     for k in ("pca", "rhf", "unseen"):
         np.testing.assert_array_equal(d[k], want[k])
     f = ds.info(p)["features"]
-    assert f["arrays"]["pca"]["shape"] == [40, 18] and f["arrays"]["unseen"]["dtype"] == "bool"
+    assert f["arrays"]["pca"]["shape"] == [40, 18]
+    assert f["arrays"]["unseen"]["dtype"] == "bool"
     assert f["unseen_samples"] == int(want["unseen"].any(axis=1).sum())
     assert f["unseen_by_column"] == want["unseen"].sum(axis=0).tolist()
     # finished: rerun is a no-op; other config is refused unless overwrite
@@ -549,7 +579,8 @@ def test_add_features_round_trip_and_resume(built, tmp_path):
     np.testing.assert_array_equal(ds.load_dataset(p)["pca"], want["pca"])
     # chunks without features.json (an overwrite killed after removing it) are ignored, then cleaned
     (p / "features.json").rename(tmp_path / "features.json")
-    assert "pca" not in ds.load_dataset(p) and ds.info(p)["features"] is None
+    assert "pca" not in ds.load_dataset(p)
+    assert ds.info(p)["features"] is None
     ds.add_features(p, feature_fn(), batch=16, progress=False)
     assert sorted(x.name for x in (p / "features").iterdir()) == ["chunk_000000", "chunk_000001", "chunk_000002"]
     np.testing.assert_array_equal(ds.load_dataset(p)["rhf"], want["rhf"])
@@ -585,7 +616,8 @@ def test_progress_bar_and_report(tmp_path, capsys):
     assert f"6 samples selected from {res['rollouts']} rollouts" in err
     sizes: list = []
     ds.add_features(tmp_path / "p", feature_fn(sizes=sizes), batch=4, progress=True)
-    assert "features" in capsys.readouterr().err and sizes == [4, 4]
+    assert "features" in capsys.readouterr().err
+    assert sizes == [4, 4]
 
 
 def test_sigkill_mid_run_then_resume(built, tmp_path):
@@ -694,17 +726,20 @@ def test_features_status_and_overwrite_recovers_corrupt_chunk(built, tmp_path):
     ds.add_features(p, feature_fn(), batch=12, progress=False, config_dict=cfg)
     assert ds.features_status(p, 12, cfg)[0] == "complete"
     state, why = ds.features_status(p, 12, {"voxel": 0.02})
-    assert state == "stale" and "voxel" in why
+    assert state == "stale"
+    assert "voxel" in why
     assert ds.features_status(p, 16, cfg)[0] == "stale"
     want = ds.load_dataset(p)["rhf"]
     _corrupt_feature_chunk(p, 1)
     state, why = ds.features_status(p, 12, cfg)
-    assert state == "corrupt" and "chunk_000001" in why
+    assert state == "corrupt"
+    assert "chunk_000001" in why
     with pytest.raises(ds.CorruptDatasetError, match="overwrite=True"):
         ds.add_features(p, feature_fn(), batch=12, progress=False, config_dict=cfg)
     sizes: list = []
     res = ds.add_features(p, feature_fn(sizes=sizes), batch=12, progress=False, config_dict=cfg, overwrite=True)
-    assert res["new_chunks"] == 4 and len(sizes) == 4
+    assert res["new_chunks"] == 4
+    assert len(sizes) == 4
     assert ds.features_status(p, 12, cfg)[0] == "complete"
     np.testing.assert_array_equal(ds.load_dataset(p)["rhf"], want)
     (p / ds.FEATURES_SIDECAR).write_text("{oops")
@@ -719,7 +754,8 @@ def test_dataset_status(built, tmp_path):
     (tmp_path / "empty").mkdir()
     assert ds.dataset_status(tmp_path / "empty", expected)[0] == "absent"
     state, why = ds.dataset_status(path, dict(expected, seed=4))
-    assert state == "stale" and "seed" in why
+    assert state == "stale"
+    assert "seed" in why
     part = tmp_path / "part"
     with pytest.raises(Killed):
         gen(part, fn=synthetic_rollout_fn(kill_after=2))
@@ -759,7 +795,8 @@ def test_corrupt_chunk_read_prints_no_event_loop_error(built, tmp_path):
                          env=dict(os.environ, JAX_PLATFORMS="cpu"), cwd=str(Path(__file__).parent.parent))
     assert res.returncode == 0, res.stderr
     assert res.stderr.count("clear: chunk") == 3
-    assert "Event loop is closed" not in res.stderr and "Traceback" not in res.stderr
+    assert "Event loop is closed" not in res.stderr
+    assert "Traceback" not in res.stderr
 
 
 def test_a_chunk_that_does_not_read_back_never_lands(tmp_path, monkeypatch):
@@ -780,7 +817,8 @@ def test_a_chunk_that_does_not_read_back_never_lands(tmp_path, monkeypatch):
     path = tmp_path / "chunk_000000"
     with pytest.raises(ds.CorruptDatasetError, match="chunk"):
         store.write_chunk(path, {"label": np.zeros(4, bool)}, {"chunk": 0})
-    assert not path.exists() and not list(tmp_path.iterdir())
+    assert not path.exists()
+    assert not list(tmp_path.iterdir())
     monkeypatch.undo()
     store.write_chunk(path, {"label": np.zeros(4, bool)}, {"chunk": 0})  # the real writer lands
     assert store.read_chunk(path)[0]["label"].shape == (4,)

@@ -62,8 +62,11 @@ def test_features_command_and_show(small_dataset, tmp_path, capsys):
     assert cli.main(["features", str(small_dataset), "--batch", "4"]) == 0
     ds = load_dataset(small_dataset)
     n = len(ds["label"])
-    assert ds["pca"].shape == (n, 18) and ds["rhf"].shape == (n, 300) and ds["unseen"].shape == (n, 2)
-    assert np.isfinite(ds["pca"]).all() and np.isfinite(ds["rhf"]).all()
+    assert ds["pca"].shape == (n, 18)
+    assert ds["rhf"].shape == (n, 300)
+    assert ds["unseen"].shape == (n, 2)
+    assert np.isfinite(ds["pca"]).all()
+    assert np.isfinite(ds["rhf"]).all()
     seen = ~ds["unseen"].any(1)
     assert seen.any()
     np.testing.assert_allclose(ds["rhf"][seen].reshape(-1, 6, 50).sum(-1), 1.0, atol=1e-4)
@@ -77,7 +80,8 @@ def test_features_command_and_show(small_dataset, tmp_path, capsys):
     capsys.readouterr()
     out = tmp_path / "scene.png"
     assert cli.main(["show", str(small_dataset), "--index", "1", "--out", str(out)]) == 0
-    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10_000
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert out.stat().st_size > 10_000
     assert cli.main(["show", str(small_dataset), "--index", "99", "--out", str(out)]) == 2
     assert "out of range" in capsys.readouterr().err
 
@@ -138,11 +142,13 @@ def test_voxel_size_set_from_the_cli_changes_the_features(small_dataset, tmp_pat
     assert cli.main(["features", str(other), "--batch", "4", "--set", "perception.voxel.size=0.025",
                      "--overwrite"]) == 0
     a, b = load_dataset(small_dataset), load_dataset(other)
-    assert not np.array_equal(a["rhf"], b["rhf"]) and not np.array_equal(a["pca"], b["pca"])
+    assert not np.array_equal(a["rhf"], b["rhf"])
+    assert not np.array_equal(a["pca"], b["pca"])
     side = json.loads((other / dataset.FEATURES_SIDECAR).read_text())
     assert side["config"]["perception"]["voxel"]["size"] == 0.025
     rec = json.loads((other / "relaff_config.json").read_text())
-    assert rec["command"] == "features" and rec["config"]["perception"]["voxel"]["size"] == 0.025
+    assert rec["command"] == "features"
+    assert rec["config"]["perception"]["voxel"]["size"] == 0.025
     assert rec["config"]["dataset"]["feature_batch"] == 4
 
 

@@ -50,7 +50,10 @@ def test_sensor_models_same_physics():
     p = [(t, o) for t, o, _ in lib.pairs()].index(("block", "cup"))
     m0 = mujoco.MjModel.from_xml_string(wd.pair_xml("block", "cup", CFG.phys, arm=True))  # World.mj_models[p]
     m1 = native_batch.sensor_models(CFG.phys, [p])[0]
-    assert m1.nsensor == 4 and m0.nsensor == 0 and m1.nq == m0.nq and m1.neq == m0.neq
+    assert m1.nsensor == 4
+    assert m0.nsensor == 0
+    assert m1.nq == m0.nq
+    assert m1.neq == m0.neq
     d0, d1 = mujoco.MjData(m0), mujoco.MjData(m1)
     j = m0.joint("obj_free")
     for d in (d0, d1):  # the cup dropped from 5 cm, spinning
@@ -121,7 +124,8 @@ def test_engine_equals_replay(planned, action):
     got = native_batch.execute_native(action, CFG, pair[idx], q[idx], qvel[idx], sub, before[idx])
     for f in FIELDS:
         np.testing.assert_array_equal(got[f], ref[f], err_msg=f"{action} {f}")
-    assert got["label"].dtype == bool and got["qpos_final"].dtype == np.float32
+    assert got["label"].dtype == bool
+    assert got["qpos_final"].dtype == np.float32
     # the objects moved: the equality is not that of programs that did nothing
     moved = np.linalg.norm(got["com_end"] - got["com0"], axis=-1).max()
     assert moved > 0.02, (action, moved)
@@ -160,7 +164,9 @@ def test_tiny_native_dataset_through_the_cli(tmp_path):
                  "--json"]) == 0
     assert read_json(out / ds.SIDECAR)["engine"] == "native"
     d = ds.load_dataset(out)
-    assert len(d["label"]) == 2 and d["label"].sum() == 1 and d["simulated"][d["label"]].all()
+    assert len(d["label"]) == 2
+    assert d["label"].sum() == 1
+    assert d["simulated"][d["label"]].all()
 
 
 @pytest.mark.slow  # compiles placement and settling (MJX)
@@ -181,7 +187,8 @@ def test_native_rollout_fn_equals_replay(scene_world):
     np.testing.assert_array_equal(out["qpos_settled"], q_ref.astype(np.float32))
     np.testing.assert_array_equal(out["relation"], rel_ref)
     run = np.flatnonzero(out["feasible"])
-    assert 0 < len(run) < B and np.array_equal(out["simulated"], out["feasible"]), out["feasible"]
+    assert 0 < len(run) < B, out["feasible"]
+    assert np.array_equal(out["simulated"], out["feasible"]), out["feasible"]
     prepare_fn, _ = rollouts.jitted_stage_fns(CFG)
     plan, _ = jax.device_get(prepare_fn(action_id("pull"), pair, s.qpos))
     ref = native.replay_native("pull", CFG, np.asarray(pair)[run], np.asarray(s.qpos)[run], np.asarray(s.qvel)[run],
@@ -191,7 +198,8 @@ def test_native_rollout_fn_equals_replay(scene_world):
     np.testing.assert_array_equal(out["qpos_final"][run], ref["qpos_final"])
     assert not out["label"][~out["feasible"]].any()
     np.testing.assert_array_equal(out["qpos_final"][~out["feasible"]], out["qpos_settled"][~out["feasible"]])
-    assert out["label"].dtype == bool and out["rollout_id"].dtype == np.int64
+    assert out["label"].dtype == bool
+    assert out["rollout_id"].dtype == np.int64
 
 
 @pytest.mark.parametrize("nthread", [1, 2])
@@ -205,8 +213,11 @@ def test_settle_batch_equals_settle_native(scene_world, nthread):
         q, rel = native.settle_native(scene_world, pair, q0)
         np.testing.assert_array_equal(got.qpos, q.astype(np.float32))
         np.testing.assert_array_equal(got.relation, rel)
-        assert got.qvel.dtype == np.float32 and got.at_rest.dtype == bool and got.cog_distance.shape == (12,)
-    assert seed == 1 and not any(scene_world.pairs[p][2] == "toy+rake" for p in pair)  # the nstep branch ran
+        assert got.qvel.dtype == np.float32
+        assert got.at_rest.dtype == bool
+        assert got.cog_distance.shape == (12,)
+    assert seed == 1
+    assert not any(scene_world.pairs[p][2] == "toy+rake" for p in pair)  # the nstep branch ran
 
 
 @pytest.mark.slow  # C executions of two actions, full and stopped

@@ -110,7 +110,9 @@ def test_sampling_distribution_and_determinism(scene_world):
     # the other object lies in the half-disc 0.2..1.8 m around the robot
     xy = q1[pg != 2, w.obj_qpos:w.obj_qpos + 2]
     r = np.linalg.norm(xy, axis=-1)
-    assert (r >= 0.2).all() and (r <= 1.8).all() and (xy[:, 0] >= 0).all()
+    assert (r >= 0.2).all()
+    assert (r <= 1.8).all()
+    assert (xy[:, 0] >= 0).all()
     # about half the toy+base scenes are stacked (on top / inside)
     stacked = i1[pg == 0] != sc.BESIDE
     assert 0.4 < stacked.mean() < 0.6
@@ -128,7 +130,8 @@ def test_run_scenes_one_compile_and_bitwise_reproducible(scene_world):
     s1, st1 = sc.run_scenes(12, seed=5, batch=B, world=scene_world, progress=False)
     s2, st2 = sc.run_scenes(12, seed=5, batch=B, world=scene_world, progress=False)
     # one placement program and one settle program per batch shape, whatever the pairs
-    assert st1["compilations"] <= 2 and st2["compilations"] == 0
+    assert st1["compilations"] <= 2
+    assert st2["compilations"] == 0
     chex.assert_trees_all_equal(s1, s2)
     assert s1.pair.shape == (12,)
     assert len({scene_world.pairs[p][2] for p in s1.pair}) == 3  # a mixed batch
@@ -154,7 +157,8 @@ def test_native_mujoco_cross_check(scene_world, settle):
     assert np.mean(rel == rel_c) >= 0.9
     err = np.maximum(np.linalg.norm(qpos[:, w.toy_qpos:w.toy_qpos + 3] - q_c[:, w.toy_qpos:w.toy_qpos + 3], axis=-1),
                      np.linalg.norm(qpos[:, w.obj_qpos:w.obj_qpos + 3] - q_c[:, w.obj_qpos:w.obj_qpos + 3], axis=-1))
-    assert np.median(err) < 0.005 and np.mean(err < 0.02) >= 0.85, err
+    assert np.median(err) < 0.005, err
+    assert np.mean(err < 0.02) >= 0.85, err
 
 
 @pytest.mark.slow  # settles scenes in a CLI run (a third compile)
@@ -162,7 +166,8 @@ def test_cli_scenes_json(capsys):
     assert cli.main(["scenes", "8", "--batch", "8", "--seed", "3", "--json"]) == 0
     s = json.loads(capsys.readouterr().out)
     assert {"n", "relations", "pairings", "compilations", "seconds"} <= set(s)
-    assert s["n"] == 8 and sum(s["relations"].values()) == 8
+    assert s["n"] == 8
+    assert sum(s["relations"].values()) == 8
     assert sum(v["n"] for v in s["pairings"].values()) == 8
 
 
