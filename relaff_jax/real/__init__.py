@@ -29,7 +29,7 @@ Relations and section VI's experiments (on top of the above):
 """
 from __future__ import annotations
 
-import importlib
+from relaff_jax.lazy import lazy_attributes
 
 # Names are loaded on first use (PEP 562), so that ``relaff_jax.real.config`` and the labels
 # file can be read without importing JAX (a ``--set`` mistake is reported at once).
@@ -94,16 +94,7 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_WHERE))
+__getattr__, __dir__ = lazy_attributes(__name__, _WHERE, globals())
 
 
 __all__ = sorted(_WHERE)

@@ -173,6 +173,15 @@ def scene_resamples(y: np.ndarray, scene: np.ndarray, rng: np.random.Generator, 
     return out
 
 
+def _central_95(vals: list, n_boot: int) -> tuple[float, float] | None:
+    """The 2.5 and 97.5 percentiles of the resampled bf means; None when bf was undefined in
+    at least half of the ``n_boot`` resamples (the interval would describe a minority)."""
+    if len(vals) < n_boot / 2:
+        return None
+    lo, hi = np.quantile(vals, [0.025, 0.975])
+    return float(lo), float(hi)
+
+
 def bf_scene_interval(res: dict, early: np.ndarray, rng: np.random.Generator,
                       n_boot: int) -> tuple[float, float] | None:
     """95 % interval of the early mean bootstrap factor across folders with the test scenes
@@ -184,10 +193,7 @@ def bf_scene_interval(res: dict, early: np.ndarray, rng: np.random.Generator,
         bf = bootstrap_factor(_balanced(bl[:, idx], y[idx]), _balanced(sl[:, idx], y[idx]))[early]
         if np.isfinite(bf).any():
             vals.append(np.nanmean(bf))
-    if len(vals) < n_boot / 2:
-        return None
-    lo, hi = np.quantile(vals, [0.025, 0.975])
-    return float(lo), float(hi)
+    return _central_95(vals, n_boot)
 
 
 def scene_interval(hits: np.ndarray, y: np.ndarray, scene: np.ndarray, rng: np.random.Generator,
@@ -254,10 +260,7 @@ def _bf_interval(sl: np.ndarray, bl: np.ndarray, early: np.ndarray, rng: np.rand
         bf = bootstrap_factor(bl[:, i].mean(1), sl[:, i].mean(1))[early]
         if np.isfinite(bf).any():
             vals.append(np.nanmean(bf))
-    if len(vals) < n_boot / 2:
-        return None
-    lo, hi = np.quantile(vals, [0.025, 0.975])
-    return float(lo), float(hi)
+    return _central_95(vals, n_boot)
 
 
 def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> dict:
