@@ -105,8 +105,9 @@ def preset(name: str) -> RunConfig:
         # The matching cannot be met inside it (73-78 % borrowed at twice the rollouts in the
         # study preset), so it is given up at the first balanced selection; take's feasible
         # negatives are 2.6 % of its rollouts, so 5,000 of them need ~194,000 (the cap)
-        return override(RunConfig(), {"dataset.rollout_batch": 1024, "dataset.population": "feasible",
-                                      "dataset.match_patience": 1.0, "dataset.max_rollouts": 300_000})
+        return override(RunConfig(experiment=experiment_preset("paper")), {
+            "dataset.rollout_batch": 1024, "dataset.population": "feasible", "dataset.match_patience": 1.0,
+            "dataset.max_rollouts": 300_000})
     if name == "study":
         return override(RunConfig(experiment=experiment_preset("study")), {
             "dataset.n_samples": 1000, "dataset.rollout_batch": 256, "dataset.max_rollouts": 100_000,
