@@ -39,19 +39,20 @@ def test_rollout_gif_of_a_settled_scene(tmp_path, scene_world, settle):
     s = settle(pair, qpos0, intended)
     heard = []
     frames = animate.animate_sample("lift", int(pair[0]), np.asarray(s.qpos)[0], tmp_path / "a.gif", title="t",
-                                    progress=lambda *a: heard.append(a))
+                                    every=40, progress=lambda *a: heard.append(a))
     from relaff_jax.constants import action_id
     from relaff_jax.sim import templates
 
-    # a frame every 10 steps of the program, which stops at its end (560 of lift's 815 steps)
+    # a frame every 40 steps of the program (the CLI's default is 10; fewer frames keep the
+    # test short), which stops at its end (560 of lift's 815 steps)
     n_run = int(templates.run_steps(templates.ActionConfig())[action_id("lift")])
     assert n_run == 560
-    assert frames["frames_xpos"].shape[0] == 1 + n_run // 10
+    assert frames["frames_xpos"].shape[0] == 1 + n_run // 40
     # every phase is announced and finished; the frames are counted one by one
     phases = list(dict.fromkeys(h[0] for h in heard))
     assert phases == ["planning (compiles the IK first)", "replaying in MuJoCo C", "drawing frames"]
     drawn = [h[1] for h in heard if h[0] == "drawing frames"]
-    assert drawn == list(range(1 + n_run // 10 + 1))
+    assert drawn == list(range(1 + n_run // 40 + 1))
     im = Image.open(tmp_path / "a.gif")
     assert im.n_frames == frames["frames_xpos"].shape[0]
     # the objects start where the scene settled

@@ -19,7 +19,7 @@ import numpy as np
 
 from relaff_jax.learn.config import ORACLE, TABLE2_ROWS, ExperimentConfig
 from relaff_jax.learn.correlation import categories_above, category_pairs
-from relaff_jax.learn.intervals import bc_interval, half_sizes, resampled_means, scene_halves, whole
+from relaff_jax.learn.intervals import bc_interval, half_sizes, resampled_means, scene_halves, target_blocks, whole
 from relaff_jax.learn.measures import (
     _quiet,
     bootstrap_factor,
@@ -90,8 +90,11 @@ def half_curves(acc_x: np.ndarray, corr_x: np.ndarray, halves: np.ndarray) -> np
         return None
     a = acc_x.shape[0]
     ran = np.isfinite(acc_x).any(-1)
-    out = np.stack([np.stack([corr_x[t][..., halves[t] == h].astype(float).mean(-1).mean(-1) for t in range(a)])
-                    for h in range(2)])
+    out = np.full((2, a) + tuple(corr_x.shape[1:3]), np.nan)  # (2, A, C', S)
+    for t in range(a):
+        for sl, blk in target_blocks(corr_x, t):
+            for h in range(2):
+                out[h, t, :, sl] = blk[..., halves[t] == h].astype(float).mean(-1).mean(-1)
     return np.where(ran[None], out, np.nan)
 
 

@@ -51,6 +51,17 @@ def scene_halves(n_test: np.ndarray, n_positive: np.ndarray | None, width: int) 
     return out
 
 
+def target_blocks(correct, t: int):
+    """``(sizes slice, (C', s, R, N) block)`` pairs covering target ``t``'s outcomes: the
+    blocks of an ``online.Outcomes`` (too large to hold whole at the paper's scale), or an
+    array's one whole slice."""
+    if hasattr(correct, "block"):
+        for sl in correct.size_blocks():
+            yield sl, correct.block(t, sl)
+    else:
+        yield slice(None), np.asarray(correct[t])
+
+
 def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, resamples: int, seed: int,
                     halves: np.ndarray | None = None) -> np.ndarray:
     """``(B, 2, A, C', S)`` float64 mean accuracy curves of each test half in ``resamples``
@@ -68,16 +79,20 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
     for t in range(a):
         n = int(n_test[t]) if n_max else 0
         if n > 0:
+            draws = []  # (half, scenes, weights (B, m)), drawn in the order (target, half)
             for h in range(2):
                 idx = np.flatnonzero(halves[t, :n] == h)
                 m = len(idx)
                 if m == 0:  # a test set of one scene: its other half is empty
                     out[:, h, t] = np.nan
                     continue
-                w = rng.multinomial(m, np.full(m, 1.0 / m), size=resamples) / m  # (B, m)
-                x = np.asarray(correct[t], dtype=np.float64)[..., idx].reshape(-1, m)  # (C' S R, m)
-                per_rep = (x @ w.T).reshape(c, s, r, resamples)  # accuracy per repetition and resample
-                out[:, h, t] = np.einsum("csrb,br->bcs", per_rep, v)
+                draws.append((h, idx, rng.multinomial(m, np.full(m, 1.0 / m), size=resamples) / m))
+            for sl, blk in target_blocks(correct, t):
+                blk = np.asarray(blk, dtype=np.float64)  # (C', s, R, N)
+                for h, idx, w in draws:
+                    x = blk[..., idx].reshape(-1, len(idx))  # (C' s R, m)
+                    per_rep = (x @ w.T).reshape(c, -1, r, resamples)  # accuracy per repetition and resample
+                    out[:, h, t, :, sl] = np.einsum("csrb,br->bcs", per_rep, v)
         else:
             out[:, :, t] = np.einsum("csr,br->bcs", np.nan_to_num(acc[t]), v)[:, None]
     return np.where(ran[None, None], out, np.nan)

@@ -39,16 +39,34 @@ def _mix(x: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.where(ok, out, np.nan)
 
 
-def extend(acc: np.ndarray, correct: np.ndarray, loo: np.ndarray, lay: Mapping) -> tuple[np.ndarray, np.ndarray, dict]:
-    """``acc (A, C + 2, S, R)``, ``correct (A, C + 2, S, R, N)`` float32 with the online
-    learners appended (NaN / 0 where a family did not run), and the weights."""
+def extend(acc: np.ndarray, correct: np.ndarray, loo: np.ndarray, lay: Mapping) -> tuple[np.ndarray, "Outcomes", dict]:
+    """``acc (A, C + 2, S, R)`` with the online learners appended (NaN where a family did not
+    run), their outcomes as ``Outcomes`` (``(A, C + 2, S, R, N)`` float32, made one target and
+    block of sizes at a time) and the weights."""
     w = online_weights(loo, lay)
     acc_on = np.stack([_mix(acc, lay[f], w[f]) for f in FAMILIES], 1)
     acc_x = np.concatenate([np.asarray(acc, dtype=float), acc_on], 1)
-    corr = np.asarray(correct)
-    if corr.shape[-1]:
-        corr_on = np.stack([np.nan_to_num(_mix(corr, lay[f], w[f])) for f in FAMILIES], 1)
-        corr_x = np.concatenate([corr.astype(np.float32), corr_on.astype(np.float32)], 1)
-    else:
-        corr_x = np.zeros(acc_x.shape + (0,), np.float32)
-    return acc_x, corr_x, w
+    return acc_x, Outcomes(np.asarray(correct), w, lay), w
+
+
+class Outcomes:
+    """The outcomes of every condition and of the two online learners, ``(A, C + 2, S, R, N)``
+    float32, never held whole: the paper preset's would be 37 GB (9 x 52 x 99 x 50 x 4,000).
+    ``block(t, sizes)`` gives target ``t``'s ``(C + 2, len(sizes), R, N)``, the same bits as
+    slicing the whole array (the mix is elementwise over sizes and scenes)."""
+
+    def __init__(self, correct: np.ndarray, w: Mapping[str, np.ndarray], lay: Mapping, budget: float = 2.5e8):
+        self.correct, self.w, self.lay, self.budget = correct, w, lay, budget
+        a, c, s, r, n = correct.shape
+        self.shape = (a, c + len(FAMILIES), s, r, n)
+
+    def block(self, t: int, sizes: slice | np.ndarray = slice(None)) -> np.ndarray:
+        corr = np.asarray(self.correct[t : t + 1, :, sizes])  # (1, C, s, R, N)
+        on = np.stack([np.nan_to_num(_mix(corr, self.lay[f], self.w[f][t : t + 1])) for f in FAMILIES], 1)
+        return np.concatenate([corr.astype(np.float32), on.astype(np.float32)], 1)[0]
+
+    def size_blocks(self) -> list[slice]:
+        """Slices of the size axis whose float32 block of one target stays under ``budget`` bytes."""
+        _, c, s, r, n = self.shape
+        step = max(1, int(self.budget // max(1, 4 * c * r * n)))
+        return [slice(i, min(i + step, s)) for i in range(0, s, step)]
