@@ -401,3 +401,17 @@ def test_cli_out_paths_are_checked_before_any_work(tmp_path):
     args = parser.parse_args(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "rep")])
     with pytest.raises(UserError, match="not an experiment folder"):
         args.func(args)
+
+
+def test_cli_space_is_the_tree_key_it_aliases(tmp_path):
+    """``--space`` is ``reproduce.spaces`` (what learn.run sweeps and records): a ``--set`` of the
+    key that disagrees is refused before any work."""
+    from relaff_jax.errors import UserError
+
+    parser = argparse.ArgumentParser()
+    cli_learn.register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["experiment", "--synthetic", "150", "--out", str(tmp_path / "res"), "--space", "pca",
+                              "--set", 'reproduce.spaces=["rhf"]'])
+    with pytest.raises(UserError, match="--space .* and --set reproduce.spaces=.* disagree"):
+        args.func(args)
+    assert not (tmp_path / "res").exists()

@@ -152,6 +152,42 @@ def test_run_log(base):
     assert run0["stages"]["experiment"]["was"] == "absent"  # a fresh folder, not a resumed one
 
 
+def _flat(d, prefix=""):
+    for k, v in d.items():
+        if isinstance(v, dict):
+            yield from _flat(v, f"{prefix}{k}.")
+        else:
+            yield prefix + k, v
+
+
+def test_relaff_experiment_and_reproduce_record_the_same_config_and_results(base, tmp_path, capsys):
+    """Both routes call learn.run: the same record shape, the same experiment node, the
+    actions and spaces that ran, and the same bits from the same datasets, tree and seed."""
+    from relaff_jax import cli
+    from relaff_jax.config import to_dict
+    from relaff_jax.provenance import CONFIG_RECORD
+
+    out, log, _, _ = base
+    rec = json.loads((out / "results" / CONFIG_RECORD).read_text())
+    quick = dict(_flat(to_dict(E.experiment_preset("quick"))))
+    sets = [x for k, v in _flat(log["config"]["experiment"]) if quick[k] != v
+            for x in ("--set", f"experiment.{k}={json.dumps(v)}")]
+    argv = ["experiment", "--data", *(str(out / "data" / a) for a in ACTS), "--out", str(tmp_path / "results"),
+            "--seed", str(log["seeds"]["experiment"]), "--jobs", "1", "--no-progress", *sets]
+    assert cli.main(argv) == 0, capsys.readouterr().err
+    mine = json.loads((tmp_path / "results" / CONFIG_RECORD).read_text())
+    assert sorted(mine) == sorted(rec)
+    assert rec["command"] == "experiment"
+    assert mine["command"] == rec["command"]
+    assert mine["config"]["experiment"] == rec["config"]["experiment"]
+    assert rec["config"]["reproduce"]["actions"] == list(ACTS)
+    assert mine["config"]["reproduce"]["actions"] == list(ACTS)  # the actions that ran, not the nine
+    assert mine["config"]["reproduce"]["spaces"] == rec["config"]["reproduce"]["spaces"]
+    theirs, ours = results_of(out), results_of(tmp_path)
+    for s in ("pca", "rhf"):
+        np.testing.assert_array_equal(ours[s], theirs[s])
+
+
 def test_second_run_skips_every_stage(base):
     out, first, second, _ = base
     assert statuses(second) == dict.fromkeys(R.STAGES, "skipped")

@@ -10,7 +10,6 @@ folder. Output folders are checked before any work; problems a user can fix are
 from __future__ import annotations
 
 import argparse
-import os
 
 from relaff_jax.cli import options
 from relaff_jax.cli.options import check_out_dir
@@ -21,30 +20,20 @@ EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bo
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    options.precheck(args)
-    for d in args.data or ():
-        options.check_in_dir(d)
-    from relaff_jax import learn
-
-    from relaff_jax.runconfig import RunConfig
-
-    tree = options.config(args, base=RunConfig(experiment=learn.experiment_preset(args.preset)))
-    cfg = tree.experiment
-    spaces = list(SPACES) if args.space == "both" else [args.space]
     if args.synthetic and args.data:
         raise UserError("give either --data or --synthetic, not both")
     if not args.synthetic and not args.data:
         raise UserError("give --data DIR... (one featured dataset per action) or --synthetic N")
-    check_out_dir(args.out)
-    if args.synthetic:
-        datasets, desc = learn.synthetic_datasets(args.synthetic, seed=args.seed), [f"synthetic:{args.synthetic}"]
-    else:
-        datasets, desc = learn.load_datasets(args.data), list(args.data)
-    jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
-    with options.cluster(args, args.out) as client:  # with --cluster: sweep blocks as cluster tasks
-        paths = learn.run_experiment(datasets, args.out, cfg, spaces, seed=args.seed, jobs=jobs,
-                                     progress=not args.no_progress, data_desc=desc, client=client)
-    options.record_config(args.out, tree, "experiment")
+    options.precheck(args)
+    from relaff_jax import learn
+    from relaff_jax.runconfig import RunConfig
+
+    spaces = {None: None, "both": tuple(SPACES)}.get(args.space, (args.space,))
+    tree = options.config(args, base=RunConfig(experiment=learn.experiment_preset(args.preset)),
+                          flags={"reproduce.spaces": ("--space", spaces)})
+    with options.cluster(args, args.out) as client:  # the same stage function reproduce runs
+        paths = learn.run(tree, args.data or args.synthetic, args.out, seed=args.seed, jobs=args.jobs,
+                          client=client, progress=not args.no_progress)
     for space, p in paths.items():
         print(f"{space}: {p}")
     return 0
@@ -96,7 +85,8 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, metavar="RESULTS", help="results folder (resumed if it exists)")
     p.add_argument("--preset", choices=("quick", "study", "paper"), default="quick",
                    help="the protocol's sizes, repetitions and forests (relaff_jax.learn.experiment_preset)")
-    p.add_argument("--space", choices=("pca", "rhf", "both"), default="both", help="state space(s) to sweep")
+    p.add_argument("--space", choices=("pca", "rhf", "both"), default=None,
+                   help="state space(s) to sweep, the same as --set reproduce.spaces=[...] (default: both)")
     p.add_argument("--seed", type=int, default=0, help="seed of the test draws, training orders and forests")
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
     options.add_cluster(p)
