@@ -1,18 +1,19 @@
 """``relaff experiment``, ``relaff report`` and ``relaff compare``: the learning sweeps, the report of
 their results, and several readings of one study side by side.
 
-Takes parsed arguments; ``experiment`` runs (or resumes) ``learn.run_experiment`` on dataset
-folders or synthetic data and prints the results paths; ``report`` writes
-``report.write_report`` (Table II, findings, figures, report.md / report.html) of a results
-folder. Output folders are checked before any work; problems a user can fix are
-``relaff_jax.errors.UserError`` (one line, exit code 2).
+Each command parses its arguments into the config tree (its flags are aliases of tree keys)
+and makes one call: ``experiment`` runs (or resumes) ``relaff_jax.learn.run`` on dataset
+folders or synthetic data and prints the results paths; ``report`` runs
+``relaff_jax.report.run`` (Table II, findings, figures, the document) on a results folder;
+``compare`` prints ``report.readings.compare_readings``. The stages check their inputs and
+outputs before any work; problems a user can fix are ``relaff_jax.errors.UserError`` (one
+line, exit code 2).
 """
 from __future__ import annotations
 
 import argparse
 
 from relaff_jax.cli import options
-from relaff_jax.cli.options import check_out_dir
 from relaff_jax.constants import SPACES
 from relaff_jax.errors import UserError
 
@@ -40,15 +41,10 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from relaff_jax.learn import folder
+    tree = options.config(args)
+    from relaff_jax import report
 
-    options.check_in_file(folder.meta(args.results),
-                          f"{args.results} is not an experiment folder (no experiment.json)")
-    check_out_dir(args.out)
-    from relaff_jax.report import write_report
-
-    out = write_report(args.results, args.out)
-    print(f"report: {out}")
+    print(f"report: {report.run(tree, args.results, args.out)}")  # the same stage function reproduce runs
     return 0
 
 
@@ -100,6 +96,7 @@ def register(subparsers) -> None:
                     "correlation clusters and the threshold study, as report.md, report.html and PNGs.")
     r.add_argument("results", metavar="RESULTS", help="a finished experiment folder (relaff experiment)")
     r.add_argument("--out", required=True, metavar="REPORT", help="report folder (created or replaced)")
+    options.add_set(r, "reproduce.examples_per_action=1")
     r.set_defaults(func=cmd_report)
     c = subparsers.add_parser("compare", help="the same study in two or more readings, side by side, from their reports",
                               description="Read the report folders of runs that differ in one setting (e.g. "

@@ -19,9 +19,10 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.errors import UserError
+from relaff_jax.report import folder as F
 from relaff_jax.report.findings import correlation_clusters
 
-FILES = ("summary.json", "findings.json", "reach.json")
+FILES = F.JSON_FILES
 
 
 def read_report(path: str | os.PathLike) -> dict[str, Any]:
