@@ -49,11 +49,8 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from relaff_jax import io as rio
-    from relaff_jax.report.readings import compare_readings
+    from relaff_jax.report.readings import compare
 
-    if args.out:
-        options.check_out_file(args.out)  # before the reports are read
     reports = {}
     for item in args.readings:
         name, sep, path = item.partition("=")
@@ -62,9 +59,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if name in reports:
             raise UserError(f"reading {name!r} given twice")
         reports[name] = path
-    page = compare_readings(reports, size=args.size)
+    page = compare(reports, args.out, size=args.size)
     if args.out:
-        rio.atomic_write_text(args.out, page)
         print(f"wrote {args.out}")
     else:
         print(page, end="")

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from relaff_jax.config import parse_set
-from relaff_jax.io import check_writable_dir
+from relaff_jax.io import check_writable_dir, check_writable_file
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import CONFIG_RECORD, record_config  # noqa: F401 (the commands' record)
 
@@ -56,11 +56,9 @@ def check_out_dir(path: Path, what: str = "--out") -> None:
 
 
 def check_out_file(path: Path, what: str = "--out") -> None:
-    """An output file must not be a folder, and its folder must be creatable and writable."""
-    path = Path(path)
-    if path.is_dir():
-        raise UserError(f"{what} {path} is a folder; give a file name")
-    check_out_dir(path.parent, what=f"{what} {path}: folder")
+    """An output file must not be a folder, and its folder must be creatable and writable
+    (``relaff_jax.io.check_writable_file``)."""
+    check_writable_file(path, what)
 
 
 def check_in_dir(path: Path, message: str | None = None) -> None:

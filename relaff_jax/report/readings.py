@@ -52,6 +52,18 @@ def _nb_overall(space: Mapping[str, Any], size: int) -> tuple[list[float], list[
     return overall.tolist(), acc.tolist()
 
 
+def compare(reports: Mapping[str, str | os.PathLike], out: str | os.PathLike | None = None, *,
+            size: int = 10) -> str:
+    """``relaff compare``'s one call: the page of ``compare_readings``; with ``out``, written
+    there atomically (``out`` checked before any report is read). Returns the page."""
+    if out is not None:
+        rio.check_writable_file(out)
+    page = compare_readings(reports, size=size)
+    if out is not None:
+        rio.atomic_write_text(out, page)
+    return page
+
+
 def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, threshold: float = 0.5) -> str:
     """The markdown page comparing the readings ``{name: REPORT_DIR}``."""
     if len(reports) < 2:
