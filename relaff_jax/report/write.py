@@ -30,6 +30,7 @@ from relaff_jax.report.examples import example_scenes
 from relaff_jax.report.figures import dataset_figure, write_figures
 from relaff_jax.report.findings import FindingRules, findings
 from relaff_jax.report.formatting import finite
+from relaff_jax.report.borrow import borrow_blocks, borrow_rows
 from relaff_jax.report.reach import predictor_blocks, reach_blocks, reach_figure, reach_json, subset_blocks
 from relaff_jax.report.tables import summary, table2_csv, table2_markdown
 
@@ -67,7 +68,8 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
         rio.atomic_write_text(out / F.TABLE2_RHF_CSV, table2_csv(an["rhf"], paper=False))
     rio.atomic_write_text(out / F.TABLE2_MD, table2_markdown(res, an))
     figs = write_figures(res, an, out)
-    rio.atomic_write_json(out / F.SUMMARY, summary(res, an, [p.name for p in figs]))
+    lend = {s: borrow_rows(res[s], an[s], cfg) for s in spaces}
+    rio.atomic_write_json(out / F.SUMMARY, summary(res, an, [p.name for p in figs]) | {"borrow": finite(lend)})
 
     # datasets and example scenes
     data_blocks: list[tuple] = []
@@ -96,7 +98,8 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     # the document
     found = findings(an, cfg, rules)
     blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
-              + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset")) + S.best_after_ten_blocks(an[main], cfg, main)
+              + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset"))
+              + [b for s in spaces for b in borrow_blocks(lend[s], s)] + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
               + S.run_blocks(info, time.perf_counter() - t0, _load(), provenance.machine()))
     rio.atomic_write_json(out / F.FINDINGS, finite({"findings": found, "rules": dataclasses.asdict(rules)}))
