@@ -41,11 +41,12 @@ def run(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str, Mapping[str,
     from relaff_jax.io import check_writable_dir
     from relaff_jax.provenance import record_config
 
-    if isinstance(data, bool) or not isinstance(data, (int, Mapping)):
-        data = [Path(d) for d in data]
-        for d in data:  # before anything is read (the experiment's own imports take seconds)
-            if not d.is_dir():
-                raise UserError(f"{d}: no such dataset directory")
+    if isinstance(data, (str, os.PathLike)):
+        data = [data]  # one folder, not its name's characters
+    folders = None if isinstance(data, (int, Mapping)) else list(data)
+    for d in folders or ():  # before anything is read (the experiment's own imports take seconds)
+        if not Path(d).is_dir():
+            raise UserError(f"{d}: no such dataset directory")
     check_writable_dir(Path(out), "--out")
     from relaff_jax.config import override
     from relaff_jax.learn.datasets import load_datasets
@@ -57,7 +58,7 @@ def run(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str, Mapping[str,
     elif isinstance(data, int):
         datasets, desc = synthetic_datasets(data, seed=seed, actions=tree.reproduce.actions), [f"synthetic:{data}"]
     else:
-        datasets, desc = load_datasets(data), [str(d) for d in data]
+        datasets, desc = load_datasets(folders), [str(d) for d in folders]
     jobs = jobs if jobs and jobs > 0 else (os.cpu_count() or 1)
     paths = run_experiment(datasets, out, tree.experiment, list(tree.reproduce.spaces), seed=seed, jobs=jobs,
                            progress=progress, data_desc=desc, client=client)
