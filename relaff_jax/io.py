@@ -188,3 +188,14 @@ def check_writable_dir(path: str | os.PathLike, what: str = "--out") -> None:
             pass
     except OSError as e:
         raise UserError(f"{what} {path}: cannot write in {probe} ({e.strerror or e})") from e
+
+
+def check_writable_file(path: str | os.PathLike, what: str = "--out") -> None:
+    """Fail at once (``UserError``) if ``path`` cannot be an output file: it is a folder, or
+    its folder cannot be made or written (``check_writable_dir``)."""
+    from relaff_jax.errors import UserError
+
+    path = Path(path)
+    if path.is_dir():
+        raise UserError(f"{what} {path} is a folder; give a file name")
+    check_writable_dir(path.parent, what=f"{what} {path}: folder")

@@ -1,9 +1,11 @@
-"""What a run folder records about how it was made: package versions, the machine, seeds."""
+"""What a run folder records about how it was made: package versions, the machine, seeds, and
+the config record every stage writes into its output folder (``record_config``)."""
 from __future__ import annotations
 
 import importlib.metadata
 import os
 import platform
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -61,3 +63,19 @@ def derive_seed(*keys: int) -> int:
     (``numpy.random.SeedSequence`` hashes the whole tuple).
     """
     return int(np.random.SeedSequence([int(k) for k in keys]).generate_state(1)[0])
+
+
+CONFIG_RECORD = "relaff_config.json"
+
+
+def record_config(folder: str | os.PathLike, cfg: Any, command: str, argv: list[str] | None = None) -> Path:
+    """Write the whole resolved config tree that made ``folder`` into ``folder/relaff_config.json``
+    (atomically, after the stage finished): ``{"command", "argv", "config", "versions"}``, one
+    shape for every stage and route. The stage's own sidecars record the settings that decide
+    its output and its resume checks; this file says how the folder was made in full."""
+    from relaff_jax import io as rio
+    from relaff_jax.config import to_dict
+
+    path = Path(folder) / CONFIG_RECORD
+    rio.atomic_write_json(path, {"command": command, "argv": argv, "config": to_dict(cfg), "versions": versions()})
+    return path

@@ -22,7 +22,7 @@ def test_every_command_is_registered_and_every_stage_command_takes_set():
     parser = cli.build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")
     assert set(COMMANDS) <= set(sub.choices)
-    for name in ("scenes", "generate", "features", "experiment", "reproduce"):
+    for name in ("scenes", "generate", "features", "experiment", "report", "reproduce"):
         opts = {o for a in sub.choices[name]._actions for o in a.option_strings}
         assert "--set" in opts, name
 

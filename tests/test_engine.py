@@ -254,6 +254,27 @@ def test_engine_setting():
         compiled.predict_proba(compiled.fit(X, np.array([0, 1, 1]), 0), np.eye(2, dtype=np.float32))
 
 
+@pytest.mark.parametrize("eng", ["fast", "compiled", "sklearn"])
+def test_an_input_error_names_the_function_called(eng):
+    """One input check (forests.checked_inputs / checked_states) for every engine, its message
+    naming the function the caller called, not another one."""
+    X, y = np.eye(3, dtype=np.float32), np.array([0, 1, 1])
+    bad = np.full((3, 2), np.nan, np.float32)
+    with pytest.raises(ValueError, match=r"^engine\.fit: X contains NaN"):
+        engine.fit(bad, y, 0, engine=eng)
+    with pytest.raises(ValueError, match=r"^engine\.fit_many: forest 1: X must be \(N, D\) and y \(N,\)"):
+        engine.fit_many([X, X], [y, y[:2]], [0, 1], engine=eng)
+    forest = engine.fit(X, y, 0, engine=eng)
+    with pytest.raises(ValueError, match=r"^engine\.predict: X contains NaN"):
+        engine.predict(forest, np.full((2, 3), np.inf, np.float32))
+    with pytest.raises(ValueError, match=r"^engine\.predict_many: ZT contains NaN"):
+        engine.predict_many([forest], np.full((3, 2), np.nan, np.float32), [np.arange(3)])
+    with pytest.raises(ValueError, match=r"^fit_forest: X contains NaN"):  # the estimator's own entry
+        L.fit_forest(bad, y, 0)
+    with pytest.raises(ValueError, match=r"^predict_class: X contains NaN"):
+        L.predict_class(L.fit_forest(X, y, 0), np.full((2, 3), np.nan, np.float32))
+
+
 def test_compiled_random_streams_are_numpys_and_sklearns():
     """rng.py: legacy MT19937 seeding and masked randint as numpy's RandomState, rand_r as
     scikit-learn's our_rand_r, the splitter seed peeked without a second seeding."""

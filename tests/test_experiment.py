@@ -401,3 +401,35 @@ def test_cli_out_paths_are_checked_before_any_work(tmp_path):
     args = parser.parse_args(["report", str(tmp_path / "nothing"), "--out", str(tmp_path / "rep")])
     with pytest.raises(UserError, match="not an experiment folder"):
         args.func(args)
+
+
+def test_cli_space_is_the_tree_key_it_aliases(tmp_path):
+    """``--space`` is ``reproduce.spaces`` (what learn.run sweeps and records): a ``--set`` of the
+    key that disagrees is refused before any work."""
+    from relaff_jax.errors import UserError
+
+    parser = argparse.ArgumentParser()
+    cli_learn.register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["experiment", "--synthetic", "150", "--out", str(tmp_path / "res"), "--space", "pca",
+                              "--set", 'reproduce.spaces=["rhf"]'])
+    with pytest.raises(UserError, match="--space .* and --set reproduce.spaces=.* disagree"):
+        args.func(args)
+    assert not (tmp_path / "res").exists()
+
+
+def test_learn_run_checks_its_inputs_before_any_work(tmp_path):
+    import re
+
+    from relaff_jax.errors import UserError
+    from relaff_jax.runconfig import RunConfig
+
+    tree = RunConfig(experiment=tiny_cfg())
+    missing = tmp_path / "none"
+    for data in ([missing], str(missing)):  # a folder given alone is one folder, not its name's characters
+        with pytest.raises(UserError, match=f"^{re.escape(str(missing))}: no such dataset directory"):
+            E.run(tree, data, tmp_path / "res")
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    with pytest.raises(UserError, match="is a file"):
+        E.run(tree, 150, blocker)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]

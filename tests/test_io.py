@@ -50,6 +50,17 @@ def test_check_writable_dir(tmp_path):
             rio.check_writable_dir(ro / "x")
 
 
+def test_check_writable_file(tmp_path):
+    f = tmp_path / "f"
+    f.write_text("x")
+    rio.check_writable_file(tmp_path / "new" / "page.md")  # its folder is creatable: fine, creates nothing
+    assert not (tmp_path / "new").exists()
+    with pytest.raises(UserError, match="is a folder; give a file name"):
+        rio.check_writable_file(tmp_path)
+    with pytest.raises(UserError, match="page.md: folder .* is a file"):
+        rio.check_writable_file(f / "page.md")
+
+
 def test_remove_tree_and_leftovers(tmp_path):
     d = tmp_path / "out"
     (d / "sub").mkdir(parents=True)

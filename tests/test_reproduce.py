@@ -152,6 +152,75 @@ def test_run_log(base):
     assert run0["stages"]["experiment"]["was"] == "absent"  # a fresh folder, not a resumed one
 
 
+def _flat(d, prefix=""):
+    for k, v in d.items():
+        if isinstance(v, dict):
+            yield from _flat(v, f"{prefix}{k}.")
+        else:
+            yield prefix + k, v
+
+
+def test_relaff_experiment_and_reproduce_record_the_same_config_and_results(base, tmp_path, capsys):
+    """Both routes call learn.run: the same record shape, the same experiment node, the
+    actions and spaces that ran, and the same bits from the same datasets, tree and seed."""
+    from relaff_jax import cli
+    from relaff_jax.config import to_dict
+    from relaff_jax.provenance import CONFIG_RECORD
+
+    out, log, _, _ = base
+    rec = json.loads((out / "results" / CONFIG_RECORD).read_text())
+    quick = dict(_flat(to_dict(E.experiment_preset("quick"))))
+    sets = [x for k, v in _flat(log["config"]["experiment"]) if quick[k] != v
+            for x in ("--set", f"experiment.{k}={json.dumps(v)}")]
+    argv = ["experiment", "--data", *(str(out / "data" / a) for a in ACTS), "--out", str(tmp_path / "results"),
+            "--seed", str(log["seeds"]["experiment"]), "--jobs", "1", "--no-progress", *sets]
+    assert cli.main(argv) == 0, capsys.readouterr().err
+    mine = json.loads((tmp_path / "results" / CONFIG_RECORD).read_text())
+    assert sorted(mine) == sorted(rec)
+    assert rec["command"] == "experiment"
+    assert mine["command"] == rec["command"]
+    assert mine["config"]["experiment"] == rec["config"]["experiment"]
+    assert rec["config"]["reproduce"]["actions"] == list(ACTS)
+    assert mine["config"]["reproduce"]["actions"] == list(ACTS)  # the actions that ran, not the nine
+    assert mine["config"]["reproduce"]["spaces"] == rec["config"]["reproduce"]["spaces"]
+    theirs, ours = results_of(out), results_of(tmp_path)
+    for s in ("pca", "rhf"):
+        np.testing.assert_array_equal(ours[s], theirs[s])
+
+
+def test_relaff_report_and_reproduce_write_the_same_report(base, tmp_path, capsys):
+    """Both routes call report.run: the same findings from the same results, the same record
+    shape, a stamp the report status accepts; every file either writes is one that
+    report/folder.py names."""
+    from relaff_jax import cli, report
+    from relaff_jax.learn import folder as LF
+    from relaff_jax.provenance import CONFIG_RECORD
+    from relaff_jax.report import folder as RF
+    from relaff_jax.report.status import inputs_stamp, report_status
+
+    out, log, _, _ = base
+    mine, theirs = tmp_path / "rep", out / "report"
+    assert cli.main(["report", str(out / "results"), "--out", str(mine)]) == 0, capsys.readouterr().err
+    assert capsys.readouterr().out == f"report: {mine}\n"
+    for f in RF.REQUIRED + (RF.STAMP, RF.FINDINGS, CONFIG_RECORD):
+        assert (mine / f).is_file(), f
+    assert json.loads((mine / RF.FINDINGS).read_text()) == json.loads((theirs / RF.FINDINGS).read_text())
+    rec, theirs_rec = (json.loads((d / CONFIG_RECORD).read_text()) for d in (mine, theirs))
+    assert sorted(rec) == sorted(theirs_rec)
+    assert rec["command"] == "report"
+    assert theirs_rec["command"] == "report"
+    tree = runconfig.from_json(rec["config"])
+    assert report_status(mine, report.stamp(tree, out / "results")) == ("complete", "stamped with the current inputs")
+    # reproduce's stamp is the one it wrote before report.run existed: old run folders stay complete
+    cfg = runconfig.from_json(log["config"])
+    old = [LF.meta(out / "results")] + [LF.results(out / "results", s) for s in cfg.reproduce.spaces]
+    old += [out / "data" / a / f for a in ACTS for f in (D.SIDECAR, D.FEATURES_SIDECAR)]
+    assert json.loads((theirs / RF.STAMP).read_text()) == inputs_stamp(old, {"examples_per_action": 0})
+    named = {v for k, v in vars(RF).items() if k.isupper() and isinstance(v, str)} | {CONFIG_RECORD}
+    for d in (mine, theirs):
+        assert sorted({p.name for p in d.iterdir()} - named) == [], d
+
+
 def test_second_run_skips_every_stage(base):
     out, first, second, _ = base
     assert statuses(second) == dict.fromkeys(R.STAGES, "skipped")

@@ -1,19 +1,19 @@
 """``relaff experiment``, ``relaff report`` and ``relaff compare``: the learning sweeps, the report of
 their results, and several readings of one study side by side.
 
-Takes parsed arguments; ``experiment`` runs (or resumes) ``learn.run_experiment`` on dataset
-folders or synthetic data and prints the results paths; ``report`` writes
-``report.write_report`` (Table II, findings, figures, report.md / report.html) of a results
-folder. Output folders are checked before any work; problems a user can fix are
-``relaff_jax.errors.UserError`` (one line, exit code 2).
+Each command parses its arguments into the config tree (its flags are aliases of tree keys)
+and makes one call: ``experiment`` runs (or resumes) ``relaff_jax.learn.run`` on dataset
+folders or synthetic data and prints the results paths; ``report`` runs
+``relaff_jax.report.run`` (Table II, findings, figures, the document) on a results folder;
+``compare`` prints ``report.readings.compare_readings``. The stages check their inputs and
+outputs before any work; problems a user can fix are ``relaff_jax.errors.UserError`` (one
+line, exit code 2).
 """
 from __future__ import annotations
 
 import argparse
-import os
 
 from relaff_jax.cli import options
-from relaff_jax.cli.options import check_out_dir
 from relaff_jax.constants import SPACES
 from relaff_jax.errors import UserError
 
@@ -21,54 +21,36 @@ EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bo
 
 
 def cmd_experiment(args: argparse.Namespace) -> int:
-    options.precheck(args)
-    for d in args.data or ():
-        options.check_in_dir(d)
-    from relaff_jax import learn
-
-    from relaff_jax.runconfig import RunConfig
-
-    tree = options.config(args, base=RunConfig(experiment=learn.experiment_preset(args.preset)))
-    cfg = tree.experiment
-    spaces = list(SPACES) if args.space == "both" else [args.space]
     if args.synthetic and args.data:
         raise UserError("give either --data or --synthetic, not both")
     if not args.synthetic and not args.data:
         raise UserError("give --data DIR... (one featured dataset per action) or --synthetic N")
-    check_out_dir(args.out)
-    if args.synthetic:
-        datasets, desc = learn.synthetic_datasets(args.synthetic, seed=args.seed), [f"synthetic:{args.synthetic}"]
-    else:
-        datasets, desc = learn.load_datasets(args.data), list(args.data)
-    jobs = args.jobs if args.jobs and args.jobs > 0 else (os.cpu_count() or 1)
-    with options.cluster(args, args.out) as client:  # with --cluster: sweep blocks as cluster tasks
-        paths = learn.run_experiment(datasets, args.out, cfg, spaces, seed=args.seed, jobs=jobs,
-                                     progress=not args.no_progress, data_desc=desc, client=client)
-    options.record_config(args.out, tree, "experiment")
+    options.precheck(args)
+    from relaff_jax import learn
+    from relaff_jax.runconfig import RunConfig
+
+    spaces = {None: None, "both": tuple(SPACES)}.get(args.space, (args.space,))
+    tree = options.config(args, base=RunConfig(experiment=learn.experiment_preset(args.preset)),
+                          flags={"reproduce.spaces": ("--space", spaces)})
+    with options.cluster(args, args.out) as client:  # the same stage function reproduce runs
+        paths = learn.run(tree, args.data or args.synthetic, args.out, seed=args.seed, jobs=args.jobs,
+                          client=client, progress=not args.no_progress)
     for space, p in paths.items():
         print(f"{space}: {p}")
     return 0
 
 
 def cmd_report(args: argparse.Namespace) -> int:
-    from relaff_jax.learn import folder
+    tree = options.config(args)
+    from relaff_jax import report
 
-    options.check_in_file(folder.meta(args.results),
-                          f"{args.results} is not an experiment folder (no experiment.json)")
-    check_out_dir(args.out)
-    from relaff_jax.report import write_report
-
-    out = write_report(args.results, args.out)
-    print(f"report: {out}")
+    print(f"report: {report.run(tree, args.results, args.out)}")  # the same stage function reproduce runs
     return 0
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    from relaff_jax import io as rio
-    from relaff_jax.report.readings import compare_readings
+    from relaff_jax.report.readings import compare
 
-    if args.out:
-        options.check_out_file(args.out)  # before the reports are read
     reports = {}
     for item in args.readings:
         name, sep, path = item.partition("=")
@@ -77,9 +59,8 @@ def cmd_compare(args: argparse.Namespace) -> int:
         if name in reports:
             raise UserError(f"reading {name!r} given twice")
         reports[name] = path
-    page = compare_readings(reports, size=args.size)
+    page = compare(reports, args.out, size=args.size)
     if args.out:
-        rio.atomic_write_text(args.out, page)
         print(f"wrote {args.out}")
     else:
         print(page, end="")
@@ -96,7 +77,8 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, metavar="RESULTS", help="results folder (resumed if it exists)")
     p.add_argument("--preset", choices=("quick", "study", "paper"), default="quick",
                    help="the protocol's sizes, repetitions and forests (relaff_jax.learn.experiment_preset)")
-    p.add_argument("--space", choices=("pca", "rhf", "both"), default="both", help="state space(s) to sweep")
+    p.add_argument("--space", choices=("pca", "rhf", "both"), default=None,
+                   help="state space(s) to sweep, the same as --set reproduce.spaces=[...] (default: both)")
     p.add_argument("--seed", type=int, default=0, help="seed of the test draws, training orders and forests")
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
     options.add_cluster(p)
@@ -110,6 +92,7 @@ def register(subparsers) -> None:
                     "correlation clusters and the threshold study, as report.md, report.html and PNGs.")
     r.add_argument("results", metavar="RESULTS", help="a finished experiment folder (relaff experiment)")
     r.add_argument("--out", required=True, metavar="REPORT", help="report folder (created or replaced)")
+    options.add_set(r, "reproduce.examples_per_action=1")
     r.set_defaults(func=cmd_report)
     c = subparsers.add_parser("compare", help="the same study in two or more readings, side by side, from their reports",
                               description="Read the report folders of runs that differ in one setting (e.g. "

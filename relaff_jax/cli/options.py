@@ -7,8 +7,9 @@ from pathlib import Path
 from typing import Any
 
 from relaff_jax.config import parse_set
-from relaff_jax.io import check_writable_dir
+from relaff_jax.io import check_writable_dir, check_writable_file
 from relaff_jax.errors import UserError
+from relaff_jax.provenance import CONFIG_RECORD, record_config  # noqa: F401 (the commands' record)
 
 
 def add_set(p: argparse.ArgumentParser, example: str = "perception.voxel.size=0.02") -> None:
@@ -55,11 +56,9 @@ def check_out_dir(path: Path, what: str = "--out") -> None:
 
 
 def check_out_file(path: Path, what: str = "--out") -> None:
-    """An output file must not be a folder, and its folder must be creatable and writable."""
-    path = Path(path)
-    if path.is_dir():
-        raise UserError(f"{what} {path} is a folder; give a file name")
-    check_out_dir(path.parent, what=f"{what} {path}: folder")
+    """An output file must not be a folder, and its folder must be creatable and writable
+    (``relaff_jax.io.check_writable_file``)."""
+    check_writable_file(path, what)
 
 
 def check_in_dir(path: Path, message: str | None = None) -> None:
@@ -73,22 +72,6 @@ def check_in_file(path: Path, message: str) -> None:
     """An input file must exist: checked first, before the command imports its stage."""
     if not Path(path).is_file():
         raise UserError(message)
-
-
-CONFIG_RECORD = "relaff_config.json"
-
-
-def record_config(folder: Path, cfg: Any, command: str, argv: list[str] | None = None) -> Path:
-    """Write the whole resolved config tree that made ``folder`` into ``folder/relaff_config.json``
-    (atomically, after the command finished): the stage's own sidecars record the settings that
-    decide its output and its resume checks; this file says how the folder was made in full."""
-    from relaff_jax import io as rio
-    from relaff_jax.config import to_dict
-    from relaff_jax.provenance import versions
-
-    path = Path(folder) / CONFIG_RECORD
-    rio.atomic_write_json(path, {"command": command, "argv": argv, "config": to_dict(cfg), "versions": versions()})
-    return path
 
 
 def add_cluster(p: argparse.ArgumentParser) -> None:

@@ -59,6 +59,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     from relaff_jax import reproduce as R
+    from relaff_jax.report.folder import html
 
     if args.status:
         for stage, st in R.status(args.out).items():
@@ -80,5 +81,5 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     for stage in STAGES:
         st = run["stages"][stage]
         print(f"{stage:<10} {st['status']:<8} {st['seconds']:8.1f} s")
-    print(f"total {run['seconds']:.1f} s; report: {Path(args.out) / 'report' / 'report.html'}")
+    print(f"total {run['seconds']:.1f} s; report: {html(R.Paths(Path(args.out)).report)}")
     return 0

@@ -23,7 +23,7 @@ from relaff_jax.errors import UserError
 from relaff_jax.learn import compiled
 from relaff_jax.learn.engine_eval import predict_block
 from relaff_jax.learn.engine_fit import Trees, fit_trees
-from relaff_jax.learn.forests import ENGINES, ForestConfig, fit_forest, predict_class
+from relaff_jax.learn.forests import ENGINES, ForestConfig, checked_inputs, checked_states, fit_checked, predict_checked
 
 __all__ = ["ENGINES", "Trees", "fit", "fit_many", "predict", "predict_many"]
 
@@ -35,20 +35,10 @@ def _engine(cfg: ForestConfig, engine: str | None) -> str:
     return engine
 
 
-def _checked(X: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    X = np.asarray(X, dtype=np.float32)
-    y = np.asarray(y).astype(bool)
-    if X.ndim != 2 or y.shape != (X.shape[0],):
-        raise ValueError(f"fit_forest: X must be (N, D) and y (N,), got {X.shape} and {y.shape}")
-    if not np.all(np.isfinite(X)):
-        raise ValueError("fit_forest: X contains NaN or inf")
-    return X, y
-
-
 def fit(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig(), engine: str | None = None):
     """A fitted forest on ``X: (N, D)``, ``y: (N,)`` bool (``Trees``, ``compiled.Forest`` or
     ``RandomForestClassifier``); ``engine`` (default ``cfg.engine``) picks how it is built."""
-    return fit_many([X], [y], [seed], cfg, engine)[0]
+    return _fit_many([X], [y], [seed], cfg, engine, lambda f: "engine.fit")[0]
 
 
 def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence[int],
@@ -56,10 +46,15 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
     """F fitted forests, forest f on ``Xs[f]: (N_f, D_f)``, ``ys[f]: (N_f,)`` bool with seed
     ``seeds[f]``: what F calls of ``fit`` give. The compiled engine builds them in one kernel
     call per distinct N (its settings resolve per N); the others one by one."""
+    return _fit_many(Xs, ys, seeds, cfg, engine, lambda f: f"engine.fit_many: forest {f}")
+
+
+def _fit_many(Xs, ys, seeds, cfg, engine, who) -> list:
+    """``fit_many``; ``who(f)`` names forest f in an input error (the function called)."""
     engine = _engine(cfg, engine)
+    pairs = [checked_inputs(X, y, who(f)) for f, (X, y) in enumerate(zip(Xs, ys))]
     if engine == "sklearn":
-        return [fit_forest(X, y, s, cfg) for X, y, s in zip(Xs, ys, seeds)]
-    pairs = [_checked(X, y) for X, y in zip(Xs, ys)]
+        return [fit_checked(X, y, s, cfg) for (X, y), s in zip(pairs, seeds)]
     if engine == "fast":
         return [fit_trees(X, y, s, cfg) for (X, y), s in zip(pairs, seeds)]
     out: list = [None] * len(pairs)
@@ -75,19 +70,8 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
 
 def predict(forest, X: np.ndarray) -> np.ndarray:
     """Predicted class as 0/1 float32 ``(N,)`` of one forest from ``fit``."""
-    if isinstance(forest, compiled.Forest):
-        X = np.asarray(X, dtype=np.float32)
-        if X.ndim != 2 or X.shape[1] != forest.n_features:
-            raise ValueError(f"X must be (N, {forest.n_features}), got {X.shape}")
-        if not np.all(np.isfinite(X)):
-            raise ValueError("predict_class: X contains NaN or inf")
-        return compiled.predict_block([forest], X.T, [np.arange(forest.n_features)])[0].astype(np.float32)
-    if not isinstance(forest, Trees):
-        return predict_class(forest, X)
-    X = np.asarray(X, dtype=np.float32)
-    if not np.all(np.isfinite(X)):
-        raise ValueError("predict_class: X contains NaN or inf")
-    return predict_block([forest], X.T, [np.arange(X.shape[1])])[0].astype(np.float32)
+    n_features = forest.n_features if isinstance(forest, compiled.Forest) else None
+    return _predict_one(forest, checked_states(X, "engine.predict", n_features))
 
 
 def predict_many(forests: Sequence, ZT: np.ndarray, colmaps: Sequence[np.ndarray]) -> np.ndarray:
@@ -101,9 +85,18 @@ def predict_many(forests: Sequence, ZT: np.ndarray, colmaps: Sequence[np.ndarray
         return np.zeros((0, ZT.shape[1]), np.float32)
     used = np.unique(np.concatenate([np.asarray(cm, dtype=np.intp) for cm in colmaps]))
     if not np.all(np.isfinite(ZT[used])):
-        raise ValueError("predict_class: X contains NaN or inf")
+        raise ValueError("engine.predict_many: ZT contains NaN or inf in the columns the forests use")
     if all(isinstance(f, Trees) for f in forests):
         return predict_block(forests, ZT, colmaps).astype(np.float32)
     if all(isinstance(f, compiled.Forest) for f in forests):
         return compiled.predict_block(forests, ZT, colmaps).astype(np.float32)
-    return np.stack([predict(f, np.ascontiguousarray(ZT[np.asarray(cm)].T)) for f, cm in zip(forests, colmaps)])
+    return np.stack([_predict_one(f, np.ascontiguousarray(ZT[np.asarray(cm)].T)) for f, cm in zip(forests, colmaps)])
+
+
+def _predict_one(forest, X: np.ndarray) -> np.ndarray:
+    """``predict`` of one forest on float32 states ``checked_states`` gave."""
+    if isinstance(forest, compiled.Forest):
+        return compiled.predict_block([forest], X.T, [np.arange(forest.n_features)])[0].astype(np.float32)
+    if isinstance(forest, Trees):
+        return predict_block([forest], X.T, [np.arange(X.shape[1])])[0].astype(np.float32)
+    return predict_checked(forest, X)

@@ -41,6 +41,12 @@ def block(sdir: str | os.PathLike, target: str, rep: int, chunk: int) -> Path:
     return Path(sdir) / BLOCKS / f"{target}_r{rep:03d}_c{chunk:02d}.npz"
 
 
+def block_files(out: str | os.PathLike, space: str) -> list[Path]:
+    """The block files a space's sweep has written so far (none if it has not begun)."""
+    d = blocks(out, space)
+    return list(d.glob("*.npz")) if d.is_dir() else []
+
+
 def block_chunk(path: str | os.PathLike) -> int | None:
     """The size-chunk index of a block file's name (None if the name is not a block's)."""
     ci = Path(path).stem.rsplit("_c", 1)[-1]

@@ -87,26 +87,49 @@ def make_forest(n_samples: int, seed: int, cfg: ForestConfig = ForestConfig()) -
     )
 
 
-def fit_forest(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig()) -> RandomForestClassifier:
-    """Fit a forest. ``X: (N, D)`` state, ``y: (N,)`` bool labels."""
+def checked_states(X: np.ndarray, who: str, n_features: int | None = None) -> np.ndarray:
+    """``X`` as float32 ``(N, D)`` (``D = n_features`` if given), all finite: the one input
+    check of every forest engine; a ``ValueError`` naming ``who`` (the function the caller
+    called) otherwise. Checked once, so scikit-learn need not re-check per tree."""
+    X = np.asarray(X, dtype=np.float32)
+    if X.ndim != 2 or (n_features is not None and X.shape[1] != n_features):
+        raise ValueError(f"{who}: X must be (N, {'D' if n_features is None else n_features}), got {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError(f"{who}: X contains NaN or inf")
+    return X
+
+
+def checked_inputs(X: np.ndarray, y: np.ndarray, who: str) -> tuple[np.ndarray, np.ndarray]:
+    """``(X, y)`` as float32 ``(N, D)`` and bool ``(N,)``, X finite (``checked_states``); a
+    ``ValueError`` naming ``who`` otherwise."""
     X = np.asarray(X, dtype=np.float32)
     y = np.asarray(y).astype(bool)
     if X.ndim != 2 or y.shape != (X.shape[0],):
-        raise ValueError(f"fit_forest: X must be (N, D) and y (N,), got {X.shape} and {y.shape}")
-    if not np.all(np.isfinite(X)):  # checked once here, so sklearn need not re-check per tree
-        raise ValueError("fit_forest: X contains NaN or inf")
+        raise ValueError(f"{who}: X must be (N, D) and y (N,), got {X.shape} and {y.shape}")
+    return checked_states(X, who), y
+
+
+def fit_checked(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig()) -> RandomForestClassifier:
+    """``fit_forest`` on inputs ``checked_inputs`` gave (not checked again)."""
     forest = make_forest(len(y), seed, cfg)
     with _fast():
         return forest.fit(X, y)
 
 
-def predict_class(forest: RandomForestClassifier, X: np.ndarray) -> np.ndarray:
-    """Predicted class as 0/1 float32 ``(N,)``; a forest that saw one class predicts it."""
-    X = np.asarray(X, dtype=np.float32)
-    if not np.all(np.isfinite(X)):
-        raise ValueError("predict_class: X contains NaN or inf")
+def fit_forest(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig()) -> RandomForestClassifier:
+    """Fit a forest. ``X: (N, D)`` state, ``y: (N,)`` bool labels."""
+    return fit_checked(*checked_inputs(X, y, "fit_forest"), seed, cfg)
+
+
+def predict_checked(forest: RandomForestClassifier, X: np.ndarray) -> np.ndarray:
+    """``predict_class`` on states ``checked_states`` gave (not checked again)."""
     with _fast():
         return np.asarray(forest.predict(X), dtype=np.float32)
+
+
+def predict_class(forest: RandomForestClassifier, X: np.ndarray) -> np.ndarray:
+    """Predicted class as 0/1 float32 ``(N,)``; a forest that saw one class predicts it."""
+    return predict_checked(forest, checked_states(X, "predict_class"))
 
 
 ENGINES = ("fast", "sklearn", "compiled")

@@ -107,7 +107,7 @@ def load_results(results_dir: str | os.PathLike) -> Results:
     root = Path(results_dir)
     meta_path = L.meta(root)
     if not meta_path.exists():
-        raise ResultsNotFound(f"{root} is not an experiment folder (no experiment.json)")
+        raise ResultsNotFound(f"{root} is not an experiment folder (no {L.META})")
     meta = rio.read_json(meta_path)
     spaces: dict[str, SpaceResults] = {}
     for space in meta["spaces"]:

@@ -73,12 +73,11 @@ def sweep_progress(out: str | os.PathLike, cfg: Any, n_actions: int, spaces: Seq
         width = state_width(s, cfg.state)
         chunk_cost = [sum(forest_cost_ms(n, width) for n in c) for c in chunks]
         w = forests_per_space(cfg, n_actions, s) * sum(chunk_cost) / len(sizes)
-        blocks = L.blocks(out, s)
         if L.results(out, s).exists():
             frac = 1.0
         else:
             got = 0.0
-            for f in (blocks.glob("*.npz") if blocks.is_dir() else ()):
+            for f in L.block_files(out, s):
                 ci = L.block_chunk(f)
                 got += chunk_cost[ci] if ci is not None and ci < len(chunks) else 0.0
             frac = 0.1 * L.prep(out, s).exists() + 0.9 * got / (cfg.reps(s) * n_actions * sum(chunk_cost))

@@ -1,10 +1,14 @@
 """Reports: Table II, findings, figures and the report document of an experiment folder.
 
-``write_report(RESULTS, REPORT, data_dirs=None, info=None, examples_per_action=2)`` is the one
-writer (``relaff report``, ``relaff reproduce``): one analysis, then every output from it.
+``run(tree, RESULTS, REPORT, data_dirs=None, info=None)`` is the stage (``relaff report``,
+``relaff reproduce``): ``write_report``, the one writer (one analysis, then every output from
+it), then the config record and the inputs' stamp.
 
 Files:
 
+- ``folder.py``: the report folder's file names (``report.md``, ``summary.json``, ``fig*.png``, ...);
+- ``stage.py``: ``run``, the report stage's one entry point over the whole config tree
+  (``relaff report`` and ``relaff reproduce`` call it; it writes the config record and the stamp);
 - ``write.py``: ``write_report``;
 - ``tables.py``: Table II as CSV and Markdown, ``summary.json``;
 - ``findings.py``: which of the paper's findings a run reproduces; correlation clusters;
@@ -14,8 +18,8 @@ Files:
 - ``document.py``: blocks rendered as ``report.md`` and a self-contained ``report.html``;
 - ``formatting.py``: number formatting shared by the above.
 """
+from relaff_jax.lazy import lazy_attributes
 from relaff_jax.report.document import render_html, render_markdown
-from relaff_jax.report.figures import dataset_figure, write_figures
 from relaff_jax.report.findings import (
     VERDICTS,
     FindingRules,
@@ -26,11 +30,17 @@ from relaff_jax.report.findings import (
     verdict,
 )
 from relaff_jax.report.formatting import finite, fmt
+from relaff_jax.report.stage import run, stamp
 from relaff_jax.report.tables import CSV_COLUMNS, summary, table2_csv, table2_markdown
-from relaff_jax.report.write import write_report
+
+# The figures (matplotlib) and the writer (the learning stage's results, JAX) load on first use
+# (PEP 562), so that ``relaff report`` checks its arguments before those imports run.
+_LAZY = {"dataset_figure": "figures", "write_figures": "figures", "write_report": "write"}
+
+__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "CSV_COLUMNS", "FindingRules", "correlation_clusters", "dataset_figure", "findings", "finite", "fmt",
     "render_html", "render_markdown", "summary", "table2_csv", "table2_markdown", "verdict", "write_figures", "VERDICTS", "combine", "judge",
-    "write_report",
+    "run", "stamp", "write_report",
 ]

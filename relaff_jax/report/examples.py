@@ -13,6 +13,8 @@ from typing import Mapping
 
 import numpy as np
 
+from relaff_jax.report import folder as F
+
 
 def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_action: int) -> list[tuple[str, str, str]]:
     """Draw ``per_action`` example scenes per action (positives and negatives alternating, in
@@ -40,7 +42,7 @@ def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_ac
             rid = int(ds["rollout_id"][i]) if "rollout_id" in ds else int(ds["rollout"][i])
             caption = (f"{action}: {ds['toy'][i]} + {ds['other'][i]}, {ds['relation'][i]}, "
                        f"{'positive' if label[i] else 'negative'} (sample {i})")
-            name = f"{action}_{i:05d}.png"
+            name = F.example(action, i)
             from_sim.show_scene(world, int(ds["pair"][i]), np.asarray(ds["qpos_settled"][i]), out / name,
                                 jax.random.PRNGKey(rid % 2**31), title=caption)
             shown.append((action, f"{out.name}/{name}", caption))

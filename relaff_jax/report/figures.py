@@ -19,6 +19,7 @@ from matplotlib.figure import Figure
 from relaff_jax import io as rio
 from relaff_jax.constants import RELATIONS
 from relaff_jax.learn import TABLE2_ROWS
+from relaff_jax.report import folder as F
 from relaff_jax.report.formatting import SHORT
 
 
@@ -92,7 +93,7 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
            title=f"{s0.upper()} - non-bootstrapped (NB); intervals per affordance in Fig. 7")
     _logx(ax, a["sizes"])
     ax.legend(fontsize=7, ncol=3)
-    save(fig, "fig06_nb_learning.png")
+    save(fig, F.FIG_NB_LEARNING)
 
     # Fig. 7: NB early learning per affordance, PCA vs RHF
     fig, axes = _grid(len(a["actions"]))
@@ -101,7 +102,7 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
             _curve(axes[ti], an[s], ti, 0, f"{s.upper()} NB")
         axes[ti].set(title=t, ylabel="accuracy")
         axes[ti].legend(fontsize=7)
-    save(fig, "fig07_nb_spaces.png")
+    save(fig, F.FIG_NB_SPACES)
 
     # Fig. 8 and 9: best DB1 per affordance (accuracy and bootstrap factor)
     db_spaces = [s for s in spaces if np.any(np.isfinite(an[s]["mean"][:, 1:1 + len(an[s]["actions"])]))]
@@ -115,7 +116,7 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
                 _curve(axes[ti], an[s], ti, b, f"{s.upper()} {t} <- ({src})")
             axes[ti].set(title=t, ylabel="accuracy")
             axes[ti].legend(fontsize=6)
-        save(fig, "fig08_db1_best.png")
+        save(fig, F.FIG_DB1_BEST)
         fig = Figure(figsize=(6 * len(db_spaces), 4.5))
         axs = fig.subplots(1, len(db_spaces), squeeze=False)
         for ax, s in zip(axs.flat, db_spaces):
@@ -128,7 +129,7 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
             ax.set(xlabel="training samples n", ylabel="bootstrap factor", title=f"{s.upper()} - DB1 best")
             _logx(ax, x["sizes"])
             ax.legend(fontsize=6, ncol=2)
-        save(fig, "fig09_db1_best_bf.png")
+        save(fig, F.FIG_DB1_BEST_BF)
 
     # Fig. 10: average bootstrap factor per method and affordance (PCA)
     rows = [r for r in range(1, len(TABLE2_ROWS)) if np.any(np.isfinite(a["table2_per_target"][r]))]
@@ -155,14 +156,14 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
                           + ", ".join(sorted(set(missing), key=groups.index)))
         # below the axes: the legend of 15 rows would cover the tallest bars
         ax.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12 if not missing else -0.18))
-        save(fig, "fig10_average_bf.png")
+        save(fig, F.FIG_AVERAGE_BF)
     else:  # say why the figure is empty rather than leave it out (tiny runs: no row is measurable)
         fig = Figure(figsize=(8, 2.5))
         ax = fig.subplots()
         ax.axis("off")
         ax.text(0.5, 0.5, f"{s0.upper()}: no bootstrap-factor row is measurable in this run\n(too few test scenes "
                 f"or sizes with NB above chance; Table II gives each row's reason)", ha="center", va="center")
-        save(fig, "fig10_average_bf.png")
+        save(fig, F.FIG_AVERAGE_BF)
 
     # Fig. 11: correlation matrices
     fig = Figure(figsize=(5.5 * len(spaces), 5))
@@ -178,7 +179,7 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
                 ax.text(j, i, f"{corr[i, j]:.2f}", ha="center", va="center", fontsize=6)
         ax.set_title(f"{s.upper()} - predictor output correlation")
         fig.colorbar(im, ax=ax, shrink=0.8)
-    save(fig, "fig11_correlation.png")
+    save(fig, F.FIG_CORRELATION)
 
     # Fig. 12: best category above each threshold, averaged over affordances
     th = a["thresholds"]
@@ -198,7 +199,7 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
         ax.set(xlabel="training samples n", ylabel="bootstrap factor", title=f"{s0.upper()} - correlation thresholds")
         _logx(ax, a["sizes"])
         ax.legend(fontsize=7)
-        save(fig, "fig12_thresholds.png")
+        save(fig, F.FIG_THRESHOLDS)
     return written
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from relaff_jax.learn.blocks import SUBSETS
+from relaff_jax.report import folder as F
 from relaff_jax.report.figures import save_png
 from relaff_jax.report.formatting import SHORT, fmt
 
@@ -66,8 +67,8 @@ def reach_blocks(anat: Mapping[str, Mapping[str, Any]], missing: Mapping[str, st
                              "label = feasible", "relation", "feasible + relation"], rows))
     if missing:
         blocks.append(("p", "No anatomy for " + "; ".join(f"{a} ({why})" for a, why in missing.items()) + "."))
-    if (out / "fig_reach.png").exists():
-        blocks.append(("img", "fig_reach.png", "Share of infeasible negatives and the three oracles, per action"))
+    if (out / F.FIG_REACH).exists():
+        blocks.append(("img", F.FIG_REACH, "Share of infeasible negatives and the three oracles, per action"))
     return blocks
 
 

@@ -19,9 +19,10 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.errors import UserError
+from relaff_jax.report import folder as F
 from relaff_jax.report.findings import correlation_clusters
 
-FILES = ("summary.json", "findings.json", "reach.json")
+FILES = F.JSON_FILES
 
 
 def read_report(path: str | os.PathLike) -> dict[str, Any]:
@@ -49,6 +50,18 @@ def _nb_overall(space: Mapping[str, Any], size: int) -> tuple[list[float], list[
     w = np.where(np.isfinite(acc), cnt, 0.0)
     overall = np.where(w.sum(1) > 0, np.nansum(acc * w, 1) / np.maximum(w.sum(1), 1), np.nan)
     return overall.tolist(), acc.tolist()
+
+
+def compare(reports: Mapping[str, str | os.PathLike], out: str | os.PathLike | None = None, *,
+            size: int = 10) -> str:
+    """``relaff compare``'s one call: the page of ``compare_readings``; with ``out``, written
+    there atomically (``out`` checked before any report is read). Returns the page."""
+    if out is not None:
+        rio.check_writable_file(out)
+    page = compare_readings(reports, size=size)
+    if out is not None:
+        rio.atomic_write_text(out, page)
+    return page
 
 
 def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, threshold: float = 0.5) -> str:

@@ -15,6 +15,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from relaff_jax.constants import RELATIONS
+from relaff_jax.report import folder as F
 from relaff_jax.learn import (
     TABLE2_ROWS,
     categories_per_threshold,
@@ -111,10 +112,10 @@ def example_blocks(shown: Sequence[tuple[str, str, str]]) -> list[tuple]:
 
 def learning_blocks(out: Path, main: str) -> list[tuple]:
     blocks: list[tuple] = [("h", 2, "Learning curves")]
-    blocks += fig_block(out, "fig06_nb_learning.png", f"Non-bootstrapped learning curves ({main.upper()}), paper Fig. 6")
-    blocks += fig_block(out, "fig07_nb_spaces.png", "NB per affordance in PCA and RHF, paper Fig. 7")
-    blocks += fig_block(out, "fig08_db1_best.png", "NB and the best DB1 learner per affordance, paper Fig. 8")
-    blocks += fig_block(out, "fig09_db1_best_bf.png", "Bootstrap factor of the best DB1 learner (average over the shaded n), paper Fig. 9")
+    blocks += fig_block(out, F.FIG_NB_LEARNING, f"Non-bootstrapped learning curves ({main.upper()}), paper Fig. 6")
+    blocks += fig_block(out, F.FIG_NB_SPACES, "NB per affordance in PCA and RHF, paper Fig. 7")
+    blocks += fig_block(out, F.FIG_DB1_BEST, "NB and the best DB1 learner per affordance, paper Fig. 8")
+    blocks += fig_block(out, F.FIG_DB1_BEST_BF, "Bootstrap factor of the best DB1 learner (average over the shaded n), paper Fig. 9")
     return blocks
 
 
@@ -140,7 +141,7 @@ def table2_blocks(an: Mapping[str, Mapping[str, Any]], cfg: Any, out: Path, pres
         blocks += [("p", "Per affordance (paper Fig. 10 as numbers); the last row: how many sizes of the window "
                          "each average rests on (bf is undefined where NB is at most half a test scene above chance):"),
                    ("table", ["method"] + list(x["actions"]), rows)]
-    blocks += fig_block(out, "fig10_average_bf.png", "Average bootstrap factor per method and affordance, paper Fig. 10")
+    blocks += fig_block(out, F.FIG_AVERAGE_BF, "Average bootstrap factor per method and affordance, paper Fig. 10")
     return blocks
 
 
@@ -207,7 +208,7 @@ def correlation_blocks(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any
                             + (f"; alone: {', '.join(g[0] for g in cl if len(g) == 1)}" if any(len(g) == 1 for g in cl) else "") + "."))
         blocks.append(("table", [""] + [SHORT.get(x, x) for x in acts],
                        [[SHORT.get(x, x)] + [f"{v:+.2f}" for v in corr[i]] for i, x in enumerate(acts)]))
-    blocks += fig_block(out, "fig11_correlation.png", "Correlation of the source predictors' outputs, paper Fig. 11")
+    blocks += fig_block(out, F.FIG_CORRELATION, "Correlation of the source predictors' outputs, paper Fig. 11")
     return blocks
 
 
@@ -233,7 +234,7 @@ def threshold_blocks(corr: np.ndarray, a: Mapping[str, Any], cfg: Any, main: str
                                  "in-sample best category's curve."),
                            ("table", ["T", f"categories built (of {k})", "best category avg bf", "interval",
                                       "in-sample oracle", "CBn avg bf"], rows)]
-    return blocks + fig_block(out, "fig12_thresholds.png", "Best category above each threshold, paper Fig. 12")
+    return blocks + fig_block(out, F.FIG_THRESHOLDS, "Best category above each threshold, paper Fig. 12")
 
 
 PAPER_SIZES = {"source": 2000, "category": 2000, "corr": 500, "test": 4000, "reps": "50 (PCA) / 25 (RHF)",

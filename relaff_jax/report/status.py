@@ -14,8 +14,7 @@ from typing import Any, Mapping, Sequence
 
 from relaff_jax import io as rio
 
-STAMP = "report_stamp.json"
-REQUIRED = ("report.md", "report.html", "summary.json")
+from relaff_jax.report.folder import REQUIRED, STAMP  # noqa: F401 (re-exported)
 
 
 def hash_files(files: Sequence[Path]) -> str:

@@ -23,6 +23,7 @@ from typing import Any, Mapping
 from relaff_jax import io as rio
 from relaff_jax import provenance
 from relaff_jax.learn import analyse, load_results
+from relaff_jax.report import folder as F
 from relaff_jax.report import sections as S
 from relaff_jax.report.document import render_html, render_markdown
 from relaff_jax.report.examples import example_scenes
@@ -62,13 +63,13 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     out.mkdir(parents=True, exist_ok=True)
 
     # tables, figures and the summary
-    rio.atomic_write_text(out / "table2.csv", table2_csv(an[main], paper=main == "pca"))
+    rio.atomic_write_text(out / F.TABLE2_CSV, table2_csv(an[main], paper=main == "pca"))
     if main == "pca" and "rhf" in an:
-        rio.atomic_write_text(out / "table2_rhf.csv", table2_csv(an["rhf"], paper=False))
-    rio.atomic_write_text(out / "table2.md", table2_markdown(res, an))
+        rio.atomic_write_text(out / F.TABLE2_RHF_CSV, table2_csv(an["rhf"], paper=False))
+    rio.atomic_write_text(out / F.TABLE2_MD, table2_markdown(res, an))
     figs = write_figures(res, an, out)
     lend = {s: borrow_rows(res[s], an[s], cfg) for s in spaces}
-    rio.atomic_write_json(out / "summary.json", summary(res, an, [p.name for p in figs]) | {"borrow": finite(lend)})
+    rio.atomic_write_json(out / F.SUMMARY, summary(res, an, [p.name for p in figs]) | {"borrow": finite(lend)})
 
     # datasets and example scenes
     data_blocks: list[tuple] = []
@@ -80,8 +81,8 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
         infos = {act: dataset_info(d) for act, d in data_dirs.items()}
         n_samples = {act: i["n"] for act, i in infos.items()}
-        dataset_figure(infos, out / "fig_datasets.png")
-        data_blocks = S.dataset_blocks(infos, "fig_datasets.png")
+        dataset_figure(infos, out / F.FIG_DATASETS)
+        data_blocks = S.dataset_blocks(infos, F.FIG_DATASETS)
         missing = {}
         for act, d in data_dirs.items():
             try:
@@ -89,10 +90,10 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
             except DatasetError as e:  # e.g. rollouts without a 'feasible' field
                 missing[act] = str(e)
         if anat:
-            reach_figure(anat, out / "fig_reach.png")
+            reach_figure(anat, out / F.FIG_REACH)
         data_blocks += reach_blocks(anat, missing, out) + subset_blocks(res, cfg) + predictor_blocks(res)
-        data_blocks += S.example_blocks(example_scenes(data_dirs, out / "examples", examples_per_action))
-    rio.atomic_write_json(out / "reach.json", finite(reach_json(anat, res, cfg)))
+        data_blocks += S.example_blocks(example_scenes(data_dirs, out / F.EXAMPLES, examples_per_action))
+    rio.atomic_write_json(out / F.REACH, finite(reach_json(anat, res, cfg)))
 
     # the document
     found = findings(an, cfg, rules)
@@ -101,7 +102,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
               + [b for s in spaces for b in borrow_blocks(lend[s], s)] + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
               + S.run_blocks(info, time.perf_counter() - t0, _load(), provenance.machine()))
-    rio.atomic_write_json(out / "findings.json", finite({"findings": found, "rules": dataclasses.asdict(rules)}))
-    rio.atomic_write_text(out / "report.md", render_markdown(blocks))
-    rio.atomic_write_text(out / "report.html", render_html(blocks, out, "relaff_jax reproduction report"))
+    rio.atomic_write_json(out / F.FINDINGS, finite({"findings": found, "rules": dataclasses.asdict(rules)}))
+    rio.atomic_write_text(out / F.MARKDOWN, render_markdown(blocks))
+    rio.atomic_write_text(out / F.HTML, render_html(blocks, out, "relaff_jax reproduction report"))
     return out

@@ -1,5 +1,5 @@
 """Stage 3, ``experiment``: the learning and bootstrapping sweeps in every state space
-(``relaff_jax.learn.run_experiment``), in ``DIR/results/``."""
+(``relaff_jax.learn.run``, what ``relaff experiment`` runs), in ``DIR/results/``."""
 from __future__ import annotations
 
 import time
@@ -43,7 +43,7 @@ def progress(run: Run) -> float:
 
 
 def run(run: Run, forced: bool) -> dict:
-    from relaff_jax.learn import run_experiment
+    from relaff_jax import learn
 
     cfg, res = run.cfg, run.paths.results
     run.progress.set("loading datasets")
@@ -56,9 +56,8 @@ def run(run: Run, forced: bool) -> dict:
     spaces = cfg.reproduce.spaces
     run.progress.set(f"{' + '.join(s.upper() for s in spaces)} sweeps")
     t0 = time.perf_counter()
-    run_experiment(datasets, res, cfg.experiment, list(spaces), seed=run.log["seeds"]["experiment"], jobs=run.jobs,
-                   progress=False, data_desc=[str(run.paths.dataset(x)) for x in cfg.reproduce.actions],
-                   client=run.client)
+    learn.run(cfg, datasets, res, seed=run.log["seeds"]["experiment"], jobs=run.jobs, client=run.client,
+              progress=False, data_desc=[str(run.paths.dataset(x)) for x in cfg.reproduce.actions])
     dt = time.perf_counter() - t0
     run.progress.message(f"experiment: {', '.join(spaces)} sweeps in {dt:.0f} s")
     return {"status": "ran", "was": "forced" if forced else st.state, "seconds": round(dt, 2)}

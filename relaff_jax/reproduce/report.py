@@ -1,29 +1,25 @@
 """Stage 4, ``report``: Table II beside the paper's, findings, figures and example scenes
-(``relaff_jax.report.write_report``), in ``DIR/report/``."""
+(``relaff_jax.report.run``, what ``relaff report`` runs), in ``DIR/report/``."""
 from __future__ import annotations
 
 import time
 from pathlib import Path
 
-from relaff_jax import data as D
 from relaff_jax import io as rio
-from relaff_jax.learn import folder as L
-from relaff_jax.report.status import clear_stamp, inputs_stamp, report_status, write_stamp
+from relaff_jax import report
+from relaff_jax.report import folder as R
+from relaff_jax.report.status import report_status
 from relaff_jax.reproduce.stage import Run, Status
 
 NAME = "report"
 
 
-def _inputs(run: Run) -> list[Path]:
-    res = run.paths.results
-    files = [L.meta(res)] + [L.results(res, s) for s in run.cfg.reproduce.spaces]
-    for a in run.cfg.reproduce.actions:
-        files += [run.paths.dataset(a) / D.SIDECAR, run.paths.dataset(a) / D.FEATURES_SIDECAR]
-    return files
+def _data_dirs(run: Run) -> dict[str, Path]:
+    return {a: run.paths.dataset(a) for a in run.cfg.reproduce.actions}
 
 
 def stamp(run: Run) -> dict:
-    return inputs_stamp(_inputs(run), {"examples_per_action": run.cfg.reproduce.examples_per_action})
+    return report.stamp(run.cfg, run.paths.results, _data_dirs(run))
 
 
 def status(run: Run) -> Status:
@@ -35,19 +31,14 @@ def progress(run: Run) -> float:
 
 
 def run(run: Run, forced: bool) -> dict:
-    from relaff_jax.report import write_report
-
     out = run.paths.report
     if forced:
         rio.remove_tree(out)
-    clear_stamp(out)
     run.progress.set("tables, figures, example scenes")
     t0 = time.perf_counter()
     info = {"preset": run.preset, "seed": run.seed, "versions": run.log["versions"],
             "timings": {s: round(t, 1) for s, t in run.log["timings"].items()}}
-    write_report(run.paths.results, out, data_dirs={a: run.paths.dataset(a) for a in run.cfg.reproduce.actions},
-                 info=info, examples_per_action=run.cfg.reproduce.examples_per_action)
-    write_stamp(out, stamp(run))
+    report.run(run.cfg, run.paths.results, out, data_dirs=_data_dirs(run), info=info)
     dt = time.perf_counter() - t0
-    run.progress.message(f"report: {out / 'report.html'} in {dt:.0f} s")
+    run.progress.message(f"report: {R.html(out)} in {dt:.0f} s")
     return {"status": "ran", "seconds": round(dt, 2)}

@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax.learn.engine_fit import check_engine_config, max_features_of, n_bootstrap
-from relaff_jax.learn.forests import ForestConfig, n_trees
+from relaff_jax.learn.forests import ForestConfig, checked_states, n_trees
 
 MAX_DEPTH = np.iinfo(np.int32).max  # max_depth=None, as BaseDecisionTree._fit
 SEED_LIMIT = 2**32  # RandomState seeds are in [0, 2**32)
@@ -142,7 +142,7 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
     x_start = np.concatenate([[0], np.cumsum(ns * ds)]).astype(np.int64)
     xs = np.concatenate(xs).astype(np.float32, copy=False)
     if not np.all(np.isfinite(xs)):
-        raise ValueError("fit_forest: X contains NaN or inf")
+        raise ValueError("fit_many: X contains NaN or inf")
     feat, thr, left, right, value, starts = kernels()["build_forests"](
         xs, x_start, ns, ds, np.concatenate(codes).astype(np.int64), ks, np.asarray(seeds, np.int64), nt, nb, mf,
         msl, min_split, max_depth, bool(cfg.bootstrap))
@@ -160,18 +160,13 @@ def fit(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfi
     return fit_many([X], [y], [seed], cfg)[0]
 
 
-def _columns(X: np.ndarray, n_features: int) -> np.ndarray:
-    X = np.asarray(X, dtype=np.float32)
-    if X.ndim != 2 or X.shape[1] != n_features:
-        raise ValueError(f"X must be (N, {n_features}), got {X.shape}")
-    if not np.all(np.isfinite(X)):
-        raise ValueError("predict_class: X contains NaN or inf")
-    return np.ascontiguousarray(X.T)
+def _columns(X: np.ndarray, n_features: int, who: str) -> np.ndarray:
+    return np.ascontiguousarray(checked_states(X, who, n_features).T)
 
 
 def predict_proba(forest: Forest, X: np.ndarray) -> np.ndarray:
     """``(N, K)`` float64, bit-identical to ``RandomForestClassifier.predict_proba``; ``X: (N, D)``."""
-    s = _sums([forest], _columns(X, forest.n_features), [np.arange(forest.n_features)])[0]
+    s = _sums([forest], _columns(X, forest.n_features, "predict_proba"), [np.arange(forest.n_features)])[0]
     return s[: len(forest.classes)].T / forest.n_trees
 
 
