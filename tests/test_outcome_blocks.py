@@ -54,3 +54,25 @@ def test_half_curves_and_resampled_means_same_bits(case, budget):
     np.testing.assert_array_equal(got, ref)
     assert np.isnan(got[:, 1, 2]).all()  # the one-scene test set's empty half
     assert np.isfinite(got[:, 0, 0]).any()
+
+
+def test_packed_bits_unpack_where_indexed():
+    from relaff_jax.learn.results import PackedBits
+
+    rng = np.random.default_rng(5)
+    bits = rng.random((2, 3, 4, 5, 21)) < 0.5
+    pk = PackedBits(np.packbits(bits, axis=-1), 21)
+    assert pk.shape == bits.shape
+    np.testing.assert_array_equal(pk[1:2, :, 1:3], bits[1:2, :, 1:3])
+    np.testing.assert_array_equal(np.asarray(pk), bits)
+    np.testing.assert_array_equal(np.asarray(pk, dtype=np.float32), bits.astype(np.float32))
+
+
+def test_outcomes_read_packed_bits_alike(case):
+    from relaff_jax.learn.results import PackedBits
+
+    acc, correct, loo, lay, n_test = case
+    _, plain, _ = extend(acc, correct, loo, lay)
+    _, packed, _ = extend(acc, PackedBits(np.packbits(correct, axis=-1), correct.shape[-1]), loo, lay)
+    for t in range(correct.shape[0]):
+        np.testing.assert_array_equal(packed.block(t), plain.block(t))

@@ -77,7 +77,9 @@ def _outcomes(res: Mapping[str, Any], acc: np.ndarray) -> tuple[np.ndarray, np.n
     them (hand-built in tests) get NaN / none."""
     a, c, s, r = acc.shape
     loo = np.asarray(_get(res, "loo", np.full((a, c, r), np.nan)), dtype=float)
-    return loo, np.asarray(_get(res, "correct", np.zeros((a, c, s, r, 0), bool))), np.asarray(_get(res, "n_test", np.zeros(a, int)))
+    correct = _get(res, "correct", None)
+    correct = np.zeros((a, c, s, r, 0), bool) if correct is None else correct  # packed stays packed
+    return loo, correct, np.asarray(_get(res, "n_test", np.zeros(a, int)))
 
 
 def _get(res: Mapping[str, Any], key: str, default: Any) -> Any:

@@ -46,7 +46,7 @@ def extend(acc: np.ndarray, correct: np.ndarray, loo: np.ndarray, lay: Mapping) 
     w = online_weights(loo, lay)
     acc_on = np.stack([_mix(acc, lay[f], w[f]) for f in FAMILIES], 1)
     acc_x = np.concatenate([np.asarray(acc, dtype=float), acc_on], 1)
-    return acc_x, Outcomes(np.asarray(correct), w, lay), w
+    return acc_x, Outcomes(correct if hasattr(correct, "shape") else np.asarray(correct), w, lay), w
 
 
 class Outcomes:

@@ -43,8 +43,9 @@ class SpaceResults:
     unknown); subset_count (T, 3) test scenes per subset; corr_feasible, corr_stacked (T,)
     each source predictor's correlation on the correlation scenes with "feasible" and with
     "stacked" (on_top or inside), NaN where undefined;
-    correct (T, C, S, R, N) bool outcome per test scene (N = the largest ``n_test``; scenes
-    past a target's ``n_test`` are padding; N = 0 when the run kept no outcomes);
+    correct (T, C, S, R, N) bool outcome per test scene, read as ``PackedBits`` (unpacked where
+    indexed; N = the largest ``n_test``; scenes past a target's ``n_test`` are padding; N = 0
+    when the run kept no outcomes);
     seconds, seconds_prep, new_fits: scalars of the run.
     """
 
@@ -102,6 +103,26 @@ def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:
     return all(s in done and L.results(out, s).exists() for s in spaces)
 
 
+class PackedBits:
+    """Bit-packed outcomes ``packed (..., ceil(N / 8))`` read as a bool array ``(..., N)``,
+    unpacked only where indexed (the paper preset's PCA outcomes are 8.9 GB as bools, 1.1 GB
+    packed). Index the leading axes only; ``np.asarray`` unpacks the whole."""
+
+    dtype = np.dtype(bool)
+
+    def __init__(self, packed: np.ndarray, n: int):
+        self.packed, self.n = packed, int(n)
+        self.shape = tuple(packed.shape[:-1]) + (self.n,)
+        self.ndim = len(self.shape)
+
+    def __getitem__(self, key) -> np.ndarray:
+        return np.unpackbits(self.packed[key], axis=-1, count=self.n).astype(bool)
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        full = self[...]
+        return full if dtype is None else full.astype(dtype)
+
+
 def load_results(results_dir: str | os.PathLike) -> Results:
     """The ``Results`` of an experiment folder (every space in its ``experiment.json``)."""
     root = Path(results_dir)
@@ -120,6 +141,6 @@ def load_results(results_dir: str | os.PathLike) -> Results:
         if missing:
             raise ResultsNotFound(f"{p} lacks {sorted(missing)}: written by another version; rerun the experiment")
         n = int(arrays["n_test"].max(initial=0))
-        arrays["correct"] = np.unpackbits(arrays["correct"], axis=-1, count=n).astype(bool)
+        arrays["correct"] = PackedBits(arrays["correct"], n)
         spaces[space] = SpaceResults(**{f.name: arrays[f.name] for f in dataclasses.fields(SpaceResults)})
     return Results(meta=meta, config=from_dict(ExperimentConfig, meta["config"]), spaces=spaces)
