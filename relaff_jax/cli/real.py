@@ -17,10 +17,12 @@
   with a test folder, trained on one folder and tested on the other; the report
   (``real.study``; resumable).
 
-Every setting of the real stages is one key of ``real.config.RealRunConfig``: ``--set
-pipeline.kmeans.background=false``, ``--set experiment.split=pair``, ``--set sim.per_relation=500``,
-``--set tolerance.tilt_deg=3``; the flags are shorthands for keys of that tree (``--set`` wins).
-The tree is resolved without JAX, so a mistyped key is reported at once.
+Every setting of the real stages is one key of the config tree (``runconfig.RunConfig``): the
+real-only ones under ``real.`` (``--set real.pipeline.kmeans.background=false``, ``--set
+real.experiment.split=pair``, ``--set real.sim.per_relation=500``), the voxel grid and RHF shared
+with simulation under ``perception.`` (``--set perception.voxel.size=0.02``); the flags are
+shorthands for keys of that tree (``--set`` wins). The tree is resolved and checked without JAX,
+so a mistyped key or a bad value is reported at once. ``check`` has no settings (no ``--set``).
 """
 from __future__ import annotations
 
@@ -31,7 +33,7 @@ from pathlib import Path
 from relaff_jax.cli.options import add_set, check_in_dir, check_in_file, check_out_dir, check_out_file
 from relaff_jax.errors import UserError
 
-SET_EXAMPLE = "pipeline.kmeans.background=false"
+SET_EXAMPLE = "real.pipeline.kmeans.background=false"
 
 
 def register(subparsers) -> None:
@@ -72,10 +74,12 @@ def register(subparsers) -> None:
     p.add_argument("--pictures", type=Path, default=None, help="folder for one PNG per pair")
     p.add_argument("--corrections", type=Path, default=None,
                    help="CSV scene,object_a,object_b,relation (beside, on_top or none) overriding the rule")
-    add_set(p, "rule.contact_tol=0.04")
+    add_set(p, "real.rule.contact_tol=0.04")
     p.set_defaults(func=cmd_propose)
 
-    p = sub.add_parser("check", help="validate a labels file against its scenes and count the pairs")
+    p = sub.add_parser("check", help="validate a labels file against its scenes and count the pairs",
+                       description="Validate a labels file against its scenes and count the pairs. No settings "
+                                   "(no --set): it reads the labels and the scenes' object ids only.")
     p.add_argument("scenes", type=Path, help="folder of scene files")
     p.add_argument("--labels", type=Path, required=True, help="labels CSV (relaff real propose, or by hand)")
     p.add_argument("--only-present", action="store_true",
@@ -114,17 +118,20 @@ def register(subparsers) -> None:
                    help="RHF normals of the simulated scenes: exact ray hits, or the cloud rule (5x5 pixel window)")
     p.add_argument("--real-normals", choices=("knn", "window"), default="knn",
                    help="RHF normals of the real scenes: 20 nearest neighbours, or the simulation's window rule")
-    add_set(p, "tolerance.tilt_deg=3 (tree: pipeline.*, rule.*, sim.*, experiment.*, tolerance.*)")
+    add_set(p, "perception.voxel.size=0.02 (real scenes: real.pipeline.*, real.rule.*, real.sim.*, "
+                "real.experiment.*, real.tolerance.*; voxel grid and RHF: perception.*)")
     p.set_defaults(func=cmd_study)
 
 
 def real_config(args, extra: dict | None = None):
-    """The resolved ``RealRunConfig``: the command's flags (``extra``, dotted keys), then ``--set``
-    (which wins); checked without importing JAX."""
-    from relaff_jax.config import parse_set
-    from relaff_jax.real.config import resolve
+    """The resolved ``RunConfig`` tree: the command's flags (``extra``, dotted keys of its
+    ``real`` node), then ``--set`` (which wins); its real settings (and the perception they
+    share) checked before any work, without importing JAX."""
+    from relaff_jax.cli.options import config
+    from relaff_jax.real.config import validate_run_config
 
-    return resolve({**(extra or {}), **parse_set(getattr(args, "set", None) or [])})
+    extra = [f"real.{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in (extra or {}).items()]
+    return validate_run_config(config(args, extra=extra))
 
 
 def _corrections(path: Path | None) -> dict:
@@ -160,13 +167,14 @@ def cmd_segment(args) -> int:
     if args.out:
         check_out_file(args.out)  # before the segmentation (about a minute)
     from relaff_jax.real import score_scenes
+    from relaff_jax.real.config import pipeline_config
     from relaff_jax.real.scene_source import scene_files
 
-    res = score_scenes(scene_files(args.scenes), seed=args.seed, cfg=cfg.pipeline, known_count=args.known_count,
+    res = score_scenes(scene_files(args.scenes), seed=args.seed, cfg=pipeline_config(cfg), known_count=args.known_count,
                        progress=True)
     for s in res["scenes"]:
         print(f"{s['scene']}: mean object IoU {s['mean']:.3f}, table {s['table']:.3f}")
-    k = cfg.pipeline.kmeans
+    k = cfg.real.pipeline.kmeans
     variant = ("k = objects" + (" + 1" if k.background else "") if args.known_count else f"k = {k.k}") + \
         (", smallest cluster = background" if k.background else ", no background cluster")
     print(f"{variant}: mean IoU over scenes {res['mean_iou']:.3f}, over objects {res['mean_iou_objects']:.3f}, "
@@ -185,9 +193,10 @@ def cmd_show(args) -> int:
     import jax
 
     from relaff_jax.real import read_cloud, render_real_scene_png
+    from relaff_jax.real.config import pipeline_config
 
     cloud = read_cloud(args.scene)
-    render_real_scene_png(cloud, jax.random.PRNGKey(args.seed), args.out, cfg.pipeline, pair=args.pair,
+    render_real_scene_png(cloud, jax.random.PRNGKey(args.seed), args.out, pipeline_config(cfg), pair=args.pair,
                           source=args.source)
     print(args.out)
     return 0
@@ -203,7 +212,7 @@ def cmd_propose(args) -> int:
     if args.pictures is not None:
         check_out_dir(args.pictures, "--pictures")
     corrections = _corrections(args.corrections)
-    labels, record = propose_folder(args.scenes, args.pictures, corrections, cfg.rule)
+    labels, record = propose_folder(args.scenes, args.pictures, corrections, cfg.real.rule)
     lab.write_labels(args.out, labels)
     counts = lab.relation_counts(labels)
     left = sum(r[2] == "none" for r in record)
