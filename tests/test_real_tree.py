@@ -52,12 +52,12 @@ def test_voxel_size_set_on_the_tree_reaches_the_real_features():
     ("real.pipeline.max_object_pixels=0", "real.pipeline.max_object_pixels"),
 ])
 def test_bad_real_setting_refused_before_any_work(setting, words, tmp_path, monkeypatch):
-    import relaff_jax.real.study as study
+    import relaff_jax.real.stages as stages
 
     def fail(*a, **k):
         raise AssertionError("the study started")
 
-    monkeypatch.setattr(study, "run_study", fail)
+    monkeypatch.setattr(stages, "run_study", fail)
     args = argparse.Namespace(set=[setting], scenes=DATA, labels=tmp_path / "missing.csv", out=tmp_path / "o",
                               per_relation=1000, chunk=256, seed=0, sim_normals="ray", reps=50, trees=100,
                               n_full=1000, split="scene", real_normals="knn", test=None, test_labels=None)

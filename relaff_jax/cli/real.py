@@ -26,8 +26,6 @@ so a mistyped key or a bad value is reported at once. ``check`` has no settings 
 """
 from __future__ import annotations
 
-import csv
-import json
 from pathlib import Path
 
 from relaff_jax.cli.options import add_set, check_in_dir, check_in_file, check_out_dir, check_out_file
@@ -134,26 +132,6 @@ def real_config(args, extra: dict | None = None):
     return validate_run_config(config(args, extra=extra))
 
 
-def _corrections(path: Path | None) -> dict:
-    if path is None:
-        return {}
-    if not path.is_file():
-        raise UserError(f"corrections file {path} does not exist")
-    out = {}
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
-    if not rows or [c.strip() for c in rows[0]][:4] != ["scene", "object_a", "object_b", "relation"]:
-        raise UserError(f"{path}: header must start scene,object_a,object_b,relation")
-    for i, r in enumerate(rows[1:], start=2):
-        if not r or r[0].startswith("#"):
-            continue
-        try:
-            out[(r[0].strip(), int(r[1]), int(r[2]))] = r[3].strip()
-        except (IndexError, ValueError):
-            raise UserError(f"{path} line {i}: expected scene,object_a,object_b,relation") from None
-    return out
-
-
 def _check_inputs(args) -> None:
     """The scenes folder and the labels file exist: checked before the real stage is imported."""
     check_in_dir(args.scenes, f"scenes folder {args.scenes} does not exist")
@@ -162,79 +140,43 @@ def _check_inputs(args) -> None:
 
 
 def cmd_segment(args) -> int:
-    cfg = real_config(args, {"pipeline.kmeans.background": False} if args.no_background else {})
+    tree = real_config(args, {"pipeline.kmeans.background": False} if args.no_background else {})
     _check_inputs(args)
     if args.out:
         check_out_file(args.out)  # before the segmentation (about a minute)
-    from relaff_jax.real import score_scenes
-    from relaff_jax.real.config import pipeline_config
-    from relaff_jax.real.scene_source import scene_files
+    from relaff_jax.real.stages import run_segment
 
-    res = score_scenes(scene_files(args.scenes), seed=args.seed, cfg=pipeline_config(cfg), known_count=args.known_count,
-                       progress=True)
-    for s in res["scenes"]:
-        print(f"{s['scene']}: mean object IoU {s['mean']:.3f}, table {s['table']:.3f}")
-    k = cfg.real.pipeline.kmeans
-    variant = ("k = objects" + (" + 1" if k.background else "") if args.known_count else f"k = {k.k}") + \
-        (", smallest cluster = background" if k.background else ", no background cluster")
-    print(f"{variant}: mean IoU over scenes {res['mean_iou']:.3f}, over objects {res['mean_iou_objects']:.3f}, "
-          f"table {res['mean_table_iou']:.3f}")
-    if args.out:
-        from relaff_jax.io import atomic_write_json
-
-        atomic_write_json(args.out, dict(res, variant=variant))
+    run_segment(tree, args.scenes, args.out, seed=args.seed, known_count=args.known_count)
     return 0
 
 
 def cmd_show(args) -> int:
-    cfg = real_config(args)
+    tree = real_config(args)
     check_in_file(args.scene, f"scene file {args.scene} does not exist")
     check_out_file(args.out)
-    import jax
+    from relaff_jax.real.stages import run_show
 
-    from relaff_jax.real import read_cloud, render_real_scene_png
-    from relaff_jax.real.config import pipeline_config
-
-    cloud = read_cloud(args.scene)
-    render_real_scene_png(cloud, jax.random.PRNGKey(args.seed), args.out, pipeline_config(cfg), pair=args.pair,
-                          source=args.source)
-    print(args.out)
+    run_show(tree, args.scene, args.out, seed=args.seed, pair=args.pair, source=args.source)
     return 0
 
 
 def cmd_propose(args) -> int:
-    cfg = real_config(args)
+    tree = real_config(args)
     _check_inputs(args)
-    from relaff_jax.real import labels as lab
-    from relaff_jax.real.labelling import propose_folder
-
     check_out_file(args.out)
     if args.pictures is not None:
         check_out_dir(args.pictures, "--pictures")
-    corrections = _corrections(args.corrections)
-    labels, record = propose_folder(args.scenes, args.pictures, corrections, cfg.real.rule)
-    lab.write_labels(args.out, labels)
-    counts = lab.relation_counts(labels)
-    left = sum(r[2] == "none" for r in record)
-    print(f"{args.out}: {counts['beside']} beside, {counts['on_top']} on_top; {left} of {len(record)} pairs left out; "
-          f"{len(corrections)} corrections applied")
+    from relaff_jax.real.stages import run_propose
+
+    run_propose(tree, args.scenes, args.out, pictures=args.pictures, corrections=args.corrections)
     return 0
 
 
 def cmd_check(args) -> int:
     _check_inputs(args)
-    from relaff_jax.real import labels as lab
-    from relaff_jax.real.scene_source import object_ids
+    from relaff_jax.real.stages import run_check
 
-    labels = lab.read_labels(args.labels)
-    skipped = []
-    if args.only_present:
-        labels, skipped = lab.present(labels, args.scenes)
-    labels = lab.validate(labels, args.scenes, object_ids)
-    counts = lab.relation_counts(labels)
-    note = f"; {len(skipped)} labelled scenes not in {args.scenes} skipped" if args.only_present else ""
-    print(f"{args.labels}: valid; {counts['beside']} beside, {counts['on_top']} on_top in "
-          f"{len({x.scene for x in labels})} scenes{note}")
+    run_check(args.scenes, args.labels, only_present=args.only_present)
     return 0
 
 
@@ -253,15 +195,11 @@ def cmd_study(args) -> int:
     elif args.test_labels is not None:
         raise UserError("--test-labels needs --test (the test folder)")
     from relaff_jax.cli.options import record_config
-    from relaff_jax.real.study import run_study
+    from relaff_jax.real.stages import run_study
 
-    res = run_study(args.scenes, args.labels, args.out, cfg, tuple(args.spaces), args.sim, args.test,
-                    args.test_labels, args.only_present)
-    for where, summary in (("within", res["within"]), ("cross", res["cross"])):
-        for space, s in (summary or {}).items():
-            acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
-            print(f"{space} {where} ({s['split']['kind']}): {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
-    record_config(args.out, cfg, "real study")
+    run_study(cfg, args.scenes, args.labels, args.out, tuple(args.spaces), args.sim, args.test, args.test_labels,
+              args.only_present)
+    record_config(args.out, cfg, "real study")  # the tree that ran, as every stage's folder holds it
     print(f"report: {args.out / 'results.md'}")
     return 0
 

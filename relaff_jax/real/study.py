@@ -61,7 +61,7 @@ def _rows(scenes: str | Path, labels_path: str | Path, only_present: bool, what:
     return rows, skipped
 
 
-def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path, tree,
+def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | Path,
                  spaces: tuple[str, ...] = ("pca", "rhf"), sim_folder: str | Path | None = None,
                  test: str | Path | None = None, test_labels: str | Path | None = None,
                  only_present: bool = False) -> dict:
@@ -135,10 +135,10 @@ def _experiments(path: Path, key: str, run) -> dict:
     return res
 
 
-def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path, tree,
+def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path,
               spaces: tuple[str, ...] = ("pca", "rhf"), sim_folder: str | Path | None = None,
               test: str | Path | None = None, test_labels: str | Path | None = None,
-              only_present: bool = False, progress: bool = True) -> dict:
+              only_present: bool = False, progress: bool = True, say=print) -> dict:
     """Run (or resume) the study with the ``RunConfig`` ``tree`` (its ``real`` node and its
     ``perception``, shared by the real and simulated features); see the module docstring."""
     from . import experiments as ex
@@ -146,7 +146,7 @@ def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path, tree
     from . import sim_relations as sr
 
     out = Path(out)
-    rows = check_inputs(scenes, labels_path, out, tree, spaces, sim_folder, test, test_labels, only_present)
+    rows = check_inputs(tree, scenes, labels_path, out, spaces, sim_folder, test, test_labels, only_present)
     cfg, pipeline = tree.real, pipeline_config(tree)
     exp_cfg, sim_cfg = cfg.experiment, cfg.sim
     poses = real_data.scene_poses(scenes, rows["train"], progress)
@@ -185,6 +185,10 @@ def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path, tree
             cross[space] = ex.summarise(craw[space], exp_cfg)
     context = _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test)
     report.write_report(out, raw, summary, context, craw or None, cross or None)
+    for where, per_space in (("within", summary), ("cross", cross)):
+        for space, s in per_space.items():
+            acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
+            say(f"{space} {where} ({s['split']['kind']}): {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
     return dict(within=summary, cross=cross or None)
 
 
