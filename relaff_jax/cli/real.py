@@ -13,7 +13,7 @@
   the pairs;
 * ``study SCENES --labels L --out DIR [--test T --test-labels TL] [--only-present]``: real
   features, simulated relation scenes from the training folder's sensor pose, the four
-  experiments within the folder (split by scene unless ``--set experiment.split=pair``) and,
+  experiments within the folder (split by scene unless ``--set real.experiment.split=pair``) and,
   with a test folder, trained on one folder and tested on the other; the report
   (``real.study``; resumable).
 
@@ -100,18 +100,18 @@ def register(subparsers) -> None:
                    help="simulated relation folder (default OUT/sim); reused when its sensor lies within "
                         "tolerance.* of the training folder's (defaults 0.01 m, 2.5 deg, 0.5 deg fov)")
     p.add_argument("--per-relation", type=int, default=1000,
-                   help="simulated scenes per relation (sim.per_relation; default 1000, paper: thousands)")
-    p.add_argument("--n-full", type=int, default=1000, help="SIM_full training samples (experiment.n_full; "
+                   help="simulated scenes per relation (real.sim.per_relation; default 1000, paper: thousands)")
+    p.add_argument("--n-full", type=int, default=1000, help="SIM_full training samples (real.experiment.n_full; "
                                                              "default 1000, paper: 6500)")
-    p.add_argument("--reps", type=int, default=50, help="repetitions (experiment.reps; default 50)")
-    p.add_argument("--trees", type=int, default=100, help="trees per forest (experiment.trees; default 100)")
+    p.add_argument("--reps", type=int, default=50, help="repetitions (real.experiment.reps; default 50)")
+    p.add_argument("--trees", type=int, default=100, help="trees per forest (real.experiment.trees; default 100)")
     p.add_argument("--split", choices=("scene", "pair"), default="scene",
                    help="within a folder: every pair of a scene on one side (default), or pairs one by one "
-                        "(experiment.split)")
+                        "(real.experiment.split)")
     p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"],
                    help="state spaces (default both)")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulation and the experiments (default 0)")
-    p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk (sim.chunk; default 256)")
+    p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk (real.sim.chunk; default 256)")
     p.add_argument("--sim-normals", choices=("ray", "cloud"), default="ray",
                    help="RHF normals of the simulated scenes: exact ray hits, or the cloud rule (5x5 pixel window)")
     p.add_argument("--real-normals", choices=("knn", "window"), default="knn",

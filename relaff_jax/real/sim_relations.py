@@ -142,7 +142,7 @@ def guard(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRel
         why = sensor_mismatch(stored, sensor, tol)
         if why:
             raise UserError(f"{folder} holds simulated relation data of another sensor ({why}); use another "
-                            "folder, delete it, or widen --set tolerance.<key>")
+                            "folder, delete it, or widen --set real.tolerance.<key>")
         return stored
     chunks = sorted(folder.glob("chunk_*.npz"))
     if chunks:
