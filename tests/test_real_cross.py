@@ -261,3 +261,39 @@ def test_claim_d_is_undefined_when_bf_mostly_is():
     assert d["holds"] is None
     assert "defined at 1 of 3" in d["numbers"]
     assert "| undefined |" in report.markdown({"pca": s}, {})
+
+
+def test_voxel_size_set_reaches_a_real_study(tmp_path, monkeypatch):
+    """``--set perception.voxel.size`` reaches the real features, the simulated chunks and the record."""
+    import argparse
+
+    from relaff_jax.cli.real import real_config
+    from relaff_jax.real import labels as lab
+    from relaff_jax.real import real_data
+    from relaff_jax.real import sim_relations as sr
+    from relaff_jax.real.config import pipeline_config
+
+    a, _, labels = _label_files(tmp_path)
+    calls, seen = [], []
+    fake = _fake_chunks(calls)
+
+    def chunk_fn(world, sensor, cfg, perception=None):
+        seen.append(perception.voxel.size)
+        return fake(world, sensor, cfg, perception)
+
+    monkeypatch.setattr(sr, "_chunk_fn", chunk_fn)
+    monkeypatch.setattr("relaff_jax.sim.world.build_world", lambda: None)
+    out = tmp_path / "study"
+    assert cli.main(["real", "study", str(a), "--labels", str(labels), "--out", str(out), "--spaces", "pca",
+                     "--reps", "2", "--trees", "5", "--n-full", "4", "--per-relation", "4", "--chunk", "8",
+                     "--split", "pair", "--only-present", "--set", "real.sim.feature_batch=8",
+                     "--set", "perception.voxel.size=0.03"]) == 0
+    assert seen == [0.03]
+    rows, _ = lab.present(lab.read_labels(labels), a)
+    tree = real_config(argparse.Namespace(set=["perception.voxel.size=0.03"]))
+    stored = np.load(out / "real_features.npz")["pca"]
+    np.testing.assert_array_equal(stored, real_data.real_features(a, rows, pipeline_config(tree), False)["pca"])
+    default = real_data.real_features(a, rows, pipeline_config(real_config(argparse.Namespace(set=[]))), False)
+    assert not np.array_equal(stored, default["pca"])
+    assert json.loads((out / "relaff_config.json").read_text())["config"]["perception"]["voxel"]["size"] == 0.03
+    assert json.loads((out / "sim" / "sim_relations.json").read_text())["perception"]["voxel_size"] == 0.03

@@ -71,3 +71,25 @@ def test_unknown_real_key_lists_the_valid_ones():
 
     with pytest.raises((UserError, ConfigError), match="valid"):
         _tree("real.pipeline.kmeans.kk=3")
+
+
+def test_simulated_relations_see_the_tree_perception_and_guard_it(tmp_path):
+    from relaff_jax.perception.config import (CameraConfig, CullConfig, NoiseConfig, NormalsConfig,
+                                              PerceptionConfig, VoxelConfig)
+    from relaff_jax.real import frame as rframe
+    from relaff_jax.real import sim_relations as sr
+    from relaff_jax.real.scene_source import TARGET
+
+    sensor, cfg = sr.SimSensor(0.6, 50.0), sr.SimRelationConfig()
+    # the default tree gives the config the study was built with before the tree reached it
+    cam = rframe.sim_camera(sensor.height, sensor.tilt_deg, TARGET, CameraConfig(vfov_deg=sensor.vfov_deg))
+    before = PerceptionConfig(camera=cam, noise=NoiseConfig(cfg.noise), normals=NormalsConfig(source=cfg.normals),
+                              voxel=VoxelConfig(max_object_pixels=cfg.max_object_pixels),
+                              cull=CullConfig(max_tiles=cfg.max_tiles))
+    assert sr.perception_config(sensor, cfg, _tree().perception) == before
+    tree = _tree("perception.voxel.size=0.03")
+    assert sr.perception_config(sensor, cfg, tree.perception).voxel.size == 0.03
+    sr.guard(tmp_path / "sim", sensor, cfg, perception=_tree().perception)
+    with pytest.raises(UserError, match="voxel_size"):
+        sr.guard(tmp_path / "sim", sensor, cfg, perception=tree.perception)
+    assert sr.guard(tmp_path / "sim", sensor, cfg) == sensor  # the default perception: the same folder
