@@ -169,8 +169,12 @@ class SimRelationConfig:
     noise: str = "robwork"
     feature_batch: int = 32  # scenes per perception call (memory: ~1 GB at these capacities)
     max_tiles: int = 600  # of 1200 16 x 16 tiles: objects 0.6 m from the camera are large
-    max_object_pixels: int = 65536
+    max_object_pixels: int = 65536  # of both objects: the real sensor's objects are near, as for the real pairs
     seed: int = 0
+    # ``noise`` and ``normals`` are the simulated relation data's own (``perception.noise.model``
+    # and ``perception.normals.source`` of the tree are not read here): they are in the guard
+    # of every simulated folder built so far (``sim_relations.GUARD_KEYS``), and the study's
+    # ``--sim-normals`` flag sets them apart from the simulated datasets' choice
     normals: str = "ray"
 
 
