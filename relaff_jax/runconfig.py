@@ -10,6 +10,9 @@
       dataset      data.DatasetConfig: samples per action, batches, rollout cap, matching
       experiment   learn.ExperimentConfig: sizes, repetitions, conditions, forests
       reproduce    ReproduceConfig: which actions and spaces a study covers, report examples
+      real         real.RealRunConfig: the real scenes' own settings (plane, crop, k-means,
+                   cloud normals, proposal rule, simulated relations, experiments); their voxel
+                   grid and RHF are ``perception``'s (``real.config.pipeline_config``)
 
 Every command takes ``--set dotted.key=value`` (``--set perception.voxel.size=0.02``), checked
 against this tree: an unknown key is an error listing the valid ones. Every output folder
@@ -65,6 +68,12 @@ def _experiment():
     return ExperimentConfig()
 
 
+def _real():
+    from relaff_jax.real.config import RealRunConfig
+
+    return RealRunConfig()
+
+
 @dataclasses.dataclass(frozen=True)
 class RunConfig:
     """The whole tree; defaults are the paper's (the ``paper`` preset)."""
@@ -74,6 +83,7 @@ class RunConfig:
     dataset: Any = dataclasses.field(default_factory=_dataset)
     experiment: Any = dataclasses.field(default_factory=_experiment)
     reproduce: ReproduceConfig = ReproduceConfig()
+    real: Any = dataclasses.field(default_factory=_real)
 
 
 def preset(name: str) -> RunConfig:
@@ -132,13 +142,13 @@ def precheck(overrides: Mapping[str, Any]) -> None:
     """Check ``--set`` keys without building the tree, so that a mistake is reported at once:
     a top-level key the tree does not have, and every key (and its value's kind) under every
     node: their configs load without JAX, MJX or scikit-learn (``sim.config``, ``learn.config``,
-    ``perception.config``, ``data.config``), in well under a second. Raises the same
+    ``perception.config``, ``data.config``, ``real.config``), in well under a second. Raises the same
     ``ConfigError``s as ``resolve``."""
     from relaff_jax.config import override_under
 
     names = {f.name for f in dataclasses.fields(RunConfig)}
     light = {"action": _action, "dataset": _dataset, "perception": _perception, "experiment": _experiment,
-             "reproduce": ReproduceConfig}
+             "reproduce": ReproduceConfig, "real": _real}
     for key, value in dict(overrides).items():
         head, _, rest = key.partition(".")
         if head not in names:

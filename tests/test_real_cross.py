@@ -95,7 +95,7 @@ def test_cross_folder_figures_by_hand():
 def _fake_chunks(calls, stop_after=None):
     """Stand-in for settle + perceive: chunk c keeps 2 beside, 2 on_top, 1 inside scene whose
     PCA x is 10 on top; ``stop_after``: the build is killed once that many chunks are written."""
-    def fake_chunk_fn(world, sensor, cfg):
+    def fake_chunk_fn(world, sensor, cfg, perception=None):
         def run(c):
             if stop_after is not None and c >= stop_after:
                 raise KeyboardInterrupt
@@ -171,7 +171,7 @@ def test_train_test_study_through_the_cli(tmp_path, monkeypatch, capsys):
     out = tmp_path / "study"
     base = ["real", "study", str(a), "--labels", str(labels), "--test", str(b), "--test-labels", str(labels),
             "--out", str(out), "--spaces", "pca", "--reps", "2", "--trees", "5", "--n-full", "4",
-            "--per-relation", "4", "--chunk", "8", "--set", "sim.feature_batch=8"]
+            "--per-relation", "4", "--chunk", "8", "--set", "real.sim.feature_batch=8"]
     assert cli.main(base + ["--split", "pair"]) == 2  # the labels name scenes the folders lack
     assert "unknown scene" in capsys.readouterr().err
     assert cli.main(base + ["--split", "pair", "--only-present"]) == 0
@@ -214,12 +214,12 @@ def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
     monkeypatch.setattr(real_data, "scene_poses", lambda *a, **k: (_ for _ in ()).throw(AssertionError("work")))
     a, b, labels = _label_files(tmp_path)
     argv = ["real", "study", str(a), "--labels", str(labels), "--out", str(tmp_path / "s"), "--only-present"]
-    assert cli.main(argv + ["--set", "experiment.splt=pair"]) == 2
+    assert cli.main(argv + ["--set", "real.experiment.splt=pair"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith("relaff real study: error: unknown config key 'experiment.splt'")
+    assert err.startswith("relaff real study: error: unknown config key 'real.experiment.splt'")
     assert "split" in err
-    assert cli.main(argv + ["--set", "experiment.split=scenes"]) == 2
-    assert "unknown experiment.split 'scenes'" in capsys.readouterr().err
+    assert cli.main(argv + ["--set", "real.experiment.split=scenes"]) == 2
+    assert "unknown real.experiment.split 'scenes'" in capsys.readouterr().err
     assert cli.main(argv + ["--test", str(b)]) == 2
     assert "--test needs --test-labels" in capsys.readouterr().err
     # A's scenes cannot be cut by scene with both relations on both sides (the within-folder figures)
@@ -229,7 +229,7 @@ def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
     only_beside.write_text("\n".join(x for x in labels.read_text().splitlines() if "on_top" not in x) + "\n")
     assert cli.main(argv + ["--split", "pair", "--test", str(b), "--test-labels", str(only_beside)]) == 2
     assert "the test folder needs >= 1 pair of each relation, have 1 beside and 0 on_top" in capsys.readouterr().err
-    assert cli.main(["real", "segment", str(a), "--set", "pipeline.kmeans.k=true"]) == 2
+    assert cli.main(["real", "segment", str(a), "--set", "real.pipeline.kmeans.k=true"]) == 2
     assert "expects an integer" in capsys.readouterr().err
     assert not (tmp_path / "s").exists()
 
@@ -261,3 +261,39 @@ def test_claim_d_is_undefined_when_bf_mostly_is():
     assert d["holds"] is None
     assert "defined at 1 of 3" in d["numbers"]
     assert "| undefined |" in report.markdown({"pca": s}, {})
+
+
+def test_voxel_size_set_reaches_a_real_study(tmp_path, monkeypatch):
+    """``--set perception.voxel.size`` reaches the real features, the simulated chunks and the record."""
+    import argparse
+
+    from relaff_jax.cli.real import real_config
+    from relaff_jax.real import labels as lab
+    from relaff_jax.real import real_data
+    from relaff_jax.real import sim_relations as sr
+    from relaff_jax.real.config import pipeline_config
+
+    a, _, labels = _label_files(tmp_path)
+    calls, seen = [], []
+    fake = _fake_chunks(calls)
+
+    def chunk_fn(world, sensor, cfg, perception=None):
+        seen.append(perception.voxel.size)
+        return fake(world, sensor, cfg, perception)
+
+    monkeypatch.setattr(sr, "_chunk_fn", chunk_fn)
+    monkeypatch.setattr("relaff_jax.sim.world.build_world", lambda: None)
+    out = tmp_path / "study"
+    assert cli.main(["real", "study", str(a), "--labels", str(labels), "--out", str(out), "--spaces", "pca",
+                     "--reps", "2", "--trees", "5", "--n-full", "4", "--per-relation", "4", "--chunk", "8",
+                     "--split", "pair", "--only-present", "--set", "real.sim.feature_batch=8",
+                     "--set", "perception.voxel.size=0.03"]) == 0
+    assert seen == [0.03]
+    rows, _ = lab.present(lab.read_labels(labels), a)
+    tree = real_config(argparse.Namespace(set=["perception.voxel.size=0.03"]))
+    stored = np.load(out / "real_features.npz")["pca"]
+    np.testing.assert_array_equal(stored, real_data.real_features(a, rows, pipeline_config(tree), False)["pca"])
+    default = real_data.real_features(a, rows, pipeline_config(real_config(argparse.Namespace(set=[]))), False)
+    assert not np.array_equal(stored, default["pca"])
+    assert json.loads((out / "relaff_config.json").read_text())["config"]["perception"]["voxel"]["size"] == 0.03
+    assert json.loads((out / "sim" / "sim_relations.json").read_text())["perception"]["voxel_size"] == 0.03

@@ -181,7 +181,7 @@ def test_sim_relations_build_resume_and_guard(tmp_path, monkeypatch):
 
     calls = []
 
-    def fake_chunk_fn(world, sensor, cfg):
+    def fake_chunk_fn(world, sensor, cfg, perception=None):
         def run(c):
             calls.append(c)
             rel = np.array([0, 0] + [1] * c + [2])

@@ -2,7 +2,8 @@
 
 Takes parsed arguments; prints ``data.info`` as a table or JSON, or writes
 ``data.export_dataset``'s Parquet file, feature schema and dataset card. Problems a user can
-fix are ``relaff_jax.errors.UserError`` (one line, exit code 2).
+fix are ``relaff_jax.errors.UserError`` (one line, exit code 2). None of the three has a setting
+of the config tree (no ``--set``): they read the settings a dataset's sidecars record.
 """
 from __future__ import annotations
 
@@ -41,7 +42,8 @@ def register(subparsers) -> None:
         "info",
         help="counts and positive rates of a dataset",
         description="Show counts, positive rates by spatial relation and by object pair, "
-        "rollouts used and attached features of a relaff dataset.",
+        "rollouts used and attached features of a relaff dataset. No settings (no --set): it "
+        "reads what the dataset's own sidecars record.",
     )
     p.add_argument("dir", metavar="DIR", help="dataset directory")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -53,7 +55,8 @@ def register(subparsers) -> None:
         description="Counts and label rates by (feasible, relation) over every rollout and over the "
         "balanced selection, the share of negatives that are infeasible, three oracles on the "
         "selection (label = feasible; the relation's majority label; both) and centre-distance "
-        "quantiles by class and relation (docs/datasets.md, 'Population').",
+        "quantiles by class and relation (docs/datasets.md, 'Population'). No settings (no --set): "
+        "it reads what the dataset's own sidecars record.",
     )
     p.add_argument("dir", metavar="DIR", help="finished dataset directory")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
@@ -66,7 +69,8 @@ def register(subparsers) -> None:
         "PCA and RHF features when present) as one Parquet file, plus a JSON schema of the "
         "feature columns and a README dataset card. OUT ending in .parquet is the file "
         "(schema and card beside it as STEM.schema.json, STEM.md); any other OUT is a folder "
-        "(data.parquet, features_schema.json, README.md).",
+        "(data.parquet, features_schema.json, README.md). No tree settings (no --set): the "
+        "card and schema copy the settings the dataset's sidecars record; --format is the only choice.",
     )
     p.add_argument("dir", metavar="DIR", help="dataset directory")
     p.add_argument("--out", required=True, metavar="FILE_OR_DIR", help="a .parquet file or a folder")

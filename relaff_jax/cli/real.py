@@ -13,25 +13,25 @@
   the pairs;
 * ``study SCENES --labels L --out DIR [--test T --test-labels TL] [--only-present]``: real
   features, simulated relation scenes from the training folder's sensor pose, the four
-  experiments within the folder (split by scene unless ``--set experiment.split=pair``) and,
+  experiments within the folder (split by scene unless ``--set real.experiment.split=pair``) and,
   with a test folder, trained on one folder and tested on the other; the report
   (``real.study``; resumable).
 
-Every setting of the real stages is one key of ``real.config.RealRunConfig``: ``--set
-pipeline.kmeans.background=false``, ``--set experiment.split=pair``, ``--set sim.per_relation=500``,
-``--set tolerance.tilt_deg=3``; the flags are shorthands for keys of that tree (``--set`` wins).
-The tree is resolved without JAX, so a mistyped key is reported at once.
+Every setting of the real stages is one key of the config tree (``runconfig.RunConfig``): the
+real-only ones under ``real.`` (``--set real.pipeline.kmeans.background=false``, ``--set
+real.experiment.split=pair``, ``--set real.sim.per_relation=500``), the voxel grid and RHF shared
+with simulation under ``perception.`` (``--set perception.voxel.size=0.02``); the flags are
+shorthands for keys of that tree (``--set`` wins). The tree is resolved and checked without JAX,
+so a mistyped key or a bad value is reported at once. ``check`` has no settings (no ``--set``).
 """
 from __future__ import annotations
 
-import csv
-import json
 from pathlib import Path
 
 from relaff_jax.cli.options import add_set, check_in_dir, check_in_file, check_out_dir, check_out_file
 from relaff_jax.errors import UserError
 
-SET_EXAMPLE = "pipeline.kmeans.background=false"
+SET_EXAMPLE = "real.pipeline.kmeans.background=false"
 
 
 def register(subparsers) -> None:
@@ -72,10 +72,12 @@ def register(subparsers) -> None:
     p.add_argument("--pictures", type=Path, default=None, help="folder for one PNG per pair")
     p.add_argument("--corrections", type=Path, default=None,
                    help="CSV scene,object_a,object_b,relation (beside, on_top or none) overriding the rule")
-    add_set(p, "rule.contact_tol=0.04")
+    add_set(p, "real.rule.contact_tol=0.04")
     p.set_defaults(func=cmd_propose)
 
-    p = sub.add_parser("check", help="validate a labels file against its scenes and count the pairs")
+    p = sub.add_parser("check", help="validate a labels file against its scenes and count the pairs",
+                       description="Validate a labels file against its scenes and count the pairs. No settings "
+                                   "(no --set): it reads the labels and the scenes' object ids only.")
     p.add_argument("scenes", type=Path, help="folder of scene files")
     p.add_argument("--labels", type=Path, required=True, help="labels CSV (relaff real propose, or by hand)")
     p.add_argument("--only-present", action="store_true",
@@ -98,53 +100,36 @@ def register(subparsers) -> None:
                    help="simulated relation folder (default OUT/sim); reused when its sensor lies within "
                         "tolerance.* of the training folder's (defaults 0.01 m, 2.5 deg, 0.5 deg fov)")
     p.add_argument("--per-relation", type=int, default=1000,
-                   help="simulated scenes per relation (sim.per_relation; default 1000, paper: thousands)")
-    p.add_argument("--n-full", type=int, default=1000, help="SIM_full training samples (experiment.n_full; "
+                   help="simulated scenes per relation (real.sim.per_relation; default 1000, paper: thousands)")
+    p.add_argument("--n-full", type=int, default=1000, help="SIM_full training samples (real.experiment.n_full; "
                                                              "default 1000, paper: 6500)")
-    p.add_argument("--reps", type=int, default=50, help="repetitions (experiment.reps; default 50)")
-    p.add_argument("--trees", type=int, default=100, help="trees per forest (experiment.trees; default 100)")
+    p.add_argument("--reps", type=int, default=50, help="repetitions (real.experiment.reps; default 50)")
+    p.add_argument("--trees", type=int, default=100, help="trees per forest (real.experiment.trees; default 100)")
     p.add_argument("--split", choices=("scene", "pair"), default="scene",
                    help="within a folder: every pair of a scene on one side (default), or pairs one by one "
-                        "(experiment.split)")
+                        "(real.experiment.split)")
     p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"],
                    help="state spaces (default both)")
     p.add_argument("--seed", type=int, default=0, help="seed of the simulation and the experiments (default 0)")
-    p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk (sim.chunk; default 256)")
+    p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk (real.sim.chunk; default 256)")
     p.add_argument("--sim-normals", choices=("ray", "cloud"), default="ray",
                    help="RHF normals of the simulated scenes: exact ray hits, or the cloud rule (5x5 pixel window)")
     p.add_argument("--real-normals", choices=("knn", "window"), default="knn",
                    help="RHF normals of the real scenes: 20 nearest neighbours, or the simulation's window rule")
-    add_set(p, "tolerance.tilt_deg=3 (tree: pipeline.*, rule.*, sim.*, experiment.*, tolerance.*)")
+    add_set(p, "perception.voxel.size=0.02 (real scenes: real.pipeline.*, real.rule.*, real.sim.*, "
+                "real.experiment.*, real.tolerance.*; voxel grid and RHF: perception.*)")
     p.set_defaults(func=cmd_study)
 
 
 def real_config(args, extra: dict | None = None):
-    """The resolved ``RealRunConfig``: the command's flags (``extra``, dotted keys), then ``--set``
-    (which wins); checked without importing JAX."""
-    from relaff_jax.config import parse_set
-    from relaff_jax.real.config import resolve
+    """The resolved ``RunConfig`` tree: the command's flags (``extra``, dotted keys of its
+    ``real`` node), then ``--set`` (which wins); its real settings (and the perception they
+    share) checked before any work, without importing JAX."""
+    from relaff_jax.cli.options import config
+    from relaff_jax.real.config import validate_run_config
 
-    return resolve({**(extra or {}), **parse_set(getattr(args, "set", None) or [])})
-
-
-def _corrections(path: Path | None) -> dict:
-    if path is None:
-        return {}
-    if not path.is_file():
-        raise UserError(f"corrections file {path} does not exist")
-    out = {}
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
-    if not rows or [c.strip() for c in rows[0]][:4] != ["scene", "object_a", "object_b", "relation"]:
-        raise UserError(f"{path}: header must start scene,object_a,object_b,relation")
-    for i, r in enumerate(rows[1:], start=2):
-        if not r or r[0].startswith("#"):
-            continue
-        try:
-            out[(r[0].strip(), int(r[1]), int(r[2]))] = r[3].strip()
-        except (IndexError, ValueError):
-            raise UserError(f"{path} line {i}: expected scene,object_a,object_b,relation") from None
-    return out
+    extra = [f"real.{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in (extra or {}).items()]
+    return validate_run_config(config(args, extra=extra))
 
 
 def _check_inputs(args) -> None:
@@ -155,77 +140,43 @@ def _check_inputs(args) -> None:
 
 
 def cmd_segment(args) -> int:
-    cfg = real_config(args, {"pipeline.kmeans.background": False} if args.no_background else {})
+    tree = real_config(args, {"pipeline.kmeans.background": False} if args.no_background else {})
     _check_inputs(args)
     if args.out:
         check_out_file(args.out)  # before the segmentation (about a minute)
-    from relaff_jax.real import score_scenes
-    from relaff_jax.real.scene_source import scene_files
+    from relaff_jax.real.stages import run_segment
 
-    res = score_scenes(scene_files(args.scenes), seed=args.seed, cfg=cfg.pipeline, known_count=args.known_count,
-                       progress=True)
-    for s in res["scenes"]:
-        print(f"{s['scene']}: mean object IoU {s['mean']:.3f}, table {s['table']:.3f}")
-    k = cfg.pipeline.kmeans
-    variant = ("k = objects" + (" + 1" if k.background else "") if args.known_count else f"k = {k.k}") + \
-        (", smallest cluster = background" if k.background else ", no background cluster")
-    print(f"{variant}: mean IoU over scenes {res['mean_iou']:.3f}, over objects {res['mean_iou_objects']:.3f}, "
-          f"table {res['mean_table_iou']:.3f}")
-    if args.out:
-        from relaff_jax.io import atomic_write_json
-
-        atomic_write_json(args.out, dict(res, variant=variant))
+    run_segment(tree, args.scenes, args.out, seed=args.seed, known_count=args.known_count)
     return 0
 
 
 def cmd_show(args) -> int:
-    cfg = real_config(args)
+    tree = real_config(args)
     check_in_file(args.scene, f"scene file {args.scene} does not exist")
     check_out_file(args.out)
-    import jax
+    from relaff_jax.real.stages import run_show
 
-    from relaff_jax.real import read_cloud, render_real_scene_png
-
-    cloud = read_cloud(args.scene)
-    render_real_scene_png(cloud, jax.random.PRNGKey(args.seed), args.out, cfg.pipeline, pair=args.pair,
-                          source=args.source)
-    print(args.out)
+    run_show(tree, args.scene, args.out, seed=args.seed, pair=args.pair, source=args.source)
     return 0
 
 
 def cmd_propose(args) -> int:
-    cfg = real_config(args)
+    tree = real_config(args)
     _check_inputs(args)
-    from relaff_jax.real import labels as lab
-    from relaff_jax.real.labelling import propose_folder
-
     check_out_file(args.out)
     if args.pictures is not None:
         check_out_dir(args.pictures, "--pictures")
-    corrections = _corrections(args.corrections)
-    labels, record = propose_folder(args.scenes, args.pictures, corrections, cfg.rule)
-    lab.write_labels(args.out, labels)
-    counts = lab.relation_counts(labels)
-    left = sum(r[2] == "none" for r in record)
-    print(f"{args.out}: {counts['beside']} beside, {counts['on_top']} on_top; {left} of {len(record)} pairs left out; "
-          f"{len(corrections)} corrections applied")
+    from relaff_jax.real.stages import run_propose
+
+    run_propose(tree, args.scenes, args.out, pictures=args.pictures, corrections=args.corrections)
     return 0
 
 
 def cmd_check(args) -> int:
     _check_inputs(args)
-    from relaff_jax.real import labels as lab
-    from relaff_jax.real.scene_source import object_ids
+    from relaff_jax.real.stages import run_check
 
-    labels = lab.read_labels(args.labels)
-    skipped = []
-    if args.only_present:
-        labels, skipped = lab.present(labels, args.scenes)
-    labels = lab.validate(labels, args.scenes, object_ids)
-    counts = lab.relation_counts(labels)
-    note = f"; {len(skipped)} labelled scenes not in {args.scenes} skipped" if args.only_present else ""
-    print(f"{args.labels}: valid; {counts['beside']} beside, {counts['on_top']} on_top in "
-          f"{len({x.scene for x in labels})} scenes{note}")
+    run_check(args.scenes, args.labels, only_present=args.only_present)
     return 0
 
 
@@ -244,15 +195,11 @@ def cmd_study(args) -> int:
     elif args.test_labels is not None:
         raise UserError("--test-labels needs --test (the test folder)")
     from relaff_jax.cli.options import record_config
-    from relaff_jax.real.study import run_study
+    from relaff_jax.real.stages import run_study
 
-    res = run_study(args.scenes, args.labels, args.out, cfg, tuple(args.spaces), args.sim, args.test,
-                    args.test_labels, args.only_present)
-    for where, summary in (("within", res["within"]), ("cross", res["cross"])):
-        for space, s in (summary or {}).items():
-            acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
-            print(f"{space} {where} ({s['split']['kind']}): {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
-    record_config(args.out, cfg, "real study")
+    run_study(cfg, args.scenes, args.labels, args.out, tuple(args.spaces), args.sim, args.test, args.test_labels,
+              args.only_present)
+    record_config(args.out, cfg, "real study")  # the tree that ran, as every stage's folder holds it
     print(f"report: {args.out / 'results.md'}")
     return 0
 

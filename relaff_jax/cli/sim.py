@@ -20,7 +20,9 @@ def register(subparsers) -> None:
     from relaff_jax.data.config import DatasetConfig  # the tree's defaults, shown in --help (no JAX)
 
     d = DatasetConfig()
-    p = subparsers.add_parser("objects", help="list the 29 objects of the library")
+    p = subparsers.add_parser("objects", help="list the 29 objects of the library",
+                              description="List the 29 objects of the library (sim.objects). No settings "
+                                          "(no --set): the library is fixed, not a part of the config tree.")
     p.add_argument("--json", action="store_true", help="one JSON array")
     p.set_defaults(func=cmd_objects)
 

@@ -7,7 +7,8 @@ Stages, in order (each file's docstring gives its inputs and outputs):
 - ``lzf.py``: LZF (de)compression for PCD binary_compressed;
 - ``pcd.py`` / ``ply.py`` / ``readers.py``: ``read_pcd``, ``read_ply``, ``read_npz``,
   ``read_cloud`` (by extension) and their writers;
-- ``config.py``: ``RealConfig`` (plane, crop, k-means, normals, shared perception settings);
+- ``config.py``: ``RealRunConfig`` (the tree's ``real`` node), ``RealConfig`` and ``pipeline_config``
+  (its pipeline settings with the tree's shared perception);
 - ``ransac.py``: RANSAC plane and k-means in JAX (pure, keyed; the caller jits);
 - ``segment.py``: ``segment_scene`` (table plane, crop, k-means), ``hand_segmentation``;
 - ``frame.py``: ``table_frame``, ``camera_pose``, ``camera_pose_stats``, ``sim_camera``;
@@ -25,7 +26,9 @@ Relations and section VI's experiments (on top of the above):
   matching simulated sensor;
 - ``sim_relations.py``: settled simulated scenes seen from the real sensor's pose (cached, resumable);
 - ``experiments.py``: SIM -> SIM, REAL -> REAL, SIM -> REAL and REAL <- SIM (paper Figs. 14-15);
-- ``report.py`` / ``study.py``: figures, claims a-d, one resumable output folder.
+- ``report.py`` / ``study.py``: figures, claims a-d, one resumable output folder;
+- ``stages.py``: one entry point per ``relaff real`` command over the whole config tree
+  (``run_segment``, ``run_show``, ``run_propose``, ``run_check``; ``run_study`` from ``study.py``).
 """
 from __future__ import annotations
 
@@ -91,6 +94,13 @@ _WHERE = {
     "build_sim_relations": "sim_relations",
     "load_sim_relations": "sim_relations",
     "run_study": "study",
+    "run_segment": "stages",
+    "run_show": "stages",
+    "run_propose": "stages",
+    "run_check": "stages",
+    "read_corrections": "stages",
+    "RealRunConfig": "config",
+    "pipeline_config": "config",
 }
 
 

@@ -1,15 +1,19 @@
 """Settings of the real-scene pipeline: frozen dataclasses and their validation.
 
-Takes nothing; gives ``RealConfig`` (plane RANSAC, crop, k-means, normals, voxel grid and the
-feature settings shared with simulation) and ``validate_real_config(cfg) -> cfg`` (UserError
-naming the bad setting).
+Takes nothing; gives ``RealRunConfig``, the node ``RunConfig.real`` of the one config tree
+(``relaff_jax.runconfig``): the real-only settings (plane RANSAC, crop, k-means, cloud normals,
+the proposal rule, the simulated relation data, the experiments, the sensor tolerance). The voxel
+grid and the RHF are not here: they are the tree's ``perception.voxel`` and ``perception.rhf``,
+shared with simulation, so ``--set perception.voxel.size=...`` reaches both. ``pipeline_config(tree)``
+gives the ``RealConfig`` the stages run with (the real-only settings plus the tree's perception);
+``validate_real_config(cfg) -> cfg`` (UserError naming the bad setting).
 """
 from __future__ import annotations
 
 import dataclasses
 
 from relaff_jax.errors import UserError
-from relaff_jax.perception.config import PerceptionConfig, VoxelConfig
+from relaff_jax.perception.config import PerceptionConfig
 
 from .propose import RuleConfig
 
@@ -65,16 +69,44 @@ class NormalConfig:
     radius: float = 0.025
 
 
+# Object pixels (both objects) kept per real pair before voxelisation: a capacity, not a
+# setting of the features (points beyond it set the overflow flag, they are never dropped
+# silently). Real objects are seen at 0.6-0.8 m, nearer than the simulated ones, and a real pair
+# fills more than ``perception.voxel.max_object_pixels`` (32768) of the 640 x 480 image, so the
+# real stages keep their own, larger capacity (the value they have always used).
+REAL_MAX_OBJECT_PIXELS = 65536
+
+
 @dataclasses.dataclass(frozen=True)
-class RealConfig:
-    """Every real-pipeline setting; ``perception`` carries the voxel grid (0.0125 m, capacities),
-    RHF bins/ranges and ``min_points`` shared with simulation, so both give the same features."""
+class PipelineConfig:
+    """The real-only settings of segmentation and features (``RunConfig.real.pipeline``); the
+    voxel grid and RHF are the tree's ``perception`` node (``pipeline_config``)."""
 
     plane: PlaneConfig = PlaneConfig()
     crop: CropConfig = CropConfig()
     kmeans: KMeansConfig = KMeansConfig()
     normals: NormalConfig = NormalConfig()
-    perception: PerceptionConfig = PerceptionConfig(voxel=VoxelConfig(max_object_pixels=65536))
+    max_object_pixels: int = REAL_MAX_OBJECT_PIXELS
+
+
+def real_perception(perception: PerceptionConfig, max_object_pixels: int = REAL_MAX_OBJECT_PIXELS) -> PerceptionConfig:
+    """The tree's perception settings (voxel size and capacity per object, RHF, ``min_points``)
+    with the real pairs' object pixel capacity."""
+    return dataclasses.replace(perception, voxel=dataclasses.replace(perception.voxel,
+                                                                     max_object_pixels=max_object_pixels))
+
+
+@dataclasses.dataclass(frozen=True)
+class RealConfig:
+    """What the real stages run with: ``PipelineConfig``'s settings and ``perception``, the
+    tree's perception node with the real capacity (``pipeline_config(tree)``; the default is
+    the default tree's)."""
+
+    plane: PlaneConfig = PlaneConfig()
+    crop: CropConfig = CropConfig()
+    kmeans: KMeansConfig = KMeansConfig()
+    normals: NormalConfig = NormalConfig()
+    perception: PerceptionConfig = real_perception(PerceptionConfig())
 
 
 def validate_real_config(cfg: RealConfig) -> RealConfig:
@@ -99,6 +131,16 @@ def validate_real_config(cfg: RealConfig) -> RealConfig:
         raise UserError(f"normals.window must be odd and >= 3 and normals.radius positive, got {nc}")
     validate_config(cfg.perception)
     return cfg
+
+
+def pipeline_config(tree) -> RealConfig:
+    """The ``RealConfig`` of a ``RunConfig`` tree: ``tree.real.pipeline`` with ``tree.perception``
+    (voxel grid, RHF) and the real object pixel capacity; validated."""
+    p = tree.real.pipeline
+    if p.max_object_pixels < 1:
+        raise UserError(f"real.pipeline.max_object_pixels must be >= 1, got {p.max_object_pixels}")
+    return validate_real_config(RealConfig(plane=p.plane, crop=p.crop, kmeans=p.kmeans, normals=p.normals,
+                                           perception=real_perception(tree.perception, p.max_object_pixels)))
 
 
 # ---- the sim-to-real study's settings (JAX-free, so that ``--set`` mistakes are reported at once) ----
@@ -127,8 +169,12 @@ class SimRelationConfig:
     noise: str = "robwork"
     feature_batch: int = 32  # scenes per perception call (memory: ~1 GB at these capacities)
     max_tiles: int = 600  # of 1200 16 x 16 tiles: objects 0.6 m from the camera are large
-    max_object_pixels: int = 65536
+    max_object_pixels: int = 65536  # of both objects: the real sensor's objects are near, as for the real pairs
     seed: int = 0
+    # ``noise`` and ``normals`` are the simulated relation data's own (``perception.noise.model``
+    # and ``perception.normals.source`` of the tree are not read here): they are in the guard
+    # of every simulated folder built so far (``sim_relations.GUARD_KEYS``), and the study's
+    # ``--sim-normals`` flag sets them apart from the simulated datasets' choice
     normals: str = "ray"
 
 
@@ -177,46 +223,40 @@ class RealExperimentConfig:
 
 @dataclasses.dataclass(frozen=True)
 class RealRunConfig:
-    """The one tree of every ``relaff real`` setting (``--set dotted.key=value``):
+    """Every real-only setting, the node ``RunConfig.real`` (``--set real.dotted.key=value``):
     ``pipeline`` the real scenes' segmentation and features, ``rule`` the relation proposal
     rule (``real propose``), ``sim`` the simulated relation data, ``experiment`` the four
     experiments, ``tolerance`` the reuse of simulated data."""
 
-    pipeline: RealConfig = RealConfig()
+    pipeline: PipelineConfig = PipelineConfig()
     rule: RuleConfig = RuleConfig()
     sim: SimRelationConfig = SimRelationConfig()
     experiment: RealExperimentConfig = RealExperimentConfig()
     tolerance: SensorTolerance = SensorTolerance()
 
 
-def resolve(overrides: dict | None = None) -> RealRunConfig:
-    """``RealRunConfig`` with checked ``--set`` overrides (unknown keys list the valid ones),
-    then validated."""
-    from relaff_jax.config import override
-
-    return validate_run_config(override(RealRunConfig(), dict(overrides or {})))
-
-
-def validate_run_config(cfg: RealRunConfig) -> RealRunConfig:
-    """Raise ``UserError`` naming the bad setting of the tree; return ``cfg`` unchanged otherwise."""
-    validate_real_config(cfg.pipeline)
+def validate_run_config(tree):
+    """Raise ``UserError`` naming the bad real setting of a ``RunConfig`` tree (its ``real`` node,
+    and the perception it shares); return ``tree`` unchanged otherwise."""
+    pipeline_config(tree)
+    cfg = tree.real
     e, s, t = cfg.experiment, cfg.sim, cfg.tolerance
     if e.split not in SPLITS:
-        raise UserError(f"unknown experiment.split {e.split!r}; valid: {list(SPLITS)}")
+        raise UserError(f"unknown real.experiment.split {e.split!r}; valid: {list(SPLITS)}")
     if not 0 < e.train_fraction < 1:
-        raise UserError(f"experiment.train_fraction must lie in (0, 1), got {e.train_fraction}")
-    for name, v, lo in (("experiment.reps", e.reps, 1), ("experiment.trees", e.trees, 1),
-                        ("experiment.n_full", e.n_full, 2), ("sim.per_relation", s.per_relation, 1),
-                        ("sim.chunk", s.chunk, 1), ("sim.feature_batch", s.feature_batch, 1)):
+        raise UserError(f"real.experiment.train_fraction must lie in (0, 1), got {e.train_fraction}")
+    for name, v, lo in (("real.experiment.reps", e.reps, 1), ("real.experiment.trees", e.trees, 1),
+                        ("real.experiment.n_full", e.n_full, 2), ("real.sim.per_relation", s.per_relation, 1),
+                        ("real.sim.chunk", s.chunk, 1), ("real.sim.feature_batch", s.feature_batch, 1)):
         if v < lo:
             raise UserError(f"{name} must be >= {lo}, got {v}")
     if s.normals not in ("ray", "cloud"):
-        raise UserError(f"unknown sim.normals {s.normals!r}; valid: ['ray', 'cloud']")
+        raise UserError(f"unknown real.sim.normals {s.normals!r}; valid: ['ray', 'cloud']")
     if s.chunk % s.feature_batch:
-        raise UserError(f"sim.chunk ({s.chunk}) must be a multiple of sim.feature_batch ({s.feature_batch})")
+        raise UserError(f"real.sim.chunk ({s.chunk}) must be a multiple of real.sim.feature_batch ({s.feature_batch})")
     if min(t.height, t.tilt_deg, t.vfov_deg) < 0:
-        raise UserError(f"tolerance values must be >= 0, got {t}")
-    return cfg
+        raise UserError(f"real.tolerance values must be >= 0, got {t}")
+    return tree
 
 
 def sensor_difference(a: SimSensor, b: SimSensor) -> dict:

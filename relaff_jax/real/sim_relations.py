@@ -50,30 +50,35 @@ GUARD_KEYS = ("seed", "chunk", "workspace_radius", "normals", "noise", "max_tile
 GUARD = "sim_relations.json"
 
 
-def perception_config(sensor: SimSensor, cfg: SimRelationConfig):
-    """The ``PerceptionConfig`` of the simulated sensor (camera pose, fov, noise, normals, capacities)."""
-    from relaff_jax.perception.config import (
-        CameraConfig,
-        CullConfig,
-        NoiseConfig,
-        NormalsConfig,
-        PerceptionConfig,
-        VoxelConfig,
-    )
+def perception_config(sensor: SimSensor, cfg: SimRelationConfig, perception=None):
+    """The tree's ``perception`` settings (default: the default tree's; voxel grid, RHF,
+    ``min_points``) seen by the simulated sensor: its camera pose and fov, and the simulated
+    relation data's noise model, normals source and capacities (``real.sim.*``)."""
+    from relaff_jax.perception.config import CameraConfig, NoiseConfig, PerceptionConfig
 
+    p = PerceptionConfig() if perception is None else perception
     cam = rframe.sim_camera(sensor.height, sensor.tilt_deg, TARGET, CameraConfig(vfov_deg=sensor.vfov_deg))
-    return PerceptionConfig(camera=cam, noise=NoiseConfig(cfg.noise), normals=NormalsConfig(source=cfg.normals),
-                            voxel=VoxelConfig(max_object_pixels=cfg.max_object_pixels),
-                            cull=CullConfig(max_tiles=cfg.max_tiles))
+    return dataclasses.replace(p, camera=cam, noise=NoiseConfig(cfg.noise),
+                               normals=dataclasses.replace(p.normals, source=cfg.normals),
+                               voxel=dataclasses.replace(p.voxel, max_object_pixels=cfg.max_object_pixels),
+                               cull=dataclasses.replace(p.cull, max_tiles=cfg.max_tiles))
 
 
-def _chunk_fn(world, sensor: SimSensor, cfg: SimRelationConfig):
+def features_record(perception) -> dict:
+    """What of the tree's perception decides a chunk's features (voxel grid, RHF): the guard holds it."""
+    from relaff_jax.perception.config import PerceptionConfig
+
+    p = PerceptionConfig() if perception is None else perception
+    return rio.jsonable(dict(voxel_size=p.voxel.size, max_voxels=p.voxel.max_voxels, rhf=dataclasses.asdict(p.rhf)))
+
+
+def _chunk_fn(world, sensor: SimSensor, cfg: SimRelationConfig, perception=None):
     """``run(c) -> dict of arrays`` for chunk ``c``: settle, perceive, filter."""
     from relaff_jax.perception import make_batched_features
     from relaff_jax.perception.from_sim import jitted_geoms, rollout_keys
     from relaff_jax.sim import scenes as sc
 
-    pcfg = perception_config(sensor, cfg)
+    pcfg = perception_config(sensor, cfg, perception)
     feats = make_batched_features(world.mj_model.geom_type, world.geom_seg, pcfg)
     geoms = jitted_geoms(world)
     scfg = sc.SceneConfig(workspace_radius=cfg.workspace_radius)
@@ -111,7 +116,7 @@ def _counts(folder: Path) -> tuple[list[Path], np.ndarray]:
 
 
 def guard(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRelationConfig(),
-          tol: SensorTolerance = SensorTolerance(), write: bool = True) -> SimSensor:
+          tol: SensorTolerance = SensorTolerance(), write: bool = True, perception=None) -> SimSensor:
     """The sensor whose data ``folder`` holds (or will hold): the stored one when the folder's
     guard matches ``cfg`` and lies within ``tol`` of ``sensor``, else ``UserError`` with the
     reason. A new folder gets its guard now (``write``), before any chunk."""
@@ -127,13 +132,17 @@ def guard(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRel
         ask, dflt = dataclasses.asdict(cfg), dataclasses.asdict(SimRelationConfig())
         differs = [f"{k} {conf.get(k, dflt[k])!r} there, {ask[k]!r} asked" for k in GUARD_KEYS
                    if rio.jsonable(conf.get(k, dflt[k])) != rio.jsonable(ask[k])]  # older folders: defaults
+        feats = features_record(perception)
+        there = old.get("perception", features_record(None))  # older folders: the default perception
+        if there != feats:
+            differs.append(f"perception (voxel grid, RHF) {there} there, {feats} asked")
         if differs:
             raise UserError(f"{folder} holds simulated relation data of another config ({'; '.join(differs)}); "
                             "use another folder or delete it")
         why = sensor_mismatch(stored, sensor, tol)
         if why:
             raise UserError(f"{folder} holds simulated relation data of another sensor ({why}); use another "
-                            "folder, delete it, or widen --set tolerance.<key>")
+                            "folder, delete it, or widen --set real.tolerance.<key>")
         return stored
     chunks = sorted(folder.glob("chunk_*.npz"))
     if chunks:
@@ -142,12 +151,12 @@ def guard(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRel
     if write:
         folder.mkdir(parents=True, exist_ok=True)
         rio.atomic_write_json(meta_path, dict(sensor=dataclasses.asdict(sensor), config=dataclasses.asdict(cfg),
-                                              status="building"))
+                                              perception=features_record(perception), status="building"))
     return sensor
 
 
 def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRelationConfig(),
-                        progress: bool = True, tol: SensorTolerance = SensorTolerance()) -> dict:
+                        progress: bool = True, tol: SensorTolerance = SensorTolerance(), perception=None) -> dict:
     """Fill ``folder`` with chunks until each relation of ``cfg.need`` has ``cfg.per_relation``
     kept scenes (resumable; ``guard`` first: the same config, a sensor within ``tol``; chunks
     are made with the folder's own sensor). Returns a summary dict, ``sensor`` the one simulated."""
@@ -159,9 +168,10 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
     bad = [r for r in cfg.need if r not in RELATIONS]
     if bad:
         raise UserError(f"unknown relations {bad}; valid: {', '.join(RELATIONS)}")
-    sensor = guard(folder, sensor, cfg, tol)
+    sensor = guard(folder, sensor, cfg, tol, perception=perception)
     meta_path = folder / GUARD
-    meta = dict(sensor=dataclasses.asdict(sensor), config=dataclasses.asdict(cfg))
+    meta = dict(sensor=dataclasses.asdict(sensor), config=dataclasses.asdict(cfg),
+                perception=features_record(perception))
     need = np.asarray([RELATIONS.index(r) for r in cfg.need])
     files, counts = _counts(folder)
     # the bar counts kept scenes of the relations still needed (a chunk's worth at a time)
@@ -179,7 +189,7 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
             from relaff_jax.sim import world as wd
 
             bar.set_description("sim relations: compiling, first chunk")
-            run = _chunk_fn(wd.build_world(), sensor, cfg)
+            run = _chunk_fn(wd.build_world(), sensor, cfg, perception)
         t0 = time.perf_counter()
         out = run(c)
         seconds += time.perf_counter() - t0

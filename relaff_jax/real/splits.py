@@ -80,7 +80,7 @@ def scene_splits(y: np.ndarray, scene: np.ndarray, sz: dict, seed: int, reps: in
         per = {c: len(np.unique(scene[y == c])) for c in (0, 1)}
         raise UserError(f"a split by scene needs whole scenes giving >= {sz['test']} test pairs and >= 1 training "
                         f"pair of each relation; the pairs lie in {per[0]} scenes with beside and {per[1]} with "
-                        "on_top pairs (use experiment.split=pair, labelled as such, or label more scenes)")
+                        "on_top pairs (use real.experiment.split=pair, labelled as such, or label more scenes)")
     out = []
     for rng, test in sides:
         tr = balanced_take(rng, np.flatnonzero(~test & (y == 0)), np.flatnonzero(~test & (y == 1)), n_train)

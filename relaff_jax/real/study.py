@@ -2,8 +2,8 @@
 test folder and its labels), resumable.
 
 Takes a training folder and its labels CSV, optionally a test folder and its labels, an output
-folder and the one ``config.RealRunConfig`` tree; ``run_study`` does, each step stored in the
-output folder and skipped when already there:
+folder and the one ``runconfig.RunConfig`` tree (its ``real`` node and ``perception``);
+``run_study`` does, each step stored in the output folder and skipped when already there:
 
 1. the camera poses of the training folder's labelled scenes: their mean is the simulated
    sensor (``sensor.json``: the pose from the *training* folder; the test folder's mean pose
@@ -38,7 +38,7 @@ from relaff_jax import io as rio
 from relaff_jax.errors import UserError
 
 from . import labels as lab
-from .config import RealRunConfig, sensor_difference
+from .config import pipeline_config, sensor_difference
 
 
 def _raw(path: Path, key: str):
@@ -61,7 +61,7 @@ def _rows(scenes: str | Path, labels_path: str | Path, only_present: bool, what:
     return rows, skipped
 
 
-def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path, cfg: RealRunConfig = RealRunConfig(),
+def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | Path,
                  spaces: tuple[str, ...] = ("pca", "rhf"), sim_folder: str | Path | None = None,
                  test: str | Path | None = None, test_labels: str | Path | None = None,
                  only_present: bool = False) -> dict:
@@ -81,7 +81,7 @@ def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path, c
     bad = [s for s in spaces if s not in SPACES]
     if not spaces or bad:
         raise UserError(f"spaces must be values of {', '.join(SPACES)}, got {list(spaces)}")
-    validate_run_config(cfg)
+    cfg = validate_run_config(tree).real
     exp_cfg, sim_cfg = cfg.experiment, cfg.sim
     full = 2 * (exp_cfg.n_full // 2)
     sim_dir = Path(sim_folder) if sim_folder else Path(out) / "sim"
@@ -112,6 +112,15 @@ def check_inputs(scenes: str | Path, labels_path: str | Path, out: str | Path, c
     return out_rows
 
 
+def perception_key(perception) -> str:
+    """The experiments' resume key part of the shared perception (voxel grid, RHF): empty for
+    the default, so the folders made before the tree's perception reached the study keep theirs."""
+    from .sim_relations import features_record
+
+    rec = features_record(perception)
+    return "" if rec == features_record(None) else json.dumps(rec, sort_keys=True)
+
+
 def _pose_stats(poses: dict) -> dict:
     return dict(scenes=len(poses["pose_scene"]), height=float(np.mean(poses["height"])),
                 tilt_deg=float(np.mean(poses["tilt_deg"])), height_std=float(np.std(poses["height"])),
@@ -126,22 +135,25 @@ def _experiments(path: Path, key: str, run) -> dict:
     return res
 
 
-def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path, cfg: RealRunConfig = RealRunConfig(),
+def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path,
               spaces: tuple[str, ...] = ("pca", "rhf"), sim_folder: str | Path | None = None,
               test: str | Path | None = None, test_labels: str | Path | None = None,
-              only_present: bool = False, progress: bool = True) -> dict:
-    """Run (or resume) the study; see the module docstring."""
+              only_present: bool = False, progress: bool = True, say=print) -> dict:
+    """Run (or resume) the study with the ``RunConfig`` ``tree`` (its ``real`` node and its
+    ``perception``, shared by the real and simulated features); see the module docstring."""
     from . import experiments as ex
     from . import real_data, report
     from . import sim_relations as sr
 
     out = Path(out)
-    rows = check_inputs(scenes, labels_path, out, cfg, spaces, sim_folder, test, test_labels, only_present)
+    rows = check_inputs(tree, scenes, labels_path, out, spaces, sim_folder, test, test_labels, only_present)
+    cfg, pipeline = tree.real, pipeline_config(tree)
     exp_cfg, sim_cfg = cfg.experiment, cfg.sim
     poses = real_data.scene_poses(scenes, rows["train"], progress)
     sensor = real_data.sensor(poses)  # the simulated sensor: the training folder's mean pose
     sim_dir = Path(sim_folder) if sim_folder else out / "sim"
-    simulated = sr.guard(sim_dir, sensor, sim_cfg, cfg.tolerance)  # refused here, before the features
+    # refused here, before the features
+    simulated = sr.guard(sim_dir, sensor, sim_cfg, cfg.tolerance, perception=tree.perception)
     test_poses = real_data.scene_poses(test, rows["test"], progress) if test is not None else None
     out.mkdir(parents=True, exist_ok=True)
     rio.atomic_write_json(out / "sensor.json", dict(
@@ -150,13 +162,14 @@ def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path, cfg:
         simulated=dataclasses.asdict(simulated),
         simulated_difference=sensor_difference(simulated, sensor), tolerance=dataclasses.asdict(cfg.tolerance),
         test=_pose_stats(test_poses) if test_poses is not None else None))
-    real = real_data.cached_real_features(out / "real_features.npz", scenes, rows["train"], cfg.pipeline, progress)
+    real = real_data.cached_real_features(out / "real_features.npz", scenes, rows["train"], pipeline, progress)
     real_t = None if test is None else real_data.cached_real_features(
-        out / "real_features_test.npz", test, rows["test"], cfg.pipeline, progress)
-    sim_summary = sr.build_sim_relations(sim_dir, sensor, sim_cfg, progress, cfg.tolerance)
+        out / "real_features_test.npz", test, rows["test"], pipeline, progress)
+    sim_summary = sr.build_sim_relations(sim_dir, sensor, sim_cfg, progress, cfg.tolerance, tree.perception)
     sim = sr.load_sim_relations(sim_dir)
     key = json.dumps(dataclasses.asdict(exp_cfg), sort_keys=True) + lab.rows_sha256(rows["train"]) + \
-        json.dumps(sim_summary["counts"], sort_keys=True) + "+sim_only" + sr.normals_note(sim_cfg, cfg.pipeline)
+        json.dumps(sim_summary["counts"], sort_keys=True) + "+sim_only" + sr.normals_note(sim_cfg, pipeline) + \
+        perception_key(tree.perception)
     raw, summary, craw, cross = {}, {}, {}, {}
     for space in spaces:
         def within(space=space):
@@ -172,6 +185,10 @@ def run_study(scenes: str | Path, labels_path: str | Path, out: str | Path, cfg:
             cross[space] = ex.summarise(craw[space], exp_cfg)
     context = _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test)
     report.write_report(out, raw, summary, context, craw or None, cross or None)
+    for where, per_space in (("within", summary), ("cross", cross)):
+        for space, s in per_space.items():
+            acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
+            say(f"{space} {where} ({s['split']['kind']}): {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
     return dict(within=summary, cross=cross or None)
 
 

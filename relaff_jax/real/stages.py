@@ -1,0 +1,120 @@
+"""The ``relaff real`` stages, one entry point each over the whole ``RunConfig`` tree (its
+``real`` node and the ``perception`` it shares with simulation); ``relaff real SUBCOMMAND``
+parses its arguments into the tree and calls one of these.
+
+- ``run_segment(tree, scenes, out=None, *, seed, known_count)``: the paper's segmentation scored
+  against the hand one (``score.score_scenes``); prints one line per scene and the means,
+  writes them to ``out`` (JSON) when given; returns the result dict.
+- ``run_show(tree, scene, out, *, seed, pair, source)``: one scene's picture (``show``).
+- ``run_propose(tree, scenes, out, *, pictures, corrections)``: the labels file proposed by the
+  rule, corrections (a CSV) applied (``labelling.propose_folder``).
+- ``run_check(scenes, labels, *, only_present)``: a labels file validated against its scenes
+  (no settings).
+- ``run_study`` (``study.py``): the sim-to-real study.
+
+``say`` (default ``print``) receives the lines a command shows.
+"""
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from relaff_jax.errors import UserError
+
+from .config import pipeline_config
+from .study import run_study
+
+
+def run_segment(tree, scenes: str | Path, out: str | Path | None = None, *, seed: int = 0,
+                known_count: bool = False, progress: bool = True, say=print) -> dict:
+    """Score the paper's segmentation of every scene of ``scenes`` against the hand one."""
+    from relaff_jax.io import atomic_write_json
+
+    from .scene_source import scene_files
+    from .score import score_scenes
+
+    res = score_scenes(scene_files(scenes), seed=seed, cfg=pipeline_config(tree), known_count=known_count,
+                       progress=progress)
+    for s in res["scenes"]:
+        say(f"{s['scene']}: mean object IoU {s['mean']:.3f}, table {s['table']:.3f}")
+    k = tree.real.pipeline.kmeans
+    variant = ("k = objects" + (" + 1" if k.background else "") if known_count else f"k = {k.k}") + \
+        (", smallest cluster = background" if k.background else ", no background cluster")
+    say(f"{variant}: mean IoU over scenes {res['mean_iou']:.3f}, over objects {res['mean_iou_objects']:.3f}, "
+        f"table {res['mean_table_iou']:.3f}")
+    res = dict(res, variant=variant)
+    if out:
+        atomic_write_json(out, res)
+    return res
+
+
+def run_show(tree, scene: str | Path, out: str | Path, *, seed: int = 0, pair=None, source: str = "hand",
+             say=print) -> Path:
+    """Draw one real scene (colour, segmentations, voxel clouds, PCA frames) into ``out``."""
+    import jax
+
+    from .readers import read_cloud
+    from .show import render_real_scene_png
+
+    render_real_scene_png(read_cloud(scene), jax.random.PRNGKey(seed), out, pipeline_config(tree), pair=pair,
+                          source=source)
+    say(str(out))
+    return Path(out)
+
+
+def run_propose(tree, scenes: str | Path, out: str | Path, *, pictures: str | Path | None = None,
+                corrections: str | Path | None = None, say=print) -> list:
+    """Propose a relation for every pair of ``scenes`` by ``tree.real.rule``, apply the
+    ``corrections`` CSV, write the labels file ``out`` (and the pictures); returns the labels."""
+    from . import labels as lab
+    from .labelling import propose_folder
+
+    fixes = read_corrections(corrections)
+    labels, record = propose_folder(scenes, pictures, fixes, tree.real.rule)
+    lab.write_labels(out, labels)
+    counts = lab.relation_counts(labels)
+    left = sum(r[2] == "none" for r in record)
+    say(f"{out}: {counts['beside']} beside, {counts['on_top']} on_top; {left} of {len(record)} pairs left out; "
+        f"{len(fixes)} corrections applied")
+    return labels
+
+
+def run_check(scenes: str | Path, labels_path: str | Path, *, only_present: bool = False, say=print) -> list:
+    """Validate a labels file against its scenes and count the pairs (no settings)."""
+    from . import labels as lab
+    from .scene_source import object_ids
+
+    labels = lab.read_labels(labels_path)
+    skipped = []
+    if only_present:
+        labels, skipped = lab.present(labels, scenes)
+    labels = lab.validate(labels, scenes, object_ids)
+    counts = lab.relation_counts(labels)
+    note = f"; {len(skipped)} labelled scenes not in {scenes} skipped" if only_present else ""
+    say(f"{labels_path}: valid; {counts['beside']} beside, {counts['on_top']} on_top in "
+        f"{len({x.scene for x in labels})} scenes{note}")
+    return labels
+
+
+def read_corrections(path: str | Path | None) -> dict:
+    """The corrections CSV (scene,object_a,object_b,relation) as {(scene, a, b): relation}; {} for None."""
+    if path is None:
+        return {}
+    if not Path(path).is_file():
+        raise UserError(f"corrections file {path} does not exist")
+    out = {}
+    with open(path, newline="") as f:
+        rows = list(csv.reader(f))
+    if not rows or [c.strip() for c in rows[0]][:4] != ["scene", "object_a", "object_b", "relation"]:
+        raise UserError(f"{path}: header must start scene,object_a,object_b,relation")
+    for i, r in enumerate(rows[1:], start=2):
+        if not r or r[0].startswith("#"):
+            continue
+        try:
+            out[(r[0].strip(), int(r[1]), int(r[2]))] = r[3].strip()
+        except (IndexError, ValueError):
+            raise UserError(f"{path} line {i}: expected scene,object_a,object_b,relation") from None
+    return out
+
+
+__all__ = ["run_segment", "run_show", "run_propose", "run_check", "run_study", "read_corrections"]
