@@ -43,6 +43,18 @@ class ReproduceConfig:
     spaces: tuple[str, ...] = SPACES
     examples_per_action: int = 2
 
+    def __post_init__(self):  # refused when the config is made
+        acts, spaces = tuple(self.actions), tuple(self.spaces)
+        if len(acts) < 2 or len(set(acts)) != len(acts) or not set(acts) <= set(ACTIONS):
+            raise ConfigError(f"reproduce.actions must be at least two distinct values of {ACTIONS}, got {acts}")
+        if acts != tuple(a for a in ACTIONS if a in acts):
+            raise ConfigError(f"reproduce.actions must be in the canonical order {ACTIONS}, got {acts}")
+        if not spaces or len(set(spaces)) != len(spaces) or not set(spaces) <= set(SPACES):
+            raise ConfigError(f"reproduce.spaces must be distinct values of {SPACES}, got {spaces}")
+        n = self.examples_per_action
+        if isinstance(n, bool) or not isinstance(n, int) or n < 0:
+            raise ConfigError(f"reproduce.examples_per_action must be an integer >= 0, got {n!r}")
+
 
 def _action():
     from relaff_jax.sim import ActionConfig
@@ -154,12 +166,27 @@ def precheck(overrides: Mapping[str, Any]) -> None:
         if head not in names:
             raise ConfigError(f"unknown config key {key!r}: RunConfig has no {head!r}; valid keys: {sorted(names)}")
         if head in light and rest:
-            override_under(light[head](), {rest: value}, f"{head}.")
+            try:
+                override_under(light[head](), {rest: value}, f"{head}.")
+            except ConfigError:
+                raise
+            except UserError:  # a value the node refuses beside the defaults may suit the preset: resolve decides
+                pass
 
 
 def resolve(base: RunConfig | None = None, overrides: Mapping[str, Any] | None = None) -> RunConfig:
     """``base`` (default: the paper's settings) with checked ``--set`` overrides."""
     return override(base or RunConfig(), dict(overrides or {}))
+
+
+def check_tree(tree: RunConfig) -> RunConfig:
+    """The whole tree's check, before any stage starts. Each node checked its own values when
+    it was made (``__post_init__``: the forest's against scikit-learn's constraints too); this
+    adds the real node with the perception it shares and its real object capacity. Imports
+    neither JAX nor scikit-learn. Returns ``tree``; raises ``UserError`` naming the setting."""
+    from relaff_jax.real.config import validate_run_config
+
+    return validate_run_config(tree)
 
 
 def from_json(d: Mapping[str, Any]) -> RunConfig:
@@ -183,4 +210,4 @@ def keys(cfg: Any = None, prefix: str = "") -> list[str]:
     return out
 
 
-__all__ = ["RunConfig", "ReproduceConfig", "PRESETS", "preset", "resolve", "from_json", "keys", "to_dict"]
+__all__ = ["RunConfig", "ReproduceConfig", "PRESETS", "preset", "resolve", "check_tree", "from_json", "keys", "to_dict"]

@@ -1,4 +1,5 @@
 """The config tree and its one override path (hand-worked cases)."""
+import copy
 import dataclasses
 
 import pytest
@@ -71,19 +72,51 @@ def test_presets():
         runconfig.preset("fast")
 
 
-def test_a_criterion_the_engine_cannot_build_is_refused_by_the_config_check(capsys, tmp_path):
-    """entropy used to pass the check and fail inside a sweep worker; now the check refuses it
-    before any work, naming the engine, and the sklearn engine accepts it."""
+def test_a_criterion_the_engine_cannot_build_is_refused_when_the_config_is_built(capsys, tmp_path):
+    """entropy used to pass the check and fail inside a sweep worker; now the config node
+    refuses it when it is made, naming the engine, and the sklearn engine accepts it (with
+    scikit-learn's own validation in the whole tree's check)."""
     from relaff_jax import cli
     from relaff_jax.errors import UserError
-    from relaff_jax.learn import ExperimentConfig, check_config
+    from relaff_jax.learn import ExperimentConfig, ForestConfig, check_config
 
-    bad = override(ExperimentConfig(), {"forest.criterion": "entropy"})
     with pytest.raises(UserError, match="fast engine builds gini trees only"):
-        check_config(bad)
-    check_config(override(bad, {"forest.engine": "sklearn"}))
+        override(ExperimentConfig(), {"forest.criterion": "entropy"})
+    with pytest.raises(UserError, match="compiled engine builds gini trees only"):
+        ForestConfig(criterion="entropy", engine="compiled")
+    check_config(override(ExperimentConfig(), {"forest.criterion": "entropy", "forest.engine": "sklearn"}))
     out = tmp_path / "e"
     assert cli.main(["experiment", "--synthetic", "40", "--out", str(out), "--set",
                      "experiment.forest.criterion=entropy"]) == 2
     assert "gini trees only" in capsys.readouterr().err
     assert not out.exists()
+
+
+FOREST_GRID = {"max_depth": [None, 0, 1, 5, -1], "min_samples_leaf": [0, 1, 3, 0.0, 0.5, 1.0, 2.0],
+               "max_features": ["sqrt", "log2", "0", "1", "3", "0.5", "1.0", "1.5", "abc", None],
+               "max_samples": [None, 0, 1, 10, 0.0, 0.5, 1.0, 1.5], "criterion": ["gini", "entropy", "log_loss", "x"],
+               "base_trees": [0, 1, 95], "max_trees": [1, 95, 200]}
+
+
+@pytest.mark.parametrize("key", sorted(FOREST_GRID))
+def test_the_forest_node_refuses_what_scikit_learn_refuses(key):
+    """ForestConfig checks itself when it is made, without importing scikit-learn; on this grid
+    it accepts exactly the values RandomForestClassifier's own parameter validation accepts
+    (the tree counts reach scikit-learn as n_estimators = min(max_trees, base_trees + ...))."""
+    from relaff_jax.learn.forests import ForestConfig, make_forest
+
+    for value in FOREST_GRID[key]:
+        base = ForestConfig(engine="sklearn")  # the only engine that builds every criterion
+        try:
+            dataclasses.replace(base, **{key: value})
+            node = True
+        except UserError:
+            node = False
+        forced = copy.copy(base)
+        object.__setattr__(forced, key, value)  # past the node's check, to ask scikit-learn
+        try:
+            make_forest(2, 0, forced)._validate_params()
+            reference = True
+        except (ValueError, TypeError):
+            reference = False
+        assert node == reference, f"{key}={value!r}: node accepts {node}, scikit-learn {reference}"

@@ -442,14 +442,15 @@ def test_bad_input(tmp_path):
     # the experiment's pools must fit: fail before simulating anything
     with pytest.raises(R.ReproduceError, match="cannot run on 20 samples"):
         run(tmp_path / "a", overrides=dict(FAST, **{"dataset.n_samples": 20}))
-    with pytest.raises(R.ReproduceError, match="canonical order"):
+    # a bad value is refused by its config node when the tree is built, before any work
+    with pytest.raises(UserError, match="reproduce.actions must be in the canonical order"):
         run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("take", "lift")}))
-    with pytest.raises(R.ReproduceError, match="at least two"):
+    with pytest.raises(UserError, match="at least two"):
         run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("lift",)}))
-    with pytest.raises(R.ReproduceError, match="rollout_batch"):
+    with pytest.raises(UserError, match="dataset.rollout_batch must be >= 1"):
         run(tmp_path / "a", overrides=dict(FAST, **{"dataset.rollout_batch": 0}))
     # a perception value is refused before generation, not when the features stage reaches it
-    with pytest.raises(R.ReproduceError, match="perception: .*voxel"):
+    with pytest.raises(UserError, match="perception.voxel.size must be positive"):
         run(tmp_path / "a", overrides=dict(FAST, **{"perception.voxel.size": -1.0}))
     assert not (tmp_path / "a").exists()
     foreign = tmp_path / "foreign"

@@ -34,7 +34,7 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
     ``flags``: the command's options that are aliases of tree keys, ``{key: (flag, value)}``
     (``{"dataset.n_samples": ("--samples", 100)}``; a value of None: not given). A flag and a
     ``--set`` of its key that disagree are an error, so what runs is what is recorded."""
-    from relaff_jax.runconfig import precheck, resolve
+    from relaff_jax.runconfig import check_tree, precheck, resolve
 
     sets = parse_set(args.set or [])
     aliased = {}
@@ -46,7 +46,7 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
         aliased[key] = value
     overrides = {**parse_set(extra), **aliased, **sets}
     precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
-    return resolve(base, overrides)
+    return check_tree(resolve(base, overrides))  # the whole tree, before any stage starts
 
 
 def check_out_dir(path: Path, what: str = "--out") -> None:

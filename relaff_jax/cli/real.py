@@ -124,12 +124,11 @@ def register(subparsers) -> None:
 def real_config(args, extra: dict | None = None):
     """The resolved ``RunConfig`` tree: the command's flags (``extra``, dotted keys of its
     ``real`` node), then ``--set`` (which wins); its real settings (and the perception they
-    share) checked before any work, without importing JAX."""
+    share) checked with the whole tree before any work, without importing JAX (``options.config``)."""
     from relaff_jax.cli.options import config
-    from relaff_jax.real.config import validate_run_config
 
     extra = [f"real.{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in (extra or {}).items()]
-    return validate_run_config(config(args, extra=extra))
+    return config(args, extra=extra)
 
 
 def _check_inputs(args) -> None:

@@ -109,17 +109,12 @@ def cmd_generate(args) -> int:
     tree = options.config(args, flags={
         "dataset.n_samples": ("--samples", args.samples), "dataset.rollout_batch": ("--batch", args.batch),
         "dataset.max_rollouts": ("--max-rollouts", args.max_rollouts), "dataset.engine": ("--engine", args.engine)})
-    n, batch = tree.dataset.n_samples, tree.dataset.rollout_batch
-    if n < 2:
-        raise UserError(f"--samples (dataset.n_samples) must be >= 2, got {n}")
-    if batch < 1:
-        raise UserError(f"--batch (dataset.rollout_batch) must be >= 1, got {batch}")
+    n, batch = tree.dataset.n_samples, tree.dataset.rollout_batch  # checked by DatasetConfig itself
 
     from relaff_jax import data as ds
     from relaff_jax.reproduce.generate import generate_one
 
     engine = tree.dataset.engine
-    ds.config.check_dataset_config(tree.dataset)
     from relaff_jax.reproduce.progress import sample_bound
 
     bound = sample_bound(n, tree.dataset.max_rollouts, batch, engine,

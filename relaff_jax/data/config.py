@@ -74,6 +74,9 @@ class DatasetConfig:
     negatives: str = "cog"
     match_patience: float = 4.0
 
+    def __post_init__(self):  # refused when the config is made
+        check_dataset_config(self)
+
 
 def check_action(action: Any) -> str:
     if action not in ACTIONS:
@@ -92,19 +95,21 @@ def check_int(name: str, value: Any, lo: int, hi: int | None = None) -> int:
 
 
 def check_dataset_config(cfg: DatasetConfig) -> None:
-    check_int("max_rollouts", cfg.max_rollouts, 1)
-    check_int("distance_bins", cfg.distance_bins, 1)
-    if not 0.0 <= float(cfg.borrow_fraction) <= 1.0:
-        raise DatasetError(f"borrow_fraction must be in [0, 1], got {cfg.borrow_fraction}")
-    check_int("n_samples", cfg.n_samples, 2)
-    check_int("rollout_batch", cfg.rollout_batch, 1)
-    check_int("feature_batch", cfg.feature_batch, 1)
+    """Each setting on its own (run when a ``DatasetConfig`` is made); ``DatasetError`` naming it."""
+    check_int("dataset.max_rollouts", cfg.max_rollouts, 1)
+    check_int("dataset.distance_bins", cfg.distance_bins, 1)
+    if isinstance(cfg.borrow_fraction, bool) or not isinstance(cfg.borrow_fraction, (int, float)) \
+            or not 0.0 <= cfg.borrow_fraction <= 1.0:
+        raise DatasetError(f"dataset.borrow_fraction must be in [0, 1], got {cfg.borrow_fraction!r}")
+    check_int("dataset.n_samples", cfg.n_samples, 2)
+    check_int("dataset.rollout_batch", cfg.rollout_batch, 1)
+    check_int("dataset.feature_batch", cfg.feature_batch, 1)
     check_engine(cfg.engine)
     check_choice("population", cfg.population, POPULATIONS)
     check_choice("negatives", cfg.negatives, NEGATIVES)
     if isinstance(cfg.match_patience, bool) or not isinstance(cfg.match_patience, (int, float)) \
             or not cfg.match_patience >= 1.0:
-        raise DatasetError(f"match_patience must be a number >= 1, got {cfg.match_patience!r}")
+        raise DatasetError(f"dataset.match_patience must be a number >= 1, got {cfg.match_patience!r}")
 
 
 def check_choice(name: str, value: Any, valid: tuple[str, ...]) -> str:

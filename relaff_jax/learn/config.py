@@ -15,7 +15,7 @@ import numpy as np
 from relaff_jax.constants import FAMILIES, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn.forests import ForestConfig, check_forest_config
-from relaff_jax.learn.states import StateConfig, check_state_config
+from relaff_jax.learn.states import StateConfig
 
 # Integer code of each state space in seed keys (part of every forest's seed: never change).
 SPACE_CODE = {"pca": 0, "rhf": 1}
@@ -94,6 +94,9 @@ class ExperimentConfig:
     # for finding what a learner relies on; the default is the paper's PCA and RHF states
     state: StateConfig = StateConfig()
 
+    def __post_init__(self):  # refused when the config is made (forest and state check themselves)
+        check_experiment_node(self)
+
     def reps(self, space: str) -> int:
         return self.reps_pca if space == "pca" else self.reps_rhf
 
@@ -126,24 +129,29 @@ def experiment_preset(name: str) -> ExperimentConfig:
     raise UserError(f"unknown preset {name!r}; expected 'quick', 'study' or 'paper'")
 
 
-def check_config(cfg: ExperimentConfig) -> None:
-    """Raise ``UserError`` if ``cfg`` cannot give a complete study."""
+def check_experiment_node(cfg: ExperimentConfig) -> None:
+    """Raise ``UserError`` if ``cfg`` cannot give a complete study (run when one is made)."""
     sizes = np.asarray(cfg.sizes)
     if sizes.ndim != 1 or len(sizes) == 0 or np.any(sizes < 2) or np.any(np.diff(sizes) <= 0):
-        raise UserError(f"sizes must be strictly increasing integers >= 2, got {cfg.sizes}")
+        raise UserError(f"experiment.sizes must be strictly increasing integers >= 2, got {cfg.sizes}")
     if cfg.select_size not in cfg.sizes:
-        raise UserError(f"select_size {cfg.select_size} ('best after ten') must be one of sizes {cfg.sizes}")
+        raise UserError(f"experiment.select_size {cfg.select_size} ('best after ten') must be one of sizes {cfg.sizes}")
     if not any(cfg.bf_sizes[0] <= s <= cfg.bf_sizes[1] for s in cfg.sizes):
-        raise UserError(f"no training size inside bf_sizes {cfg.bf_sizes}")
+        raise UserError(f"experiment.sizes: no training size inside experiment.bf_sizes {cfg.bf_sizes}")
     if cfg.cbn_threshold not in cfg.thresholds:
-        raise UserError(f"cbn_threshold {cfg.cbn_threshold} must be one of thresholds {cfg.thresholds}")
+        raise UserError(f"experiment.cbn_threshold {cfg.cbn_threshold} must be one of thresholds {cfg.thresholds}")
     for space in SPACES:
         bad = set(cfg.conditions(space)) - set(FAMILIES)
         if bad or "NB" not in cfg.conditions(space):
-            raise UserError(f"conditions_{space} must include NB and be among {FAMILIES}, got {cfg.conditions(space)}")
-    check_forest_config(cfg.forest)
-    check_state_config(cfg.state)
+            raise UserError(f"experiment.conditions_{space} must include NB and be among {FAMILIES}, got {cfg.conditions(space)}")
     if not 0.5 <= cfg.ci_level < 1 or cfg.ci_resamples < 10:
-        raise UserError(f"ci_level must be in [0.5, 1) and ci_resamples >= 10, got {cfg.ci_level}, {cfg.ci_resamples}")
+        raise UserError(f"experiment.ci_level must be in [0.5, 1) and ci_resamples >= 10, got {cfg.ci_level}, {cfg.ci_resamples}")
     if min(cfg.reps_pca, cfg.reps_rhf, cfg.test_size, cfg.source_size, cfg.corr_scenes, cfg.sizes_per_block) < 1:
-        raise UserError("reps, test_size, source_size, corr_scenes and sizes_per_block must be >= 1")
+        raise UserError("experiment: reps, test_size, source_size, corr_scenes and sizes_per_block must be >= 1")
+
+
+def check_config(cfg: ExperimentConfig) -> None:
+    """The node's own check, then scikit-learn's validation of the forest parameters (which
+    needs scikit-learn, so it is not run when the node is made)."""
+    check_experiment_node(cfg)
+    check_forest_config(cfg.forest)

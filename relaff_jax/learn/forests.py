@@ -20,6 +20,67 @@ if TYPE_CHECKING:
 from relaff_jax.errors import UserError
 
 
+# the forest builders (ForestConfig.engine)
+ENGINES = ("fast", "sklearn", "compiled")
+
+
+def max_features_value(mf: str | None) -> str | int | float | None:
+    """``ForestConfig.max_features`` as scikit-learn takes it: "sqrt" / "log2" / None as they
+    are, a numeric string as an int (features per split) or a float (a fraction of them), so
+    ``--set experiment.forest.max_features=0.5`` is the fraction 0.5."""
+    if mf is None or mf in ("sqrt", "log2"):
+        return mf
+    try:
+        return int(mf)
+    except (TypeError, ValueError):
+        pass
+    try:
+        return float(mf)
+    except (TypeError, ValueError):
+        return mf  # scikit-learn's validation names the problem (check_forest_config)
+
+
+def check_forest_node(cfg: ForestConfig) -> None:
+    """What a ``ForestConfig`` can check without scikit-learn (run when one is made): the
+    engine, and the gini-only rule of the fast and compiled engines, refused here rather than in
+    a worker mid-sweep."""
+    if cfg.engine not in ENGINES:
+        raise UserError(f"experiment.forest.engine {cfg.engine!r}: expected one of {', '.join(ENGINES)}")
+    if cfg.engine != "sklearn" and cfg.criterion != "gini":
+        raise UserError(f"experiment.forest.criterion {cfg.criterion!r}: the {cfg.engine} engine builds gini trees "
+                        "only (the paper's); set experiment.forest.engine=sklearn for another criterion")
+    if not cfg.bootstrap and cfg.max_samples is not None:
+        raise UserError("experiment.forest.max_samples needs experiment.forest.bootstrap=true")
+    # scikit-learn's parameter constraints, without importing it (check_forest_config runs its own)
+    for name in ("base_trees", "samples_per_extra_tree", "max_trees"):
+        if not _int_at_least(getattr(cfg, name), 1):
+            raise UserError(f"experiment.forest.{name} must be an integer >= 1, got {getattr(cfg, name)!r}")
+    if cfg.criterion not in ("gini", "entropy", "log_loss"):
+        raise UserError(f"experiment.forest.criterion must be gini, entropy or log_loss, got {cfg.criterion!r}")
+    if cfg.max_depth is not None and not _int_at_least(cfg.max_depth, 1):
+        raise UserError(f"experiment.forest.max_depth must be an integer >= 1 or null, got {cfg.max_depth!r}")
+    leaf = cfg.min_samples_leaf
+    if not (_int_at_least(leaf, 1) or (_real(leaf) and 0.0 < leaf < 1.0)):
+        raise UserError(f"experiment.forest.min_samples_leaf must be an integer >= 1 or a fraction in (0, 1), got {leaf!r}")
+    mf = max_features_value(cfg.max_features)
+    if not (mf in ("sqrt", "log2", None) or _int_at_least(mf, 1) or (_real(mf) and 0.0 < mf <= 1.0)):
+        raise UserError(f"experiment.forest.max_features must be sqrt, log2, null, an integer >= 1 or a fraction "
+                        f"in (0, 1], got {cfg.max_features!r}")
+    ms = cfg.max_samples
+    if not (ms is None or _int_at_least(ms, 1) or (_real(ms) and ms > 0.0)):
+        raise UserError(f"experiment.forest.max_samples must be null, an integer >= 1 or a float > 0, got {ms!r}")
+    if not isinstance(cfg.bootstrap, bool):
+        raise UserError(f"experiment.forest.bootstrap must be true or false, got {cfg.bootstrap!r}")
+
+
+def _int_at_least(v, lo: int) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo
+
+
+def _real(v) -> bool:  # a float, not an int (scikit-learn's RealNotInt)
+    return isinstance(v, (float, np.floating))
+
+
 @dataclasses.dataclass(frozen=True)
 class ForestConfig:
     """Random forest settings of paper section III-B (defaults are the paper's).
@@ -46,28 +107,15 @@ class ForestConfig:
     # (learn/compiled/, docs/learning.md)
     engine: str = "fast"
 
+    def __post_init__(self):  # refused when the config is made; scikit-learn's own check: check_forest_config
+        check_forest_node(self)
+
 
 def n_trees(n_samples: int, cfg: ForestConfig = ForestConfig()) -> int:
     """T = min(115, 95 + N // 20) trees for N training samples (paper III-B)."""
     if n_samples < 1:
         raise ValueError(f"a forest needs at least one training sample, got {n_samples}")
     return int(min(cfg.max_trees, cfg.base_trees + n_samples // cfg.samples_per_extra_tree))
-
-
-def max_features_value(mf: str | None) -> str | int | float | None:
-    """``ForestConfig.max_features`` as scikit-learn takes it: "sqrt" / "log2" / None as they
-    are, a numeric string as an int (features per split) or a float (a fraction of them), so
-    ``--set experiment.forest.max_features=0.5`` is the fraction 0.5."""
-    if mf is None or mf in ("sqrt", "log2"):
-        return mf
-    try:
-        return int(mf)
-    except (TypeError, ValueError):
-        pass
-    try:
-        return float(mf)
-    except (TypeError, ValueError):
-        return mf  # scikit-learn's validation names the problem (check_forest_config)
 
 
 def make_forest(n_samples: int, seed: int, cfg: ForestConfig = ForestConfig()) -> RandomForestClassifier:
@@ -132,16 +180,12 @@ def predict_class(forest: RandomForestClassifier, X: np.ndarray) -> np.ndarray:
     return predict_checked(forest, checked_states(X, "predict_class"))
 
 
-ENGINES = ("fast", "sklearn", "compiled")
 
 
 def check_forest_config(cfg: ForestConfig = ForestConfig()) -> None:
-    """Let scikit-learn validate the forest parameters once (fits then skip re-validation)."""
-    if cfg.engine not in ENGINES:
-        raise UserError(f"forest.engine {cfg.engine!r}: expected one of {', '.join(ENGINES)}")
-    if cfg.engine != "sklearn" and cfg.criterion != "gini":  # refused here, not in a worker mid-sweep
-        raise UserError(f"forest.criterion {cfg.criterion!r}: the {cfg.engine} engine builds gini trees only (the "
-                        "paper's); set experiment.forest.engine=sklearn for another criterion")
+    """``check_forest_node``, then scikit-learn's own validation of the forest parameters as the
+    reference, once per sweep (fits then skip re-validation)."""
+    check_forest_node(cfg)
     try:
         make_forest(2, 0, cfg)._validate_params()
     except ValueError as e:

@@ -40,6 +40,9 @@ class StateConfig:
     rhf_pca: bool = True
     rhf_parts: tuple[str, ...] = RHF_PARTS
 
+    def __post_init__(self):  # refused when the config is made
+        check_state_config(self)
+
 
 def check_state_config(cfg: StateConfig) -> None:
     bad = [e for e in cfg.extra if e not in EXTRAS]

@@ -123,47 +123,50 @@ class PerceptionConfig:
     cull: CullConfig = CullConfig()
     min_points: int = 10
 
+    def __post_init__(self):  # refused when the config is made: the parts' checks cross (tile vs image)
+        validate_config(self)
+
 
 def validate_config(cfg: PerceptionConfig) -> PerceptionConfig:
     """Raise ``UserError`` (a ValueError) naming the bad setting; return ``cfg`` unchanged otherwise."""
     cam = cfg.camera
     if cam.width <= 0 or cam.height <= 0:
-        raise UserError(f"camera size must be positive, got {cam.width}x{cam.height}")
+        raise UserError(f"perception.camera size must be positive, got {cam.width}x{cam.height}")
     if not 0.0 < cam.vfov_deg < 180.0:
-        raise UserError(f"camera.vfov_deg must be in (0, 180), got {cam.vfov_deg}")
+        raise UserError(f"perception.camera.vfov_deg must be in (0, 180), got {cam.vfov_deg}")
     if not 0.0 <= cam.near < cam.far:
-        raise UserError(f"need 0 <= camera.near < camera.far, got {cam.near}, {cam.far}")
+        raise UserError(f"perception: need 0 <= camera.near < camera.far, got {cam.near}, {cam.far}")
     if np.linalg.norm(np.subtract(cam.target, cam.position)) == 0.0:
-        raise UserError("camera.target equals camera.position")
+        raise UserError("perception.camera.target equals camera.position")
     if cfg.noise.model not in NOISE_MODEL_NAMES:
-        raise UserError(f"unknown noise.model {cfg.noise.model!r}; valid: {sorted(NOISE_MODEL_NAMES)}")
+        raise UserError(f"unknown perception.noise.model {cfg.noise.model!r}; valid: {sorted(NOISE_MODEL_NAMES)}")
     nc = cfg.normals
     if nc.source not in NORMAL_SOURCES:
-        raise UserError(f"unknown normals.source {nc.source!r}; valid: {list(NORMAL_SOURCES)}")
+        raise UserError(f"unknown perception.normals.source {nc.source!r}; valid: {list(NORMAL_SOURCES)}")
     if nc.window < 3 or nc.window % 2 == 0:
-        raise UserError(f"normals.window must be odd and >= 3, got {nc.window}")
+        raise UserError(f"perception.normals.window must be odd and >= 3, got {nc.window}")
     if nc.radius <= 0:
-        raise UserError(f"normals.radius must be positive, got {nc.radius}")
+        raise UserError(f"perception.normals.radius must be positive, got {nc.radius}")
     if cfg.voxel.size <= 0:
-        raise UserError(f"voxel.size must be positive, got {cfg.voxel.size}")
+        raise UserError(f"perception.voxel.size must be positive, got {cfg.voxel.size}")
     if cfg.voxel.max_object_pixels <= 0 or cfg.voxel.max_voxels <= 0:
-        raise UserError("voxel capacities must be positive")
+        raise UserError("perception.voxel capacities must be positive")
     r = cfg.rhf
     if r.bins <= 0 or r.chunk <= 0:
-        raise UserError(f"rhf.bins and rhf.chunk must be positive, got {r.bins}, {r.chunk}")
+        raise UserError(f"perception.rhf.bins and rhf.chunk must be positive, got {r.bins}, {r.chunk}")
     if cfg.voxel.max_voxels % r.chunk:
         raise UserError(
-            f"voxel.max_voxels ({cfg.voxel.max_voxels}) must be a multiple of rhf.chunk ({r.chunk})"
+            f"perception.voxel.max_voxels ({cfg.voxel.max_voxels}) must be a multiple of rhf.chunk ({r.chunk})"
         )
     if len(r.ranges) != len(RHF_NAMES) or any(hi <= lo for lo, hi in r.ranges):
-        raise UserError(f"rhf.ranges needs {len(RHF_NAMES)} (lo, hi) pairs with hi > lo, got {r.ranges}")
+        raise UserError(f"perception.rhf.ranges needs {len(RHF_NAMES)} (lo, hi) pairs with hi > lo, got {r.ranges}")
     t = cfg.cull.tile
     if t <= 0 or cam.width % t or cam.height % t:
-        raise UserError(f"cull.tile ({t}) must divide the image size {cam.width}x{cam.height}")
+        raise UserError(f"perception.cull.tile ({t}) must divide the image size {cam.width}x{cam.height}")
     if cfg.cull.max_tiles <= 0:
-        raise UserError(f"cull.max_tiles must be positive, got {cfg.cull.max_tiles}")
+        raise UserError(f"perception.cull.max_tiles must be positive, got {cfg.cull.max_tiles}")
     if cfg.min_points < 3:
-        raise UserError(f"min_points must be >= 3 for a PCA frame, got {cfg.min_points}")
+        raise UserError(f"perception.min_points must be >= 3 for a PCA frame, got {cfg.min_points}")
     return cfg
 
 

@@ -21,65 +21,37 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.cluster import nthreads
 from relaff_jax.config import override
-from relaff_jax.constants import ACTIONS, SIM_ENGINES, SPACES, STAGES
-from relaff_jax.data.config import check_dataset_config
-from relaff_jax.data.errors import DatasetError
+from relaff_jax.constants import ACTIONS, STAGES
 from relaff_jax.reproduce import experiment, features, generate, report
 from relaff_jax.reproduce.folder import Paths, ReproduceError, damaged_log_hint, now, open_log
 from relaff_jax.reproduce.progress import Progress, estimate_seconds, sample_bound
 from relaff_jax.errors import UserError
 from relaff_jax.reproduce.stage import Run, Status
-from relaff_jax.runconfig import PRESETS, RunConfig, from_json, preset
+from relaff_jax.runconfig import PRESETS, RunConfig, check_tree, from_json, preset
 
 STAGE_MODULES = {m.NAME: m for m in (generate, features, experiment, report)}
 assert tuple(STAGE_MODULES) == STAGES
 
 
 def check_config(cfg: RunConfig, seed: int) -> None:
-    """Fail before any simulation if the config cannot give a complete study."""
-    from relaff_jax.learn import check_config as check_experiment
+    """Fail before any simulation if the config cannot give a complete study: the whole tree's
+    check (``runconfig.check_tree``; each node checked its own values when it was made), then
+    what a study needs of several nodes at once."""
     from relaff_jax.learn import split_pools
 
-    def pos_int(name, v, lo=1):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-            raise ReproduceError(f"{name} must be an integer >= {lo}, got {v!r}")
-
+    try:
+        check_tree(cfg)
+    except ReproduceError:
+        raise
+    except UserError as e:
+        raise ReproduceError(str(e)) from e
     d = cfg.dataset
-    pos_int("dataset.n_samples", d.n_samples, 4)
-    pos_int("dataset.rollout_batch", d.rollout_batch)
-    pos_int("dataset.max_rollouts", d.max_rollouts)
-    pos_int("dataset.distance_bins", d.distance_bins)
-    pos_int("dataset.feature_batch", d.feature_batch)
-    pos_int("reproduce.examples_per_action", cfg.reproduce.examples_per_action, 0)
-    if not 0.0 <= float(d.borrow_fraction) <= 1.0:
-        raise ReproduceError(f"dataset.borrow_fraction must be in [0, 1], got {d.borrow_fraction}")
-    if d.engine not in SIM_ENGINES:
-        raise ReproduceError(f"dataset.engine must be one of {', '.join(SIM_ENGINES)}, got {d.engine!r}")
     bound = sample_bound(d.n_samples, d.max_rollouts, d.rollout_batch, d.engine)
     if bound:
         raise ReproduceError(bound)
-    try:  # the dataset stage's own check (population, negatives, match_patience, ...)
-        check_dataset_config(d)
-    except DatasetError as e:
-        raise ReproduceError(f"dataset: {e}") from e
-    from relaff_jax.perception import validate_config as check_perception
-
-    try:  # the features stage's own check, before the datasets are simulated (minutes to hours)
-        check_perception(cfg.perception)
-    except UserError as e:
-        raise ReproduceError(f"perception: {e}") from e
-    acts = tuple(cfg.reproduce.actions)
-    if len(acts) < 2 or len(set(acts)) != len(acts) or not set(acts) <= set(ACTIONS):
-        raise ReproduceError(f"reproduce.actions must be at least two distinct values of {ACTIONS}, got {acts}")
-    if acts != tuple(a for a in ACTIONS if a in acts):
-        raise ReproduceError(f"reproduce.actions must be in the canonical order {ACTIONS}, got {acts}")
-    spaces = tuple(cfg.reproduce.spaces)
-    if not spaces or len(set(spaces)) != len(spaces) or not set(spaces) <= set(SPACES):
-        raise ReproduceError(f"reproduce.spaces must be distinct values of {SPACES}, got {spaces}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
         raise ReproduceError(f"seed must be an integer in [0, 2**32), got {seed!r}")
     try:
-        check_experiment(cfg.experiment)
         for i in range(len(ACTIONS)):  # the learning pools of every action must fit in n_samples
             split_pools(d.n_samples, i, cfg.experiment, seed)
     except ValueError as e:
