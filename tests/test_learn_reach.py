@@ -61,8 +61,8 @@ def test_rhf_parts_and_bins_only():
 
 def test_max_features_strings():
     assert [max_features_value(v) for v in ("sqrt", "log2", None, "6", "0.5")] == ["sqrt", "log2", None, 6, 0.5]
-    with pytest.raises(UserError, match="bad forest config"):
-        L.check_config(override(L.ExperimentConfig(), {"forest.max_features": "most"}))
+    with pytest.raises(UserError, match="experiment.forest.max_features must be sqrt, log2"):
+        override(L.ExperimentConfig(), {"forest.max_features": "most"})  # refused when the node is made
 
 
 def test_correlation_with_matches_numpy():

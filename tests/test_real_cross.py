@@ -220,6 +220,11 @@ def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
     assert "split" in err
     assert cli.main(argv + ["--set", "real.experiment.split=scenes"]) == 2
     assert "unknown real.experiment.split 'scenes'" in capsys.readouterr().err
+    # a flag is an alias of its tree key: a --set of the same key that disagrees is refused
+    assert cli.main(argv + ["--reps", "5", "--set", "real.experiment.reps=7"]) == 2
+    assert "--reps 5 and --set real.experiment.reps=7 disagree" in capsys.readouterr().err
+    assert cli.main(argv + ["--seed", "1", "--set", "real.sim.seed=2"]) == 2
+    assert "--seed 1 and --set real.sim.seed=2 disagree" in capsys.readouterr().err
     assert cli.main(argv + ["--test", str(b)]) == 2
     assert "--test needs --test-labels" in capsys.readouterr().err
     # A's scenes cannot be cut by scene with both relations on both sides (the within-folder figures)

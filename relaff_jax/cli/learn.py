@@ -12,6 +12,7 @@ line, exit code 2).
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from relaff_jax.cli import options
 from relaff_jax.constants import SPACES
@@ -32,6 +33,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     spaces = {None: None, "both": tuple(SPACES)}.get(args.space, (args.space,))
     tree = options.config(args, base=RunConfig(experiment=learn.experiment_preset(args.preset)),
                           flags={"reproduce.spaces": ("--space", spaces)})
+    options.check_out_dir(Path(args.out))  # before a --cluster client connects (seconds) and any work
     with options.cluster(args, args.out) as client:  # the same stage function reproduce runs
         paths = learn.run(tree, args.data or args.synthetic, args.out, seed=args.seed, jobs=args.jobs,
                           client=client, progress=not args.no_progress)

@@ -46,7 +46,16 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
         aliased[key] = value
     overrides = {**parse_set(extra), **aliased, **sets}
     precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
-    return check_tree(resolve(base, overrides))  # the whole tree, before any stage starts
+    try:
+        return check_tree(resolve(base, overrides))  # the whole tree, before any stage starts
+    except UserError as e:  # a value given by a flag: the message names the flag too
+        msg = str(e)
+        named = [(k, flags[k][0]) for k in aliased if k not in sets and k in msg]
+        if not named:
+            raise
+        for key, flag in named:
+            msg = msg.replace(key, f"{flag} ({key})", 1)
+        raise UserError(msg) from e
 
 
 def check_out_dir(path: Path, what: str = "--out") -> None:

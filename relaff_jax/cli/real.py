@@ -99,36 +99,42 @@ def register(subparsers) -> None:
     p.add_argument("--sim", type=Path, default=None,
                    help="simulated relation folder (default OUT/sim); reused when its sensor lies within "
                         "tolerance.* of the training folder's (defaults 0.01 m, 2.5 deg, 0.5 deg fov)")
-    p.add_argument("--per-relation", type=int, default=1000,
+    # the flags below are aliases of tree keys (default None: the tree's value); a flag and a
+    # --set of its key that disagree are refused
+    p.add_argument("--per-relation", type=int, default=None,
                    help="simulated scenes per relation (real.sim.per_relation; default 1000, paper: thousands)")
-    p.add_argument("--n-full", type=int, default=1000, help="SIM_full training samples (real.experiment.n_full; "
+    p.add_argument("--n-full", type=int, default=None, help="SIM_full training samples (real.experiment.n_full; "
                                                              "default 1000, paper: 6500)")
-    p.add_argument("--reps", type=int, default=50, help="repetitions (real.experiment.reps; default 50)")
-    p.add_argument("--trees", type=int, default=100, help="trees per forest (real.experiment.trees; default 100)")
-    p.add_argument("--split", choices=("scene", "pair"), default="scene",
+    p.add_argument("--reps", type=int, default=None, help="repetitions (real.experiment.reps; default 50)")
+    p.add_argument("--trees", type=int, default=None, help="trees per forest (real.experiment.trees; default 100)")
+    p.add_argument("--split", choices=("scene", "pair"), default=None,
                    help="within a folder: every pair of a scene on one side (default), or pairs one by one "
                         "(real.experiment.split)")
     p.add_argument("--spaces", nargs="+", choices=("pca", "rhf"), default=["pca", "rhf"],
                    help="state spaces (default both)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the simulation and the experiments (default 0)")
-    p.add_argument("--chunk", type=int, default=256, help="simulated scenes per chunk (real.sim.chunk; default 256)")
-    p.add_argument("--sim-normals", choices=("ray", "cloud"), default="ray",
-                   help="RHF normals of the simulated scenes: exact ray hits, or the cloud rule (5x5 pixel window)")
-    p.add_argument("--real-normals", choices=("knn", "window"), default="knn",
-                   help="RHF normals of the real scenes: 20 nearest neighbours, or the simulation's window rule")
+    p.add_argument("--seed", type=int, default=None, help="seed of the simulation and the experiments "
+                                                           "(real.sim.seed and real.experiment.seed; default 0)")
+    p.add_argument("--chunk", type=int, default=None, help="simulated scenes per chunk (real.sim.chunk; default 256)")
+    p.add_argument("--sim-normals", choices=("ray", "cloud"), default=None,
+                   help="RHF normals of the simulated scenes: exact ray hits (default), or the cloud rule "
+                        "(5x5 pixel window; real.sim.normals)")
+    p.add_argument("--real-normals", choices=("knn", "window"), default=None,
+                   help="RHF normals of the real scenes: 20 nearest neighbours (default), or the simulation's "
+                        "window rule (real.pipeline.normals.method)")
     add_set(p, "perception.voxel.size=0.02 (real scenes: real.pipeline.*, real.rule.*, real.sim.*, "
                 "real.experiment.*, real.tolerance.*; voxel grid and RHF: perception.*)")
     p.set_defaults(func=cmd_study)
 
 
-def real_config(args, extra: dict | None = None):
-    """The resolved ``RunConfig`` tree: the command's flags (``extra``, dotted keys of its
-    ``real`` node), then ``--set`` (which wins); its real settings (and the perception they
-    share) checked with the whole tree before any work, without importing JAX (``options.config``)."""
+def real_config(args, flags: dict | None = None):
+    """The resolved ``RunConfig`` tree: the command's flags, aliases of keys of its ``real``
+    node (``{"sim.chunk": ("--chunk", args.chunk)}``; None: not given), and ``--set``; a flag
+    and a ``--set`` of its key that disagree are refused. Its real settings (and the
+    perception they share) are checked with the whole tree before any work, without importing
+    JAX (``options.config``)."""
     from relaff_jax.cli.options import config
 
-    extra = [f"real.{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in (extra or {}).items()]
-    return config(args, extra=extra)
+    return config(args, flags={f"real.{k}": v for k, v in (flags or {}).items()})
 
 
 def _check_inputs(args) -> None:
@@ -139,7 +145,7 @@ def _check_inputs(args) -> None:
 
 
 def cmd_segment(args) -> int:
-    tree = real_config(args, {"pipeline.kmeans.background": False} if args.no_background else {})
+    tree = real_config(args, {"pipeline.kmeans.background": ("--no-background", False if args.no_background else None)})
     _check_inputs(args)
     if args.out:
         check_out_file(args.out)  # before the segmentation (about a minute)
@@ -181,10 +187,11 @@ def cmd_check(args) -> int:
 
 def cmd_study(args) -> int:
     cfg = real_config(args, {
-        "sim.per_relation": args.per_relation, "sim.chunk": args.chunk, "sim.seed": args.seed,
-        "sim.normals": args.sim_normals, "experiment.reps": args.reps, "experiment.trees": args.trees,
-        "experiment.n_full": args.n_full, "experiment.seed": args.seed, "experiment.split": args.split,
-        "pipeline.normals.method": args.real_normals})
+        "sim.per_relation": ("--per-relation", args.per_relation), "sim.chunk": ("--chunk", args.chunk),
+        "sim.seed": ("--seed", args.seed), "sim.normals": ("--sim-normals", args.sim_normals),
+        "experiment.reps": ("--reps", args.reps), "experiment.trees": ("--trees", args.trees),
+        "experiment.n_full": ("--n-full", args.n_full), "experiment.seed": ("--seed", args.seed),
+        "experiment.split": ("--split", args.split), "pipeline.normals.method": ("--real-normals", args.real_normals)})
     _check_inputs(args)
     if args.test is not None:
         check_in_dir(args.test, f"test folder {args.test} does not exist")
@@ -193,12 +200,10 @@ def cmd_study(args) -> int:
         check_in_file(args.test_labels, f"labels file {args.test_labels} does not exist")
     elif args.test_labels is not None:
         raise UserError("--test-labels needs --test (the test folder)")
-    from relaff_jax.cli.options import record_config
     from relaff_jax.real.stages import run_study
 
     run_study(cfg, args.scenes, args.labels, args.out, tuple(args.spaces), args.sim, args.test, args.test_labels,
               args.only_present)
-    record_config(args.out, cfg, "real study")  # the tree that ran, as every stage's folder holds it
     print(f"report: {args.out / 'results.md'}")
     return 0
 

@@ -189,6 +189,9 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
         for space, s in per_space.items():
             acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
             say(f"{space} {where} ({s['split']['kind']}): {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
+    from relaff_jax.provenance import record_config
+
+    record_config(out, tree, "real study")  # the tree that ran, as every stage's folder holds it
     return dict(within=summary, cross=cross or None)
 
 
