@@ -204,7 +204,9 @@ def cmd_study(args) -> int:
 
     run_study(cfg, args.scenes, args.labels, args.out, tuple(args.spaces), args.sim, args.test, args.test_labels,
               args.only_present)
-    print(f"report: {args.out / 'results.md'}")
+    from relaff_jax.real.folder import RESULTS_MD
+
+    print(f"report: {args.out / RESULTS_MD}")
     return 0
 
 

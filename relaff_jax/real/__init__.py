@@ -27,6 +27,7 @@ Relations and section VI's experiments (on top of the above):
 - ``sim_relations.py``: settled simulated scenes seen from the real sensor's pose (cached, resumable);
 - ``experiments.py``: SIM -> SIM, REAL -> REAL, SIM -> REAL and REAL <- SIM (paper Figs. 14-15);
 - ``report.py`` / ``study.py``: figures, claims a-d, one resumable output folder;
+- ``folder.py``: that output folder's layout, each file named once;
 - ``stages.py``: one entry point per ``relaff real`` command over the whole config tree
   (``run_segment``, ``run_show``, ``run_propose``, ``run_check``; ``run_study`` from ``study.py``).
 """

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from relaff_jax import io as rio
+from . import folder as layout
 
 GOOD = 0.75  # "good performance": mean accuracy at least this, and the 95 % interval above chance
 MARGIN = 0.10  # "not a large margin" / "competitive": within 10 accuracy points
@@ -229,16 +230,16 @@ def write_report(folder: str | Path, raw: dict, summary: dict, context: dict,
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
-    for tag, r, sm in (("", raw, summary), ("_cross", cross_raw, cross)):
+    for across, r, sm in ((False, raw, summary), (True, cross_raw, cross)):
         for space in sm or {}:
-            where = ", across folders" if tag else ""
-            for name, data in ((f"fig14_{space}{tag}.png", fig14(r[space], space, where)),
-                               (f"fig15_{space}{tag}.png", fig15(sm[space], space, where))):
+            where = ", across folders" if across else ""
+            for name, data in ((layout.figure(14, space, across), fig14(r[space], space, where)),
+                               (layout.figure(15, space, across), fig15(sm[space], space, where))):
                 rio.atomic_write_bytes(folder / name, data)
                 paths.append(folder / name)
     decided = cross or summary
     doc = dict(context=context, summary=summary, cross=cross,
                claims=claims(decided) if "pca" in decided else [], claims_decided_on="cross" if cross else "within")
-    rio.atomic_write_json(folder / "results.json", doc)
-    rio.atomic_write_text(folder / "results.md", markdown(summary, context, cross))
-    return paths + [folder / "results.json", folder / "results.md"]
+    rio.atomic_write_json(folder / layout.RESULTS_JSON, doc)
+    rio.atomic_write_text(folder / layout.RESULTS_MD, markdown(summary, context, cross))
+    return paths + [folder / layout.RESULTS_JSON, folder / layout.RESULTS_MD]

@@ -40,6 +40,7 @@ from relaff_jax.provenance import derive_seed
 
 from relaff_jax.data.progress import progress_bar
 
+from . import folder as layout
 from . import frame as rframe
 from .config import SensorTolerance, SimRelationConfig, SimSensor, sensor_mismatch
 from .scene_source import TARGET
@@ -47,7 +48,7 @@ from .scene_source import TARGET
 # Settings that change what a chunk holds: a folder's chunks must share them (the others, e.g.
 # per_relation or feature_batch, only say how many chunks or how they are computed).
 GUARD_KEYS = ("seed", "chunk", "workspace_radius", "normals", "noise", "max_tiles", "max_object_pixels")
-GUARD = "sim_relations.json"
+GUARD = layout.GUARD
 
 
 def perception_config(sensor: SimSensor, cfg: SimRelationConfig, perception=None):
@@ -107,7 +108,7 @@ def _chunk_fn(world, sensor: SimSensor, cfg: SimRelationConfig, perception=None)
 
 
 def _counts(folder: Path) -> tuple[list[Path], np.ndarray]:
-    files = sorted(folder.glob("chunk_*.npz"))
+    files = sorted(folder.glob(layout.CHUNK_GLOB))
     counts = np.zeros(len(RELATIONS), np.int64)
     for f in files:
         with np.load(f) as z:
@@ -144,7 +145,7 @@ def guard(folder: str | Path, sensor: SimSensor, cfg: SimRelationConfig = SimRel
             raise UserError(f"{folder} holds simulated relation data of another sensor ({why}); use another "
                             "folder, delete it, or widen --set real.tolerance.<key>")
         return stored
-    chunks = sorted(folder.glob("chunk_*.npz"))
+    chunks = sorted(folder.glob(layout.CHUNK_GLOB))
     if chunks:
         raise UserError(f"{folder} holds {len(chunks)} simulated chunks but no {GUARD}, so which sensor made them "
                         "is unknown (a build killed before the guard was written first); delete them")
@@ -194,7 +195,7 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
         out = run(c)
         seconds += time.perf_counter() - t0
         done_now += 1
-        rio.atomic_save_npz(folder / f"chunk_{c:05d}.npz", **out)
+        rio.atomic_save_npz(folder / layout.chunk(c), **out)
         files, counts = _counts(folder)
         bar.set_description("sim relations")
         bar.update(held() - bar.n)
@@ -234,7 +235,7 @@ def _dropped(files) -> dict:
 
 def load_sim_relations(folder: str | Path) -> dict:
     """All kept scenes of ``folder``: pca (N, 18), rhf (N, 300), relation, pair, scene_id (N,)."""
-    files = sorted(Path(folder).glob("chunk_*.npz"))
+    files = sorted(Path(folder).glob(layout.CHUNK_GLOB))
     if not files:
         raise UserError(f"{folder} holds no simulated relation chunks; run `relaff real sim` first")
     parts = []
@@ -246,7 +247,7 @@ def load_sim_relations(folder: str | Path) -> dict:
 
 def describe(folder: str | Path) -> dict:
     """The summary JSON ``build_sim_relations`` wrote."""
-    path = Path(folder) / "sim_relations.json"
+    path = Path(folder) / layout.GUARD
     if not path.exists():
         raise UserError(f"{path} missing: not a simulated relation folder")
     return json.loads(path.read_text())

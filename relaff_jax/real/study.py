@@ -38,6 +38,7 @@ from relaff_jax import io as rio
 from relaff_jax.errors import UserError
 
 from . import labels as lab
+from . import folder as layout
 from .config import pipeline_config, sensor_difference
 
 
@@ -84,7 +85,7 @@ def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | P
     cfg = validate_run_config(tree).real
     exp_cfg, sim_cfg = cfg.experiment, cfg.sim
     full = 2 * (exp_cfg.n_full // 2)
-    sim_dir = Path(sim_folder) if sim_folder else Path(out) / "sim"
+    sim_dir = Path(sim_folder) if sim_folder else Path(out) / layout.SIM
     have = _counts(sim_dir)[1] if sim_dir.is_dir() else np.zeros(len(RELATIONS), np.int64)
     held = min(int(have[RELATIONS.index(r)]) for r in ("beside", "on_top"))
     if sim_cfg.per_relation < full and held < full:  # the simulation would stop short of SIM_full
@@ -151,20 +152,20 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
     exp_cfg, sim_cfg = cfg.experiment, cfg.sim
     poses = real_data.scene_poses(scenes, rows["train"], progress)
     sensor = real_data.sensor(poses)  # the simulated sensor: the training folder's mean pose
-    sim_dir = Path(sim_folder) if sim_folder else out / "sim"
+    sim_dir = Path(sim_folder) if sim_folder else out / layout.SIM
     # refused here, before the features
     simulated = sr.guard(sim_dir, sensor, sim_cfg, cfg.tolerance, perception=tree.perception)
     test_poses = real_data.scene_poses(test, rows["test"], progress) if test is not None else None
     out.mkdir(parents=True, exist_ok=True)
-    rio.atomic_write_json(out / "sensor.json", dict(
+    rio.atomic_write_json(out / layout.SENSOR, dict(
         dataclasses.asdict(sensor), scenes=len(poses["pose_scene"]), height_std=float(np.std(poses["height"])),
         tilt_std_deg=float(np.std(poses["tilt_deg"])), source="the training folder's labelled scenes (mean pose)",
         simulated=dataclasses.asdict(simulated),
         simulated_difference=sensor_difference(simulated, sensor), tolerance=dataclasses.asdict(cfg.tolerance),
         test=_pose_stats(test_poses) if test_poses is not None else None))
-    real = real_data.cached_real_features(out / "real_features.npz", scenes, rows["train"], pipeline, progress)
+    real = real_data.cached_real_features(out / layout.REAL_FEATURES, scenes, rows["train"], pipeline, progress)
     real_t = None if test is None else real_data.cached_real_features(
-        out / "real_features_test.npz", test, rows["test"], pipeline, progress)
+        out / layout.REAL_FEATURES_TEST, test, rows["test"], pipeline, progress)
     sim_summary = sr.build_sim_relations(sim_dir, sensor, sim_cfg, progress, cfg.tolerance, tree.perception)
     sim = sr.load_sim_relations(sim_dir)
     key = json.dumps(dataclasses.asdict(exp_cfg), sort_keys=True) + lab.rows_sha256(rows["train"]) + \
@@ -176,11 +177,11 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
             res = ex.run_space(real, sim, space, exp_cfg, progress)
             res.update(ex.run_sim_only(sim, space, exp_cfg))
             return res
-        raw[space] = _experiments(out / f"raw_{space}.npz", key, within)
+        raw[space] = _experiments(out / layout.raw(space), key, within)
         summary[space] = ex.summarise(raw[space], exp_cfg)
         if real_t is not None:
             ckey = key + "+cross+hits2" + lab.rows_sha256(rows["test"])
-            craw[space] = _experiments(out / f"raw_{space}_cross.npz", ckey,
+            craw[space] = _experiments(out / layout.raw(space, cross=True), ckey,
                                        lambda space=space: ex.run_space(real, sim, space, exp_cfg, progress, test=real_t))
             cross[space] = ex.summarise(craw[space], exp_cfg)
     context = _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test)
