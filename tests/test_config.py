@@ -120,3 +120,22 @@ def test_the_forest_node_refuses_what_scikit_learn_refuses(key):
         except (ValueError, TypeError):
             reference = False
         assert node == reference, f"{key}={value!r}: node accepts {node}, scikit-learn {reference}"
+
+
+BAD_VALUES = {"dataset.n_samples": 1, "dataset.population": "some", "perception.voxel.size": -1.0,
+              "perception.cull.tile": 7, "experiment.select_size": 1000, "experiment.forest.criterion": "entropy",
+              "experiment.state.extra": ("x",), "reproduce.actions": ("lift",), "real.experiment.split": "x",
+              "real.pipeline.normals.method": "y", "action.scene.settle_steps": 0, "action.arm.ik_steps": 0,
+              "action.phys.solver": "PGS", "action.move_rule": "x"}
+
+
+@pytest.mark.parametrize("key", sorted(BAD_VALUES))
+def test_each_node_refuses_a_bad_value_when_the_tree_is_built(key):
+    """Every node of the tree checks its own values when it is made (``__post_init__``), so a
+    bad ``--set`` fails while the tree is built, before any stage; the message names the key
+    as it is spelled from the root. The good default beside it is accepted."""
+    import re
+
+    with pytest.raises(UserError, match=re.escape(key)):
+        runconfig.resolve(runconfig.preset("tiny"), {key: BAD_VALUES[key]})
+    runconfig.check_tree(runconfig.resolve(runconfig.preset("tiny"), {}))

@@ -113,32 +113,36 @@ def validate_real_config(cfg: RealConfig) -> RealConfig:
     """Raise ``UserError`` naming the bad setting; return ``cfg`` unchanged otherwise."""
     from relaff_jax.perception.config import validate_config
 
-    p = cfg.plane
-    if p.threshold <= 0 or p.iterations <= 0 or p.batch <= 0:
-        raise UserError(f"plane.threshold, .iterations and .batch must be positive, got {p}")
-    c = cfg.crop
-    if not 0 <= c.min_height < c.max_height or c.radius_scale <= 0:
-        raise UserError(f"need 0 <= crop.min_height < crop.max_height and crop.radius_scale > 0, got {c}")
-    k = cfg.kmeans
-    if k.k < 1 + int(k.background) or k.iterations <= 0 or k.n_init <= 0:
-        raise UserError(f"kmeans.k must leave an object cluster and kmeans.iterations, .n_init positive, got {k}")
-    nc = cfg.normals
-    if nc.knn < 3:
-        raise UserError(f"normals.knn must be >= 3 for a plane fit, got {nc.knn}")
-    if nc.method not in ("knn", "window"):
-        raise UserError(f"unknown normals.method {nc.method!r}; valid: ['knn', 'window']")
-    if nc.window < 3 or nc.window % 2 == 0 or nc.radius <= 0:
-        raise UserError(f"normals.window must be odd and >= 3 and normals.radius positive, got {nc}")
+    check_pipeline_parts(cfg)
     validate_config(cfg.perception)
     return cfg
+
+
+def check_pipeline_parts(cfg) -> None:
+    """The plane, crop, k-means and normal settings of a ``RealConfig`` or ``PipelineConfig``."""
+    p = cfg.plane
+    if p.threshold <= 0 or p.iterations <= 0 or p.batch <= 0:
+        raise UserError(f"real.pipeline.plane.threshold, .iterations and .batch must be positive, got {p}")
+    c = cfg.crop
+    if not 0 <= c.min_height < c.max_height or c.radius_scale <= 0:
+        raise UserError(f"need 0 <= real.pipeline.crop.min_height < crop.max_height and crop.radius_scale > 0, got {c}")
+    k = cfg.kmeans
+    if k.k < 1 + int(k.background) or k.iterations <= 0 or k.n_init <= 0:
+        raise UserError(f"real.pipeline.kmeans.k must leave an object cluster and kmeans.iterations, .n_init "
+                        f"positive, got {k}")
+    nc = cfg.normals
+    if nc.knn < 3:
+        raise UserError(f"real.pipeline.normals.knn must be >= 3 for a plane fit, got {nc.knn}")
+    if nc.method not in ("knn", "window"):
+        raise UserError(f"unknown real.pipeline.normals.method {nc.method!r}; valid: ['knn', 'window']")
+    if nc.window < 3 or nc.window % 2 == 0 or nc.radius <= 0:
+        raise UserError(f"real.pipeline.normals.window must be odd and >= 3 and normals.radius positive, got {nc}")
 
 
 def pipeline_config(tree) -> RealConfig:
     """The ``RealConfig`` of a ``RunConfig`` tree: ``tree.real.pipeline`` with ``tree.perception``
     (voxel grid, RHF) and the real object pixel capacity; validated."""
     p = tree.real.pipeline
-    if p.max_object_pixels < 1:
-        raise UserError(f"real.pipeline.max_object_pixels must be >= 1, got {p.max_object_pixels}")
     return validate_real_config(RealConfig(plane=p.plane, crop=p.crop, kmeans=p.kmeans, normals=p.normals,
                                            perception=real_perception(tree.perception, p.max_object_pixels)))
 
@@ -234,12 +238,23 @@ class RealRunConfig:
     experiment: RealExperimentConfig = RealExperimentConfig()
     tolerance: SensorTolerance = SensorTolerance()
 
+    def __post_init__(self):  # refused when the config is made (the perception it shares: check_tree)
+        check_real_node(self)
+
 
 def validate_run_config(tree):
-    """Raise ``UserError`` naming the bad real setting of a ``RunConfig`` tree (its ``real`` node,
-    and the perception it shares); return ``tree`` unchanged otherwise."""
+    """Raise ``UserError`` naming the bad real setting of a ``RunConfig`` tree: its ``real`` node
+    checked itself when it was made (``check_real_node``); this checks the pipeline with the
+    perception it shares. Return ``tree`` unchanged otherwise."""
     pipeline_config(tree)
-    cfg = tree.real
+    return tree
+
+
+def check_real_node(cfg: RealRunConfig) -> None:
+    """The real node's own settings (run when a ``RealRunConfig`` is made)."""
+    check_pipeline_parts(cfg.pipeline)
+    if cfg.pipeline.max_object_pixels < 1:
+        raise UserError(f"real.pipeline.max_object_pixels must be >= 1, got {cfg.pipeline.max_object_pixels}")
     e, s, t = cfg.experiment, cfg.sim, cfg.tolerance
     if e.split not in SPLITS:
         raise UserError(f"unknown real.experiment.split {e.split!r}; valid: {list(SPLITS)}")
@@ -256,7 +271,6 @@ def validate_run_config(tree):
         raise UserError(f"real.sim.chunk ({s.chunk}) must be a multiple of real.sim.feature_batch ({s.feature_batch})")
     if min(t.height, t.tilt_deg, t.vfov_deg) < 0:
         raise UserError(f"real.tolerance values must be >= 0, got {t}")
-    return tree
 
 
 def sensor_difference(a: SimSensor, b: SimSensor) -> dict:

@@ -17,6 +17,22 @@ from relaff_jax.errors import UserError
 PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
 
 
+def _check(where: str, rules: dict) -> None:
+    """``rules``: ``{field: (ok, what it must be)}``; the first failed rule is a ``UserError``
+    naming the key from the tree's root (``action.scene.settle_steps``)."""
+    for name, (ok, must) in rules.items():
+        if not ok:
+            raise UserError(f"{where}.{name} must be {must}")
+
+
+def _int_pos(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool) and v >= 1
+
+
+def _gap(g) -> bool:
+    return len(g) == 2 and 0.0 <= g[0] < g[1]
+
+
 @dataclasses.dataclass(frozen=True)
 class PhysicsConfig:
     """Static physics settings shared by settle and action rollouts.
@@ -56,10 +72,17 @@ class PhysicsConfig:
     # (docs/actions.md, "Tuning").
     arm_palm_objects: str = "contact"
 
-    def __post_init__(self):
-        if self.arm_palm_objects not in PALM_MODES:  # refused when the config is made
+    def __post_init__(self):  # refused when the config is made
+        if self.arm_palm_objects not in PALM_MODES:
             raise UserError(f"action.phys.arm_palm_objects={self.arm_palm_objects!r}: "
                             f"one of {', '.join(PALM_MODES)}")
+        _check("action.phys", {
+            "timestep": (self.timestep > 0, f"> 0, got {self.timestep}"),
+            "iterations": (_int_pos(self.iterations), f"an integer >= 1, got {self.iterations!r}"),
+            "ls_iterations": (_int_pos(self.ls_iterations), f"an integer >= 1, got {self.ls_iterations!r}"),
+            "solver": (self.solver in ("Newton", "CG"), f"Newton or CG (the solvers MJX has), got {self.solver!r}"),
+            "arm_max_geom_pairs": (self.arm_max_geom_pairs == -1 or _int_pos(self.arm_max_geom_pairs),
+                                   f"-1 (all pairs) or an integer >= 1, got {self.arm_max_geom_pairs!r}")})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,6 +101,21 @@ class SceneConfig:
     rest_speed: float = 0.02  # m/s: a body slower than this at the end is "at rest"
     contact_dist: float = 0.002  # m: a contact closer than this is touching
     candidates: int = 16  # rejection-sampling draws per placement (static shapes)
+
+    def __post_init__(self):  # refused when the config is made
+        _check("action.scene", {
+            "min_radius": (0.0 <= self.min_radius < self.workspace_radius,
+                           f"in [0, workspace_radius = {self.workspace_radius}), got {self.min_radius}"),
+            "p_stacked": (0.0 <= self.p_stacked <= 1.0, f"in [0, 1], got {self.p_stacked}"),
+            "p_near": (0.0 <= self.p_near <= 1.0, f"in [0, 1], got {self.p_near}"),
+            "p_between": (0.0 <= self.p_between <= 1.0, f"in [0, 1], got {self.p_between}"),
+            "near_gap": (_gap(self.near_gap), f"(lo, hi) with 0 <= lo < hi, got {self.near_gap}"),
+            "between_gap": (_gap(self.between_gap), f"(lo, hi) with 0 <= lo < hi, got {self.between_gap}"),
+            "drop_height": (self.drop_height >= 0, f">= 0, got {self.drop_height}"),
+            "settle_steps": (_int_pos(self.settle_steps), f"an integer >= 1, got {self.settle_steps!r}"),
+            "rest_speed": (self.rest_speed > 0, f"> 0, got {self.rest_speed}"),
+            "contact_dist": (self.contact_dist > 0, f"> 0, got {self.contact_dist}"),
+            "candidates": (_int_pos(self.candidates), f"an integer >= 1, got {self.candidates!r}")})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,9 +139,17 @@ class ArmConfig:
     # (a pad resting on top of an object, or an edge of it on a rim, is no grip)
     contact_face_cos: float = 0.7
 
-    def __post_init__(self):
-        if self.ik_solver not in ("lbfgs", "lm"):  # kinematics.IK_SOLVERS; refused when the config is made
+    def __post_init__(self):  # refused when the config is made
+        if self.ik_solver not in ("lbfgs", "lm"):  # kinematics.IK_SOLVERS
             raise UserError(f"action.arm.ik_solver={self.ik_solver!r}: one of lbfgs, lm")
+        _check("action.arm", {
+            "ik_steps": (_int_pos(self.ik_steps), f"an integer >= 1, got {self.ik_steps!r}"),
+            "ik_lm_steps": (_int_pos(self.ik_lm_steps), f"an integer >= 1, got {self.ik_lm_steps!r}"),
+            "ik_pos_tol": (self.ik_pos_tol > 0, f"> 0, got {self.ik_pos_tol}"),
+            "ik_ang_tol": (self.ik_ang_tol > 0, f"> 0, got {self.ik_ang_tol}"),
+            "grip_open": (self.grip_closed <= self.grip_open <= 0.21,
+                          f"in [grip_closed, 0.21] (the finger joint's range), got {self.grip_open}"),
+            "contact_face_cos": (-1.0 <= self.contact_face_cos <= 1.0, f"in [-1, 1], got {self.contact_face_cos}")})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -141,3 +187,12 @@ class ActionConfig:
     arm: ArmConfig = ArmConfig()
     phys: PhysicsConfig = PhysicsConfig()
     scene: SceneConfig = SceneConfig()
+
+    def __post_init__(self):  # refused when the config is made (arm, phys and scene check themselves)
+        lengths = ("lift_height", "drag_raise", "pull_distance", "push_distance", "unobstruct_distance",
+                   "move_distance", "rake_pull", "clearance", "grip_margin", "tip_clearance", "rake_gap",
+                   "lifted", "moved", "closer", "farther", "aside", "take_opening", "corridor")
+        rules = {k: (getattr(self, k) >= 0, f">= 0 m, got {getattr(self, k)}") for k in lengths}
+        rules["tilt_deg"] = (0.0 < self.tilt_deg < 180.0, f"in (0, 180), got {self.tilt_deg}")
+        rules["move_rule"] = (self.move_rule in ("apart", "both"), f"apart or both, got {self.move_rule!r}")
+        _check("action", rules)
