@@ -315,3 +315,23 @@ def test_full_report(scene_run, tmp_path):
     for f in found:
         assert f"| {f['finding']} |" in page
     assert cli.main(["compare", f"a={out}"]) == 2  # one reading is refused
+
+
+def test_cli_report_takes_the_datasets(scene_run, tmp_path, capsys):
+    """``relaff report RESULTS --data DIR...``: each folder's action read from its sidecar, as
+    ``write_report``'s ``data_dirs``, so the datasets' statistics and figures are in the report;
+    two folders of one action are refused before anything is written."""
+    lift, take = scene_run / "data" / "lift", scene_run / "data" / "take"
+    out = tmp_path / "report"
+    argv = ["report", str(scene_run / "results"), "--out", str(out), "--set", "reproduce.examples_per_action=0"]
+    assert cli.main(argv + ["--data", str(take), str(lift)]) == 0
+    assert (out / "fig_datasets.png").stat().st_size > 0
+    md = (out / "report.md").read_text()
+    for action in ("lift", "take"):  # the Datasets table: samples, rollouts
+        assert re.search(rf"^\| {action} \| \d+ \| \d+ \|", md, re.M), action
+    without = tmp_path / "bare"
+    assert cli.main(argv[:3] + [str(without)]) == 0
+    assert not (without / "fig_datasets.png").exists()
+    capsys.readouterr()
+    assert cli.main(argv + ["--data", str(lift), str(lift)]) == 2
+    assert "are both lift datasets" in capsys.readouterr().err

@@ -44,9 +44,20 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
 def cmd_report(args: argparse.Namespace) -> int:
     tree = options.config(args)
+    data_dirs = None
+    if args.data:  # each folder's action from its sidecar, as the experiment read them
+        from relaff_jax.data.store import read_sidecar
+
+        data_dirs = {}
+        for folder in args.data:
+            action = read_sidecar(Path(folder))["action"]
+            if action in data_dirs:
+                raise UserError(f"--data: {data_dirs[action]} and {folder} are both {action} datasets; give one")
+            data_dirs[action] = folder
     from relaff_jax import report
 
-    print(f"report: {report.run(tree, args.results, args.out)}")  # the same stage function reproduce runs
+    # the same stage function reproduce runs
+    print(f"report: {report.run(tree, args.results, args.out, data_dirs=data_dirs)}")
     return 0
 
 
@@ -94,6 +105,9 @@ def register(subparsers) -> None:
                     "correlation clusters and the threshold study, as report.md, report.html and PNGs.")
     r.add_argument("results", metavar="RESULTS", help="a finished experiment folder (relaff experiment)")
     r.add_argument("--out", required=True, metavar="REPORT", help="report folder (created or replaced)")
+    r.add_argument("--data", nargs="+", metavar="DIR", default=None,
+                   help="the dataset folders the experiment learnt from (one per action): their statistics, "
+                        "what the labels consist of, the datasets' figures and example scenes")
     options.add_set(r, "reproduce.examples_per_action=1")
     r.set_defaults(func=cmd_report)
     c = subparsers.add_parser("compare", help="the same study in two or more readings, side by side, from their reports",
