@@ -13,9 +13,11 @@ import numpy as np
 import pytest
 
 from relaff_jax import cli
+from relaff_jax.config import override
 from relaff_jax import data as dataset
 from relaff_jax import learn as E
 from relaff_jax import report as R
+from relaff_jax import runconfig
 from relaff_jax.reproduce import features as stage_features
 from relaff_jax.sim import scenes as sc
 
@@ -50,7 +52,8 @@ def scene_run(tmp_path_factory, scene_world, settle):
             path = root / "data" / action
             dataset.generate_dataset(path, action, 16, scene_rollout_fn(scene_world, settle), seed=seed, batch=B,
                                      progress=False, dataset_config=dataset.DatasetConfig(borrow_fraction=1.0))
-            stage_features.add_features(path, B, progress=False)
+            stage_features.add_features(override(runconfig.RunConfig(), {"dataset.feature_batch": B}), path,
+                                        progress=False)
         argv = ["experiment", "--synthetic", "150", "--out", str(root / "results"), "--jobs", "2", "--no-progress",
                 "--set", "experiment.sizes=[4,10]", "--set", "experiment.reps_pca=1", "--set", "experiment.reps_rhf=1",
                 "--set", "experiment.forest.base_trees=4", "--set", "experiment.forest.max_trees=4"]
@@ -98,7 +101,8 @@ def test_findings_hand_worked():
     an = _analysis([0.6, 0.65, 0.7, 0.8], [0.62, 0.7, 0.71, 0.79], GOOD, [2.0, 1.95, 1.9])
     got = R.findings(an, CFG)
     assert [f["id"] for f in got] == ["rhf_faster", "bootstrapping_helps", "dbn_below_db1", "pruning_cheap", "best_after_ten"]
-    assert all(f["verdict"] == "reproduced" and f["reproduced"] is True for f in got)
+    assert all(f["verdict"] == "reproduced" for f in got)
+    assert all(f["reproduced"] is True for f in got)
     f = {x["id"]: x for x in got}
     # n <= 10: RHF - PCA = +0.02, +0.05, +0.01 -> mean +0.0267; paired resamples: interval of zero width
     assert f["rhf_faster"]["values"]["sizes"] == [2, 4, 10]

@@ -14,8 +14,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from relaff_jax.errors import UserError
-
 from relaff_jax.cli import options
 from relaff_jax.cli.options import check_out_file
 
@@ -62,8 +60,7 @@ def cmd_features(args) -> int:
 
     tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch)})
     with options.cluster(args, args.dir) as client:  # the same stage function reproduce runs
-        out = add_features(args.dir, tree.dataset.feature_batch, args.seed, tree.perception,
-                           overwrite=args.overwrite, client=client)
+        out = add_features(tree, args.dir, args.seed, overwrite=args.overwrite, client=client)
     options.record_config(args.dir, tree, "features")
     print(f"{args.dir}: features for {out['n']} samples: "
           + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))
@@ -74,35 +71,15 @@ def cmd_show(args) -> int:
     """``relaff show``: draw sample ``--index`` of the dataset into ``--out``."""
     options.precheck(args)
     options.check_in_dir(args.dir)
-    from relaff_jax import data
-    from relaff_jax.perception import from_sim
-    from relaff_jax.sim import world as wd
-
-    args.out = args.out or Path("action.gif" if args.rollout else "scene.png")
-    check_out_file(args.out)
-    if args.rollout and args.out.suffix.lower() != ".gif":
-        raise UserError(f"--rollout writes a GIF; give --out a .gif name, not {args.out.name}")
+    out = args.out or Path("action.gif" if args.rollout else "scene.png")
+    check_out_file(out)
     tree = options.config(args)
-    ds = data.load_dataset(args.dir, features=False)
-    n = len(ds["label"])
-    if not 0 <= args.index < n:
-        raise UserError(f"--index {args.index} out of range: the dataset has {n} samples")
-    i = args.index
-    title = (f"{ds['action']} sample {i}: {ds['toy'][i]} + {ds['other'][i]}, {ds['relation'][i]}, "
-             f"label {bool(ds['label'][i])}")
-    if args.rollout:
-        from relaff_jax.sim.animate import animate_sample
+    from relaff_jax.data.show import show_sample
 
-        bars = options.PhaseBars("show")
-        try:
-            frames = animate_sample(str(ds["action"]), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
-                                    title=title, cfg=tree.action, progress=bars)
-        finally:
+    bars = options.PhaseBars("show") if args.rollout else None
+    try:
+        print(show_sample(tree, args.dir, args.index, out, rollout=args.rollout, progress=bars))
+    finally:
+        if bars is not None:
             bars.close()
-        print(f"wrote {args.out}: {len(frames['frames_xpos'])} frames; feasible {frames['feasible']}, "
-              f"label in the MuJoCo C replay {frames['label']} (dataset: {bool(ds['label'][i])}, MJX)")
-        return 0
-    out = from_sim.show_scene(wd.build_world(tree.action.phys), int(ds["pair"][i]), ds["qpos_settled"][i], args.out,
-                              from_sim.show_key(int(ds["rollout_id"][i])), cfg=tree.perception, title=title)
-    print(f"wrote {out}")
     return 0

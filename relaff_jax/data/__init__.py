@@ -27,6 +27,7 @@ Files (one job each):
 * ``info.py``      ``info``, ``format_info``;
 * ``anatomy.py``   ``anatomy``, ``format_anatomy``: labels by (feasible, relation), oracles;
 * ``export.py``    ``export_dataset``: Parquet, JSON schema of the features, dataset card.
+* ``show.py``      ``show_sample``: one sample drawn (PNG) or replayed (GIF), ``relaff show``.
 
 The ``relaff info``, ``relaff anatomy`` and ``relaff export`` commands are in ``relaff_jax.cli.data``.
 Layout, selection scheme and error cases: ``docs/datasets.md``.

@@ -29,20 +29,24 @@ def feature_config(seed: int, config: Any = None) -> dict:
     return {"perception": pc.stored_config(config if config is not None else pc.PerceptionConfig()), "seed": seed}
 
 
-def add_features(path: Any, batch: int, seed: int = 0, config: Any = None, *, progress: bool = True,
-                 overwrite: bool = False, client: Any = None) -> dict:
-    """The features stage on one dataset folder, as ``relaff features`` and tests run it: the
-    simulated Kinect's PCA and RHF (``config``: a ``PerceptionConfig``, default the paper's)
-    attached by ``data.add_features`` with the config record this module writes for
-    ``reproduce`` too. ``client``: chunks as tasks on that cluster (each worker builds the
-    perception once)."""
-    if client is None:
-        fn = default_feature_factory(seed, config)[0]
-    else:
+def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, overwrite: bool = False,
+                 client: Any = None, compute: tuple | None = None) -> dict:
+    """The features stage on one dataset folder, as ``relaff features`` and ``reproduce`` run it:
+    the simulated Kinect's PCA and RHF with the ``RunConfig`` ``tree``'s perception, in chunks
+    of ``tree.dataset.feature_batch``, attached by ``data.add_features`` with this module's
+    config record. ``client``: chunks as tasks on that cluster (each worker builds the
+    perception once). ``compute``: ``(compute_fn, config_dict)`` already built (``reproduce``
+    builds it once for every action, or takes a test's factory); default: the perception's."""
+    if compute is None and client is None:
+        compute = default_feature_factory(seed, tree.perception)
+    elif compute is None:
         from relaff_jax.cluster import Remote
 
-        fn = Remote(default_feature_factory, seed, config=config, pick=0)
-    return D.add_features(path, fn, batch, progress, feature_config(seed, config), overwrite=overwrite, client=client)
+        compute = Remote(default_feature_factory, seed, config=tree.perception, pick=0), \
+            feature_config(seed, tree.perception)
+    fn, config_dict = compute
+    return D.add_features(path, fn, tree.dataset.feature_batch, progress, config_dict, overwrite=overwrite,
+                          client=client)
 
 
 def factories_for(cfg: Any):
@@ -81,8 +85,8 @@ def run(run: Run, forced: bool) -> dict:
         if compute is None:
             compute, config_dict = run.feature_factory(fseed) if run.client is None else \
                 (run.remote(run.feature_factory, fseed), run.feature_config(fseed))
-        D.add_features(run.paths.dataset(action), compute, cfg.dataset.feature_batch, False, config_dict,
-                       overwrite=forced or st.state in ("stale", "corrupt"), client=run.client)
+        add_features(cfg, run.paths.dataset(action), fseed, progress=False, client=run.client,
+                     overwrite=forced or st.state in ("stale", "corrupt"), compute=(compute, config_dict))
         dt = time.perf_counter() - t0
         items[action] = {"status": "ran", "seconds": round(dt, 2), "was": st.state}
         run.progress.message(f"features {action}: {cfg.dataset.n_samples} scenes in {dt:.0f} s")
