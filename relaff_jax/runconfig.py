@@ -46,14 +46,14 @@ class ReproduceConfig:
     def __post_init__(self):  # refused when the config is made
         acts, spaces = tuple(self.actions), tuple(self.spaces)
         if len(acts) < 2 or len(set(acts)) != len(acts) or not set(acts) <= set(ACTIONS):
-            raise ConfigError(f"reproduce.actions must be at least two distinct values of {ACTIONS}, got {acts}")
+            raise UserError(f"reproduce.actions must be at least two distinct values of {ACTIONS}, got {acts}")
         if acts != tuple(a for a in ACTIONS if a in acts):
-            raise ConfigError(f"reproduce.actions must be in the canonical order {ACTIONS}, got {acts}")
+            raise UserError(f"reproduce.actions must be in the canonical order {ACTIONS}, got {acts}")
         if not spaces or len(set(spaces)) != len(spaces) or not set(spaces) <= set(SPACES):
-            raise ConfigError(f"reproduce.spaces must be distinct values of {SPACES}, got {spaces}")
+            raise UserError(f"reproduce.spaces must be distinct values of {SPACES}, got {spaces}")
         n = self.examples_per_action
         if isinstance(n, bool) or not isinstance(n, int) or n < 0:
-            raise ConfigError(f"reproduce.examples_per_action must be an integer >= 0, got {n!r}")
+            raise UserError(f"reproduce.examples_per_action must be an integer >= 0, got {n!r}")
 
 
 def _action():
