@@ -300,6 +300,8 @@ def test_a_run_begun_before_a_setting_existed_resumes_at_its_default(tmp_path):
     (["generate", "lift", "--samples", "10", "--batch", "8", "--out", "{tmp}/d", "--set", "dataset.rollout_batch=16"],
      "--batch 8"),
     (["features", "{tmp}", "--batch", "4", "--set", "dataset.feature_batch=8"], "--batch 4"),
+    (["reproduce", "--preset", "tiny", "--out", "{tmp}/r", "--engine", "native", "--set", "dataset.engine=mjx"],
+     "--engine native"),
 ])
 def test_a_flag_and_a_set_of_its_key_that_disagree_are_refused(capsys, tmp_path, argv, flag):
     argv = [a.format(tmp=tmp_path) for a in argv]

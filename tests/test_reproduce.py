@@ -186,6 +186,12 @@ def test_relaff_experiment_and_reproduce_record_the_same_config_and_results(base
     theirs, ours = results_of(out), results_of(tmp_path)
     for s in ("pca", "rhf"):
         np.testing.assert_array_equal(ours[s], theirs[s])
+    # the dataset folders hold the record too, written by the stage functions both routes call
+    for a in ACTS:
+        drec = json.loads((out / "data" / a / CONFIG_RECORD).read_text())
+        assert sorted(drec) == sorted(rec)
+        assert drec["command"] == "features"  # the last stage that wrote the folder (generate, then features)
+        assert drec["config"]["dataset"] == log["config"]["dataset"]
 
 
 def test_relaff_report_and_reproduce_write_the_same_report(base, tmp_path, capsys):

@@ -9,7 +9,6 @@ from typing import Any
 from relaff_jax.config import parse_set
 from relaff_jax.io import check_writable_dir, check_writable_file
 from relaff_jax.errors import UserError
-from relaff_jax.provenance import CONFIG_RECORD, record_config  # noqa: F401 (the commands' record)
 
 
 def add_set(p: argparse.ArgumentParser, example: str = "perception.voxel.size=0.02") -> None:
@@ -37,13 +36,7 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
     from relaff_jax.runconfig import check_tree, precheck, resolve
 
     sets = parse_set(args.set or [])
-    aliased = {}
-    for key, (flag, value) in (flags or {}).items():
-        if value is None:
-            continue
-        if key in sets and sets[key] != value:
-            raise UserError(f"{flag} {value} and --set {key}={sets[key]} disagree; give one of them")
-        aliased[key] = value
+    aliased = {k: v for k, v in overrides_of(args, flags).items() if k not in sets}
     overrides = {**parse_set(extra), **aliased, **sets}
     precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     try:
@@ -56,6 +49,20 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
         for key, flag in named:
             msg = msg.replace(key, f"{flag} ({key})", 1)
         raise UserError(msg) from e
+
+
+def overrides_of(args: argparse.Namespace, flags: dict[str, tuple[str, Any]] | None = None) -> dict[str, Any]:
+    """The tree keys the command's flags and ``--set`` give (``--set`` and an aliased flag
+    together only if they agree): ``flags`` as ``config`` takes them."""
+    sets = parse_set(args.set or [])
+    out = {}
+    for key, (flag, value) in (flags or {}).items():
+        if value is None:
+            continue
+        if key in sets and sets[key] != value:
+            raise UserError(f"{flag} {value} and --set {key}={sets[key]} disagree; give one of them")
+        out[key] = value
+    return {**out, **sets}
 
 
 def check_out_dir(path: Path, what: str = "--out") -> None:

@@ -61,7 +61,6 @@ def cmd_features(args) -> int:
     tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch)})
     with options.cluster(args, args.dir) as client:  # the same stage function reproduce runs
         out = add_features(tree, args.dir, args.seed, overwrite=args.overwrite, client=client)
-    options.record_config(args.dir, tree, "features")
     print(f"{args.dir}: features for {out['n']} samples: "
           + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))
     return 0

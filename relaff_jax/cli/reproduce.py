@@ -45,7 +45,6 @@ def register(sub) -> None:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from relaff_jax.config import parse_set
     from relaff_jax.runconfig import precheck
 
     if args.dir is not None and args.out is not None and args.dir != args.out:
@@ -55,7 +54,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     args.out = args.out if args.out is not None else args.dir
     if args.out is None:
         raise UserError("the run folder is required: --out DIR")
-    overrides = {**({"dataset.engine": args.engine} if args.engine else {}), **parse_set(args.set or [])}
+    overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine)})
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     from relaff_jax import reproduce as R

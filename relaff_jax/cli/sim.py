@@ -128,7 +128,6 @@ def cmd_generate(args) -> int:
             if isinstance(e, UserError):
                 raise
             raise UserError(str(e)) from e
-    options.record_config(Path(args.out), tree, "generate")
     if args.json:
         print(json.dumps(summary, default=str))
     else:

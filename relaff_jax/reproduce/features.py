@@ -7,6 +7,7 @@ import time
 from typing import Any
 
 from relaff_jax import data as D
+from relaff_jax.provenance import record_config
 from relaff_jax.reproduce.stage import Run, Status
 
 NAME = "features"
@@ -45,8 +46,10 @@ def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, 
         compute = Remote(default_feature_factory, seed, config=tree.perception, pick=0), \
             feature_config(seed, tree.perception)
     fn, config_dict = compute
-    return D.add_features(path, fn, tree.dataset.feature_batch, progress, config_dict, overwrite=overwrite,
-                          client=client)
+    out = D.add_features(path, fn, tree.dataset.feature_batch, progress, config_dict, overwrite=overwrite,
+                         client=client)
+    record_config(path, tree, "features")  # the tree that made the folder, as every stage's folder holds it
+    return out
 
 
 def factories_for(cfg: Any):

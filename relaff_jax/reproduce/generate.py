@@ -9,6 +9,7 @@ from typing import Any
 
 from relaff_jax import data as D
 from relaff_jax import io as rio
+from relaff_jax.provenance import record_config
 from relaff_jax.reproduce.folder import ReproduceError
 from relaff_jax.reproduce.stage import Run, Status
 
@@ -61,7 +62,7 @@ def generate_one(tree: Any, action: str, out: Any, seed: int, *, client: Any = N
     ``relaff generate`` and ``reproduce`` both run. ``factory(action, batch) -> (rollout_fn,
     config_dict, object_names)`` defaults to the simulation bound to ``tree``
     (``rollout_factory_for``); with ``client`` the workers build (and compile) it themselves,
-    once each. Returns ``data.generate_dataset``'s summary."""
+    once each. Returns ``data.generate_dataset``'s summary; writes ``out/relaff_config.json``."""
     factory = factory or rollout_factory_for(tree)
     batch = tree.dataset.rollout_batch
     fn, config_dict, names = factory(action, batch)
@@ -69,8 +70,10 @@ def generate_one(tree: Any, action: str, out: Any, seed: int, *, client: Any = N
         from relaff_jax.cluster import Remote
 
         fn = Remote(factory, action, batch, pick=0)
-    return D.generate_dataset(out, action, tree.dataset.n_samples, fn, seed, batch, config_dict, progress=progress,
-                              dataset_config=tree.dataset, object_names=names, client=client, window=window)
+    summary = D.generate_dataset(out, action, tree.dataset.n_samples, fn, seed, batch, config_dict, progress=progress,
+                                 dataset_config=tree.dataset, object_names=names, client=client, window=window)
+    record_config(out, tree, "generate")  # the tree that made the folder, as every stage's folder holds it
+    return summary
 
 
 def _one(run: Run, action: str, window: int | None) -> dict:
