@@ -331,8 +331,9 @@ def test_cli_report_takes_the_datasets(scene_run, tmp_path, capsys):
     assert cli.main(argv + ["--data", str(take), str(lift)]) == 0
     assert (out / "fig_datasets.png").stat().st_size > 0
     md = (out / "report.md").read_text()
-    for action in ("lift", "take"):  # the Datasets table: samples, rollouts
-        assert re.search(rf"^\| {action} \| \d+ \| \d+ \|", md, re.M), action
+    rows = [re.search(rf"^\| {action} \| \d+ \| \d+ \|", md, re.M) for action in ("lift", "take")]
+    assert all(rows)  # the Datasets table: samples, rollouts
+    assert rows[0].start() < rows[1].start()  # in the canonical order, whatever the order given
     without = tmp_path / "bare"
     assert cli.main(argv[:3] + [str(without)]) == 0
     assert not (without / "fig_datasets.png").exists()

@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from relaff_jax.cli import options
-from relaff_jax.constants import SPACES
+from relaff_jax.constants import ACTIONS, SPACES
 from relaff_jax.errors import UserError
 
 EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bootstrap factors and Table II."
@@ -54,6 +54,7 @@ def cmd_report(args: argparse.Namespace) -> int:
             if action in data_dirs:
                 raise UserError(f"--data: {data_dirs[action]} and {folder} are both {action} datasets; give one")
             data_dirs[action] = folder
+        data_dirs = {a: data_dirs[a] for a in ACTIONS if a in data_dirs}  # the tables' canonical order
     from relaff_jax import report
 
     # the same stage function reproduce runs
