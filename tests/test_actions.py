@@ -268,7 +268,7 @@ def test_move_and_take_rules_hand_worked():
     assert not label("move", [0.05, 0, 0], [0, 0, 0])  # below the 8 cm threshold
     assert label("take", [0, 0, 0.2], [0, 0, 0])
     assert not label("take", [0, 0, 0.2], [0, 0, 0.2])  # lifted with its container: not taken
-    with pytest.raises(ValueError, match="unknown move_rule 'sideways'"):
+    with pytest.raises(ValueError, match="action.move_rule must be apart or both, got 'sideways'"):  # the node refuses it
         label("move", [0.2, 0, 0], [0, 0, 0], move_rule="sideways")
 
 
