@@ -40,6 +40,13 @@ def parse_set(items: Iterable[str]) -> dict[str, Any]:
     return out
 
 
+def is_int(v: Any, lo: int) -> bool:
+    """``v`` is an integer (not a bool) >= ``lo``: the config nodes' checks of counts."""
+    import numbers
+
+    return isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= lo
+
+
 def _freeze(v: Any) -> Any:
     return tuple(_freeze(x) for x in v) if isinstance(v, list) else v
 

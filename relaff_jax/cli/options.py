@@ -35,15 +35,14 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
     ``--set`` of its key that disagree are an error, so what runs is what is recorded."""
     from relaff_jax.runconfig import check_tree, precheck, resolve
 
-    sets = parse_set(args.set or [])
-    aliased = {k: v for k, v in overrides_of(args, flags).items() if k not in sets}
-    overrides = {**parse_set(extra), **aliased, **sets}
+    overrides = {**parse_set(extra), **overrides_of(args, flags)}
     precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     try:
         return check_tree(resolve(base, overrides))  # the whole tree, before any stage starts
     except UserError as e:  # a value given by a flag: the message names the flag too
         msg = str(e)
-        named = [(k, flags[k][0]) for k in aliased if k not in sets and k in msg]
+        sets = parse_set(args.set or [])
+        named = [(k, flag) for k, (flag, v) in (flags or {}).items() if v is not None and k not in sets and k in msg]
         if not named:
             raise
         for key, flag in named:

@@ -17,6 +17,7 @@ import numpy as np
 if TYPE_CHECKING:
     from sklearn.ensemble import RandomForestClassifier
 
+from relaff_jax.config import is_int
 from relaff_jax.errors import UserError
 
 
@@ -42,8 +43,8 @@ def max_features_value(mf: str | None) -> str | int | float | None:
 
 def check_forest_node(cfg: ForestConfig) -> None:
     """What a ``ForestConfig`` can check without scikit-learn (run when one is made): the
-    engine, and the gini-only rule of the fast and compiled engines, refused here rather than in
-    a worker mid-sweep."""
+    engine, the gini-only rule of the fast and compiled engines (refused here rather than in a
+    worker mid-sweep), and scikit-learn's constraints on each parameter."""
     if cfg.engine not in ENGINES:
         raise UserError(f"experiment.forest.engine {cfg.engine!r}: expected one of {', '.join(ENGINES)}")
     if cfg.engine != "sklearn" and cfg.criterion != "gini":
@@ -53,28 +54,24 @@ def check_forest_node(cfg: ForestConfig) -> None:
         raise UserError("experiment.forest.max_samples needs experiment.forest.bootstrap=true")
     # scikit-learn's parameter constraints, without importing it (check_forest_config runs its own)
     for name in ("base_trees", "samples_per_extra_tree", "max_trees"):
-        if not _int_at_least(getattr(cfg, name), 1):
+        if not is_int(getattr(cfg, name), 1):
             raise UserError(f"experiment.forest.{name} must be an integer >= 1, got {getattr(cfg, name)!r}")
     if cfg.criterion not in ("gini", "entropy", "log_loss"):
         raise UserError(f"experiment.forest.criterion must be gini, entropy or log_loss, got {cfg.criterion!r}")
-    if cfg.max_depth is not None and not _int_at_least(cfg.max_depth, 1):
+    if cfg.max_depth is not None and not is_int(cfg.max_depth, 1):
         raise UserError(f"experiment.forest.max_depth must be an integer >= 1 or null, got {cfg.max_depth!r}")
     leaf = cfg.min_samples_leaf
-    if not (_int_at_least(leaf, 1) or (_real(leaf) and 0.0 < leaf < 1.0)):
+    if not (is_int(leaf, 1) or (_real(leaf) and 0.0 < leaf < 1.0)):
         raise UserError(f"experiment.forest.min_samples_leaf must be an integer >= 1 or a fraction in (0, 1), got {leaf!r}")
     mf = max_features_value(cfg.max_features)
-    if not (mf in ("sqrt", "log2", None) or _int_at_least(mf, 1) or (_real(mf) and 0.0 < mf <= 1.0)):
+    if not (mf in ("sqrt", "log2", None) or is_int(mf, 1) or (_real(mf) and 0.0 < mf <= 1.0)):
         raise UserError(f"experiment.forest.max_features must be sqrt, log2, null, an integer >= 1 or a fraction "
                         f"in (0, 1], got {cfg.max_features!r}")
     ms = cfg.max_samples
-    if not (ms is None or _int_at_least(ms, 1) or (_real(ms) and ms > 0.0)):
+    if not (ms is None or is_int(ms, 1) or (_real(ms) and ms > 0.0)):
         raise UserError(f"experiment.forest.max_samples must be null, an integer >= 1 or a float > 0, got {ms!r}")
     if not isinstance(cfg.bootstrap, bool):
         raise UserError(f"experiment.forest.bootstrap must be true or false, got {cfg.bootstrap!r}")
-
-
-def _int_at_least(v, lo: int) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, bool) and v >= lo
 
 
 def _real(v) -> bool:  # a float, not an int (scikit-learn's RealNotInt)

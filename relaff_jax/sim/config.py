@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 
+from relaff_jax.config import is_int
 from relaff_jax.errors import UserError
 
 
@@ -23,10 +24,6 @@ def _check(where: str, rules: dict) -> None:
     for name, (ok, must) in rules.items():
         if not ok:
             raise UserError(f"{where}.{name} must be {must}")
-
-
-def _int_pos(v) -> bool:
-    return isinstance(v, int) and not isinstance(v, bool) and v >= 1
 
 
 def _gap(g) -> bool:
@@ -78,10 +75,10 @@ class PhysicsConfig:
                             f"one of {', '.join(PALM_MODES)}")
         _check("action.phys", {
             "timestep": (self.timestep > 0, f"> 0, got {self.timestep}"),
-            "iterations": (_int_pos(self.iterations), f"an integer >= 1, got {self.iterations!r}"),
-            "ls_iterations": (_int_pos(self.ls_iterations), f"an integer >= 1, got {self.ls_iterations!r}"),
+            "iterations": (is_int(self.iterations, 1), f"an integer >= 1, got {self.iterations!r}"),
+            "ls_iterations": (is_int(self.ls_iterations, 1), f"an integer >= 1, got {self.ls_iterations!r}"),
             "solver": (self.solver in ("Newton", "CG"), f"Newton or CG (the solvers MJX has), got {self.solver!r}"),
-            "arm_max_geom_pairs": (self.arm_max_geom_pairs == -1 or _int_pos(self.arm_max_geom_pairs),
+            "arm_max_geom_pairs": (self.arm_max_geom_pairs == -1 or is_int(self.arm_max_geom_pairs, 1),
                                    f"-1 (all pairs) or an integer >= 1, got {self.arm_max_geom_pairs!r}")})
 
 
@@ -112,10 +109,10 @@ class SceneConfig:
             "near_gap": (_gap(self.near_gap), f"(lo, hi) with 0 <= lo < hi, got {self.near_gap}"),
             "between_gap": (_gap(self.between_gap), f"(lo, hi) with 0 <= lo < hi, got {self.between_gap}"),
             "drop_height": (self.drop_height >= 0, f">= 0, got {self.drop_height}"),
-            "settle_steps": (_int_pos(self.settle_steps), f"an integer >= 1, got {self.settle_steps!r}"),
+            "settle_steps": (is_int(self.settle_steps, 1), f"an integer >= 1, got {self.settle_steps!r}"),
             "rest_speed": (self.rest_speed > 0, f"> 0, got {self.rest_speed}"),
             "contact_dist": (self.contact_dist > 0, f"> 0, got {self.contact_dist}"),
-            "candidates": (_int_pos(self.candidates), f"an integer >= 1, got {self.candidates!r}")})
+            "candidates": (is_int(self.candidates, 1), f"an integer >= 1, got {self.candidates!r}")})
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,8 +140,8 @@ class ArmConfig:
         if self.ik_solver not in ("lbfgs", "lm"):  # kinematics.IK_SOLVERS
             raise UserError(f"action.arm.ik_solver={self.ik_solver!r}: one of lbfgs, lm")
         _check("action.arm", {
-            "ik_steps": (_int_pos(self.ik_steps), f"an integer >= 1, got {self.ik_steps!r}"),
-            "ik_lm_steps": (_int_pos(self.ik_lm_steps), f"an integer >= 1, got {self.ik_lm_steps!r}"),
+            "ik_steps": (is_int(self.ik_steps, 1), f"an integer >= 1, got {self.ik_steps!r}"),
+            "ik_lm_steps": (is_int(self.ik_lm_steps, 1), f"an integer >= 1, got {self.ik_lm_steps!r}"),
             "ik_pos_tol": (self.ik_pos_tol > 0, f"> 0, got {self.ik_pos_tol}"),
             "ik_ang_tol": (self.ik_ang_tol > 0, f"> 0, got {self.ik_ang_tol}"),
             "grip_open": (self.grip_closed <= self.grip_open <= 0.21,
