@@ -9,7 +9,7 @@ from relaff_jax import learn as E
 from relaff_jax import learn as L
 from relaff_jax.cli import learn as cli_learn
 from relaff_jax.config import override
-from relaff_jax.learn import sweep
+from relaff_jax.learn import folder, sweep
 from relaff_jax.provenance import derive_seed
 
 # Small forests keep the sweep tests fast; the paper's forest settings are tested in test_learning.
@@ -308,6 +308,32 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
     E.run_experiment(data3, tmp_path / "b", cfg, ["rhf"], seed=2, jobs=1, progress=False)
     assert E.is_complete(tmp_path / "b")
     assert E.load_results(tmp_path / "b")["meta"]["spaces"] == ["pca", "rhf"]
+
+
+def test_results_outcomes_are_the_blocks_bits(data3, tmp_path):
+    """The sweep holds the blocks' outcomes bit-packed (issue 26): results.npz's ``correct``
+    is what packing the whole bool array once gave (every block unpacked, zero-padded to
+    the most test scenes), from fresh blocks and from blocks read back on a resume."""
+    cfg = tiny_cfg(test_size=21, keep_outcomes=True)  # 20 scenes: a partial last byte
+    path = E.run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=5, jobs=1, progress=False)["pca"]
+    res = dict(np.load(path))
+    n_cond, sizes, chunk = E.layout(3, 3)["n"], list(cfg.sizes), cfg.sizes_per_block
+    n_test = res["n_test"]
+    whole = np.zeros(res["acc"].shape + (int(n_test.max()),), bool)
+    for ti, t in enumerate(ACTS3):
+        for r in range(cfg.reps_pca):
+            for ci in range(0, len(sizes), chunk):
+                got = E.read_block(folder.block(tmp_path / "a" / "pca", t, r, ci // chunk), n_cond, sizes[ci : ci + chunk])
+                whole[ti, :, ci : ci + chunk, r, : n_test[ti]] = got["correct"]
+    np.testing.assert_array_equal(res["correct"], np.packbits(whole, axis=-1))
+    assert res["correct"].shape[-1] == 3 and list(n_test) == [20, 20, 20]
+    ran = np.isfinite(res["acc"])
+    np.testing.assert_array_equal(whole.mean(-1)[ran], res["acc"][ran])
+    (tmp_path / "a" / "pca" / "results.npz").unlink()  # resumed from the block files alone
+    again = np.load(E.run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=5, jobs=1, progress=False)["pca"])
+    for k in res:
+        if k not in ("seconds", "seconds_prep", "new_fits"):
+            np.testing.assert_array_equal(again[k], res[k])
 
 
 def test_two_processes_give_the_same_bits_as_one(data3, tmp_path):

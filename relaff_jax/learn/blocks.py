@@ -145,29 +145,42 @@ def run_block_to_file(path: str, X, y, boot, plan, train_order, test_idx, sizes,
     """``block_outcomes``, saved atomically to ``path`` (a finished block; the per scene
     outcomes bit-packed, or left out (``correct: (C, S, 0)``) without ``keep_outcomes``), with
     ``acc_subset: (C, S, N_SUBSETS)``, the accuracy on each test subset (``subset: (T,)``
-    codes of the test scenes; None: all unknown), kept even when the outcomes are not."""
+    codes of the test scenes; None: all unknown), kept even when the outcomes are not.
+
+    Returns the block as saved (what ``read_block(..., packed=True)`` gives back): ``acc``,
+    ``loo``, ``acc_subset``, ``bits: (C, S, ceil(T / 8))`` uint8 the outcomes bit-packed along
+    the scenes (``np.packbits``) and ``n_test`` T (0 without ``keep_outcomes``): an eighth of
+    the unpacked outcomes to send back from a worker process and to hold in the sweep."""
     out = block_outcomes(X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys,
                          loo_size, loo_conditions)
     sub = np.full(len(test_idx), -1) if subset is None else np.asarray(subset)
-    out["acc_subset"] = np.where(np.isfinite(out["acc"])[..., None], subset_accuracy(out["correct"], sub), np.nan)
-    if not keep_outcomes:
-        out["correct"] = out["correct"][..., :0]
-    rio.atomic_save_npz(path, acc=out["acc"], loo=out["loo"], sizes=np.asarray(sizes), acc_subset=out["acc_subset"],
-                        correct=np.packbits(out["correct"], axis=-1), n_test=np.asarray(out["correct"].shape[-1]))
-    return out
+    acc_subset = np.where(np.isfinite(out["acc"])[..., None], subset_accuracy(out["correct"], sub), np.nan)
+    correct = out["correct"] if keep_outcomes else out["correct"][..., :0]
+    block = {"acc": out["acc"], "loo": out["loo"], "acc_subset": acc_subset, "bits": np.packbits(correct, axis=-1),
+             "n_test": int(correct.shape[-1])}
+    rio.atomic_save_npz(path, acc=block["acc"], loo=block["loo"], sizes=np.asarray(sizes), acc_subset=acc_subset,
+                        correct=block["bits"], n_test=np.asarray(block["n_test"]))
+    return block
 
 
-def read_block(path: Path, n_conditions: int, sizes: Sequence[int]) -> dict[str, np.ndarray] | None:
-    """A finished block (``acc``, ``correct``, ``loo`` as ``block_outcomes`` gives them), or
-    None if missing or unreadable (then it is recomputed)."""
+def read_block(path: Path, n_conditions: int, sizes: Sequence[int], packed: bool = False) -> dict[str, np.ndarray] | None:
+    """A finished block (``acc``, ``correct``, ``loo`` as ``block_outcomes`` gives them, and
+    ``acc_subset``), or None if missing or unreadable (then it is recomputed). ``packed``:
+    the outcomes as saved, ``bits`` and ``n_test`` instead of ``correct`` (what
+    ``run_block_to_file`` returns)."""
     if not path.exists():
         return None
     try:
         with np.load(path) as z:
             acc, s, loo, acc_subset = z["acc"], z["sizes"], z["loo"], z["acc_subset"]
-            correct = np.unpackbits(z["correct"], axis=-1, count=int(z["n_test"])).astype(bool)
+            bits, n_test = z["correct"], int(z["n_test"])
+            if bits.dtype != np.uint8 or bits.ndim != 3 or bits.shape[-1] != (n_test + 7) // 8:
+                return None
+            correct = None if packed else np.unpackbits(bits, axis=-1, count=n_test).astype(bool)
     except Exception:  # a corrupt file (or one of an older format) cannot be a finished block
         return None
-    if acc.shape != (n_conditions, len(sizes)) or list(s) != list(sizes) or correct.shape[:2] != acc.shape:
+    if acc.shape != (n_conditions, len(sizes)) or list(s) != list(sizes) or bits.shape[:2] != acc.shape:
         return None
+    if packed:
+        return {"acc": acc, "loo": loo, "acc_subset": acc_subset, "bits": bits, "n_test": n_test}
     return {"acc": acc, "correct": correct, "loo": loo, "acc_subset": acc_subset}

@@ -138,7 +138,9 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     tests = {t: draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), 0,
                          cfg.balanced_test, cfg.balanced_train)[0] for t in actions}
     n_test = np.asarray([len(tests[t]) if cfg.keep_outcomes else 0 for t in actions])
-    correct = np.zeros((a, n_cond, len(sizes), reps, int(n_test.max())), bool)
+    # the outcomes bit-packed along the scenes as the blocks give them (a target with fewer
+    # test scenes than the most is zero-padded: the bytes np.packbits gives the padded bools)
+    correct = np.zeros((a, n_cond, len(sizes), reps, (int(n_test.max()) + 7) // 8), np.uint8)
     subsets = {t: subset_codes(datasets[t], prep[f"target:{t}"][tests[t]]) for t in actions}
     acc_subset = np.full((a, n_cond, len(sizes), reps, len(SUBSETS)), np.nan)
     calls, weights, done_fits, total_fits = [], [], 0, 0
@@ -153,8 +155,8 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                 fits = block_fits(plans[ti], len(chunk), loo_n if loo_n in chunk else 0, loo_conds)
                 total_fits += fits
                 s0 = sizes.index(chunk[0])
-                got = read_block(path, n_cond, chunk)
-                if got is not None and got["correct"].shape[-1] == n_test[ti]:
+                got = read_block(path, n_cond, chunk, packed=True)
+                if got is not None and got["n_test"] == n_test[ti]:
                     _store(acc, correct, loo, acc_subset, got, ti, s0, len(chunk), r)
                     done_fits += fits
                     continue
@@ -199,7 +201,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
         subset_count=np.stack([np.bincount(subsets[t][subsets[t] >= 0], minlength=len(SUBSETS)) for t in actions]),
         corr_feasible=prep["corr_feasible"],
         corr_stacked=prep["corr_stacked"],
-        correct=np.packbits(correct, axis=-1),
+        correct=correct,
         n_test=n_test,
         seconds=np.asarray(time.perf_counter() - t0),
         seconds_prep=np.asarray(t_prep),
@@ -220,10 +222,11 @@ def subset_codes(ds: Mapping[str, Any], idx: np.ndarray) -> np.ndarray:
 
 
 def _store(acc, correct, loo, acc_subset, got, ti, s0, n, r) -> None:
-    """Put one block's outcomes (``blocks.block_outcomes``) into the space's arrays."""
+    """Put one block (``blocks.run_block_to_file``'s, or ``read_block(..., packed=True)``'s)
+    into the space's arrays; ``correct`` holds the outcomes bit-packed."""
     acc[ti, :, s0 : s0 + n, r] = got["acc"]
     acc_subset[ti, :, s0 : s0 + n, r] = got["acc_subset"]
-    k = got["correct"].shape[-1]
-    correct[ti, :, s0 : s0 + n, r, :k] = got["correct"]
+    k = got["bits"].shape[-1]
+    correct[ti, :, s0 : s0 + n, r, :k] = got["bits"]
     finite = np.isfinite(got["loo"])
     loo[ti, finite, r] = got["loo"][finite]
