@@ -116,6 +116,7 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
     nb = np.empty(F, np.int64)
     mf = np.empty(F, np.int64)
     xs, codes, classes, msls = [], [], [], set()
+    per_shape: dict[tuple[int, int], tuple] = {}  # (N, D) -> trees, max features, draws, settings
     for f, (X, y, s) in enumerate(zip(Xs, ys, seeds)):
         X = np.asarray(X, dtype=np.float32)
         y = np.asarray(y)
@@ -124,18 +125,20 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
         if not 0 <= int(s) < SEED_LIMIT:
             raise ValueError(f"fit_many: forest {f}: seed {s} is not in [0, 2**32)")
         n, d = X.shape
-        c, enc = np.unique(y, return_inverse=True)
+        c, enc = _bool_classes(y) if y.dtype == np.bool_ else np.unique(y, return_inverse=True)
         if len(c) > 2:
             raise ValueError(f"fit_many: forest {f}: {len(c)} classes, the compiled engine builds binary forests")
-        m = max_features_of(d, cfg)
-        if not 0 < m <= d:
-            raise ValueError("max_features must be in (0, n_features]")
-        ns[f], ds[f], ks[f], nt[f], mf[f] = n, d, len(c), n_trees(n, cfg), m
-        nb[f] = n_bootstrap(n, cfg) if cfg.bootstrap else n
+        shape = per_shape.get((n, d))
+        if shape is None:
+            m = max_features_of(d, cfg)
+            if not 0 < m <= d:
+                raise ValueError("max_features must be in (0, n_features]")
+            shape = per_shape[n, d] = (n_trees(n, cfg), m, n_bootstrap(n, cfg) if cfg.bootstrap else n, _settings(cfg, n))
+        ns[f], ds[f], ks[f], (nt[f], mf[f], nb[f], settings) = n, d, len(c), shape
         xs.append(X.T.ravel())  # features by row
         codes.append(enc.reshape(-1))
         classes.append(c)
-        msls.add(_settings(cfg, n))
+        msls.add(settings)
     if len(msls) > 1:
         raise ValueError("fit_many: forests of one call must resolve min_samples_leaf alike (call per size)")
     msl, min_split, max_depth = msls.pop()
@@ -153,6 +156,16 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
         out.append(Forest(feat[a:b], thr[a:b], left[a:b], right[a:b], value[a:b, : ks[f]], ts - a, classes[f], int(ds[f])))
         t0 += nt[f]
     return out
+
+
+def _bool_classes(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(y, return_inverse=True)`` of bool labels ``y: (N,)`` without sorting: the
+    distinct labels (bool, ascending) and each sample's class code (0/1; bool here, the
+    codes are cast to int64 with the others)."""
+    k = int(np.count_nonzero(y))
+    if 0 < k < len(y):
+        return np.array([False, True]), y
+    return np.array([k > 0]), np.zeros(len(y), bool)
 
 
 def fit(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig()) -> Forest:
