@@ -30,6 +30,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from relaff_jax.learn import halfrows
 from relaff_jax.learn.measures import _quiet
 
 
@@ -62,10 +63,17 @@ def target_blocks(correct, t: int):
         yield slice(None), np.asarray(correct[t])
 
 
+def fast_outcomes(correct) -> bool:
+    """Whether ``correct`` is an ``online.Outcomes`` of 0/1 outcomes, which ``halfrows`` reads
+    half by half without the float copies of its blocks (anything else takes the reference path)."""
+    return hasattr(correct, "half_parts") and np.dtype(getattr(correct.correct, "dtype", None)) == bool
+
+
 def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, resamples: int, seed: int,
-                    halves: np.ndarray | None = None) -> np.ndarray:
+                    halves: np.ndarray | None = None, reference: bool = False) -> np.ndarray:
     """``(B, 2, A, C', S)`` float64 mean accuracy curves of each test half in ``resamples``
-    bootstrap resamples (both entries the whole test set without outcomes)."""
+    bootstrap resamples (both entries the whole test set without outcomes). ``reference``:
+    the float copy of every block (the fast path, ``halfrows``, is checked against it)."""
     acc = np.asarray(acc, dtype=np.float64)
     a, c, s, r = acc.shape
     rng = np.random.default_rng(seed)
@@ -87,6 +95,12 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
                     out[:, h, t] = np.nan
                     continue
                 draws.append((h, idx, rng.multinomial(m, np.full(m, 1.0 / m), size=resamples) / m))
+            if not reference and fast_outcomes(correct):
+                for sl in correct.size_blocks():  # the reference's blocks: the same matmul shapes
+                    parts = correct.half_parts(t, sl, [idx for _, idx, _ in draws])
+                    for (h, _, w), (bits, on) in zip(draws, parts):
+                        out[:, h, t, :, sl] = halfrows.resampled(bits, on, w, v)
+                continue
             for sl, blk in target_blocks(correct, t):
                 blk = np.asarray(blk, dtype=np.float64)  # (C', s, R, N)
                 for h, idx, w in draws:

@@ -70,3 +70,38 @@ def synthetic_datasets(
             "action": action,
         }
     return out
+
+
+def synthetic_outcomes(a: int, sizes: int, reps: int, n_test: Sequence[int], seed: int = 0,
+                       n_thresholds: int = 3, not_run: Sequence[str] = ()) -> dict:
+    """Paper-shaped outcomes of one space, for the report's resampling paths (tests, benchmarks):
+    ``acc (A, C, S, R)``, ``correct (A, C, S, R, N)`` bool (N = max ``n_test``, padding False),
+    ``loo (A, C, R)`` in tenths (a target of ``n_test`` 0 keeps no outcomes, only accuracies) (ties are common, as with ten samples) and ``n_test (A,)``.
+    As in a sweep: a target's own DB1 and the categories built from it do not run, nor the
+    families in ``not_run`` (RHF: DBn, CB1, CBn); conditions that did not run have NaN
+    accuracies and leave-one-out and all-False outcomes. Not a simulation."""
+    from relaff_jax.learn.correlation import category_pairs  # noqa: PLC0415
+    from relaff_jax.learn.protocol import layout  # noqa: PLC0415
+
+    lay = layout(a, n_thresholds)
+    c, n = lay["n"], max(int(k) for k in n_test)
+    rng = np.random.default_rng(seed)
+    skill = rng.uniform(0.5, 0.9, (a, c, sizes, reps, 1))  # each learner's accuracy
+    correct = rng.random((a, c, sizes, reps, n)) < skill
+    ran = np.ones((a, c), bool)
+    pairs = np.asarray(category_pairs(range(a))).reshape(-1, 2)
+    for t in range(a):
+        ran[t, lay["DB1"][t]] = False
+        ran[t, lay["CB1"][(pairs == t).any(1)]] = False
+        correct[t, ..., int(n_test[t]):] = False
+    for fam in not_run:
+        ran[:, lay[fam]] = False
+    correct &= ran[:, :, None, None, None]
+    if "CBn" not in not_run:
+        correct[0, lay["CBn"][-1]] = correct[0, 0]  # a CBn with no category left is NB's learner
+    nt = np.asarray(n_test, float)[:, None, None, None]
+    with np.errstate(invalid="ignore"):  # a target without outcomes keeps its learners' accuracies
+        acc = np.where(nt > 0, correct.sum(-1) / nt, skill[..., 0])
+    acc = np.where(ran[:, :, None, None], acc, np.nan)
+    loo = np.where(ran[:, :, None], rng.integers(5, 11, (a, c, reps)) / 10.0, np.nan)
+    return {"acc": acc, "correct": correct, "loo": loo, "n_test": np.asarray(n_test, int), "lay": lay}
