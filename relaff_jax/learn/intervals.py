@@ -84,6 +84,7 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
     n_max = np.shape(correct)[-1]
     if halves is None:
         halves = scene_halves(n_test, None, n_max)
+    work: dict = {}  # the fast path's arrays, reused across blocks
     for t in range(a):
         n = int(n_test[t]) if n_max else 0
         if n > 0:
@@ -99,7 +100,7 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
                 for sl in correct.size_blocks():  # the reference's blocks: the same matmul shapes
                     parts = correct.half_parts(t, sl, [idx for _, idx, _ in draws])
                     for (h, _, w), (bits, on) in zip(draws, parts):
-                        out[:, h, t, :, sl] = halfrows.resampled(bits, on, w, v)
+                        out[:, h, t, :, sl] = halfrows.resampled(bits, on, w, v, work)
                 continue
             for sl, blk in target_blocks(correct, t):
                 blk = np.asarray(blk, dtype=np.float64)  # (C', s, R, N)
