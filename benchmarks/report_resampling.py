@@ -35,10 +35,9 @@ RHF_NOT_RUN = ("DBn", "CB1", "CBn")  # the paper's RHF runs NB and DB1 only
 
 def one_target(reps: int, sizes: int, not_run: tuple[str, ...], seed: int = 0):
     """``acc_x``, the ``Outcomes`` over packed bits, ``n_test`` and ``halves`` of target 0."""
-    d = synthetic_outcomes(TARGETS, sizes, reps, np.full(TARGETS, N_TEST), seed=seed, not_run=not_run)
-    sl = slice(0, 1)
-    corr = PackedBits(np.packbits(d["correct"][sl], axis=-1), N_TEST)
-    acc_x, out, _ = extend(d["acc"][sl], corr, d["loo"][sl], d["lay"])
+    d = synthetic_outcomes(TARGETS, sizes, reps, np.full(TARGETS, N_TEST), seed=seed, not_run=not_run, targets=[0])
+    corr = PackedBits(np.packbits(d.pop("correct"), axis=-1), N_TEST)
+    acc_x, out, _ = extend(d["acc"], corr, d["loo"], d["lay"])
     n_test = np.array([N_TEST])
     return acc_x, out, n_test, scene_halves(n_test, n_test // 2, N_TEST)
 

@@ -59,10 +59,9 @@ def test_paper_shaped_target_same_bits(reps, not_run):
     # reference's one matmul per block and half has (C + 2) s R rows: 2600 s, 1300 s (whose
     # BLAS row partition puts rows in OpenBLAS's one-row edge kernel) and 364 s
     n_test = np.array([4000])
-    d = synthetic_outcomes(9, 3, reps, np.full(9, 4000), seed=reps, not_run=not_run)
-    sl = slice(0, 1)
-    corr = PackedBits(np.packbits(d["correct"][sl], axis=-1), 4000)
-    acc_x, out, w = extend(d["acc"][sl], corr, d["loo"][sl], d["lay"])
+    d = synthetic_outcomes(9, 3, reps, np.full(9, 4000), seed=reps, not_run=not_run, targets=[0])
+    corr = PackedBits(np.packbits(d["correct"], axis=-1), 4000)
+    acc_x, out, w = extend(d["acc"], corr, d["loo"], d["lay"])
     block = 4 * 52 * reps * 4000  # bytes of one size
     _check(acc_x, out, n_test, [block, 2 * block, 1e12], resamples=200)
 
