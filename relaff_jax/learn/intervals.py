@@ -18,6 +18,9 @@ float64 (``whole`` averages them back into the whole test set's):
   "halves" are the whole test set, and the interval leaves out the test set's own sampling
   error (at 4000 test scenes, a standard error of about 0.008 in accuracy).
 
+With outcomes as ``online.Outcomes`` of 0/1 outcomes, each block's half is read from the bits
+(``halfrows``); ``reference=True`` takes the float copy of every block, the same bits.
+
 Everything is float64: a resampled NB mean exactly at chance stays exactly at chance (float32
 put it 6e-8 above, and its bootstrap factor near 1e6). Conditions that did not run stay NaN.
 ``bc_interval`` turns B values of a statistic ``(B, ...)`` and its estimate into the
