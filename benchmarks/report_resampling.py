@@ -52,7 +52,8 @@ def measure(reps: int, sizes: int, resamples: int, not_run: tuple[str, ...]) -> 
     acc_x, out, n_test, halves = one_target(reps, sizes, not_run)
     row = {}
     for name, f in (("half_curves", lambda ref: half_curves(acc_x, out, halves, reference=ref)),
-                    ("resampled_means", lambda ref: resampled_means(acc_x, out, n_test, resamples, 7, halves, reference=ref))):
+                    ("resampled_means",
+                     lambda ref: resampled_means(acc_x, out, n_test, resamples, 7, halves, reference=ref))):
         t_ref, a = timed(lambda: f(True))
         t_new, b = timed(lambda: f(False))
         row[name] = (t_ref, t_new, bool(np.array_equal(a, b, equal_nan=True)))

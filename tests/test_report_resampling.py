@@ -71,7 +71,8 @@ def test_sparse_mix_same_bits_as_mix():
     x = rng.random((1, 9, 4, 30, 57)) < 0.5
     loo = rng.integers(0, 4, (1, 9, 30)) / 10.0  # many ties, up to all nine
     loo[0, :, 3] = np.nan  # no candidate: 0 after nan_to_num
-    w = online_weights(np.concatenate([np.full((1, 1, 30), np.nan), loo], 1), {"DB1": np.arange(1, 10), "CB1": np.arange(1, 10)})
+    lay = {"DB1": np.arange(1, 10), "CB1": np.arange(1, 10)}
+    w = online_weights(np.concatenate([np.full((1, 1, 30), np.nan), loo], 1), lay)
     ref = np.nan_to_num(_mix(x, np.arange(9), w["DB1"]))[0]
     np.testing.assert_array_equal(_mix_sparse(x[0], w["DB1"][0]), ref)
     assert (w["DB1"][0] > 0).sum(0).max() >= 3

@@ -88,7 +88,8 @@ def _get(res: Mapping[str, Any], key: str, default: Any) -> Any:
     return res[key] if key in res.keys() else default
 
 
-def half_curves(acc_x: np.ndarray, corr_x: np.ndarray, halves: np.ndarray, reference: bool = False) -> np.ndarray | None:
+def half_curves(acc_x: np.ndarray, corr_x: np.ndarray, halves: np.ndarray,
+                reference: bool = False) -> np.ndarray | None:
     """``(2, A, C', S)`` mean accuracy on each half of every test set (None without outcomes).
     ``reference``: the float copy of every block (the fast path, ``halfrows``, is checked against it)."""
     if not corr_x.shape[-1]:

@@ -10,8 +10,9 @@ random choice; with ten samples the accuracy moves in steps of 0.1, so ties are 
 weighted mix of the candidates' accuracies and test outcomes, ``(A, C + 2, S, R)`` and
 ``(A, C + 2, S, R, N)`` float, so that every later step (means, intervals, Table II) treats
 them like conditions (``Outcomes.half_parts``: one half of a block as the report's
-resampling reads it, ``halfrows``). The choice never looks at a test scene, unlike the paper's (offline)
-"best after ten", which picks the candidate with the highest mean test accuracy at n = 10.
+resampling reads it, ``halfrows``). The choice never looks at a test scene, unlike the
+paper's (offline) "best after ten", which picks the candidate with the highest mean test
+accuracy at n = 10.
 """
 from __future__ import annotations
 

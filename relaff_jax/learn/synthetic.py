@@ -73,7 +73,8 @@ def synthetic_datasets(
 
 
 def synthetic_outcomes(a: int, sizes: int, reps: int, n_test: Sequence[int], seed: int = 0,
-                       n_thresholds: int = 3, not_run: Sequence[str] = (), targets: Sequence[int] | None = None) -> dict:
+                       n_thresholds: int = 3, not_run: Sequence[str] = (),
+                       targets: Sequence[int] | None = None) -> dict:
     """Paper-shaped outcomes of one space, for the report's resampling paths (tests, benchmarks):
     ``acc (A', C, S, R)``, ``correct (A', C, S, R, N)`` bool (N = max ``n_test``, padding False),
     ``loo (A', C, R)`` in tenths (ties are common, as with ten samples) and ``n_test (A',)``
