@@ -76,3 +76,19 @@ def test_sparse_mix_same_bits_as_mix():
     ref = np.nan_to_num(_mix(x, np.arange(9), w["DB1"]))[0]
     np.testing.assert_array_equal(_mix_sparse(x[0], w["DB1"][0]), ref)
     assert (w["DB1"][0] > 0).sum(0).max() >= 3
+
+
+@pytest.mark.parametrize("m", [2000, 57])
+def test_products_of_the_needed_rows_same_bits_as_one_call(m):
+    # row counts whose one call computes some rows apart (OpenBLAS's one-row edge kernel:
+    # 1300, 3900, 1301, 7) and some without (2600 s R with R = 50, 15600)
+    from relaff_jax.learn.halfrows import products
+
+    rng = np.random.default_rng(m)
+    w = rng.multinomial(m, np.full(m, 1 / m), size=1000) / m
+    for rows in (1300, 3900, 1301, 7, 7800, 15600):
+        x = (rng.random((rows, m)) < 0.6).astype(float)
+        x[rng.random(rows) < 0.1] = (rng.integers(0, 4, m) / 3).astype(np.float32)  # tied online mixes
+        needed = rng.random(rows) < 0.25
+        x[~needed] = 0.0
+        np.testing.assert_array_equal(products(x, w, needed), x @ w.T)
