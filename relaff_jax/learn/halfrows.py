@@ -95,6 +95,15 @@ def products(x: np.ndarray, w: np.ndarray, needed: np.ndarray, work: dict | None
     return out
 
 
+def _threads() -> tuple:
+    """The BLAS libraries' thread counts: the row split, hence the probed kinds, depend on them."""
+    try:
+        from threadpoolctl import threadpool_info  # noqa: PLC0415 (scikit-learn's dependency)
+    except ImportError:
+        return ()
+    return tuple(i.get("num_threads") for i in threadpool_info() if i.get("user_api") == "blas")
+
+
 def _probe(rows: int, w: np.ndarray) -> np.ndarray:
     """``(rows, B)``: one fixed 0/1 row repeated ``rows`` times, times ``w.T`` in one call."""
     row = np.random.default_rng(0).random(w.shape[1]) < 0.5
@@ -104,7 +113,7 @@ def _probe(rows: int, w: np.ndarray) -> np.ndarray:
 def _kinds(rows: int, w: np.ndarray):
     """For a call of ``rows`` rows against ``w``: ``(apart (rows,) bool, small, at)`` (the rows
     computed apart, and a call of ``small`` rows computing its row ``at`` the same way), or None."""
-    key = ("kinds", rows) + w.shape
+    key = ("kinds", rows, _threads()) + w.shape
     if key not in _KINDS:
         p = _probe(rows, w)
         common = _probe(8, w)
@@ -127,7 +136,7 @@ def _kinds(rows: int, w: np.ndarray):
 def _clean_rows(n: int, w: np.ndarray) -> int | None:
     """The rows (``>= n``, a multiple of ``_CLEAN``) of a call that computes none apart, or None."""
     for rows in range(max(_CLEAN, -(-n // _CLEAN) * _CLEAN), -(-n // _CLEAN) * _CLEAN + 4 * _CLEAN, _CLEAN):
-        key = ("clean", rows) + w.shape
+        key = ("clean", rows, _threads()) + w.shape
         if key not in _KINDS:
             k = _kinds(rows, w)
             _KINDS[key] = k is not None and not k[0].any()
