@@ -19,7 +19,9 @@ import numpy as np
 
 from relaff_jax.learn.config import ORACLE, TABLE2_ROWS, ExperimentConfig
 from relaff_jax.learn.correlation import categories_above, category_pairs
-from relaff_jax.learn.intervals import bc_interval, half_sizes, resampled_means, scene_halves, target_blocks, whole
+from relaff_jax.learn import halfrows
+from relaff_jax.learn.intervals import (bc_interval, fast_outcomes, half_sizes, resampled_means, scene_halves,
+                                         target_blocks, whole)
 from relaff_jax.learn.measures import (
     _quiet,
     bootstrap_factor,
@@ -86,13 +88,22 @@ def _get(res: Mapping[str, Any], key: str, default: Any) -> Any:
     return res[key] if key in res.keys() else default
 
 
-def half_curves(acc_x: np.ndarray, corr_x: np.ndarray, halves: np.ndarray) -> np.ndarray | None:
-    """``(2, A, C', S)`` mean accuracy on each half of every test set (None without outcomes)."""
+def half_curves(acc_x: np.ndarray, corr_x: np.ndarray, halves: np.ndarray,
+                reference: bool = False) -> np.ndarray | None:
+    """``(2, A, C', S)`` mean accuracy on each half of every test set (None without outcomes).
+    ``reference``: the float copy of every block (the fast path, ``halfrows``, is checked against it)."""
     if not corr_x.shape[-1]:
         return None
     a = acc_x.shape[0]
     ran = np.isfinite(acc_x).any(-1)
     out = np.full((2, a) + tuple(corr_x.shape[1:3]), np.nan)  # (2, A, C', S)
+    if not reference and fast_outcomes(corr_x):
+        for t in range(a):
+            cols = [np.flatnonzero(halves[t] == h) for h in range(2)]
+            for sl in corr_x.size_blocks():
+                for h, (bits, on) in enumerate(corr_x.half_parts(t, sl, cols)):
+                    out[h, t, :, sl] = halfrows.row_means(bits, on).mean(-1)
+        return np.where(ran[None], out, np.nan)
     for t in range(a):
         for sl, blk in target_blocks(corr_x, t):
             for h in range(2):

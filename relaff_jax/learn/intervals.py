@@ -18,6 +18,9 @@ float64 (``whole`` averages them back into the whole test set's):
   "halves" are the whole test set, and the interval leaves out the test set's own sampling
   error (at 4000 test scenes, a standard error of about 0.008 in accuracy).
 
+With outcomes as ``online.Outcomes`` of 0/1 outcomes, each block's half is read from the bits
+(``halfrows``); ``reference=True`` takes the float copy of every block, the same bits.
+
 Everything is float64: a resampled NB mean exactly at chance stays exactly at chance (float32
 put it 6e-8 above, and its bootstrap factor near 1e6). Conditions that did not run stay NaN.
 ``bc_interval`` turns B values of a statistic ``(B, ...)`` and its estimate into the
@@ -30,6 +33,7 @@ from statistics import NormalDist
 
 import numpy as np
 
+from relaff_jax.learn import halfrows
 from relaff_jax.learn.measures import _quiet
 
 
@@ -62,10 +66,17 @@ def target_blocks(correct, t: int):
         yield slice(None), np.asarray(correct[t])
 
 
+def fast_outcomes(correct) -> bool:
+    """Whether ``correct`` is an ``online.Outcomes`` of 0/1 outcomes, which ``halfrows`` reads
+    half by half without the float copies of its blocks (anything else takes the reference path)."""
+    return hasattr(correct, "half_parts") and np.dtype(getattr(correct.correct, "dtype", None)) == bool
+
+
 def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, resamples: int, seed: int,
-                    halves: np.ndarray | None = None) -> np.ndarray:
+                    halves: np.ndarray | None = None, reference: bool = False) -> np.ndarray:
     """``(B, 2, A, C', S)`` float64 mean accuracy curves of each test half in ``resamples``
-    bootstrap resamples (both entries the whole test set without outcomes)."""
+    bootstrap resamples (both entries the whole test set without outcomes). ``reference``:
+    the float copy of every block (the fast path, ``halfrows``, is checked against it)."""
     acc = np.asarray(acc, dtype=np.float64)
     a, c, s, r = acc.shape
     rng = np.random.default_rng(seed)
@@ -76,6 +87,7 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
     n_max = np.shape(correct)[-1]
     if halves is None:
         halves = scene_halves(n_test, None, n_max)
+    work: dict = {}  # the fast path's arrays, reused across blocks
     for t in range(a):
         n = int(n_test[t]) if n_max else 0
         if n > 0:
@@ -87,6 +99,12 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
                     out[:, h, t] = np.nan
                     continue
                 draws.append((h, idx, rng.multinomial(m, np.full(m, 1.0 / m), size=resamples) / m))
+            if not reference and fast_outcomes(correct):
+                for sl in correct.size_blocks():  # the reference's blocks: the same matmul shapes
+                    parts = correct.half_parts(t, sl, [idx for _, idx, _ in draws])
+                    for (h, _, w), (bits, on) in zip(draws, parts):
+                        out[:, h, t, :, sl] = halfrows.resampled(bits, on, w, v, work)
+                continue
             for sl, blk in target_blocks(correct, t):
                 blk = np.asarray(blk, dtype=np.float64)  # (C', s, R, N)
                 for h, idx, w in draws:

@@ -9,8 +9,10 @@ random choice; with ten samples the accuracy moves in steps of 0.1, so ties are 
 ``extend`` appends the two chosen learners (DB1, CB1) to the condition axis as the
 weighted mix of the candidates' accuracies and test outcomes, ``(A, C + 2, S, R)`` and
 ``(A, C + 2, S, R, N)`` float, so that every later step (means, intervals, Table II) treats
-them like conditions. The choice never looks at a test scene, unlike the paper's (offline)
-"best after ten", which picks the candidate with the highest mean test accuracy at n = 10.
+them like conditions (``Outcomes.half_parts``: one half of a block as the report's
+resampling reads it, ``halfrows``). The choice never looks at a test scene, unlike the
+paper's (offline) "best after ten", which picks the candidate with the highest mean test
+accuracy at n = 10.
 """
 from __future__ import annotations
 
@@ -39,6 +41,22 @@ def _mix(x: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.where(ok, out, np.nan)
 
 
+def _mix_sparse(x: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """``_mix`` of one target, nonzero weights only: candidates' outcomes ``x (K, s, R, m)``
+    (0/1, any dtype), ``w (K, R)`` -> ``(s, R, m)`` float64, 0 where no candidate has weight
+    (``_mix`` then ``nan_to_num``). The same bits: ``_mix`` adds the K products in order and
+    the skipped ones are +0.0, which leave a sum of nonnegative terms unchanged."""
+    out = np.zeros((x.shape[1], x.shape[2], x.shape[3]), np.float64)
+    for r in range(w.shape[1]):
+        ks = np.flatnonzero(w[:, r])  # increasing: _mix's order
+        if len(ks):
+            acc = x[ks[0], :, r] * w[ks[0], r]
+            for k in ks[1:]:
+                acc = acc + x[k, :, r] * w[k, r]
+            out[:, r] = acc
+    return out
+
+
 def extend(acc: np.ndarray, correct: np.ndarray, loo: np.ndarray, lay: Mapping) -> tuple[np.ndarray, "Outcomes", dict]:
     """``acc (A, C + 2, S, R)`` with the online learners appended (NaN where a family did not
     run), their outcomes as ``Outcomes`` (``(A, C + 2, S, R, N)`` float32, made one target and
@@ -64,6 +82,20 @@ class Outcomes:
         corr = np.asarray(self.correct[t : t + 1, :, sizes])  # (1, C, s, R, N)
         on = np.stack([np.nan_to_num(_mix(corr, self.lay[f], self.w[f][t : t + 1])) for f in FAMILIES], 1)
         return np.concatenate([corr.astype(np.float32), on.astype(np.float32)], 1)[0]
+
+    def half_parts(self, t: int, sizes: slice, cols: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Per test-scene index set ``cols[h] (m_h,)``: the conditions' outcomes ``(C, s, R, m_h)``
+        bool and the online learners' ``(2, s, R, m_h)`` float64, the same values as
+        ``block(t, sizes)[..., cols[h]]`` (the online ones through float32, as ``block``)
+        without the float copies of the whole block; the mix only over the chosen candidates
+        (``_mix_sparse``) and the scenes of the half."""
+        corr = np.asarray(self.correct[t : t + 1, :, sizes])[0]  # (C, s, R, N) bool, unpacked once
+        out = []
+        for idx in cols:
+            x = corr[..., idx].astype(bool, copy=False)
+            on = np.stack([_mix_sparse(x[self.lay[f]], self.w[f][t]) for f in FAMILIES])
+            out.append((x, on.astype(np.float32).astype(np.float64)))
+        return out
 
     def size_blocks(self) -> list[slice]:
         """Slices of the size axis whose float32 block of one target stays under ``budget`` bytes."""

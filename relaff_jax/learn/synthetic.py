@@ -70,3 +70,45 @@ def synthetic_datasets(
             "action": action,
         }
     return out
+
+
+def synthetic_outcomes(a: int, sizes: int, reps: int, n_test: Sequence[int], seed: int = 0,
+                       n_thresholds: int = 3, not_run: Sequence[str] = (),
+                       targets: Sequence[int] | None = None) -> dict:
+    """Paper-shaped outcomes of one space, for the report's resampling paths (tests, benchmarks):
+    ``acc (A', C, S, R)``, ``correct (A', C, S, R, N)`` bool (N = max ``n_test``, padding False),
+    ``loo (A', C, R)`` in tenths (ties are common, as with ten samples) and ``n_test (A',)``
+    over ``targets`` (A' of the A actions; default all; a paper-sized target's outcomes take
+    1 GB). As in a sweep: a target's own DB1 and the categories built from it do not run, nor
+    the families in ``not_run`` (RHF: DBn, CB1, CBn); conditions that did not run have NaN
+    accuracies and leave-one-out and all-False outcomes; a target of ``n_test`` 0 keeps no
+    outcomes, only accuracies. Not a simulation."""
+    from relaff_jax.learn.correlation import category_pairs  # noqa: PLC0415
+    from relaff_jax.learn.protocol import layout  # noqa: PLC0415
+
+    lay = layout(a, n_thresholds)
+    targets = list(range(a)) if targets is None else [int(t) for t in targets]
+    n_test = np.asarray(n_test, int)[targets]
+    c, n = lay["n"], max(int(k) for k in n_test)
+    rng = np.random.default_rng(seed)
+    pairs = np.asarray(category_pairs(range(a))).reshape(-1, 2)
+    ran = np.ones((len(targets), c), bool)
+    for j, t in enumerate(targets):
+        ran[j, lay["DB1"][t]] = False
+        ran[j, lay["CB1"][(pairs == t).any(1)]] = False
+    for fam in not_run:
+        ran[:, lay[fam]] = False
+    skill = rng.uniform(0.5, 0.9, (len(targets), c, sizes, reps))  # each learner's accuracy
+    correct = np.zeros((len(targets), c, sizes, reps, n), bool)
+    for j in range(len(targets)):
+        for si in range(sizes):  # a size at a time: the uniform draws are 8x the outcomes
+            correct[j, :, si, :, : n_test[j]] = rng.random((c, reps, n_test[j])) < skill[j, :, si, :, None]
+    correct &= ran[:, :, None, None, None]
+    if "CBn" not in not_run:
+        correct[0, lay["CBn"][-1]] = correct[0, 0]  # a CBn with no category left is NB's learner
+    nt = n_test.astype(float)[:, None, None, None]
+    with np.errstate(invalid="ignore"):
+        acc = np.where(nt > 0, correct.sum(-1) / nt, skill)
+    acc = np.where(ran[:, :, None, None], acc, np.nan)
+    loo = np.where(ran[:, :, None], rng.integers(5, 11, (len(targets), c, reps)) / 10.0, np.nan)
+    return {"acc": acc, "correct": correct, "loo": loo, "n_test": n_test, "lay": lay}

@@ -1,0 +1,94 @@
+"""The report's fast resampling paths (learn/halfrows: the outcomes read half by half from
+their bits, the online learners mixed over their chosen candidates only) give the bits of the
+reference paths (``reference=True``: the float copy of every block) on paper-shaped outcomes:
+ties in the online weights, conditions that did not run, a family that did not run for a
+target, a target without outcomes, a test set of one scene, several block budgets."""
+import numpy as np
+import pytest
+
+from relaff_jax.learn.analysis import half_curves
+from relaff_jax.learn.intervals import resampled_means, scene_halves
+from relaff_jax.learn.online import FAMILIES, _mix, _mix_sparse, extend, online_weights
+from relaff_jax.learn.results import PackedBits
+from relaff_jax.learn.synthetic import synthetic_outcomes
+
+
+def _case(a, sizes, reps, n_test, seed, packed, not_run=()):
+    d = synthetic_outcomes(a, sizes, reps, n_test, seed=seed, not_run=not_run)
+    if a > 2:  # a family that did not run for one target: its online learner is NaN there
+        d["loo"][1, d["lay"]["CB1"]] = np.nan
+        d["acc"][1, d["lay"]["CB1"]] = np.nan
+        d["correct"][1, d["lay"]["CB1"]] = False
+    corr = d["correct"]
+    if packed:
+        corr = PackedBits(np.packbits(corr, axis=-1), corr.shape[-1])
+    acc_x, out, w = extend(d["acc"], corr, d["loo"], d["lay"])
+    return d, acc_x, out, w
+
+
+def _check(acc_x, out, n_test, budgets, resamples=40, seed=5):
+    halves = scene_halves(n_test, n_test // 2, out.shape[-1])
+    for budget in budgets:
+        out.budget = budget
+        hc = half_curves(acc_x, out, halves)
+        np.testing.assert_array_equal(hc, half_curves(acc_x, out, halves, reference=True))
+        got = resampled_means(acc_x, out, n_test, resamples, seed, halves)
+        ref = resampled_means(acc_x, out, n_test, resamples, seed, halves, reference=True)
+        np.testing.assert_array_equal(got, ref)
+    return hc, got
+
+
+@pytest.mark.parametrize("packed", [False, True])
+def test_small_targets_same_bits(packed):
+    # a 31-scene and a 30-scene test set, one of one scene (its other half empty), one without outcomes
+    n_test = np.array([31, 30, 1, 0])
+    d, acc_x, out, w = _case(4, 7, 5, n_test, 3, packed)
+    assert any((w[f] > 0).sum(1).max() > 1 for f in FAMILIES)  # tied online choices
+    c1 = 4 * 52 * 5 * 31  # bytes of one size of one target's float32 block
+    hc, got = _check(acc_x, out, n_test, [1, 3 * c1, 1e12])
+    assert np.isnan(got[:, 1, 2]).all() and np.isnan(hc[1, 2]).all()  # the one-scene test set's empty half
+    assert np.isnan(hc[:, 3]).all()  # the target without outcomes has no half curves ...
+    assert np.isfinite(got[:, :, 3, 0]).all()  # ... its resampled means resample the repetitions only
+    assert np.isnan(got[:, :, 1, -1]).all()  # CB1 online did not run for target 1
+    assert np.isnan(got[:, :, 0, d["lay"]["DB1"][0]]).all()  # a target's own DB1 never runs
+
+
+@pytest.mark.parametrize("reps,not_run", [(50, ()), (25, ("DBn", "CB1", "CBn")), (7, ())])
+def test_paper_shaped_target_same_bits(reps, not_run):
+    # nine actions (52 conditions with the online learners), a 4000-scene test set; the
+    # reference's one matmul per block and half has (C + 2) s R rows: 2600 s, 1300 s (whose
+    # BLAS row partition puts rows in OpenBLAS's one-row edge kernel) and 364 s
+    n_test = np.array([4000])
+    d = synthetic_outcomes(9, 3, reps, np.full(9, 4000), seed=reps, not_run=not_run, targets=[0])
+    corr = PackedBits(np.packbits(d["correct"], axis=-1), 4000)
+    acc_x, out, w = extend(d["acc"], corr, d["loo"], d["lay"])
+    block = 4 * 52 * reps * 4000  # bytes of one size
+    _check(acc_x, out, n_test, [block, 2 * block, 1e12], resamples=200)
+
+
+def test_sparse_mix_same_bits_as_mix():
+    rng = np.random.default_rng(0)
+    x = rng.random((1, 9, 4, 30, 57)) < 0.5
+    loo = rng.integers(0, 4, (1, 9, 30)) / 10.0  # many ties, up to all nine
+    loo[0, :, 3] = np.nan  # no candidate: 0 after nan_to_num
+    lay = {"DB1": np.arange(1, 10), "CB1": np.arange(1, 10)}
+    w = online_weights(np.concatenate([np.full((1, 1, 30), np.nan), loo], 1), lay)
+    ref = np.nan_to_num(_mix(x, np.arange(9), w["DB1"]))[0]
+    np.testing.assert_array_equal(_mix_sparse(x[0], w["DB1"][0]), ref)
+    assert (w["DB1"][0] > 0).sum(0).max() >= 3
+
+
+@pytest.mark.parametrize("m", [2000, 57])
+def test_products_of_the_needed_rows_same_bits_as_one_call(m):
+    # row counts whose one call computes some rows apart (OpenBLAS's one-row edge kernel:
+    # 1300, 3900, 1301, 7) and some without (2600 s R with R = 50, 15600)
+    from relaff_jax.learn.halfrows import products
+
+    rng = np.random.default_rng(m)
+    w = rng.multinomial(m, np.full(m, 1 / m), size=1000) / m
+    for rows in (1300, 3900, 1301, 7, 7800, 15600):
+        x = (rng.random((rows, m)) < 0.6).astype(float)
+        x[rng.random(rows) < 0.1] = (rng.integers(0, 4, m) / 3).astype(np.float32)  # tied online mixes
+        needed = rng.random(rows) < 0.25
+        x[~needed] = 0.0
+        np.testing.assert_array_equal(products(x, w, needed), x @ w.T)
