@@ -1,37 +1,35 @@
-"""The paper preset stage by stage: today's rate and the new one in the same run, and the
-projected wall time of each stage and of the whole preset (issue 26).
+"""The paper preset stage by stage: each stage's rate measured in one run on 2 cores, beside
+its reference in the same run, and the paper preset's wall time, measured and projected (issue 26).
 
-    python benchmarks/paper_stages.py [--actions lift ...] [--batch 1024] [--batches 2]
-                                      [--features 256] [--forests 16] [--smoke]
+    python benchmarks/paper_stages.py [--actions lift ...] [--parts lift ...] [--batch 1024]
+                                      [--batches 2] [--features 256] [--forests 16] [--smoke]
 
-Stages, each measured on the same inputs for today's code path and the new one, interleaved:
-- data (``--engine native``): one prepared batch = sample + place (shared), settle, plan,
-  execute in MuJoCo C, labelled rollouts/s of the whole batch per action. Today: MJX settle
-  (``scenes.jitted_scene_fns``) + the L-BFGS plan; "C settle": the native engine's settle of
-  this branch (``native_settle.settle_batch``) + the L-BFGS plan (what ``--engine native``
-  does by default now); new: C settle + ``ArmConfig.ik_solver="lm"`` (an option: other
-  plans, recorded in the sidecar). Plans of both solvers are made on the C-settled scenes and
-  each is executed (every rate counts the mean of the two executions: the same work to within
-  a few scenes); the label agreement of the two is printed. The first batch (compiles) is
-  not timed.
-- forests: fit + evaluation on 4,000 rows per forest at n = 25 and 100, PCA and RHF
-  (``benchmarks/sweep.py``'s ``engine_times``), with ``ForestConfig``'s current engine; a
-  "compiled" engine is used for "new" if ``learn.forests.ENGINES`` has one, else the new rate
-  is today's (``forest_speedup=1.0``).
-- features: the perception of stored scenes (``from_sim.make_feature_fn``) with the chunk of
-  ``feature_batch`` = 32 in one call (today) and in calls of ``from_sim.SUB_BATCH`` (new),
-  against the chain alone (``make_batched_features``' jitted program on precomputed inputs).
+- data: the native rollout function itself (``make_rollout_fn(..., engine="native")``: C
+  settle, the default L-BFGS plans, C execution; what ``relaff generate --engine native``
+  runs per chunk), labelled rollouts/s of the whole batch per action and the cores it kept
+  busy. ``--parts``: the batch part by part (place, settle in MJX and in C, plan by L-BFGS
+  and by LM, C execution of each plan; the rates "today" = MJX settle, "C settle" = the
+  engine now, "C settle + LM" = ``--set action.arm.ik_solver=lm``, other plans).
+- forests: the compiled engine (``learn/compiled``, the sweep's) against the fast one
+  (scikit-learn's builder per tree + one JAX evaluation), fit + evaluation on 4,000 rows at
+  n = 25 and 100, wall and CPU seconds (the experiment runs one worker per core, so CPU).
+- features: the stage's feature function (``from_sim.make_feature_fn``, calls of
+  ``SUB_BATCH``) and one call of 32, against the chain alone on the same precomputed inputs.
+- report: its bootstrap over test scenes (``resampled_means`` + ``half_curves``), the
+  reference path against the fast one, one paper-shaped PCA target (``--report-sizes`` sizes).
 
-Projection (the paper preset, ``docs/reproduce.md``): ~500,000 rollouts (take ~194,000, the
-other eight ~38,250 each) at the measured per-action rates (an action not measured takes the
-mean of the measured ones); 90,000 scenes of features; the sweep's 2 h 05 min measured with
-two workers (``docs/learning.md``) divided by the forest speedup; 0.1 h for the report. One
-process, as measured (the cluster's second worker is not assumed).
-``--smoke`` (lift, batch 64, two timed batches, 2 forests per cell, one chunk of 32 scenes)
-runs in under 5 minutes once JAX's persistent compilation cache (``--xla-cache``, default
-``$TMPDIR/relaff_paper_stages_xla``) holds its programs; the first run also compiles (the
-L-BFGS plan alone ~40-100 s on 2 cores; docs/benchmarks.md gives both times). The last line is ``native_per_s=<new whole-batch labelled rollouts/s, lift>
-forest_speedup=<new/today per forest, n = 25, PCA> paper_projected_h=<hours, new>``.
+Projection: the paper run of 2026-12-03 (``PAPER_RUN_S``, ``PAPER_RUN_ROLLOUTS``) is the
+measured row; the projected row takes its rollouts per action at this run's rates (actions not
+timed at their mean) plus one compile, 90,000 feature scenes at this run's rate, its
+experiment as measured (kernel-bound, docs/benchmarks.md "Experiment stage"), and its report
+with the resampling part (``REPORT_RESAMPLING_S``) divided by this run's ratio. One process,
+as run (the experiment's two workers included).
+``--smoke`` (lift, batch 64, two timed batches, 2 forests per cell, one chunk of 32 scenes,
+a report target of 3 sizes) runs in under 5 minutes once JAX's persistent compilation cache
+(``--xla-cache``) holds its programs; batch 64 is slower per rollout than the preset's 1024,
+so its projection is pessimistic. The last line is ``native_per_s=<whole-batch labelled
+rollouts/s, lift> forest_speedup=<compiled/fast CPU s per forest, n = 25, PCA>
+paper_projected_h=<hours, projected>``.
 """
 from __future__ import annotations
 
@@ -55,10 +53,17 @@ from relaff_jax.sim import world as wd  # noqa: E402
 from relaff_jax.sim.native_batch import default_threads, execute_native  # noqa: E402
 from relaff_jax.sim.planning import Plan  # noqa: E402
 
-PAPER_ROLLOUTS = {a: (194_000 if a == "take" else 38_250) for a in ACTIONS}  # docs/reproduce.md
+# The paper preset as run on this machine (docs/reproduce.md, "The paper preset, run": seed 0,
+# --engine native, the compiled forest engine, outcomes kept, 2026-12-03): rollouts per action
+# and seconds per stage; the report's is the re-run with the outcomes bit-packed, machine idle.
+PAPER_RUN_ROLLOUTS = {"lift": 20_480, "move": 31_744, "pull": 20_480, "push": 34_816, "rake": 14_336,
+                      "take": 181_248, "pour": 46_080, "slide": 54_272, "unobstruct": 45_056}
+PAPER_RUN_S = {"data": 7_014, "features": 1_457, "experiment": 2_850, "report": 1_942}
 PAPER_SCENES = 90_000
-SWEEP_TODAY_H = 2 + 5 / 60  # docs/learning.md: two workers, the fast engine
-REPORT_H = 0.1
+# The report's bootstrap over test scenes (resampled_means + half_curves, reference path) in
+# that report: one paper-sized target per space x 9 targets (docs/benchmarks.md, "Report
+# resampling", 2026-12-04: 962 s; 1,189 s in a run the day before). The rest is taken as measured.
+REPORT_RESAMPLING_S = 962
 
 
 def _execute(action, cfg, pair, s, plan, before, nthread):
@@ -121,9 +126,29 @@ def data_stage(action: str, batch: int, batches: int, nthread: int) -> dict:
                 c_settle=n / csettle, new=n / new, agree=agree / n, feasible=feasible)
 
 
-def _compiled_times(space: str, n: int, k: int) -> float:
-    """Seconds per forest of a "compiled" engine (fit, then ``predict_many`` on 4,000 rows),
-    through ``learn.engine.fit(..., engine="compiled")`` on sweep.py's inputs."""
+def rollout_stage(action: str, batch: int, batches: int, nthread: int) -> dict:
+    """Whole-batch labelled rollouts/s of the native rollout function itself, what ``relaff
+    generate --engine native`` runs per chunk (C settle, default L-BFGS plans, C execution):
+    ``batches`` timed batches after one untimed call (``first_s``: its compiles), and the
+    cores it kept busy (process CPU time / wall time)."""
+    fn = rollouts.make_rollout_fn(action, batch, templates.ActionConfig(), engine="native", nthread=nthread)
+    key = lambda i: rollouts.bench_batch_key(1, batch, i)
+    t0 = time.perf_counter()
+    fn(key(0), batch)
+    first = time.perf_counter() - t0
+    c0, t0 = os.times(), time.perf_counter()
+    for i in range(batches):
+        fn(key(1 + i), batch)
+    wall, c1 = time.perf_counter() - t0, os.times()
+    cpu = (c1.user - c0.user) + (c1.system - c0.system)
+    return dict(action=action, n=batches * batch, batch=batch, per_s=batches * batch / wall, first_s=first,
+                cores=cpu / wall)
+
+
+def _forest_times(space: str, n: int, k: int, engine: str) -> tuple[float, float]:
+    """(wall, CPU) seconds per forest of ``engine``: fit + evaluation on 4,000 rows
+    (``predict_many``) of ``k`` DB1 learners at size n on ``benchmarks/sweep.py``'s inputs,
+    after an untimed pass (compiles), and the predictions."""
     import sweep
 
     from relaff_jax import learn as E
@@ -136,25 +161,28 @@ def _compiled_times(space: str, n: int, k: int) -> float:
     ZT = np.concatenate([X[test_idx].T, boot[:, test_idx]])
     maps = [np.concatenate([np.arange(d0), d0 + np.repeat([s % len(boot)], rep)]) for s in range(k)]
     fits = [(E.augment(X[tr], boot[[s % len(boot)]][:, tr], rep), y[tr], 1000 + s) for s in range(k)]
-    G.predict_many([G.fit(x, yy, sd, cfg.forest, engine="compiled") for x, yy, sd in fits], ZT, maps)
-    t = time.perf_counter()
-    G.predict_many([G.fit(x, yy, sd, cfg.forest, engine="compiled") for x, yy, sd in fits], ZT, maps)
-    return (time.perf_counter() - t) / k
+    run = lambda: G.predict_many([G.fit(x, yy, sd, cfg.forest, engine=engine) for x, yy, sd in fits], ZT, maps)
+    run()
+    c0, t0 = os.times(), time.perf_counter()
+    pred = run()
+    wall, c1 = time.perf_counter() - t0, os.times()
+    return wall / k, ((c1.user - c0.user) + (c1.system - c0.system)) / k, pred
 
 
 def forest_stage(k: int) -> dict:
-    """Seconds per forest (fit + evaluation on 4,000 rows) by (space, n), today and new."""
-    import sweep
-
-    from relaff_jax.learn import forests as F
-
-    compiled = "compiled" in F.ENGINES
+    """Per forest (fit + evaluation on 4,000 rows) by (space, n): ``{(space, n): {engine:
+    (wall s, CPU s)}}`` of the fast and the compiled engine, rounds interleaved; checks both
+    predict the same. CPU seconds are what counts in the experiment stage, which runs one
+    worker process per core: the fast engine's JAX evaluation spreads over both cores of an
+    idle machine in one process, the compiled engine is one thread."""
     out = {}
     for space in ("pca", "rhf"):
         for n in (25, 100):
-            today = sum(sweep.engine_times(space, n, k_old=2, k_new=k)["fast"])
-            out[(space, n)] = (today, _compiled_times(space, n, k) if compiled else today)
-    return dict(times=out, compiled=compiled)
+            fast, comp = _forest_times(space, n, k, "fast"), _forest_times(space, n, k, "compiled")
+            if not np.array_equal(fast[2], comp[2]):
+                raise AssertionError(f"{space} n={n}: the fast and compiled engines predicted differently")
+            out[(space, n)] = {"fast": fast[:2], "compiled": comp[:2]}
+    return out
 
 
 def features_stage(n: int) -> dict:
@@ -175,7 +203,7 @@ def features_stage(n: int) -> dict:
     pcfg = pc.PerceptionConfig()
     fns = {"today": from_sim.make_feature_fn(sw, pcfg, 0, sub_batch=32), "new": from_sim.make_feature_fn(sw, pcfg, 0)}
     feats = pc.make_batched_features(sw.mj_model.geom_type, sw.geom_seg, pcfg)
-    geoms = from_sim._jitted_geoms(sw)
+    geoms = from_sim.jitted_geoms(sw)
     inputs = []
     for c in chunks:
         g = geoms(jnp.asarray(c["pair"], jnp.int32), jnp.asarray(c["qpos_settled"], jnp.float32))
@@ -203,36 +231,58 @@ def features_stage(n: int) -> dict:
     return dict(n=len(chunks) * 32, rates={k: len(chunks) * 32 / v for k, v in t.items()}, identical=same, sub_batch=sb)
 
 
-def project(data: list[dict], forest: dict, feats: dict) -> dict:
-    """Hours per stage of the paper preset, today and new."""
-    out = {}
-    for which in ("today", "c_settle", "new"):
-        rate = {d["action"]: d[which] for d in data}
-        mean = float(np.mean(list(rate.values())))
-        out[which] = {"data": sum(r / rate.get(a, mean) for a, r in PAPER_ROLLOUTS.items()) / 3600}
-    sp = forest["times"][("pca", 25)]
-    for which, speed in (("today", 1.0), ("c_settle", 1.0), ("new", sp[0] / sp[1])):
-        out[which]["experiment"] = SWEEP_TODAY_H / speed
-        fr = feats["rates"]["today" if which == "today" else "new"]
-        out[which]["features"] = PAPER_SCENES / fr / 3600
-        out[which]["report"] = REPORT_H
-        out[which]["total"] = sum(out[which].values())
+def project(rollout: list[dict], feats: dict, report_ratio: float) -> dict:
+    """Seconds per stage of the paper preset: ``measured`` (the paper run, ``PAPER_RUN_S``)
+    and ``projected`` from this run's parts: data = the run's rollouts per action at this run's
+    whole-batch rate of the native rollout function (an action not measured at the mean rate
+    of those measured) + one compile (programs are shared by the nine actions); features =
+    90,000 scenes at this run's rate of the stage's feature function; experiment = the run's
+    (kernel-bound: 94 % in the compiled forest kernels, docs/benchmarks.md "Experiment stage");
+    report = the run's, with its resampling part divided by ``report_ratio``."""
+    rate = {d["action"]: d["per_s"] for d in rollout}
+    mean = float(np.mean(list(rate.values())))
+    data = sum(r / rate.get(a, mean) for a, r in PAPER_RUN_ROLLOUTS.items())
+    data += max(0.0, rollout[0]["first_s"] - rollout[0]["batch"] / rollout[0]["per_s"])
+    report = PAPER_RUN_S["report"] - REPORT_RESAMPLING_S + REPORT_RESAMPLING_S / report_ratio
+    new = {"data": data, "features": PAPER_SCENES / feats["rates"]["new"], "experiment": PAPER_RUN_S["experiment"],
+           "report": report}
+    out = {"measured": dict(PAPER_RUN_S), "projected": new}
+    for v in out.values():
+        v["total"] = sum(v.values())
     return out
+
+
+def report_stage(sizes: int, resamples: int) -> dict:
+    """Seconds of the report's two resampling functions, reference and fast, on one
+    paper-shaped target (``benchmarks/report_resampling.py``'s ``measure``, R = 50, PCA)."""
+    import report_resampling as rr
+
+    row = rr.measure(50, sizes, resamples, ())
+    ref = sum(v[0] for v in row.values())
+    new = sum(v[1] for v in row.values())
+    return dict(ref=ref, new=new, ratio=ref / new, identical=all(v[2] for v in row.values()), sizes=sizes,
+                resamples=resamples)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--actions", nargs="+", default=["lift"])
+    ap.add_argument("--actions", nargs="+", default=list(ACTIONS),
+                    help="actions whose native rollout function is timed (default: all nine)")
+    ap.add_argument("--parts", nargs="*", default=["lift"],
+                    help="actions whose batch is also timed part by part, today's MJX settle and the LM plans beside")
     ap.add_argument("--batch", type=int, default=1024, help="rollouts per batch (the paper preset's)")
     ap.add_argument("--batches", type=int, default=2, help="timed batches per action (after one untimed)")
     ap.add_argument("--features", type=int, default=256, help="scenes for the features stage")
     ap.add_argument("--forests", type=int, default=16, help="forests per (space, n)")
+    ap.add_argument("--report-sizes", type=int, default=20, help="training sizes of the report's resampling target")
     ap.add_argument("--smoke", action="store_true", help="lift, batch 64, 2 batches, few forests and scenes")
     ap.add_argument("--xla-cache", default=os.path.join(os.environ.get("TMPDIR", "/tmp"), "relaff_paper_stages_xla"),
                     help="JAX's persistent compilation cache ('' for none): a rerun skips the ~2-5 min of compiles")
     args = ap.parse_args()
+    resamples = 1000
     if args.smoke:
-        args.actions, args.batch, args.batches, args.features, args.forests = ["lift"], 64, 2, 32, 2
+        args.actions, args.parts, args.batch, args.batches, args.features, args.forests = ["lift"], ["lift"], 64, 2, 32, 2
+        args.report_sizes, resamples = 3, 200
     if args.xla_cache:
         jax.config.update("jax_compilation_cache_dir", args.xla_cache)
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
@@ -241,46 +291,60 @@ def main() -> None:
     nthread = default_threads()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, C threads {nthread}; jax {jax.__version__}; "
           f"load average before {os.getloadavg()[0]:.2f}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
-    data = []
-    print("\n| action | batch | s/batch: place, MJX settle, C settle, plan L-BFGS, plan LM, exec (L-BFGS plans), exec (LM) "
-          "| today /s | C settle /s | new (C settle + LM) /s | new / today | labels LM = L-BFGS |")
-    print("|---|---:|---|---:|---:|---:|---:|---:|")
+    print(f"\nnative rollout function (C settle, L-BFGS plans, C execution), batch {args.batch}, {args.batches} timed "
+          "batches after one untimed:")
+    print("| action | labelled rollouts/s (whole batch) | cores busy | first call s (compiles) |\n|---|---:|---:|---:|")
+    rollout = []
     for a in args.actions:
+        d = rollout_stage(a, args.batch, args.batches, nthread)
+        print(f"| {a} | {d['per_s']:.1f} | {d['cores']:.2f} | {d['first_s']:.1f} |", flush=True)
+        rollout.append(d)
+    stamp("rollout functions done")
+    if args.parts:
+        print("\n| action | batch | s/batch: place, MJX settle, C settle, plan L-BFGS, plan LM, exec (L-BFGS plans), "
+              "exec (LM) | today /s | C settle /s | C settle + LM /s | labels LM = L-BFGS |")
+        print("|---|---:|---|---:|---:|---:|---:|")
+    for a in args.parts:
         d = data_stage(a, args.batch, args.batches, nthread)
         s = d["seconds"]
         parts = ", ".join(f"{s[k]:.2f}" for k in ("place", "settle_mjx", "settle_c", "plan_lbfgs", "plan_lm",
                                                    "exec_lbfgs", "exec_lm"))
         print(f"| {a} | {args.batch} | {parts} | {d['today']:.1f} | {d['c_settle']:.1f} | {d['new']:.1f} | "
-              f"{d['new'] / d['today']:.2f} | {100 * d['agree']:.2f} % of {d['n']} |", flush=True)
-        data.append(d)
-    stamp("data stage done")
+              f"{100 * d['agree']:.2f} % of {d['n']} |", flush=True)
+    stamp("data parts done")
     forest = forest_stage(args.forests)
     stamp("forest stage done")
-    print(f"\nforests ({'compiled engine' if forest['compiled'] else 'no compiled engine in learn.forests.ENGINES: new = today, the fast engine'}), "
-          f"{args.forests} per cell, fit + evaluation on 4,000 rows:")
-    print("| space | n | today forests/s | new forests/s | new / today |\n|---|---:|---:|---:|---:|")
-    for (space, n), (today, new) in forest["times"].items():
-        print(f"| {space} | {n} | {1 / today:.1f} | {1 / new:.1f} | {today / new:.2f} |", flush=True)
+    print(f"\nforests, compiled engine against the fast engine, {args.forests} per cell, fit + evaluation on 4,000 "
+          "rows (same predictions); CPU seconds count in the experiment stage (one worker per core):")
+    print("| space | n | fast ms wall / CPU | compiled ms wall / CPU | compiled / fast, wall | compiled / fast, CPU |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for (space, n), e in forest.items():
+        (fw, fc), (cw, cc) = e["fast"], e["compiled"]
+        print(f"| {space} | {n} | {1e3 * fw:.2f} / {1e3 * fc:.2f} | {1e3 * cw:.2f} / {1e3 * cc:.2f} | {fw / cw:.2f} | "
+              f"{fc / cc:.2f} |", flush=True)
     feats = features_stage(args.features)
     stamp("features stage done")
     r = feats["rates"]
-    print(f"\nfeatures, {feats['n']} lift scenes in chunks of 32: today (one call of 32) {r['today']:.1f} scenes/s, "
-          f"new (calls of {feats['sub_batch']}) {r['new']:.1f} scenes/s, new / today {r['new'] / r['today']:.2f}, "
-          f"bit-identical {feats['identical']}; the chain alone: {r['chain32']:.1f} scenes/s in calls of 32, "
-          f"{r['chain_sub']:.1f} in calls of {feats['sub_batch']}; chain / new features "
-          f"{r['chain_sub'] / r['new']:.2f}", flush=True)
-    proj = project(data, forest, feats)
-    print("\nprojected paper preset, one process (hours):")
-    print("| path | data (native) | features | experiment | report | total |\n|---|---:|---:|---:|---:|---:|")
-    for which, label in (("today", "today (MJX settle, L-BFGS)"), ("c_settle", "C settle, L-BFGS (the default now)"),
-                         ("new", "C settle, LM plans (option), sub-batched features")):
-        p = proj[which]
-        print(f"| {label} | {p['data']:.2f} | {p['features']:.2f} | {p['experiment']:.2f} | {p['report']:.2f} | "
-              f"{p['total']:.2f} |")
-    lift = next((d for d in data if d["action"] == "lift"), data[0])
-    sp = forest["times"][("pca", 25)]
+    print(f"\nfeatures, {feats['n']} lift scenes in chunks of 32: one call of 32 {r['today']:.1f} scenes/s, "
+          f"the stage's calls of {feats['sub_batch']} {r['new']:.1f} scenes/s, bit-identical {feats['identical']}; "
+          f"the chain alone: {r['chain32']:.1f} scenes/s in calls of 32, {r['chain_sub']:.1f} in calls of "
+          f"{feats['sub_batch']}; chain / stage {r['chain_sub'] / r['new']:.2f}", flush=True)
+    rep = report_stage(args.report_sizes, resamples)
+    stamp("report stage done")
+    print(f"\nreport resampling, one PCA target, {rep['sizes']} sizes, {rep['resamples']} resamples: reference "
+          f"{rep['ref']:.1f} s, fast {rep['new']:.1f} s, reference / fast {rep['ratio']:.2f}, same bits {rep['identical']}")
+    proj = project(rollout, feats, rep["ratio"])
+    print("\npaper preset, seconds (measured: the paper run of 2026-12-03, docs/reproduce.md; projected: this run's "
+          "rates for data and features, the run's experiment, its report with this run's resampling ratio):")
+    print("| | data (native) | features | experiment | report | total | hours |\n|---|---:|---:|---:|---:|---:|---:|")
+    for which, p in proj.items():
+        print(f"| {which} | {p['data']:.0f} | {p['features']:.0f} | {p['experiment']:.0f} | {p['report']:.0f} | "
+              f"{p['total']:.0f} | {p['total'] / 3600:.2f} |")
+    lift = next((d for d in rollout if d["action"] == "lift"), rollout[0])
+    sp = forest[("pca", 25)]
     print(f"\nwall time of this benchmark {time.perf_counter() - t_start:.0f} s; load average after {os.getloadavg()[0]:.2f}")
-    print(f"native_per_s={lift['new']:.1f} forest_speedup={sp[0] / sp[1]:.2f} paper_projected_h={proj['new']['total']:.2f}")
+    print(f"native_per_s={lift['per_s']:.1f} forest_speedup={sp['fast'][1] / sp['compiled'][1]:.2f} "
+          f"paper_projected_h={proj['projected']['total'] / 3600:.2f}")
 
 
 if __name__ == "__main__":
