@@ -270,7 +270,9 @@ def main() -> None:
     ap.add_argument("--parts", nargs="*", default=["lift"],
                     help="actions whose batch is also timed part by part, today's MJX settle and the LM plans beside")
     ap.add_argument("--batch", type=int, default=1024, help="rollouts per batch (the paper preset's)")
-    ap.add_argument("--batches", type=int, default=2, help="timed batches per action (after one untimed)")
+    ap.add_argument("--batches", type=int, default=2,
+                    help="timed batches per action (after one untimed); a batch's time varies by +-15 %%, so "
+                         "use 16 or more for a projection (docs/benchmarks.md)")
     ap.add_argument("--features", type=int, default=256, help="scenes for the features stage")
     ap.add_argument("--forests", type=int, default=16, help="forests per (space, n)")
     ap.add_argument("--report-sizes", type=int, default=20, help="training sizes of the report's resampling target")
