@@ -53,11 +53,12 @@ MEANING = {
     "at_rest": "both objects slower than SceneConfig.rest_speed at the end of settling",
     "feasible": "the motor program was executable (every waypoint reachable by IK, the object fits the "
                 "gripper); an infeasible program is not run and its label is False",
-    "ik_error": "largest IK position error over the program's waypoints (m)",
+    "ik_error": "largest IK position error over the program's waypoints (m); NaN where the reach screen "
+                "found a target beyond the arm's reach and no IK was solved (action.arm.reach_screen)",
     "intended": "the relation the scene sampler aimed for (index into beside, on_top, inside), before settling",
     "reach_before": "the toy was reachable by the arm before the action (used by unobstruct)",
     "reach_after": "the toy was reachable by the arm after the action (used by unobstruct)",
-    "simulated": "the program was simulated in MJX (feasible programs only)",
+    "simulated": "the program was simulated (feasible programs only, by the dataset's engine)",
     "rollout_id": "per-scene id (seeds the scene and the depth noise of its features)",
     "qpos0": "object joint positions as placed: toy then other, xyz + quaternion wxyz each",
     "qpos_settled": "object joint positions after settling (the scene the robot sees)",

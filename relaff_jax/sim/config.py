@@ -129,6 +129,9 @@ class ArmConfig:
     ik_ang_tol: float = 0.05  # rad (~2.9 deg): and the orientation residual is below
     ik_min_sigma: float = 0.03  # m/rad: and the task Jacobian's smallest singular value above
     ik_continuity: float = 1e-3  # tie-break between good seeds: prefer the one nearest q_init
+    # skip the IK of programs whose targets are provably beyond the arm's reach (reach_screen.py):
+    # the same plans, feasibility and labels; their ``ik_error`` is NaN (not solved)
+    reach_screen: bool = True
     grip_open: float = 0.12  # m, default half opening (finger joint value) when open; max 0.21
     grip_closed: float = 0.0  # m, command when closing (force-limited, stops at the object)
     contact_dist: float = 0.002  # m: a pad "touches" a geom if their distance is below
@@ -140,6 +143,7 @@ class ArmConfig:
         if self.ik_solver not in ("lbfgs", "lm"):  # kinematics.IK_SOLVERS
             raise UserError(f"action.arm.ik_solver={self.ik_solver!r}: one of lbfgs, lm")
         _check("action.arm", {
+            "reach_screen": (isinstance(self.reach_screen, bool), f"true or false, got {self.reach_screen!r}"),
             "ik_steps": (is_int(self.ik_steps, 1), f"an integer >= 1, got {self.ik_steps!r}"),
             "ik_lm_steps": (is_int(self.ik_lm_steps, 1), f"an integer >= 1, got {self.ik_lm_steps!r}"),
             "ik_pos_tol": (self.ik_pos_tol > 0, f"> 0, got {self.ik_pos_tol}"),

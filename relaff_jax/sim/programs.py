@@ -172,14 +172,21 @@ def _corridor_blocked(cfg: ActionConfig, toy: Body, obst: Body, min_radius: floa
     return jnp.min(dist) < width
 
 
+def toy_grasp_target(arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax.Array,
+                     qpos: jax.Array) -> tuple[A.IKTarget, jax.Array]:
+    """The tcp target of unobstruct's reachability test (a top-down grasp of the toy) and
+    whether its other conditions hold (the toy fits the gripper, the corridor is clear)."""
+    toy, obst = bodies(geo, pair, qpos)
+    g = top_down_grasp(arm, cfg, toy)
+    target = top_down(g.xy + jnp.array([0.0, 0.0, 1.0]) * g.tcp_z, g.closing)
+    return target, g.fits & ~_corridor_blocked(cfg, toy, obst, cfg.scene.min_radius)
+
+
 def toy_reachable(arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax.Array, qpos: jax.Array) -> jax.Array:
     """Unobstruct's reachability of the toy (one scene): a top-down grasp of the toy is
     reachable by the IK **and** the approach corridor from the robot is clear of the obstacle."""
-    toy, obst = bodies(geo, pair, qpos)
-    g = top_down_grasp(arm, cfg, toy)
-    res = A.solve_ik(arm, cfg.arm, top_down(g.xy + jnp.array([0.0, 0.0, 1.0]) * g.tcp_z, g.closing),
-                     jnp.zeros(6))
-    return res.reachable & g.fits & ~_corridor_blocked(cfg, toy, obst, cfg.scene.min_radius)
+    target, clear = toy_grasp_target(arm, cfg, geo, pair, qpos)
+    return A.solve_ik(arm, cfg.arm, target, jnp.zeros(6)).reachable & clear
 
 
 def program(action: str, arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax.Array,

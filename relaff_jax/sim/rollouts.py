@@ -32,6 +32,7 @@ from .bodies import geometry
 from .native_batch import default_threads, execute_native
 from .native_settle import settle_batch
 from .planning import Plan
+from .reach_screen import prepare_screened
 from .simulate import make_prepare_fn, make_simulate_fn
 from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config: for reproduce)
 
@@ -195,8 +196,12 @@ def make_batch_prepare_fn(action: str, cfg: ActionConfig, settle: str = "mjx",
                                   default_threads() if nthread is None else int(nthread))
         else:
             scenes = settle_fn(pair, qpos0, intended)
-        plan, before = prepare_fn(aid, pair, jnp.asarray(scenes.qpos))
-        s, plan, before = jax.device_get((scenes, plan, before))
+        if cfg.arm.reach_screen:  # the IK only where the arm might reach (reach_screen.py)
+            s = jax.device_get(scenes)
+            plan, before = prepare_screened(prepare_fn, cfg, aid, np.asarray(pair), s.qpos)
+        else:
+            plan, before = prepare_fn(aid, pair, jnp.asarray(scenes.qpos))
+            s, plan, before = jax.device_get((scenes, plan, before))
         p = np.asarray(pair)
         base = int(jax.random.bits(kid, (), jnp.uint32))
         ids = np.int64(base) * int(batch_size) + np.arange(int(batch_size), dtype=np.int64)

@@ -107,11 +107,17 @@ def stored_config(cfg: ActionConfig) -> dict:
     The default IK solver (``ArmConfig.ik_solver="lbfgs"``) is recorded by the absence of
     ``ik_solver`` and ``ik_lm_steps``, as in every dataset written before the option existed,
     so that those stay valid and resumable; ``"lm"`` is recorded with its step count, so a
-    dataset is never resumed with the other solver's plans."""
+    dataset is never resumed with the other solver's plans.
+
+    The reach screen (``ArmConfig.reach_screen``, default on) is recorded only when off: it
+    changes no stored field but ``ik_error`` (NaN where screened, ``reach_screen.py``), so a
+    dataset written before it existed stays valid and resumable (its later chunks screened)."""
     from relaff_jax.config import to_dict
 
     d = to_dict(cfg)
     if cfg.arm.ik_solver == "lbfgs":
         d["arm"].pop("ik_solver")
         d["arm"].pop("ik_lm_steps")
+    if cfg.arm.reach_screen:
+        d["arm"].pop("reach_screen")
     return d
