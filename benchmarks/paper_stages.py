@@ -7,7 +7,8 @@ its reference in the same run, and the paper preset's wall time, measured and pr
 - data: the native rollout function itself (``make_rollout_fn(..., engine="native")``: C
   settle, the default L-BFGS plans, C execution; what ``relaff generate --engine native``
   runs per chunk), labelled rollouts/s of the whole batch per action and the cores it kept
-  busy. ``--parts``: the batch part by part (place, settle in MJX and in C, plan by L-BFGS
+  busy, with the reach screen (the default, ``sim/reach_screen.py``) against without it,
+  batches interleaved, every field checked equal but the screened scenes' ``ik_error``. ``--parts``: the batch part by part (place, settle in MJX and in C, plan by L-BFGS
   and by LM, C execution of each plan; the rates "today" = MJX settle, "C settle" = the
   engine now, "C settle + LM" = ``--set action.arm.ik_solver=lm``, other plans).
 - forests: the compiled engine (``learn/compiled``, the sweep's) against the fast one
@@ -128,21 +129,41 @@ def data_stage(action: str, batch: int, batches: int, nthread: int) -> dict:
 
 def rollout_stage(action: str, batch: int, batches: int, nthread: int) -> dict:
     """Whole-batch labelled rollouts/s of the native rollout function itself, what ``relaff
-    generate --engine native`` runs per chunk (C settle, default L-BFGS plans, C execution):
-    ``batches`` timed batches after one untimed call (``first_s``: its compiles), and the
-    cores it kept busy (process CPU time / wall time)."""
-    fn = rollouts.make_rollout_fn(action, batch, templates.ActionConfig(), engine="native", nthread=nthread)
+    generate --engine native`` runs per chunk (C settle, default L-BFGS plans, C execution),
+    with the reach screen (``per_s``, the default) and without (``per_s_ref``, the reference):
+    ``batches`` timed batches of each after one untimed call of each (``first_s``: the
+    compiles), interleaved batch by batch on the same keys; every field of the two equal but
+    the screened scenes' ``ik_error`` (NaN), checked. ``cores``: process CPU time over wall
+    time, screened."""
+    base = templates.ActionConfig()
+    ref_cfg = dataclasses.replace(base, arm=dataclasses.replace(base.arm, reach_screen=False))
+    fns = {name: rollouts.make_rollout_fn(action, batch, c, engine="native", nthread=nthread)
+           for name, c in (("new", base), ("ref", ref_cfg))}
     key = lambda i: rollouts.bench_batch_key(1, batch, i)
     t0 = time.perf_counter()
-    fn(key(0), batch)
+    fns["new"](key(0), batch)
     first = time.perf_counter() - t0
-    c0, t0 = os.times(), time.perf_counter()
+    fns["ref"](key(0), batch)
+    wall, cpu, screened = {"new": 0.0, "ref": 0.0}, 0.0, 0
     for i in range(batches):
-        fn(key(1 + i), batch)
-    wall, c1 = time.perf_counter() - t0, os.times()
-    cpu = (c1.user - c0.user) + (c1.system - c0.system)
-    return dict(action=action, n=batches * batch, batch=batch, per_s=batches * batch / wall, first_s=first,
-                cores=cpu / wall)
+        outs = {}
+        for name in (("new", "ref") if i % 2 == 0 else ("ref", "new")):
+            c0, t0 = os.times(), time.perf_counter()
+            outs[name] = fns[name](key(1 + i), batch)
+            wall[name] += time.perf_counter() - t0
+            c1 = os.times()
+            if name == "new":
+                cpu += (c1.user - c0.user) + (c1.system - c0.system)
+        skip = np.isnan(outs["new"]["ik_error"])
+        screened += int(skip.sum())
+        for k, v in outs["ref"].items():
+            g = outs["new"][k]
+            same = np.array_equal(g[~skip], v[~skip]) if k == "ik_error" else np.array_equal(g, v)
+            if not same:
+                raise AssertionError(f"{action}: the reach screen changed {k}")
+    n = batches * batch
+    return dict(action=action, n=n, batch=batch, per_s=n / wall["new"], per_s_ref=n / wall["ref"], first_s=first,
+                cores=cpu / wall["new"], screened=screened / n)
 
 
 def _forest_times(space: str, n: int, k: int, engine: str) -> tuple[float, float]:
@@ -294,11 +315,13 @@ def main() -> None:
           f"load average before {os.getloadavg()[0]:.2f}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
     print(f"\nnative rollout function (C settle, L-BFGS plans, C execution), batch {args.batch}, {args.batches} timed "
           "batches after one untimed:")
-    print("| action | labelled rollouts/s (whole batch) | cores busy | first call s (compiles) |\n|---|---:|---:|---:|")
+    print("| action | labelled rollouts/s (whole batch), reach screen | without (reference) | ratio | scenes screened "
+          "| cores busy | first call s (compiles) |\n|---|---:|---:|---:|---:|---:|---:|")
     rollout = []
     for a in args.actions:
         d = rollout_stage(a, args.batch, args.batches, nthread)
-        print(f"| {a} | {d['per_s']:.1f} | {d['cores']:.2f} | {d['first_s']:.1f} |", flush=True)
+        print(f"| {a} | {d['per_s']:.1f} | {d['per_s_ref']:.1f} | {d['per_s'] / d['per_s_ref']:.2f} "
+              f"| {d['screened']:.1%} | {d['cores']:.2f} | {d['first_s']:.1f} |", flush=True)
         rollout.append(d)
     stamp("rollout functions done")
     if args.parts:
