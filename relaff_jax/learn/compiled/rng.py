@@ -68,7 +68,7 @@ def temper(y):
     return y & MASK32
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def mt_next(mt):
     """The next tempered 32-bit output (``genrand_int32``) as int64."""
     if mt[N_MT] >= N_MT:
@@ -112,7 +112,7 @@ def mask_of(rng):
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def randint(mt, low, high):
     """Legacy ``RandomState.randint(low, high)`` (one draw, high - low <= 2**32)."""
     rng = high - low - 1
@@ -125,7 +125,7 @@ def randint(mt, low, high):
             return low + v
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rand_r(state):
     """``our_rand_r`` on ``state: (1,)`` int64 (a uint32 value); returns the 31-bit output."""
     s = state[0]
@@ -138,7 +138,7 @@ def rand_r(state):
     return s & RAND_R_MAX
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rand_int(state, low, high):
     """``rand_int(low, high, state)``: an integer in [low, high)."""
     return low + rand_r(state) % (high - low)

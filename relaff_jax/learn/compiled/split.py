@@ -18,50 +18,56 @@ Read from sklearn/tree/_splitter.pyx, _partitioner.pyx, _criterion.pyx and kept 
 - Children impurities and the improvement use the criterion's formulas in its operation
   order (``children_impurity``, ``impurity_improvement``).
 
-Why the order of samples inside a node does not matter, so any sort will do (scikit-learn
-sorts with its own introsort, which is not stable): the sorted feature values are the same
-for every order, the thresholds depend only on them, the children are the sets ``x <= t`` /
-``x > t``, and the weighted class counts are sums of integer bootstrap counts, exact in
-float64 in any order. Only the sets of samples per node, the persistent ``features`` array
-and the ``rand_r`` state carry from node to node.
+Why the order of samples inside a node does not matter, so no node is ever sorted in place
+(scikit-learn sorts with its own introsort, which is not stable): the sorted feature values
+are the same for every order, the thresholds depend only on them, the children are the sets
+``x <= t`` / ``x > t``, and the weighted class counts are sums of integer bootstrap counts,
+exact in float64 in any order. Only the sets of samples per node, the persistent
+``features`` array and the ``rand_r`` state carry from node to node.
 
-Arrays: ``XT: (D, N)`` float32 features by row; ``y1: (N,)`` float64 1.0 for class 1, else
-0.0; ``w: (N,)`` float64 integer weights. ``fo = (XT, order, rank, ready)``: the forest's
-features presorted on first use (``order, rank: (D, N)`` int64 samples in ascending order of
-each feature and their ranks, ``ready: (D,)`` uint8). ``sc = (samples, fv, ws, wy, bm,
-features, constant)``: the splitter's ``samples: (N,)`` int64 (the node's at
-``[start, end)``), and scratch: ``fv: (N,)`` float32 the sorted values, ``ws, wy: (N,)``
-float64 their weights and class-1 weights, ``bm: (ceil(N / 64),)`` uint64 zeros, and the
-persistent ``features, constant: (D,)`` int64. Splits are searched for binary
-nodes only (a node of one class has impurity 0 and is a leaf), so counts are scalars.
+How a drawn feature is searched: each feature of the forest is sorted once, on first use
+(``presort``: its samples in ascending order, their ranks and the sorted values); a node's
+samples are turned into their ranks in ascending order (``node_ranks``: a bitmap of ranks
+read back lowest bit first, or an insertion sort for small nodes), and the scan walks them,
+reading values and weights through the presorted arrays: one pass, no moving of samples.
+
+Arrays: ``XT: (D, N)`` float32 features by row; ``w: (N,)`` float64 integer weights; ``wy:
+(N,)`` float64 ``w * y`` (class-1 weights, ``y`` 1.0 for class 1, else 0.0). ``fo = (XT,
+order, rank, sv, ready, keys)``: the forest's features presorted on first use (``order,
+rank: (D, N)`` int32 samples in ascending order of each feature and their ranks, ``sv: (D,
+N)`` float32 the sorted values, ``ready: (D,)`` uint8, ``keys: (N,)`` int64 scratch). ``sc =
+(samples, rk, bm, features, constant, wy)``: the splitter's ``samples: (N,)`` int64 (the
+node's at ``[start, end)``), scratch ``rk: (N,)`` int64 a node's ranks and ``bm: (ceil(N /
+64),)`` uint64 zeros, the persistent ``features, constant: (D,)`` int64, and ``wy``. Splits
+are searched for binary nodes only (a node of one class has impurity 0 and is a leaf), so
+counts are scalars.
+
+Small functions called per drawn feature or per random draw are ``inline="always"``: a
+numba call that passes arrays costs reference counting on every call.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from relaff_jax.learn.compiled.rng import rand_int
 
 FEATURE_THRESHOLD = np.float32(1e-7)  # sklearn/tree/_partitioner.pxd
-INSERTION = 12  # nodes up to this size are insertion-sorted
+INSERTION = 12  # nodes up to this size get their ranks by insertion sort
 ONE = np.uint64(1)
-DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
-SHIFT = np.uint64(58)
-CTZ = np.zeros(64, np.int64)  # index of the lowest set bit b: CTZ[(b * DEBRUIJN) >> 58]
-for _i in range(64):
-    CTZ[((int(DEBRUIJN) << _i) & 0xFFFFFFFFFFFFFFFF) >> 58] = _i
+ZERO = np.uint64(0)
 SIGN = np.uint32(0x80000000)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def presort(fo, j):
-    """Sort feature j of the forest once (``order[j]``, ``rank[j]``), on first use."""
-    XT, order, rank, ready = fo
+    """Sort feature j of the forest once (``order[j]``, ``rank[j]``, ``sv[j]``), on first use."""
+    XT, order, rank, sv, ready, keys = fo
     if ready[j]:
         return
     n = XT.shape[1]
     bits = XT[j].view(np.uint32)
-    keys = np.empty(n, np.int64)
     for i in range(n):  # float32 order as unsigned keys, the sample in the low word
         b = bits[i]
         k = ~b if b & SIGN else b | SIGN
@@ -71,51 +77,43 @@ def presort(fo, j):
         s = keys[r] & 0xFFFFFFFF
         order[j, r] = s
         rank[j, s] = r
+        sv[j, r] = XT[j, s]
     ready[j] = 1
 
 
-@njit(cache=True)
-def sort_node(fo, sc, j, y1, w, start, end):
-    """``samples[start:end]`` in ascending order of feature j (ties in any order), with
-    ``fv``, ``ws``, ``wy`` along: insertion sort for small nodes; else the node's ranks in
-    the forest's presorted order are set in a bitmap and read back in order (lowest set bit
-    first), O(m + N / 64)."""
-    XT, order, rank, ready = fo
-    samples, fv, ws, wy, bm = sc[0], sc[1], sc[2], sc[3], sc[4]
+@njit(cache=True, inline="always")
+def node_ranks(fo, sc, j, start, end):
+    """The ranks (in the forest's presorted order of feature j) of ``samples[start:end]``,
+    ascending, into ``rk[:end - start]``: insertion sort for small nodes (or when the
+    bitmap would be long for the node); else set in a bitmap and read back lowest bit
+    first, O(m + N / 64). Ranks are distinct, so either gives the same list."""
+    rank = fo[2]
+    samples, rk, bm = sc[0], sc[1], sc[2]
     m = end - start
-    if m <= INSERTION:
-        for p in range(start, end):
-            fv[p] = XT[j, samples[p]]
-        for i in range(start + 1, end):
-            v = fv[i]
-            s = samples[i]
+    nw = bm.shape[0]
+    if m <= INSERTION or nw > m:
+        for i in range(m):
+            r = rank[j, samples[start + i]]  # 2-D indexing, no row views (each costs reference counting)
             k = i - 1
-            while k >= start and fv[k] > v:
-                fv[k + 1] = fv[k]
-                samples[k + 1] = samples[k]
+            while k >= 0 and rk[k] > r:
+                rk[k + 1] = rk[k]
                 k -= 1
-            fv[k + 1] = v
-            samples[k + 1] = s
+            rk[k + 1] = r
     else:
-        presort(fo, j)
-        for p in range(start, end):  # 2-D indexing, no row views (each costs reference counting)
+        for p in range(start, end):
             r = rank[j, samples[p]]
             bm[r >> 6] |= ONE << np.uint64(r & 63)
-        k = start
-        for wi in range(bm.shape[0]):
+        k = 0
+        for wi in range(nw):
             v = bm[wi]
-            bm[wi] = np.uint64(0)
-            while v != np.uint64(0):
-                low = v & (~v + ONE)
-                s = order[j, wi * 64 + CTZ[(low * DEBRUIJN) >> SHIFT]]
-                samples[k] = s
-                fv[k] = XT[j, s]
+            if v == ZERO:
+                continue
+            bm[wi] = ZERO
+            base = wi * 64
+            while v != ZERO:
+                rk[k] = base + trailing_zeros(v)
                 k += 1
-                v ^= low
-    for p in range(start, end):
-        s = samples[p]
-        ws[p] = w[s]
-        wy[p] = w[s] * y1[s]
+                v &= v - ONE
 
 
 @njit(cache=True)
@@ -138,16 +136,17 @@ def node_impurity(t0, t1, wn):
     return g / 1.0
 
 
-@njit(cache=True)
-def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, max_features, min_leaf,
+@njit(cache=True, inline="always")
+def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, max_features, min_leaf,
                state):
     """``node_split_best`` on ``samples[start:end]`` of class-count totals (t0, t1) and
     weight ``wn`` (``samples`` partitioned in place when a split is found). Returns ``(pos,
     feature, threshold, impurity_left, impurity_right, improvement, n_constant)``; ``pos ==
     end`` when no split is valid."""
-    XT = fo[0]
-    samples, fv, ws, wy, features, constant = sc[0], sc[1], sc[2], sc[3], sc[5], sc[6]
+    XT, order, sv = fo[0], fo[1], fo[3]
+    samples, rk, features, constant = sc[0], sc[1], sc[3], sc[4]
     n_features = XT.shape[0]
+    m = end - start
     best_pos = end
     best_feature = 0
     best_thr = 0.0
@@ -171,8 +170,10 @@ def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
             continue
         f_j += n_found
         feat = features[f_j]
-        sort_node(fo, sc, feat, y1, w, start, end)
-        if fv[end - 1] <= fv[start] + FEATURE_THRESHOLD:
+        presort(fo, feat)
+        node_ranks(fo, sc, feat, start, end)
+        prev = sv[feat, rk[0]]
+        if sv[feat, rk[m - 1]] <= prev + FEATURE_THRESHOLD:
             features[f_j] = features[n_total]
             features[n_total] = feat
             n_found += 1
@@ -182,24 +183,25 @@ def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
         t = features[f_i]
         features[f_i] = features[f_j]
         features[f_j] = t
-        wl = 0.0
-        l1 = 0.0
-        for i in range(start, end - 1):  # candidate p = i + 1: positions not tied with p - 1
-            wl += ws[i]
-            l1 += wy[i]
-            p = i + 1
-            if fv[p] <= fv[i] + FEATURE_THRESHOLD:
-                continue
-            if p - start < min_leaf or end - p < min_leaf:
-                continue
-            wr = wn - wl
-            gl, gr = gini_pair(wl - l1, l1, t0, t1, wl, wr)
-            proxy = -wr * gr - wl * gl
-            if proxy > best_proxy:
-                best_proxy = proxy
-                best_pos = p
-                best_feature = feat
-                best_thr = fv[i] / 2.0 + fv[p] / 2.0
+        s = order[feat, rk[0]]
+        wl = w[s]
+        l1 = wy[s]
+        for i in range(1, m):  # candidate p = start + i, wl and l1 the sums over positions < p
+            r = rk[i]
+            v = sv[feat, r]
+            if not (v <= prev + FEATURE_THRESHOLD) and i >= min_leaf and m - i >= min_leaf:
+                wr = wn - wl
+                gl, gr = gini_pair(wl - l1, l1, t0, t1, wl, wr)
+                proxy = -wr * gr - wl * gl
+                if proxy > best_proxy:
+                    best_proxy = proxy
+                    best_pos = start + i
+                    best_feature = feat
+                    best_thr = prev / 2.0 + v / 2.0
+            s = order[feat, r]
+            wl += w[s]
+            l1 += wy[s]
+            prev = v
     if best_pos < end:
         a = start
         b = end
@@ -216,7 +218,7 @@ def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
         for q in range(start, best_pos):
             s = samples[q]
             wl += w[s]
-            l1 += w[s] * y1[s]
+            l1 += wy[s]
         wr = wn - wl
         imp_l, imp_r = gini_pair(wl - l1, l1, t0, t1, wl, wr)
         improvement = (wn / w_all) * (impurity - (wr / wn * imp_r) - (wl / wn * imp_l))
