@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from numba.cpython.unsafe.numbers import trailing_zeros
+from numba.cpython.unsafe.numbers import leading_zeros, trailing_zeros
 
 from relaff_jax.learn.compiled.rng import rand_int
 
@@ -59,6 +59,18 @@ INSERTION = 12  # nodes up to this size get their ranks by insertion sort
 ONE = np.uint64(1)
 ZERO = np.uint64(0)
 SIGN = np.uint32(0x80000000)
+
+
+@njit(cache=True, inline="always")
+def ctz(b):
+    """Index of the lowest set bit of ``b != 0`` (uint64), as int64 (int64 + uint64 is float64 in numba)."""
+    return np.int64(trailing_zeros(b))
+
+
+@njit(cache=True, inline="always")
+def clz(b):
+    """Leading zero bits of ``b != 0`` (uint64), as int64."""
+    return np.int64(leading_zeros(b))
 
 
 @njit(cache=True, inline="always")
@@ -95,16 +107,42 @@ def presort(fo, j):
 @njit(cache=True, inline="always")
 def node_ranks(fo, sc, j, start, end):
     """The ranks (in the forest's presorted order of feature j) of ``samples[start:end]``,
-    ascending, into ``rk[:end - start]``: insertion sort for small nodes (or when the
-    bitmap would be long for the node); else set in a bitmap and read back lowest bit
-    first, O(m + N / 64). Ranks are distinct, so either gives the same list."""
-    rank = fo[2]
+    ascending, into ``rk[:end - start]``, unless feature j is constant at the node (returns
+    True then, and ``rk`` may be unfilled). N <= 128: the ranks set in a two-word bitmap
+    held in registers (no loop-carried memory, and a constant feature is seen from the
+    lowest and highest bits before reading them out); else an insertion sort for small
+    nodes (or when the bitmap would be long for the node) or a bitmap in memory read back
+    lowest bit first, O(m + N / 64). Ranks are distinct, so all give the same list."""
+    rank, sv = fo[2], fo[3]
     samples, rk, bm = sc[0], sc[1], sc[2]
     m = end - start
     nw = bm.shape[0]
+    if nw <= 2:
+        b0 = ZERO
+        b1 = ZERO
+        for p in range(start, end):
+            r = rank[j, samples[p]]  # 2-D indexing, no row views (each costs reference counting)
+            bit = ONE << np.uint64(r & 63)
+            hi = np.uint64(r >> 6)  # 0 or 1: branch-free choice of the word
+            b0 |= bit & (hi - ONE)
+            b1 |= bit & (ZERO - hi)
+        lo = ctz(b0) if b0 != ZERO else 64 + ctz(b1)
+        top = 127 - clz(b1) if b1 != ZERO else 63 - clz(b0)
+        if sv[j, top] <= sv[j, lo] + FEATURE_THRESHOLD:
+            return True
+        k = 0
+        while b0 != ZERO:
+            rk[k] = ctz(b0)
+            k += 1
+            b0 &= b0 - ONE
+        while b1 != ZERO:
+            rk[k] = 64 + ctz(b1)
+            k += 1
+            b1 &= b1 - ONE
+        return False
     if m <= INSERTION or nw > m:
         for i in range(m):
-            r = rank[j, samples[start + i]]  # 2-D indexing, no row views (each costs reference counting)
+            r = rank[j, samples[start + i]]
             k = i - 1
             while k >= 0 and rk[k] > r:
                 rk[k + 1] = rk[k]
@@ -122,9 +160,10 @@ def node_ranks(fo, sc, j, start, end):
             bm[wi] = ZERO
             base = wi * 64
             while v != ZERO:
-                rk[k] = base + trailing_zeros(v)
+                rk[k] = base + ctz(v)
                 k += 1
                 v &= v - ONE
+    return sv[j, rk[m - 1]] <= sv[j, rk[0]] + FEATURE_THRESHOLD
 
 
 @njit(cache=True)
@@ -182,9 +221,7 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
         f_j += n_found
         feat = features[f_j]
         presort(fo, feat)
-        node_ranks(fo, sc, feat, start, end)
-        prev = sv[feat, rk[0]]
-        if sv[feat, rk[m - 1]] <= prev + FEATURE_THRESHOLD:
+        if node_ranks(fo, sc, feat, start, end):
             features[f_j] = features[n_total]
             features[n_total] = feat
             n_found += 1
@@ -194,6 +231,7 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
         t = features[f_i]
         features[f_i] = features[f_j]
         features[f_j] = t
+        prev = sv[feat, rk[0]]
         s = order[feat, rk[0]]
         wl = w[s]
         l1 = wy[s]
