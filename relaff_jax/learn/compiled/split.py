@@ -55,6 +55,7 @@ from relaff_jax.learn.compiled.rng import rand_int
 
 FEATURE_THRESHOLD = np.float32(1e-7)  # sklearn/tree/_partitioner.pxd
 COUNT_SORT = 256  # presort: ranks by counting up to this N (keys are distinct), else a sort
+MARGIN = 1e-9  # of wn: far above the proxy's rounding error (< 10 * 2**-53 * wn), see best_split
 INSERTION = 12  # nodes up to this size get their ranks by insertion sort
 ONE = np.uint64(1)
 ZERO = np.uint64(0)
@@ -201,6 +202,7 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
     best_feature = 0
     best_thr = 0.0
     best_proxy = -np.inf
+    cut = -np.inf  # a candidate can beat best_proxy only if its exact proxy + wn exceeds this
     imp_l = np.inf
     imp_r = np.inf
     improvement = -np.inf
@@ -240,13 +242,20 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
             v = sv[feat, r]
             if not (v <= prev + FEATURE_THRESHOLD) and i >= min_leaf and m - i >= min_leaf:
                 wr = wn - wl
-                gl, gr = gini_pair(wl - l1, l1, t0, t1, wl, wr)
-                proxy = -wr * gr - wl * gl
-                if proxy > best_proxy:
-                    best_proxy = proxy
-                    best_pos = start + i
-                    best_feature = feat
-                    best_thr = prev / 2.0 + v / 2.0
+                l0 = wl - l1
+                r0 = t0 - l0
+                r1 = t1 - l1
+                # the proxy is -wn + q / (wl wr) in exact arithmetic: no division unless it may win
+                q = (r0 * r0 + r1 * r1) * wl + (l0 * l0 + l1 * l1) * wr
+                if q > cut * (wl * wr):
+                    gl, gr = gini_pair(l0, l1, t0, t1, wl, wr)
+                    proxy = -wr * gr - wl * gl
+                    if proxy > best_proxy:
+                        best_proxy = proxy
+                        cut = best_proxy + wn - MARGIN * wn
+                        best_pos = start + i
+                        best_feature = feat
+                        best_thr = prev / 2.0 + v / 2.0
             s = order[feat, r]
             wl += w[s]
             l1 += wy[s]
