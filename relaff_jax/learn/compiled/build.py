@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, first_randint, mt_seed, randint
+from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, first_randint, mt_seed, mt_seed4, randint
 from relaff_jax.learn.compiled.split import best_split, node_impurity
 
 EPSILON = np.finfo(np.float64).eps  # sklearn/tree/_tree.pyx
@@ -161,7 +161,8 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
     stk_f = np.empty(n_max + 2, np.float64)
     mt = np.zeros(625, np.int64)
     mt2 = np.zeros(625, np.int64)
-    tree_seeds = np.empty(n_trees.max(), np.int64)
+    tree_seeds = np.zeros(n_trees.max() + 3, np.int64)
+    mts = np.zeros((4, 625), np.int64)
     state = np.zeros(1, np.int64)
     w = np.empty(n_max, np.float64)
     y1 = np.empty(n_max, np.float64)
@@ -184,8 +185,10 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
         for t in range(n_trees[f]):  # _set_random_states: one draw per tree
             tree_seeds[t] = randint(mt, 0, MAX_INT)
         for t in range(n_trees[f]):
-            mt_seed(mt, tree_seeds[t])
-            state[0] = first_randint(mt, 0, RAND_R_MAX)  # the splitter's fresh RandomState(s_i)
+            if t % 4 == 0:  # the next four trees' streams seeded together (past the last tree: unused)
+                mt_seed4(mts, tree_seeds[t], tree_seeds[t + 1], tree_seeds[t + 2], tree_seeds[t + 3])
+            mtt = mts[t % 4]
+            state[0] = first_randint(mtt, 0, RAND_R_MAX)  # the splitter's fresh RandomState(s_i)
             if state[0] < 0:
                 mt_seed(mt2, tree_seeds[t])
                 state[0] = randint(mt2, 0, RAND_R_MAX)
@@ -193,7 +196,7 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
             if bootstrap:
                 wt[:] = 0.0
                 for _ in range(n_boot[f]):
-                    wt[randint(mt, 0, n)] += 1.0
+                    wt[randint(mtt, 0, n)] += 1.0
             else:
                 wt[:] = 1.0
             m = 0
