@@ -295,6 +295,20 @@ def test_compiled_random_streams_are_numpys_and_sklearns():
         rng.mt_seed(mt, seed)
         assert rng.first_randint(mt, 0, rng.RAND_R_MAX) == np.random.RandomState(seed).randint(0, rng.RAND_R_MAX)
         assert rng.randint(mt, 0, 7) == np.random.RandomState(seed).randint(0, 7)  # the peek consumed nothing
+    mts, one = np.zeros((4, 625), np.int64), np.zeros(625, np.int64)
+    seeds = (0, 12345, 2**31 - 2, 2**32 - 1)
+    rng.mt_seed4(mts, *seeds)  # four streams seeded together = each seeded alone
+    for g, seed in enumerate(seeds):
+        rng.mt_seed(one, seed)
+        np.testing.assert_array_equal(mts[g], one)
+        for n, draws in ((1, 5), (2, 30), (25, 25), (100, 700)):  # 700 draws cross a 624-word block
+            rng.mt_seed(one, seed)
+            rng.first_randint(one, 0, rng.RAND_R_MAX)  # as build_forests: the peek, then the bootstrap
+            wt = np.zeros(n)
+            rng.draw_bootstrap(one, wt, n, draws)
+            np.testing.assert_array_equal(wt, np.bincount(np.random.RandomState(seed).randint(0, n, draws), minlength=n))
+            if n > 1:  # the stream's position is left where randint's would be
+                assert rng.randint(one, 0, n) == np.random.RandomState(seed).randint(0, n, draws + 1)[-1]
     for s in (0, 1, 12345, 2**31 - 1, 2**32 - 1):
         state = np.array([s], np.int64)
         assert rng.rand_r(state) == _our_rand_r_py(s)

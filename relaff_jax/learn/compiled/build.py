@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, first_randint, mt_seed, mt_seed4, randint
+from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, draw_bootstrap, first_randint, mt_seed, mt_seed4, randint
 from relaff_jax.learn.compiled.split import best_split, node_impurity
 
 EPSILON = np.finfo(np.float64).eps  # sklearn/tree/_tree.pyx
@@ -195,8 +195,7 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
             wt = w[:n]
             if bootstrap:
                 wt[:] = 0.0
-                for _ in range(n_boot[f]):
-                    wt[randint(mtt, 0, n)] += 1.0
+                draw_bootstrap(mtt, wt, n, n_boot[f])
             else:
                 wt[:] = 1.0
             m = 0
