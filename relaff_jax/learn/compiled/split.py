@@ -202,6 +202,8 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
     best_feature = 0
     best_thr = 0.0
     best_proxy = -np.inf
+    best_wl = 0.0
+    best_l1 = 0.0
     cut = -np.inf  # a candidate can beat best_proxy only if its exact proxy + wn exceeds this
     imp_l = np.inf
     imp_r = np.inf
@@ -256,27 +258,26 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
                         best_pos = start + i
                         best_feature = feat
                         best_thr = prev / 2.0 + v / 2.0
+                        best_wl = wl
+                        best_l1 = l1
             s = order[feat, r]
             wl += w[s]
             l1 += wy[s]
             prev = v
-    if best_pos < end:
-        a = start
-        b = end
-        while a < b:  # partition_samples_final
-            if np.float64(XT[best_feature, samples[a]]) <= best_thr:
-                a += 1
-            else:
-                b -= 1
-                t = samples[a]
-                samples[a] = samples[b]
-                samples[b] = t
-        wl = 0.0
-        l1 = 0.0
-        for q in range(start, best_pos):
-            s = samples[q]
-            wl += w[s]
-            l1 += wy[s]
+    if best_pos < end:  # partition_samples_final, branch-free through rk (any order will do)
+        lo = 0
+        hi = m - 1
+        for p in range(start, end):
+            s = samples[p]
+            left = np.float64(XT[best_feature, s]) <= best_thr
+            rk[lo] = s
+            rk[hi] = s
+            lo += left
+            hi -= not left
+        for i in range(m):
+            samples[start + i] = rk[i]
+        wl = best_wl  # the left child's counts, as the scan summed them (integers: exact in any order)
+        l1 = best_l1
         wr = wn - wl
         imp_l, imp_r = gini_pair(wl - l1, l1, t0, t1, wl, wr)
         improvement = (wn / w_all) * (impurity - (wr / wn * imp_r) - (wl / wn * imp_l))
