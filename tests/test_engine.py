@@ -165,6 +165,13 @@ def test_edge_cases_match_sklearn(kind, n):
         assert pack_forest(fast) is None  # impure leaves: the exact float64 path
 
 
+def test_large_n_nodes_between_the_sort_paths():
+    """N = 1000 (16 bitmap words, kept in memory): nodes of m <= 12 samples (insertion sort),
+    12 < m < 16 (insertion sort: the bitmap would be longer than the node) and m >= 16
+    (bitmap) in the same trees, with ties."""
+    _check(*_data(1000, 3, 0, "ties"), seed=5, cfg=override(L.ForestConfig(), {"base_trees": 4, "max_trees": 4}), m=100)
+
+
 @pytest.mark.parametrize("cfg", [
     {"max_samples": 2 / 3}, {"max_samples": 0.05}, {"bootstrap": False},
     {"base_trees": 3, "max_trees": 7, "samples_per_extra_tree": 5}, {"min_samples_leaf": 3},
@@ -313,6 +320,24 @@ def test_compiled_random_streams_are_numpys_and_sklearns():
         state = np.array([s], np.int64)
         assert rng.rand_r(state) == _our_rand_r_py(s)
     assert rng.rand_r(np.array([0], np.int64)) == rng.rand_r(np.array([1], np.int64))  # a zero state is 1
+
+
+def test_compiled_gini_filter_passes_every_candidate_that_wins():
+    """split.may_win (a candidate's Gini divisions are skipped when it cannot beat the best)
+    never skips a candidate whose computed proxy is above the best one, checked against the
+    closest such best: one float64 step below the candidate's own proxy."""
+    from relaff_jax.learn.compiled import split
+
+    rng = np.random.default_rng(0)
+    counts = np.concatenate([rng.integers(0, 120, (3000, 4)), rng.integers(0, 20000, (3000, 4))]).astype(float)
+    for l0, l1, r0, r1 in counts:
+        wl, wr = l0 + l1, r0 + r1
+        if wl == 0 or wr == 0:
+            continue
+        gl, gr = split.gini_pair(l0, l1, l0 + r0, l1 + r1, wl, wr)
+        proxy = -wr * gr - wl * gl  # as best_split computes it
+        best = np.nextafter(proxy, -np.inf)
+        assert split.may_win(l0, l1, r0, r1, wl, wr, split.cut_of(best, wl + wr)), (l0, l1, r0, r1)
 
 
 def test_compiled_many_forests_per_call_and_large_trees():

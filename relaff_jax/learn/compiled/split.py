@@ -55,7 +55,7 @@ from relaff_jax.learn.compiled.rng import rand_int
 
 FEATURE_THRESHOLD = np.float32(1e-7)  # sklearn/tree/_partitioner.pxd
 COUNT_SORT = 256  # presort: ranks by counting up to this N (keys are distinct), else a sort
-MARGIN = 1e-9  # of wn: far above the proxy's rounding error (< 10 * 2**-53 * wn), see best_split
+MARGIN = 1e-9  # of wn: far above the proxy's rounding error (< 10 * 2**-53 * wn), see may_win
 INSERTION = 12  # nodes up to this size get their ranks by insertion sort
 ONE = np.uint64(1)
 ZERO = np.uint64(0)
@@ -180,6 +180,25 @@ def gini_pair(l0, l1, t0, t1, wl, wr):
 
 
 @njit(cache=True)
+def cut_of(best_proxy, wn):
+    """The bound ``may_win`` compares with once the best proxy is ``best_proxy``."""
+    return best_proxy + wn - MARGIN * wn
+
+
+@njit(cache=True)
+def may_win(l0, l1, r0, r1, wl, wr, cut):
+    """Whether a candidate of left counts (l0, l1) and right (r0, r1) may have a proxy above
+    the best one (``cut = cut_of(best_proxy, wn)``), with multiplications only. In exact
+    arithmetic the proxy is ``-wn + q / (wl wr)``, ``q = (r0^2 + r1^2) wl + (l0^2 + l1^2)
+    wr``; the computed proxy (``gini_pair``) is within ~10 * 2**-53 * wn of it, and q and the
+    product within a few 2**-53 relative, all far below MARGIN * wn: a candidate whose
+    computed proxy is above the best one always passes (tests/test_engine.py checks it on
+    mirrored candidates, whose exact proxies are equal)."""
+    q = (r0 * r0 + r1 * r1) * wl + (l0 * l0 + l1 * l1) * wr
+    return q > cut * (wl * wr)
+
+
+@njit(cache=True)
 def node_impurity(t0, t1, wn):
     """``Gini.node_impurity`` of a node with class counts (t0, t1) (t1 = 0 for one class)."""
     g = 0.0
@@ -204,7 +223,7 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
     best_proxy = -np.inf
     best_wl = 0.0
     best_l1 = 0.0
-    cut = -np.inf  # a candidate can beat best_proxy only if its exact proxy + wn exceeds this
+    cut = -np.inf  # cut_of(best_proxy, wn), for may_win
     imp_l = np.inf
     imp_r = np.inf
     improvement = -np.inf
@@ -247,14 +266,12 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
                 l0 = wl - l1
                 r0 = t0 - l0
                 r1 = t1 - l1
-                # the proxy is -wn + q / (wl wr) in exact arithmetic: no division unless it may win
-                q = (r0 * r0 + r1 * r1) * wl + (l0 * l0 + l1 * l1) * wr
-                if q > cut * (wl * wr):
+                if may_win(l0, l1, r0, r1, wl, wr, cut):  # else no divisions: it cannot beat the best
                     gl, gr = gini_pair(l0, l1, t0, t1, wl, wr)
                     proxy = -wr * gr - wl * gl
                     if proxy > best_proxy:
                         best_proxy = proxy
-                        cut = best_proxy + wn - MARGIN * wn
+                        cut = cut_of(best_proxy, wn)
                         best_pos = start + i
                         best_feature = feat
                         best_thr = prev / 2.0 + v / 2.0
