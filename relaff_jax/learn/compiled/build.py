@@ -14,7 +14,8 @@ min_impurity_decrease`` (0). Leaves get feature -2, threshold -2.0, children -1,
 
 ``build_forests`` loops over forests and trees: forest seeds, bootstrap counts
 (``np.bincount`` of the draws) and the splitter seed as ``rng.py`` describes, then
-``build_tree``. Output node arrays are flat over all trees of all forests, children ids
+``build_tree``; the trees' streams are seeded four at a time (``mt_seed4``: one seeding is a
+latency-bound chain, four interleave) and the bootstrap drawn by ``draw_bootstrap``. Output node arrays are flat over all trees of all forests, children ids
 local to their tree (as ``Tree.children_left``), ``tree_start: (T_all + 1,)`` the first
 node of each tree.
 """

@@ -29,7 +29,12 @@ How a drawn feature is searched: each feature of the forest is sorted once, on f
 (``presort``: its samples in ascending order, their ranks and the sorted values); a node's
 samples are turned into their ranks in ascending order (``node_ranks``: a bitmap of ranks
 read back lowest bit first, or an insertion sort for small nodes), and the scan walks them,
-reading values and weights through the presorted arrays: one pass, no moving of samples.
+reading values and weights through the presorted arrays: one pass, no moving of samples. A
+candidate's Gini (two float64 divisions) is computed only when an exact, division-free form
+of its proxy says it may beat the best so far (``may_win``, with a margin far above rounding):
+a candidate that could win is always computed and compared as scikit-learn does it, in its
+order, so the best split is the same. The partition of the best
+split is branch-free through scratch, and the left child's counts are the scan's.
 
 Arrays: ``XT: (D, N)`` float32 features by row; ``w: (N,)`` float64 integer weights; ``wy:
 (N,)`` float64 ``w * y`` (class-1 weights, ``y`` 1.0 for class 1, else 0.0). ``fo = (XT,
