@@ -165,6 +165,13 @@ def test_edge_cases_match_sklearn(kind, n):
         assert pack_forest(fast) is None  # impure leaves: the exact float64 path
 
 
+def test_large_n_nodes_between_the_sort_paths():
+    """N = 1000 (16 bitmap words, kept in memory): nodes of m <= 12 samples (insertion sort),
+    12 < m < 16 (insertion sort: the bitmap would be longer than the node) and m >= 16
+    (bitmap) in the same trees, with ties."""
+    _check(*_data(1000, 3, 0, "ties"), seed=5, cfg=override(L.ForestConfig(), {"base_trees": 4, "max_trees": 4}), m=100)
+
+
 @pytest.mark.parametrize("cfg", [
     {"max_samples": 2 / 3}, {"max_samples": 0.05}, {"bootstrap": False},
     {"base_trees": 3, "max_trees": 7, "samples_per_extra_tree": 5}, {"min_samples_leaf": 3},
@@ -295,10 +302,42 @@ def test_compiled_random_streams_are_numpys_and_sklearns():
         rng.mt_seed(mt, seed)
         assert rng.first_randint(mt, 0, rng.RAND_R_MAX) == np.random.RandomState(seed).randint(0, rng.RAND_R_MAX)
         assert rng.randint(mt, 0, 7) == np.random.RandomState(seed).randint(0, 7)  # the peek consumed nothing
+    mts, one = np.zeros((4, 625), np.int64), np.zeros(625, np.int64)
+    seeds = (0, 12345, 2**31 - 2, 2**32 - 1)
+    rng.mt_seed4(mts, *seeds)  # four streams seeded together = each seeded alone
+    for g, seed in enumerate(seeds):
+        rng.mt_seed(one, seed)
+        np.testing.assert_array_equal(mts[g], one)
+        for n, draws in ((1, 5), (2, 30), (25, 25), (100, 700)):  # 700 draws cross a 624-word block
+            rng.mt_seed(one, seed)
+            rng.first_randint(one, 0, rng.RAND_R_MAX)  # as build_forests: the peek, then the bootstrap
+            wt = np.zeros(n)
+            rng.draw_bootstrap(one, wt, n, draws)
+            np.testing.assert_array_equal(wt, np.bincount(np.random.RandomState(seed).randint(0, n, draws), minlength=n))
+            if n > 1:  # the stream's position is left where randint's would be
+                assert rng.randint(one, 0, n) == np.random.RandomState(seed).randint(0, n, draws + 1)[-1]
     for s in (0, 1, 12345, 2**31 - 1, 2**32 - 1):
         state = np.array([s], np.int64)
         assert rng.rand_r(state) == _our_rand_r_py(s)
     assert rng.rand_r(np.array([0], np.int64)) == rng.rand_r(np.array([1], np.int64))  # a zero state is 1
+
+
+def test_compiled_gini_filter_passes_every_candidate_that_wins():
+    """split.may_win (a candidate's Gini divisions are skipped when it cannot beat the best)
+    never skips a candidate whose computed proxy is above the best one, checked against the
+    closest such best: one float64 step below the candidate's own proxy."""
+    from relaff_jax.learn.compiled import split
+
+    rng = np.random.default_rng(0)
+    counts = np.concatenate([rng.integers(0, 120, (3000, 4)), rng.integers(0, 20000, (3000, 4))]).astype(float)
+    for l0, l1, r0, r1 in counts:
+        wl, wr = l0 + l1, r0 + r1
+        if wl == 0 or wr == 0:
+            continue
+        gl, gr = split.gini_pair(l0, l1, l0 + r0, l1 + r1, wl, wr)
+        proxy = -wr * gr - wl * gl  # as best_split computes it
+        best = np.nextafter(proxy, -np.inf)
+        assert split.may_win(l0, l1, r0, r1, wl, wr, split.cut_of(best, wl + wr)), (l0, l1, r0, r1)
 
 
 def test_compiled_many_forests_per_call_and_large_trees():

@@ -14,7 +14,8 @@ min_impurity_decrease`` (0). Leaves get feature -2, threshold -2.0, children -1,
 
 ``build_forests`` loops over forests and trees: forest seeds, bootstrap counts
 (``np.bincount`` of the draws) and the splitter seed as ``rng.py`` describes, then
-``build_tree``. Output node arrays are flat over all trees of all forests, children ids
+``build_tree``; the trees' streams are seeded four at a time (``mt_seed4``: one seeding is a
+latency-bound chain, four interleave) and the bootstrap drawn by ``draw_bootstrap``. Output node arrays are flat over all trees of all forests, children ids
 local to their tree (as ``Tree.children_left``), ``tree_start: (T_all + 1,)`` the first
 node of each tree.
 """
@@ -23,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, first_randint, mt_seed, randint
+from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, draw_bootstrap, first_randint, mt_seed, mt_seed4, randint
 from relaff_jax.learn.compiled.split import best_split, node_impurity
 
 EPSILON = np.finfo(np.float64).eps  # sklearn/tree/_tree.pyx
@@ -36,7 +37,7 @@ def build_tree(fo, sc, stk_i, stk_f, y1, w, K, max_features, min_leaf, min_split
     """One tree on the forest ``fo`` (``split.py``) with weights ``w: (N,)``; nodes written
     to ``out = (feature, threshold, left, right, value)`` from ``base``. ``stk_i: (N + 2, 6)``
     int64 and ``stk_f: (N + 2,)`` float64 are the stack. Returns the tree's node count."""
-    samples, features = sc[0], sc[5]
+    samples, features, wy = sc[0], sc[3], sc[5]
     feature_o, thr_o, left_o, right_o, value_o = out
     n = y1.shape[0]
     m = 0
@@ -46,6 +47,7 @@ def build_tree(fo, sc, stk_i, stk_f, y1, w, K, max_features, min_leaf, min_split
             samples[m] = i
             m += 1
         w_all += w[i]
+        wy[i] = w[i] * y1[i]
     for j in range(features.shape[0]):
         features[j] = j
     # stack rows: start, end, depth, parent, is_left, n_constant | impurity
@@ -66,7 +68,7 @@ def build_tree(fo, sc, stk_i, stk_f, y1, w, K, max_features, min_leaf, min_split
         for p in range(start, end):
             s = samples[p]
             wn += w[s]
-            t1 += w[s] * y1[s]
+            t1 += wy[s]
         t0 = wn - t1
         is_leaf = depth >= max_depth or nn < min_split or nn < 2 * min_leaf
         if first:
@@ -75,7 +77,7 @@ def build_tree(fo, sc, stk_i, stk_f, y1, w, K, max_features, min_leaf, min_split
         is_leaf = is_leaf or impurity <= EPSILON
         if not is_leaf:
             pos, feat, thr, imp_l, imp_r, improvement, n_const = best_split(
-                fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_const, max_features, min_leaf, state)
+                fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_const, max_features, min_leaf, state)
             is_leaf = pos >= end or improvement + EPSILON < 0.0
         node = base + count
         if parent >= 0:
@@ -149,17 +151,19 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
     right_o = np.empty(cap, np.int32)
     value_o = np.zeros((cap, 2), np.float64)
     tree_start = np.zeros(n_trees.sum() + 1, np.int64)
-    order_all = np.empty(d_max * n_max, np.int64)
-    rank_all = np.empty(d_max * n_max, np.int64)
+    order_all = np.empty(d_max * n_max, np.int32)
+    rank_all = np.empty(d_max * n_max, np.int32)
+    sv_all = np.empty(d_max * n_max, np.float32)
     ready = np.zeros(d_max, np.uint8)
-    sc = (np.empty(n_max, np.int64), np.empty(n_max, np.float32), np.empty(n_max, np.float64),
-          np.empty(n_max, np.float64), np.zeros((n_max + 63) // 64, np.uint64), np.empty(d_max, np.int64),
-          np.empty(d_max, np.int64))
+    keys = np.empty(n_max, np.int64)
+    sc = (np.empty(n_max, np.int64), np.empty(n_max, np.int64), np.zeros((n_max + 63) // 64, np.uint64),
+          np.empty(d_max, np.int64), np.empty(d_max, np.int64), np.empty(n_max, np.float64))
     stk_i = np.empty((n_max + 2, 6), np.int64)
     stk_f = np.empty(n_max + 2, np.float64)
     mt = np.zeros(625, np.int64)
     mt2 = np.zeros(625, np.int64)
-    tree_seeds = np.empty(n_trees.max(), np.int64)
+    tree_seeds = np.zeros(n_trees.max() + 3, np.int64)
+    mts = np.zeros((4, 625), np.int64)
     state = np.zeros(1, np.int64)
     w = np.empty(n_max, np.float64)
     y1 = np.empty(n_max, np.float64)
@@ -175,22 +179,24 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
         y0 += n
         rf = ready[:d]
         rf[:] = 0
-        fo = (XT, order_all[: d * n].reshape(d, n), rank_all[: d * n].reshape(d, n), rf)  # C-contiguous
-        scf = (sc[0][:n], sc[1][:n], sc[2][:n], sc[3][:n], sc[4][: (n + 63) // 64], sc[5][:d], sc[6][:d])
+        fo = (XT, order_all[: d * n].reshape(d, n), rank_all[: d * n].reshape(d, n), sv_all[: d * n].reshape(d, n),
+              rf, keys[:n])  # C-contiguous
+        scf = (sc[0][:n], sc[1][:n], sc[2][: (n + 63) // 64], sc[3][:d], sc[4][:d], sc[5][:n])
         mt_seed(mt, seeds[f])
         for t in range(n_trees[f]):  # _set_random_states: one draw per tree
             tree_seeds[t] = randint(mt, 0, MAX_INT)
         for t in range(n_trees[f]):
-            mt_seed(mt, tree_seeds[t])
-            state[0] = first_randint(mt, 0, RAND_R_MAX)  # the splitter's fresh RandomState(s_i)
+            if t % 4 == 0:  # the next four trees' streams seeded together (past the last tree: unused)
+                mt_seed4(mts, tree_seeds[t], tree_seeds[t + 1], tree_seeds[t + 2], tree_seeds[t + 3])
+            mtt = mts[t % 4]
+            state[0] = first_randint(mtt, 0, RAND_R_MAX)  # the splitter's fresh RandomState(s_i)
             if state[0] < 0:
                 mt_seed(mt2, tree_seeds[t])
                 state[0] = randint(mt2, 0, RAND_R_MAX)
             wt = w[:n]
             if bootstrap:
                 wt[:] = 0.0
-                for _ in range(n_boot[f]):
-                    wt[randint(mt, 0, n)] += 1.0
+                draw_bootstrap(mtt, wt, n, n_boot[f])
             else:
                 wt[:] = 1.0
             m = 0

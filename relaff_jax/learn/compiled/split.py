@@ -18,104 +18,158 @@ Read from sklearn/tree/_splitter.pyx, _partitioner.pyx, _criterion.pyx and kept 
 - Children impurities and the improvement use the criterion's formulas in its operation
   order (``children_impurity``, ``impurity_improvement``).
 
-Why the order of samples inside a node does not matter, so any sort will do (scikit-learn
-sorts with its own introsort, which is not stable): the sorted feature values are the same
-for every order, the thresholds depend only on them, the children are the sets ``x <= t`` /
-``x > t``, and the weighted class counts are sums of integer bootstrap counts, exact in
-float64 in any order. Only the sets of samples per node, the persistent ``features`` array
-and the ``rand_r`` state carry from node to node.
+Why the order of samples inside a node does not matter, so no node is ever sorted in place
+(scikit-learn sorts with its own introsort, which is not stable): the sorted feature values
+are the same for every order, the thresholds depend only on them, the children are the sets
+``x <= t`` / ``x > t``, and the weighted class counts are sums of integer bootstrap counts,
+exact in float64 in any order. Only the sets of samples per node, the persistent
+``features`` array and the ``rand_r`` state carry from node to node.
 
-Arrays: ``XT: (D, N)`` float32 features by row; ``y1: (N,)`` float64 1.0 for class 1, else
-0.0; ``w: (N,)`` float64 integer weights. ``fo = (XT, order, rank, ready)``: the forest's
-features presorted on first use (``order, rank: (D, N)`` int64 samples in ascending order of
-each feature and their ranks, ``ready: (D,)`` uint8). ``sc = (samples, fv, ws, wy, bm,
-features, constant)``: the splitter's ``samples: (N,)`` int64 (the node's at
-``[start, end)``), and scratch: ``fv: (N,)`` float32 the sorted values, ``ws, wy: (N,)``
-float64 their weights and class-1 weights, ``bm: (ceil(N / 64),)`` uint64 zeros, and the
-persistent ``features, constant: (D,)`` int64. Splits are searched for binary
-nodes only (a node of one class has impurity 0 and is a leaf), so counts are scalars.
+How a drawn feature is searched: each feature of the forest is sorted once, on first use
+(``presort``: its samples in ascending order, their ranks and the sorted values); a node's
+samples are turned into their ranks in ascending order (``node_ranks``: a bitmap of ranks
+read back lowest bit first, or an insertion sort for small nodes), and the scan walks them,
+reading values and weights through the presorted arrays: one pass, no moving of samples. A
+candidate's Gini (two float64 divisions) is computed only when an exact, division-free form
+of its proxy says it may beat the best so far (``may_win``, with a margin far above rounding):
+a candidate that could win is always computed and compared as scikit-learn does it, in its
+order, so the best split is the same. The partition of the best
+split is branch-free through scratch, and the left child's counts are the scan's.
+
+Arrays: ``XT: (D, N)`` float32 features by row; ``w: (N,)`` float64 integer weights; ``wy:
+(N,)`` float64 ``w * y`` (class-1 weights, ``y`` 1.0 for class 1, else 0.0). ``fo = (XT,
+order, rank, sv, ready, keys)``: the forest's features presorted on first use (``order,
+rank: (D, N)`` int32 samples in ascending order of each feature and their ranks, ``sv: (D,
+N)`` float32 the sorted values, ``ready: (D,)`` uint8, ``keys: (N,)`` int64 scratch). ``sc =
+(samples, rk, bm, features, constant, wy)``: the splitter's ``samples: (N,)`` int64 (the
+node's at ``[start, end)``), scratch ``rk: (N,)`` int64 a node's ranks and ``bm: (ceil(N /
+64),)`` uint64 zeros, the persistent ``features, constant: (D,)`` int64, and ``wy``. Splits
+are searched for binary nodes only (a node of one class has impurity 0 and is a leaf), so
+counts are scalars.
+
+Small functions called per drawn feature or per random draw are ``inline="always"``: a
+numba call that passes arrays costs reference counting on every call.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
+from numba.cpython.unsafe.numbers import leading_zeros, trailing_zeros
 
 from relaff_jax.learn.compiled.rng import rand_int
 
 FEATURE_THRESHOLD = np.float32(1e-7)  # sklearn/tree/_partitioner.pxd
-INSERTION = 12  # nodes up to this size are insertion-sorted
+COUNT_SORT = 256  # presort: ranks by counting up to this N (keys are distinct), else a sort
+MARGIN = 1e-9  # of wn: far above the proxy's rounding error (< 10 * 2**-53 * wn), see may_win
+INSERTION = 12  # nodes up to this size get their ranks by insertion sort
 ONE = np.uint64(1)
-DEBRUIJN = np.uint64(0x03F79D71B4CB0A89)
-SHIFT = np.uint64(58)
-CTZ = np.zeros(64, np.int64)  # index of the lowest set bit b: CTZ[(b * DEBRUIJN) >> 58]
-for _i in range(64):
-    CTZ[((int(DEBRUIJN) << _i) & 0xFFFFFFFFFFFFFFFF) >> 58] = _i
+ZERO = np.uint64(0)
 SIGN = np.uint32(0x80000000)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def ctz(b):
+    """Index of the lowest set bit of ``b != 0`` (uint64), as int64 (int64 + uint64 is float64 in numba)."""
+    return np.int64(trailing_zeros(b))
+
+
+@njit(cache=True, inline="always")
+def clz(b):
+    """Leading zero bits of ``b != 0`` (uint64), as int64."""
+    return np.int64(leading_zeros(b))
+
+
+@njit(cache=True, inline="always")
 def presort(fo, j):
-    """Sort feature j of the forest once (``order[j]``, ``rank[j]``), on first use."""
-    XT, order, rank, ready = fo
+    """Sort feature j of the forest once (``order[j]``, ``rank[j]``, ``sv[j]``), on first use."""
+    XT, order, rank, sv, ready, keys = fo
     if ready[j]:
         return
     n = XT.shape[1]
     bits = XT[j].view(np.uint32)
-    keys = np.empty(n, np.int64)
     for i in range(n):  # float32 order as unsigned keys, the sample in the low word
         b = bits[i]
         k = ~b if b & SIGN else b | SIGN
         keys[i] = ((np.int64(k) - 0x80000000) << 32) | i  # high word signed: no overflow
-    keys.sort()
-    for r in range(n):
-        s = keys[r] & 0xFFFFFFFF
-        order[j, r] = s
-        rank[j, s] = r
+    if n <= COUNT_SORT:  # rank = how many keys are smaller: n^2 compares, vectorised, beat the sort here
+        for s in range(n):
+            ks = keys[s]
+            r = 0
+            for i in range(n):
+                r += keys[i] < ks
+            order[j, r] = s
+            rank[j, s] = r
+            sv[j, r] = XT[j, s]
+    else:
+        keys.sort()
+        for r in range(n):
+            s = keys[r] & 0xFFFFFFFF
+            order[j, r] = s
+            rank[j, s] = r
+            sv[j, r] = XT[j, s]
     ready[j] = 1
 
 
-@njit(cache=True)
-def sort_node(fo, sc, j, y1, w, start, end):
-    """``samples[start:end]`` in ascending order of feature j (ties in any order), with
-    ``fv``, ``ws``, ``wy`` along: insertion sort for small nodes; else the node's ranks in
-    the forest's presorted order are set in a bitmap and read back in order (lowest set bit
-    first), O(m + N / 64)."""
-    XT, order, rank, ready = fo
-    samples, fv, ws, wy, bm = sc[0], sc[1], sc[2], sc[3], sc[4]
+@njit(cache=True, inline="always")
+def node_ranks(fo, sc, j, start, end):
+    """The ranks (in the forest's presorted order of feature j) of ``samples[start:end]``,
+    ascending, into ``rk[:end - start]``, unless feature j is constant at the node (returns
+    True then, and ``rk`` may be unfilled). N <= 128: the ranks set in a two-word bitmap
+    held in registers (no loop-carried memory, and a constant feature is seen from the
+    lowest and highest bits before reading them out); else an insertion sort for small
+    nodes (or when the bitmap would be long for the node) or a bitmap in memory read back
+    lowest bit first, O(m + N / 64). Ranks are distinct, so all give the same list."""
+    rank, sv = fo[2], fo[3]
+    samples, rk, bm = sc[0], sc[1], sc[2]
     m = end - start
-    if m <= INSERTION:
+    nw = bm.shape[0]
+    if nw <= 2:
+        b0 = ZERO
+        b1 = ZERO
         for p in range(start, end):
-            fv[p] = XT[j, samples[p]]
-        for i in range(start + 1, end):
-            v = fv[i]
-            s = samples[i]
+            r = rank[j, samples[p]]  # 2-D indexing, no row views (each costs reference counting)
+            bit = ONE << np.uint64(r & 63)
+            hi = np.uint64(r >> 6)  # 0 or 1: branch-free choice of the word
+            b0 |= bit & (hi - ONE)
+            b1 |= bit & (ZERO - hi)
+        lo = ctz(b0) if b0 != ZERO else 64 + ctz(b1)
+        top = 127 - clz(b1) if b1 != ZERO else 63 - clz(b0)
+        if sv[j, top] <= sv[j, lo] + FEATURE_THRESHOLD:
+            return True
+        k = 0
+        while b0 != ZERO:
+            rk[k] = ctz(b0)
+            k += 1
+            b0 &= b0 - ONE
+        while b1 != ZERO:
+            rk[k] = 64 + ctz(b1)
+            k += 1
+            b1 &= b1 - ONE
+        return False
+    if m <= INSERTION or nw > m:
+        for i in range(m):
+            r = rank[j, samples[start + i]]
             k = i - 1
-            while k >= start and fv[k] > v:
-                fv[k + 1] = fv[k]
-                samples[k + 1] = samples[k]
+            while k >= 0 and rk[k] > r:
+                rk[k + 1] = rk[k]
                 k -= 1
-            fv[k + 1] = v
-            samples[k + 1] = s
+            rk[k + 1] = r
     else:
-        presort(fo, j)
-        for p in range(start, end):  # 2-D indexing, no row views (each costs reference counting)
+        for p in range(start, end):
             r = rank[j, samples[p]]
             bm[r >> 6] |= ONE << np.uint64(r & 63)
-        k = start
-        for wi in range(bm.shape[0]):
+        k = 0
+        for wi in range(nw):
             v = bm[wi]
-            bm[wi] = np.uint64(0)
-            while v != np.uint64(0):
-                low = v & (~v + ONE)
-                s = order[j, wi * 64 + CTZ[(low * DEBRUIJN) >> SHIFT]]
-                samples[k] = s
-                fv[k] = XT[j, s]
+            if v == ZERO:
+                continue
+            bm[wi] = ZERO
+            base = wi * 64
+            while v != ZERO:
+                rk[k] = base + ctz(v)
                 k += 1
-                v ^= low
-    for p in range(start, end):
-        s = samples[p]
-        ws[p] = w[s]
-        wy[p] = w[s] * y1[s]
+                v &= v - ONE
+    return sv[j, rk[m - 1]] <= sv[j, rk[0]] + FEATURE_THRESHOLD
 
 
 @njit(cache=True)
@@ -131,6 +185,25 @@ def gini_pair(l0, l1, t0, t1, wl, wr):
 
 
 @njit(cache=True)
+def cut_of(best_proxy, wn):
+    """The bound ``may_win`` compares with once the best proxy is ``best_proxy``."""
+    return best_proxy + wn - MARGIN * wn
+
+
+@njit(cache=True)
+def may_win(l0, l1, r0, r1, wl, wr, cut):
+    """Whether a candidate of left counts (l0, l1) and right (r0, r1) may have a proxy above
+    the best one (``cut = cut_of(best_proxy, wn)``), with multiplications only. In exact
+    arithmetic the proxy is ``-wn + q / (wl wr)``, ``q = (r0^2 + r1^2) wl + (l0^2 + l1^2)
+    wr``; the computed proxy (``gini_pair``) is within ~10 * 2**-53 * wn of it, and q and the
+    product within a few 2**-53 relative, all far below MARGIN * wn: a candidate whose
+    computed proxy is above the best one always passes (tests/test_engine.py checks it on
+    mirrored candidates, whose exact proxies are equal)."""
+    q = (r0 * r0 + r1 * r1) * wl + (l0 * l0 + l1 * l1) * wr
+    return q > cut * (wl * wr)
+
+
+@njit(cache=True)
 def node_impurity(t0, t1, wn):
     """``Gini.node_impurity`` of a node with class counts (t0, t1) (t1 = 0 for one class)."""
     g = 0.0
@@ -138,20 +211,24 @@ def node_impurity(t0, t1, wn):
     return g / 1.0
 
 
-@njit(cache=True)
-def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, max_features, min_leaf,
+@njit(cache=True, inline="always")
+def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, max_features, min_leaf,
                state):
     """``node_split_best`` on ``samples[start:end]`` of class-count totals (t0, t1) and
     weight ``wn`` (``samples`` partitioned in place when a split is found). Returns ``(pos,
     feature, threshold, impurity_left, impurity_right, improvement, n_constant)``; ``pos ==
     end`` when no split is valid."""
-    XT = fo[0]
-    samples, fv, ws, wy, features, constant = sc[0], sc[1], sc[2], sc[3], sc[5], sc[6]
+    XT, order, sv = fo[0], fo[1], fo[3]
+    samples, rk, features, constant = sc[0], sc[1], sc[3], sc[4]
     n_features = XT.shape[0]
+    m = end - start
     best_pos = end
     best_feature = 0
     best_thr = 0.0
     best_proxy = -np.inf
+    best_wl = 0.0
+    best_l1 = 0.0
+    cut = -np.inf  # cut_of(best_proxy, wn), for may_win
     imp_l = np.inf
     imp_r = np.inf
     improvement = -np.inf
@@ -171,8 +248,8 @@ def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
             continue
         f_j += n_found
         feat = features[f_j]
-        sort_node(fo, sc, feat, y1, w, start, end)
-        if fv[end - 1] <= fv[start] + FEATURE_THRESHOLD:
+        presort(fo, feat)
+        if node_ranks(fo, sc, feat, start, end):
             features[f_j] = features[n_total]
             features[n_total] = feat
             n_found += 1
@@ -182,41 +259,47 @@ def best_split(fo, sc, y1, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
         t = features[f_i]
         features[f_i] = features[f_j]
         features[f_j] = t
-        wl = 0.0
-        l1 = 0.0
-        for i in range(start, end - 1):  # candidate p = i + 1: positions not tied with p - 1
-            wl += ws[i]
-            l1 += wy[i]
-            p = i + 1
-            if fv[p] <= fv[i] + FEATURE_THRESHOLD:
-                continue
-            if p - start < min_leaf or end - p < min_leaf:
-                continue
-            wr = wn - wl
-            gl, gr = gini_pair(wl - l1, l1, t0, t1, wl, wr)
-            proxy = -wr * gr - wl * gl
-            if proxy > best_proxy:
-                best_proxy = proxy
-                best_pos = p
-                best_feature = feat
-                best_thr = fv[i] / 2.0 + fv[p] / 2.0
-    if best_pos < end:
-        a = start
-        b = end
-        while a < b:  # partition_samples_final
-            if np.float64(XT[best_feature, samples[a]]) <= best_thr:
-                a += 1
-            else:
-                b -= 1
-                t = samples[a]
-                samples[a] = samples[b]
-                samples[b] = t
-        wl = 0.0
-        l1 = 0.0
-        for q in range(start, best_pos):
-            s = samples[q]
+        prev = sv[feat, rk[0]]
+        s = order[feat, rk[0]]
+        wl = w[s]
+        l1 = wy[s]
+        for i in range(1, m):  # candidate p = start + i, wl and l1 the sums over positions < p
+            r = rk[i]
+            v = sv[feat, r]
+            if not (v <= prev + FEATURE_THRESHOLD) and i >= min_leaf and m - i >= min_leaf:
+                wr = wn - wl
+                l0 = wl - l1
+                r0 = t0 - l0
+                r1 = t1 - l1
+                if may_win(l0, l1, r0, r1, wl, wr, cut):  # else no divisions: it cannot beat the best
+                    gl, gr = gini_pair(l0, l1, t0, t1, wl, wr)
+                    proxy = -wr * gr - wl * gl
+                    if proxy > best_proxy:
+                        best_proxy = proxy
+                        cut = cut_of(best_proxy, wn)
+                        best_pos = start + i
+                        best_feature = feat
+                        best_thr = prev / 2.0 + v / 2.0
+                        best_wl = wl
+                        best_l1 = l1
+            s = order[feat, r]
             wl += w[s]
-            l1 += w[s] * y1[s]
+            l1 += wy[s]
+            prev = v
+    if best_pos < end:  # partition_samples_final, branch-free through rk (any order will do)
+        lo = 0
+        hi = m - 1
+        for p in range(start, end):
+            s = samples[p]
+            left = np.float64(XT[best_feature, s]) <= best_thr
+            rk[lo] = s
+            rk[hi] = s
+            lo += left
+            hi -= not left
+        for i in range(m):
+            samples[start + i] = rk[i]
+        wl = best_wl  # the left child's counts, as the scan summed them (integers: exact in any order)
+        l1 = best_l1
         wr = wn - wl
         imp_l, imp_r = gini_pair(wl - l1, l1, t0, t1, wl, wr)
         improvement = (wn / w_all) * (impurity - (wr / wn * imp_r) - (wl / wn * imp_l))
