@@ -302,6 +302,8 @@ def main() -> None:
     ap.add_argument("--forests", type=int, default=16, help="forests per (space, n)")
     ap.add_argument("--report-sizes", type=int, default=20, help="training sizes of the report's resampling target")
     ap.add_argument("--smoke", action="store_true", help="lift, batch 64, 2 batches, few forests and scenes")
+    ap.add_argument("--rollouts-only", action="store_true",
+                    help="time the native rollout functions (with and without the reach screen) and stop")
     ap.add_argument("--xla-cache", default=os.path.join(os.environ.get("TMPDIR", "/tmp"), "relaff_paper_stages_xla"),
                     help="JAX's persistent compilation cache ('' for none): a rerun skips the ~2-5 min of compiles")
     args = ap.parse_args()
@@ -328,6 +330,8 @@ def main() -> None:
               f"| {d['screened']:.1%} | {d['cores']:.2f} | {d['first_s']:.1f} |", flush=True)
         rollout.append(d)
     stamp("rollout functions done")
+    if args.rollouts_only:
+        return
     if args.parts:
         print("\n| action | batch | s/batch: place, MJX settle, C settle, plan L-BFGS, plan LM, exec (L-BFGS plans), "
               "exec (LM) | today /s | C settle /s | C settle + LM /s | labels LM = L-BFGS |")
