@@ -1,0 +1,181 @@
+"""Where the report stage's time goes (issue 26), on a paper-shaped synthetic experiment folder;
+reference path against the default one in the same run, outputs compared byte for byte.
+
+    PYTHONPATH=. python benchmarks/report_stage.py --out /tmp/relaff_report_bench [--sizes 99]
+        [--resamples 1000] [--variants reference new] [--profile]
+
+The folder (``learn.synthetic_results``: 9 actions, 50 conditions, 4,000 balanced test scenes,
+50 PCA / 25 RHF repetitions, outcomes bit-packed as the sweep writes them, ``--sizes`` training
+sizes 2, 3, ...) is built once in ``--out/results`` and reused. No ``--data``: the dataset
+sections need dataset folders (see ``docs/benchmarks.md`` for what that leaves out).
+
+Each variant (``write_report(..., reference=True)`` or the default) runs in its own process,
+with timers wrapped around the writer's parts (inclusive seconds; a part's exclusive seconds
+leave out the parts timed inside it), and reports its peak RSS; ``--profile`` also writes a
+cProfile of each variant beside the reports. The variants' report files (``findings.json``,
+``summary.json``, ``reach.json``, Table II CSV and Markdown) are compared byte for byte.
+
+Projection to the paper preset when ``--sizes`` < 99: every part's time times 99 / sizes (the
+outcomes, resamples' curves and figures' curves all grow with the sizes; the few fixed costs,
+imports and small tables, are scaled too, so the projection is an upper bound). Resamples:
+the resampling and the per-resample Table II scale with ``--resamples`` / 1000 likewise.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parents[1]
+COMPARED = ("findings.json", "summary.json", "reach.json", "table2.csv", "table2_rhf.csv", "table2.md")
+
+# (module, attribute, part name): wrapped where the writer and the analysis look them up
+PARTS = [
+    ("relaff_jax.report.write", "load_results", "load results.npz"),
+    ("relaff_jax.report.write", "analyse", "analyse (space)"),
+    ("relaff_jax.learn.analysis", "extend", "  online.extend"),
+    ("relaff_jax.learn.analysis", "curves", "  curves"),
+    ("relaff_jax.learn.analysis", "half_curves", "  half_curves"),
+    ("relaff_jax.learn.analysis", "table2_rows", "  table2_rows"),
+    ("relaff_jax.learn.analysis", "threshold_study", "  threshold_study"),
+    ("relaff_jax.learn.analysis", "_intervals", "  _intervals"),
+    ("relaff_jax.learn.analysis", "resampled_means", "    resampled_means"),
+    ("relaff_jax.learn.analysis", "whole", "    whole"),
+    ("relaff_jax.learn.analysis", "bc_interval", "    bc_interval"),
+    ("relaff_jax.report.write", "table2_csv", "table2_csv"),
+    ("relaff_jax.report.write", "table2_markdown", "table2_markdown"),
+    ("relaff_jax.report.write", "write_figures", "figures (Figs. 6-12)"),
+    ("relaff_jax.report.write", "borrow_rows", "borrow_rows"),
+    ("relaff_jax.report.write", "summary", "summary"),
+    ("relaff_jax.report.write", "reach_json", "reach_json"),
+    ("relaff_jax.report.write", "findings", "findings"),
+    ("relaff_jax.report.write", "finite", "finite (json prep)"),
+    ("relaff_jax.report.sections", "correlation_blocks", "correlation_blocks"),
+    ("relaff_jax.report.sections", "threshold_blocks", "threshold_blocks"),
+    ("relaff_jax.report.sections", "table2_blocks", "table2_blocks"),
+    ("relaff_jax.report.write", "render_markdown", "render_markdown"),
+    ("relaff_jax.report.write", "render_html", "render_html"),
+    ("relaff_jax.io", "atomic_write_text", "file writes"),
+]
+
+
+def build(root: Path, sizes: int, resamples: int) -> Path:
+    """The synthetic experiment folder ``root/results`` (reused when its config matches)."""
+    from relaff_jax.config import to_dict
+    from relaff_jax.learn.config import ExperimentConfig
+    from relaff_jax.learn.synthetic_results import write_synthetic_results
+
+    cfg = ExperimentConfig(keep_outcomes=True, sizes=tuple(range(2, 2 + sizes)), ci_resamples=resamples)
+    res = root / "results"
+    meta = res / "experiment.json"
+    if meta.exists() and json.loads(meta.read_text())["config"] == json.loads(json.dumps(to_dict(cfg))):
+        return res
+    t = time.perf_counter()
+    write_synthetic_results(res, cfg)
+    print(f"built {res} in {time.perf_counter() - t:.0f} s")
+    return res
+
+
+class Timers:
+    """Inclusive and exclusive seconds per part (a stack: a part's time inside another's is
+    taken off that one's exclusive time)."""
+
+    def __init__(self):
+        self.incl, self.excl, self.calls, self.stack = {}, {}, {}, []
+
+    def wrap(self, name, f):
+        def timed(*a, **k):
+            self.stack.append(0.0)
+            t = time.perf_counter()
+            try:
+                return f(*a, **k)
+            finally:
+                dt = time.perf_counter() - t
+                inner = self.stack.pop()
+                if self.stack:
+                    self.stack[-1] += dt
+                self.incl[name] = self.incl.get(name, 0.0) + dt
+                self.excl[name] = self.excl.get(name, 0.0) + dt - inner
+                self.calls[name] = self.calls.get(name, 0) + 1
+        return timed
+
+
+def child(results: Path, report: Path, variant: str, profile: bool) -> None:
+    """One variant's report under the timers; prints one JSON line of its parts."""
+    import importlib
+
+    timers = Timers()
+    t0 = time.perf_counter()
+    import relaff_jax.report.write as W  # noqa: F401 (imports timed apart)
+    t_import = time.perf_counter() - t0
+    for mod, attr, name in PARTS:
+        m = importlib.import_module(mod)
+        setattr(m, attr, timers.wrap(name, getattr(m, attr)))
+    kw = {"reference": True} if variant == "reference" else {}
+    t = time.perf_counter()
+    if profile:
+        import cProfile
+        pr = cProfile.Profile()
+        pr.runcall(W.write_report, results, report, examples_per_action=0, **kw)
+        pr.dump_stats(str(report) + ".prof")
+    else:
+        W.write_report(results, report, examples_per_action=0, **kw)
+    total = time.perf_counter() - t
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB -> GB
+    print(json.dumps({"variant": variant, "total": total, "import": t_import, "rss_gb": rss,
+                      "incl": timers.incl, "excl": timers.excl, "calls": timers.calls}))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("/tmp/relaff_report_bench"))
+    ap.add_argument("--sizes", type=int, default=99, help="training sizes 2, 3, ... (paper: 99)")
+    ap.add_argument("--resamples", type=int, default=1000, help="bootstrap resamples (paper: 1000)")
+    ap.add_argument("--variants", nargs="+", default=["reference", "new"], choices=["reference", "new"])
+    ap.add_argument("--profile", action="store_true", help="cProfile each variant (report.prof)")
+    ap.add_argument("--child", nargs=2, metavar=("VARIANT", "REPORT"), help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child:
+        return child(args.out / "results", Path(args.child[1]), args.child[0], args.profile)
+    print(f"{platform.machine()} {os.cpu_count()} cores, load average {os.getloadavg()}")
+    results = build(args.out, args.sizes, args.resamples)
+    runs = {}
+    for v in args.variants:
+        report = args.out / f"report_{v}"
+        cmd = [sys.executable, __file__, "--out", str(args.out), "--child", v, str(report)] + (["--profile"] if args.profile else [])
+        p = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(HERE)))
+        if p.returncode:
+            sys.exit(p.stderr)
+        runs[v] = json.loads(p.stdout.strip().splitlines()[-1])
+    scale = 99 / args.sizes * 1.0  # see the module docstring
+    names = [n for _, _, n in PARTS if any(n in r["incl"] for r in runs.values())]
+    head = f"{'part':26}" + "".join(f" {v + ' incl':>14} {v + ' excl':>14}" for v in runs)
+    print(f"{args.sizes} sizes, {args.resamples} resamples; seconds (projection x{scale:.2f} to 99 sizes in the last line)")
+    print(head)
+    for n in names:
+        print(f"{n:26}" + "".join(f" {r['incl'].get(n, 0):14.2f} {r['excl'].get(n, 0):14.2f}" for r in runs.values()))
+    for key in ("total", "import"):
+        print(f"{key:26}" + "".join(f" {r[key]:14.2f} {'':14}" for r in runs.values()))
+    print(f"{'peak RSS GB':26}" + "".join(f" {r['rss_gb']:14.2f} {'':14}" for r in runs.values()))
+    if len(runs) == 2:
+        ref, new = runs["reference"], runs["new"]
+        same = {f: _same(args.out / "report_reference" / f, args.out / "report_new" / f) for f in COMPARED}
+        print(f"identical: {same}")
+        print(f"ratio reference/new total {ref['total'] / new['total']:.2f}; projected to the paper preset "
+              f"{ref['total'] * scale:.0f} s -> {new['total'] * scale:.0f} s")
+
+
+def _same(a: Path, b: Path) -> bool | None:
+    if not a.exists() and not b.exists():
+        return None
+    return a.exists() and b.exists() and a.read_bytes() == b.read_bytes()
+
+
+if __name__ == "__main__":
+    main()
