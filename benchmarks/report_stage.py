@@ -55,6 +55,12 @@ PARTS = [
     ("relaff_jax.report.write", "summary", "summary"),
     ("relaff_jax.report.write", "reach_json", "reach_json"),
     ("relaff_jax.report.write", "findings", "findings"),
+    ("relaff_jax.data", "info", "data: info"),
+    ("relaff_jax.data", "anatomy", "data: anatomy"),
+    ("relaff_jax.report.write", "dataset_figure", "data: dataset_figure"),
+    ("relaff_jax.report.write", "reach_figure", "data: reach_figure"),
+    ("relaff_jax.report.write", "reach_blocks", "data: reach_blocks"),
+    ("relaff_jax.report.write", "subset_blocks", "data: subset_blocks"),
     ("relaff_jax.report.write", "finite", "finite (json prep)"),
     ("relaff_jax.report.sections", "correlation_blocks", "correlation_blocks"),
     ("relaff_jax.report.sections", "threshold_blocks", "threshold_blocks"),
@@ -82,6 +88,39 @@ def build(root: Path, sizes: int, resamples: int) -> Path:
     return res
 
 
+def build_data(root: Path, n: int) -> dict[str, str]:
+    """Nine datasets of ``n`` balanced samples (``root/data/<action>``) written by the dataset
+    stage's writer (``data.generate_dataset``) from a numpy stand-in for the simulator: labels
+    by relation (the real lift's shares), ``feasible``, distances, objects; no scene fields, so
+    no example pictures. Reused when there."""
+    import numpy as np
+
+    from relaff_jax.constants import ACTIONS, RELATIONS
+    from relaff_jax.data import generate_dataset, info
+
+    def rollout(key, batch):
+        rng = np.random.default_rng(int(np.asarray(key).astype(np.int64).sum()))
+        rel = rng.choice(3, batch, p=[0.47, 0.34, 0.19])
+        feasible = rng.random(batch) < 0.7
+        label = feasible & (rng.random(batch) < np.array([0.0, 0.9, 1.0])[rel])
+        return {"label": label, "relation": np.asarray(RELATIONS)[rel], "feasible": feasible,
+                "cog_distance": np.abs(rng.normal(0.1 + 0.1 * (rel == 0), 0.05, batch)),
+                "toy": rng.choice(["ball", "cube", "cup"], batch), "other": rng.choice(["plate", "box", "bowl"], batch),
+                "pair": rng.integers(0, 40, batch)}
+
+    dirs = {}
+    for i, act in enumerate(ACTIONS):
+        d = root / "data" / act
+        try:
+            done = info(d)["status"] == "complete"
+        except Exception:  # noqa: BLE001 (absent or partial: write it)
+            done = False
+        if not done:
+            generate_dataset(d, act, n, rollout, seed=i, batch=4096, progress=False)
+        dirs[act] = str(d)
+    return dirs
+
+
 class Timers:
     """Inclusive and exclusive seconds per part (a stack: a part's time inside another's is
     taken off that one's exclusive time)."""
@@ -106,7 +145,7 @@ class Timers:
         return timed
 
 
-def child(results: Path, report: Path, variant: str, profile: bool) -> None:
+def child(results: Path, report: Path, variant: str, profile: bool, data: dict | None) -> None:
     """One variant's report under the timers; prints one JSON line of its parts."""
     import importlib
 
@@ -118,6 +157,7 @@ def child(results: Path, report: Path, variant: str, profile: bool) -> None:
         m = importlib.import_module(mod)
         setattr(m, attr, timers.wrap(name, getattr(m, attr)))
     kw = {"reference": True} if variant == "reference" else {}
+    kw["data_dirs"] = data
     t = time.perf_counter()
     if profile:
         import cProfile
@@ -139,16 +179,24 @@ def main() -> None:
     ap.add_argument("--resamples", type=int, default=1000, help="bootstrap resamples (paper: 1000)")
     ap.add_argument("--variants", nargs="+", default=["reference", "new"], choices=["reference", "new"])
     ap.add_argument("--profile", action="store_true", help="cProfile each variant (report.prof)")
+    ap.add_argument("--data", type=int, default=0, metavar="N",
+                    help="also the --data sections, on nine datasets of N samples (paper: 10000; built once)")
     ap.add_argument("--child", nargs=2, metavar=("VARIANT", "REPORT"), help=argparse.SUPPRESS)
     args = ap.parse_args()
+    data = {a: str(args.out / "data" / a) for a in _actions()} if args.data else None
     if args.child:
-        return child(args.out / "results", Path(args.child[1]), args.child[0], args.profile)
+        return child(args.out / "results", Path(args.child[1]), args.child[0], args.profile, data)
     print(f"{platform.machine()} {os.cpu_count()} cores, load average {os.getloadavg()}")
     results = build(args.out, args.sizes, args.resamples)
+    if args.data:
+        t = time.perf_counter()
+        build_data(args.out, args.data)
+        print(f"datasets ready in {time.perf_counter() - t:.0f} s")
     runs = {}
     for v in args.variants:
         report = args.out / f"report_{v}"
-        cmd = [sys.executable, __file__, "--out", str(args.out), "--child", v, str(report)] + (["--profile"] if args.profile else [])
+        cmd = [sys.executable, __file__, "--out", str(args.out), "--child", v, str(report), "--data", str(args.data)]
+        cmd += ["--profile"] if args.profile else []
         p = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(HERE)))
         if p.returncode:
             sys.exit(p.stderr)
@@ -169,6 +217,12 @@ def main() -> None:
         print(f"identical: {same}")
         print(f"ratio reference/new total {ref['total'] / new['total']:.2f}; projected to the paper preset "
               f"{ref['total'] * scale:.0f} s -> {new['total'] * scale:.0f} s")
+
+
+def _actions() -> tuple:
+    from relaff_jax.constants import ACTIONS
+
+    return ACTIONS
 
 
 def _same(a: Path, b: Path) -> bool | None:
