@@ -92,3 +92,22 @@ def test_products_of_the_needed_rows_same_bits_as_one_call(m):
         needed = rng.random(rows) < 0.25
         x[~needed] = 0.0
         np.testing.assert_array_equal(products(x, w, needed), x @ w.T)
+
+
+def test_products_of_rows_read_from_bits_same_bits():
+    # halfrows.Rows: the needed rows gathered from the bits (and the online rows) give the
+    # products of the float64 rows (rows_f64), also through the one-call fallback
+    from relaff_jax.learn.halfrows import Rows, products, rows_f64
+
+    rng = np.random.default_rng(1)
+    m = 2000
+    w = rng.multinomial(m, np.full(m, 1 / m), size=1000) / m
+    for c, s, r in ((50, 1, 26), (20, 3, 7)):
+        bits = rng.random((c, s, r, m)) < 0.6
+        bits[rng.random(c) < 0.2] = False  # conditions that did not run
+        on = np.zeros((2, s, r, m))
+        on[0] = (rng.integers(0, 4, (s, r, m)) / 3).astype(np.float32)
+        x = rows_f64(bits, on).reshape(-1, m)
+        needed = x.any(-1)
+        np.testing.assert_array_equal(products(Rows(bits, on), w, needed), x @ w.T)
+        np.testing.assert_array_equal(Rows(bits, on).whole(), x)

@@ -15,6 +15,8 @@ Files, in pipeline order:
 - ``states.py``: ``state_features`` (manipulated object first), ``augment`` (bootstrap inputs);
 - ``correlation.py``: the categories and the correlation heuristic;
 - ``synthetic.py``: synthetic datasets in ``load_dataset``'s layout (``--synthetic``, tests);
+- ``synthetic_results.py``: a synthetic experiment folder in the sweep's layout (report tests,
+  ``benchmarks/report_stage.py``);
 - ``config.py``: ``ExperimentConfig``, ``experiment_preset``, ``check_config``, Table II rows;
 - ``protocol.py``: condition axis and plans, pools, ``forests_per_space``;
 - ``draws.py``: each target's (balanced) test set and each repetition's training order;

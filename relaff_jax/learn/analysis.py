@@ -111,7 +111,8 @@ def half_curves(acc_x: np.ndarray, corr_x: np.ndarray, halves: np.ndarray,
     return np.where(ran[None], out, np.nan)
 
 
-def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0, intervals: bool = True) -> dict[str, Any]:
+def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0, intervals: bool = True,
+            reference: bool = False) -> dict[str, Any]:
     """Everything section V reports for one space, as arrays over (target, condition, size).
 
     Returns ``mean``/``sem`` curves ``(A, C + 2, S)``, ``bf`` curves, ``avg_bf (A, C + 2)``,
@@ -123,7 +124,8 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     ``table2_per_target (rows, A)``, ``table2 (rows, 3)`` avg/min/max, ``n_targets (rows,)``,
     ``unmeasurable {row: reason}``, the same for the accuracy gain (``gain_*``), and with
     ``intervals`` (``_intervals``) bias-corrected bootstrap intervals and the resampled values
-    behind them, and the threshold study.
+    behind them, and the threshold study. ``reference``: the reference paths (the same bits,
+    slower; kept to check the default ones against).
     """
     acc, sizes = np.asarray(res["acc"], dtype=float), [int(s) for s in res["sizes"]]
     actions = [str(a) for a in res["actions"]]
@@ -136,7 +138,11 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     masks = np.asarray(res["category_masks"], dtype=bool)  # (T, A, K)
     cbn_ok = masks[list(cfg.thresholds).index(cfg.cbn_threshold)].any(-1)  # (A,)
     halves = scene_halves(n_test, _get(res, "test_positive", None), corr_x.shape[-1])
-    half_means = half_curves(acc_x, corr_x, halves)
+    hm = None  # the resampled half curves, made with the half curves where one pass reads both
+    if intervals and not reference and corr_x.shape[-1] and fast_outcomes(corr_x):
+        half_means, hm = _fused(acc_x, corr_x, n_test, halves, cfg, seed)
+    else:
+        half_means = half_curves(acc_x, corr_x, halves, reference=reference)
     bf = bootstrap_factor(mean, mean[:, lay["NB"]][:, None, :], cfg.chance, tol[:, None, None])
     t2 = table2_rows(mean, sizes, cfg, lay, tol, half_means, cbn_ok, masks)
     table2, n_targets = summarise(t2["bf"])
@@ -163,7 +169,7 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
         out[f"online_{fam.lower()}"] = w_on[fam]
     out["thresholds"] = threshold_study(mean[:, : lay["n"]], bf[:, : lay["n"]], masks, sizes, cfg, lay, t2)
     if intervals:
-        out.update(_intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, out))
+        out.update(_intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, out, reference, hm))
     return out
 
 
@@ -197,13 +203,23 @@ def _fixed_mean(per_target: np.ndarray, fixed: np.ndarray) -> tuple[np.ndarray, 
         return np.nanmean(np.where(fixed, per_target, np.nan), -1), held
 
 
-def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, pt) -> dict[str, Any]:
+def _fused(acc_x, corr_x, n_test, halves, cfg, seed) -> tuple[np.ndarray, np.ndarray]:
+    """``half_curves`` and ``_intervals``' resampled means from one read of the outcomes (the
+    same bits as the two apart: each block's halves unpacked and mixed once, not twice)."""
+    means = np.full((2,) + corr_x.shape[:3], np.nan)
+    hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, 7), halves, means=means)
+    return np.where(np.isfinite(acc_x).any(-1)[None], means, np.nan), hm
+
+
+def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, pt, reference=False,
+               hm=None) -> dict[str, Any]:
     """Bias-corrected bootstrap intervals (``intervals.bc_interval``) of Table II (bf and gain:
     each row's avg over the point estimate's targets, held fixed, and every per target
     value), of the threshold study's averages and of every mean curve; the resampled values
     (``*_boot``, for the findings' paired differences) and the share of resamples in which
     each row's set of targets kept a value (``table2_set_held (rows,)``)."""
-    hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, 7), halves)
+    if hm is None:
+        hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, 7), halves, reference=reference)
     hs = half_sizes(n_test, halves)
     outcomes = bool(corr_x.shape[-1])
     fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]), np.isfinite(pt["gain_per_target"])

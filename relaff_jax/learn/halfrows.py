@@ -48,14 +48,40 @@ def row_means(bits: np.ndarray, on: np.ndarray) -> np.ndarray:
     return np.concatenate([counts / m, on.mean(-1)])
 
 
+class Rows:
+    """The rows of ``rows_f64(bits, on)`` as ``(M, m)``, read where ``products`` needs them
+    without the float64 copy of them all (most of a block's bytes): ``take`` gathers bits, 1
+    byte each, and casts them (0/1: the same values)."""
+
+    def __init__(self, bits: np.ndarray, on: np.ndarray, work: dict | None = None):
+        self.b4, self.o4, self.work = bits, on, work
+        self.bits, self.on = bits.reshape(-1, bits.shape[-1]), on.reshape(-1, on.shape[-1])
+        self.shape = (len(self.bits) + len(self.on), self.bits.shape[1])
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def take(self, rows: np.ndarray, out: np.ndarray) -> None:
+        """``out[:] = x[rows]``, ``rows`` increasing."""
+        k = int(np.searchsorted(rows, len(self.bits)))
+        out[:k] = np.take(self.bits, rows[:k], axis=0)
+        out[k:] = np.take(self.on, rows[k:] - len(self.bits), axis=0)
+
+    def row(self, i: int) -> np.ndarray:
+        return self.bits[i] if i < len(self.bits) else self.on[i - len(self.bits)]
+
+    def whole(self) -> np.ndarray:
+        """All of them, as ``rows_f64`` gives them (the one call's fallback)."""
+        return rows_f64(self.b4, self.o4, self.work).reshape(self.shape)
+
+
 def resampled(bits: np.ndarray, on: np.ndarray, w: np.ndarray, v: np.ndarray, work: dict | None = None) -> np.ndarray:
     """``(B, C + 2, s)`` bootstrap means of the half: scene weights ``w (B, m)``, repetition
-    weights ``v (B, R)``; the reference's products (``products``) and einsum (``work``:
-    arrays reused across calls)."""
-    x = rows_f64(bits, on, work)
-    c, s, r, m = x.shape
+    weights ``v (B, R)``; the reference's products (``products``, of the rows read from the
+    bits, ``Rows``) and einsum (``work``: arrays reused across calls)."""
+    c, (s, r, m) = bits.shape[0] + on.shape[0], bits.shape[1:]
     needed = np.concatenate([bits.any(-1), on.any(-1)]).reshape(-1)  # an all-zero row's product is +0 in any order
-    per_rep = products(x.reshape(-1, m), w, needed, work)  # accuracy per repetition and resample
+    per_rep = products(Rows(bits, on, work), w, needed, work)  # accuracy per repetition and resample
     return np.einsum("csrb,br->bcs", per_rep.reshape(c, s, r, len(w)), v)
 
 
@@ -79,18 +105,21 @@ def products(x: np.ndarray, w: np.ndarray, needed: np.ndarray, work: dict | None
     n_common = int((needed & ~kinds[0]).sum()) if kinds else 0
     clean = _clean_rows(n_common, w) if kinds else None
     if kinds is None or clean is None:
-        return np.matmul(x, w.T, out=out)
+        return np.matmul(x.whole() if isinstance(x, Rows) else x, w.T, out=out)
     apart, small, at = kinds
     out[:] = 0.0
     rows = np.flatnonzero(needed & ~apart)
     if len(rows):
         buf = _buffer(work, "common", (clean, x.shape[1]))
         buf[len(rows):] = 0.0
-        np.take(x, rows, axis=0, out=buf[: len(rows)])
+        if isinstance(x, Rows):
+            x.take(rows, buf[: len(rows)])
+        else:
+            np.take(x, rows, axis=0, out=buf[: len(rows)])
         out[rows] = (buf @ w.T)[: len(rows)]
     for i in np.flatnonzero(needed & apart):
         one = np.zeros((small, x.shape[1]))
-        one[at] = x[i]
+        one[at] = x.row(i) if isinstance(x, Rows) else x[i]
         out[i] = (one @ w.T)[at]
     return out
 

@@ -133,8 +133,17 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
     on = {"DB1": lay["n"], "CB1": lay["n"] + 1}
     nan = np.full(mean.shape[:-2], np.nan)  # (..., A)
 
-    def family(m, idx, allowed):
-        """Candidates' mean curves, which ran, and the 'best' / 'at ten' weights ``(..., A, K)``."""
+    seen: dict = {}  # family's values per (curves, candidates, allowed): the same for bf and gain
+
+    def family(m, idx, allowed, h=None):
+        """Candidates' mean curves, which ran, and the 'best' / 'at ten' weights ``(..., A, K)``
+        of the curves ``m`` (``h``: which of them, the whole test set's or a half's)."""
+        key = (h, np.asarray(idx).tobytes(), np.shape(allowed), np.asarray(allowed).tobytes())
+        if key not in seen:
+            seen[key] = _family(m, idx, allowed)
+        return seen[key]
+
+    def _family(m, idx, allowed):
         fm = m[..., idx, :]
         ran = np.any(np.isfinite(fm), -1) & allowed
         fm = np.where(ran[..., None], fm, np.nan)
@@ -152,7 +161,7 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
             return nan, best_o, nan, ten_o, avg, ran
         held_b, held_t = [], []
         for h in range(2):  # choose on half h, score on the other half
-            _, ran_h, wb_h, wt_h = family(halves[..., h, :, :, :], idx, allowed)
+            _, ran_h, wb_h, wt_h = family(halves[..., h, :, :, :], idx, allowed, h)
             other = split[1 - h][key_i][..., idx, :]
             held_b.append(wm(_mix(other, wb_h)))
             held_t.append(wm(_from_ten(other, _mix(other, wt_h), ran_h, after)))

@@ -116,7 +116,8 @@ class PackedBits:
         self.ndim = len(self.shape)
 
     def __getitem__(self, key) -> np.ndarray:
-        return np.unpackbits(self.packed[key], axis=-1, count=self.n).astype(bool)
+        # unpackbits gives 0/1 bytes: read as bool in place (astype copied every unpacked byte)
+        return np.unpackbits(self.packed[key], axis=-1, count=self.n).view(bool)
 
     def __array__(self, dtype=None, copy=None) -> np.ndarray:
         full = self[...]

@@ -45,19 +45,21 @@ def _load() -> tuple[float, float, float] | None:
 def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
                  data_dirs: Mapping[str, str | os.PathLike] | None = None,
                  info: Mapping[str, Any] | None = None, examples_per_action: int = 2,
-                 rules: FindingRules = FindingRules()) -> Path:
+                 rules: FindingRules = FindingRules(), reference: bool = False) -> Path:
     """Write the report of ``results_dir`` to ``out_dir``; return ``out_dir``.
 
     data_dirs: ``{action: DIR}`` of the datasets the experiment learnt from; adds their
       statistics, ``fig_datasets.png`` and ``examples_per_action`` example scenes per action.
     info: the run log of ``relaff reproduce`` (``preset``, ``seed``, ``timings``, ``versions``).
     rules: how the findings summary decides whether a paper finding is reproduced.
+    reference: the reference paths of the analysis and the writer (the same files, slower;
+      kept to check the default ones against).
     """
     t0 = time.perf_counter()
     res = load_results(results_dir)
     cfg = res["config"]
     spaces = list(res["meta"]["spaces"])
-    an = {s: analyse(res[s], cfg, seed=int(res["meta"]["seed"])) for s in spaces}
+    an = {s: analyse(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference) for s in spaces}
     main = "pca" if "pca" in an else spaces[0]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
