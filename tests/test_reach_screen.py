@@ -12,7 +12,7 @@ from relaff_jax.sim import native_settle, rollouts, templates
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 from relaff_jax.sim.planning import setup
-from relaff_jax.sim.reach_screen import beyond_reach, prepare_screened, reach_bound
+from relaff_jax.sim.reach_screen import beyond_reach, jitted_screen_fn, prepare_screened, reach_bound
 
 CFG = templates.ActionConfig()
 
@@ -72,7 +72,9 @@ def test_no_reachable_pose_is_screened(arm):
 @pytest.mark.slow  # compiles the plan (~20 s) and the screen
 def test_screened_plan_equals_plan():
     """Every action, 64 scenes: the screened plan equals the unscreened plan in every field but
-    ``ik_error`` (NaN where screened); the screened scenes are infeasible in the full plan."""
+    ``ik_error`` (NaN where screened); the screened scenes are infeasible in the full plan.
+    Unobstruct's scenes include all three of its calls: program and toy, program only (toy
+    beyond reach), toy only (program beyond reach)."""
     sw = wd.build_world(CFG.phys)
     place_fn, _, _ = sc.jitted_scene_fns(sw, CFG.scene)
     prep = rollouts.jitted_stage_fns(CFG)[0]
@@ -96,6 +98,10 @@ def test_screened_plan_equals_plan():
         assert not np.asarray(ref.feasible)[skip].any()
         assert (~skip).any(), action
         screened += skip.sum()
+        if action == "unobstruct":
+            far, toy_far, _ = jax.device_get(jitted_screen_fn(CFG)(aid, jnp.asarray(pair), jnp.asarray(q)))
+            assert (~far & ~toy_far).any() and (~far & toy_far).any() and (far & ~toy_far).any()
+            np.testing.assert_array_equal(skip, far)
     assert screened > 0.25 * 64 * len(ACTIONS)  # about half the scenes are beyond reach
 
 

@@ -23,24 +23,24 @@ Why a screened program is infeasible whatever the solver does (a proof, not a fi
 
 A program is infeasible if one of the targets its template uses is beyond reach
 (``planning.make_plan_fn``), and unobstruct's toy is unreachable before the action if its grasp
-target is (``programs.toy_reachable``). The screened scenes' plans are what the plan function
-gives every infeasible scene (home waypoints, ``feasible`` False); only their ``ik_error``,
-never solved, is NaN. The other scenes are planned by the same jitted function in calls of
+target is (``programs.toy_reachable``); unobstruct's two are screened apart. The screened
+scenes' plans are what the plan function gives every infeasible scene (home waypoints,
+``feasible`` False); only their ``ik_error``, never solved, is NaN. The other scenes are planned by the same jitted function in calls of
 ``PLAN_CHUNK`` rows; a scene's plan does not depend on the other rows of its call
 (``tests/test_reach_screen.py`` checks the whole batch against the unscreened plan).
 """
 from __future__ import annotations
 
 import functools
-from typing import Callable, NamedTuple
+from typing import Any, Callable, Iterator, NamedTuple
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from . import arm as A
-from .planning import Plan, home_grip, setup
-from .programs import program, toy_grasp_target
+from .planning import Plan, home_grip, make_plan_fn, setup
+from .programs import program, toy_grasp_target, toy_reachable
 from .templates import N_TARGETS, TPL_STEPS, TPL_TARGET, UNOBSTRUCT_ID, ActionConfig
 
 from relaff_jax.constants import ACTIONS
@@ -99,10 +99,12 @@ def beyond_reach(bound: ReachBound, target: A.IKTarget) -> jax.Array:
 
 
 def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
-    """``screen_fn(action_id (), pair (B,), qpos (B, 14)) -> (beyond (B,) bool, direction
-    (B, 3))``: ``beyond`` where the program is provably infeasible and (unobstruct) the toy
-    provably unreachable before the action, so neither needs the IK; ``direction`` is the
-    program's (what the plan function returns). Pure; the caller jits."""
+    """``screen_fn(action_id (), pair (B,), qpos (B, 14)) -> (infeasible (B,) bool, unreachable
+    (B,) bool, direction (B, 3))``: ``infeasible`` where the program is provably infeasible, so
+    its plan needs no IK; ``unreachable`` where unobstruct's toy is provably unreachable before
+    the action, so ``reach_before`` needs none (True for the other actions, whose
+    ``reach_before`` is False); ``direction`` is the program's (what the plan function
+    returns). Pure; the caller jits."""
     st = setup(cfg)
     bound = reach_bound(st.arm, cfg.arm)
     branches = [functools.partial(program, a, st.arm, cfg, st.geo) for a in ACTIONS]
@@ -114,7 +116,7 @@ def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         infeasible = jnp.any(far(prog.targets) & used)
         grasp, _ = toy_grasp_target(st.arm, cfg, st.geo, pair, qpos)
         unreachable = jnp.where(action_id == UNOBSTRUCT_ID, beyond_reach(bound, grasp), True)
-        return infeasible & unreachable, prog.direction
+        return infeasible, unreachable, prog.direction
 
     def screen_fn(action_id, pair, qpos):
         return jax.vmap(one, in_axes=(None, 0, 0))(jnp.asarray(action_id, jnp.int32), pair, qpos)
@@ -128,16 +130,41 @@ def jitted_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     return jax.jit(make_screen_fn(cfg))
 
 
+@functools.lru_cache(maxsize=4)
+def jitted_parts(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
+    """The two halves of ``simulate.make_prepare_fn`` apart, jitted and cached:
+    ``plan_fn(action_id, pair (B,), qpos (B, 14)) -> Plan`` (``planning.make_plan_fn``) and
+    ``reach_fn(pair (B,), qpos (B, 14)) -> (B,) bool``, unobstruct's ``toy_reachable``. Only
+    unobstruct uses them: its program and its toy are screened apart."""
+    st = setup(cfg)
+    reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
+    return jax.jit(make_plan_fn(cfg)), jax.jit(reach)
+
+
+def _in_chunks(fn: Callable, rows: np.ndarray, chunk: int, *arrays: np.ndarray) -> Iterator[tuple[np.ndarray, Any]]:
+    """``(rows of the call, fn's host output)`` for ``fn(*arrays[idx])`` over ``rows`` in calls
+    of ``chunk`` rows, the last padded with repeats (one compiled shape): the output's first
+    ``len(rows of the call)`` entries are theirs."""
+    for lo in range(0, len(rows), chunk):
+        part = rows[lo:lo + chunk]
+        idx = np.resize(part, chunk)
+        yield part, jax.device_get(fn(*(jnp.asarray(a[idx]) for a in arrays)))
+
+
 def prepare_screened(prepare_fn: Callable, cfg: ActionConfig, aid: int, pair: np.ndarray,
                      qpos: np.ndarray) -> tuple[Plan, np.ndarray]:
     """``prepare_fn``'s ``(Plan, before)`` (``simulate.make_prepare_fn``, jitted) for B scenes,
     solving the IK only of the scenes the screen cannot rule out, in calls of ``PLAN_CHUNK``
     rows (the last padded with repeats; a batch up to ``PLAN_CHUNK`` is one call of its own
-    size). Host arrays: pair (B,), qpos (B, 14) float32. Returns numpy arrays: every field
-    equal to the unscreened call's except ``ik_error``, NaN where screened."""
+    size). Unobstruct's program and toy are screened apart: a scene whose program is beyond
+    reach but whose toy may not be gets only the toy's IK (``jitted_parts``), and the other way
+    round. Host arrays: pair (B,), qpos (B, 14) float32. Returns numpy arrays: every field
+    equal to the unscreened call's except ``ik_error``, NaN where the program was screened."""
     pair, qpos = np.asarray(pair), np.asarray(qpos, np.float32)
     n = len(pair)
-    beyond, direction = jax.device_get(jitted_screen_fn(cfg)(aid, jnp.asarray(pair), jnp.asarray(qpos)))
+    infeasible, unreachable, direction = jax.device_get(
+        jitted_screen_fn(cfg)(aid, jnp.asarray(pair), jnp.asarray(qpos)))
+    infeasible, unreachable = np.asarray(infeasible, bool), np.asarray(unreachable, bool)
     st = setup(cfg)
     seg = np.asarray(TPL_STEPS, np.int32)[aid]
     q_way = np.broadcast_to(np.asarray(st.q_home, np.float32), (n, len(seg) + 1, 6)).copy()
@@ -145,13 +172,26 @@ def prepare_screened(prepare_fn: Callable, cfg: ActionConfig, aid: int, pair: np
     feasible, before = np.zeros(n, bool), np.zeros(n, bool)
     ik_error = np.full(n, np.nan, np.float32)
     direction = np.asarray(direction, np.float32).copy()
-    run = np.flatnonzero(~np.asarray(beyond, bool))
     chunk = min(n, PLAN_CHUNK)
-    for lo in range(0, len(run), chunk):
-        rows = run[lo:lo + chunk]
-        idx = np.resize(rows, chunk)
-        plan, b = jax.device_get(prepare_fn(aid, jnp.asarray(pair[idx]), jnp.asarray(qpos[idx])))
+
+    def keep(rows, plan):
         k = len(rows)
         q_way[rows], grip_way[rows], feasible[rows] = plan.q_way[:k], plan.grip_way[:k], plan.feasible[:k]
-        direction[rows], ik_error[rows], before[rows] = plan.direction[:k], plan.ik_error[:k], b[:k]
+        direction[rows], ik_error[rows] = plan.direction[:k], plan.ik_error[:k]
+
+    if aid != UNOBSTRUCT_ID:  # reach_before is False: prepare_fn's own
+        both, plan_only, toy_only = np.flatnonzero(~infeasible), np.zeros(0, int), np.zeros(0, int)
+    else:
+        both = np.flatnonzero(~infeasible & ~unreachable)
+        plan_only = np.flatnonzero(~infeasible & unreachable)
+        toy_only = np.flatnonzero(infeasible & ~unreachable)
+    for rows, (plan, b) in _in_chunks(lambda p, q: prepare_fn(aid, p, q), both, chunk, pair, qpos):
+        keep(rows, plan)
+        before[rows] = b[:len(rows)]
+    if len(plan_only) or len(toy_only):
+        plan_fn, reach_fn = jitted_parts(cfg)
+        for rows, plan in _in_chunks(lambda p, q: plan_fn(aid, p, q), plan_only, chunk, pair, qpos):
+            keep(rows, plan)
+        for rows, b in _in_chunks(reach_fn, toy_only, chunk, pair, qpos):
+            before[rows] = b[:len(rows)]
     return Plan(q_way, grip_way, seg, feasible, direction, ik_error), before
