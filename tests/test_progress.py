@@ -78,6 +78,10 @@ def test_generation_estimate_follows_the_engine():
     assert mjx["generate"] - COST["sim_compile"] == pytest.approx(sim / COST["rollouts_per_s"])
     assert native["generate"] - COST["sim_compile"] == pytest.approx(sim / COST["rollouts_per_s_native"])
     assert {k: v for k, v in mjx.items() if k != "generate"} == {k: v for k, v in native.items() if k != "generate"}
+    # the feasible population selects from about twice the rollouts per sample
+    feasible = estimate_seconds(resolve(preset("quick"), {"dataset.population": "feasible"}), 2, 2)
+    assert feasible["generate"] - COST["sim_compile"] == pytest.approx(
+        9 * 100 * COST["rollouts_per_sample_feasible"] / COST["rollouts_per_s"])
 
 
 def test_sweep_progress_weighs_blocks_by_their_forests_cost(tmp_path):

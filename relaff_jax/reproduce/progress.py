@@ -20,13 +20,20 @@ from relaff_jax.constants import STAGES
 COST = {
     "sim_compile": 150.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
     "rollouts_per_sample": 2.5,  # rollouts simulated per selected sample (positive rate, matching)
+    # the same when only feasible rollouts may be selected (dataset.population=feasible): the
+    # paper preset's 448,512 rollouts for 9 x 10,000 samples (2026-12-05, docs/reproduce.md)
+    "rollouts_per_sample_feasible": 5.0,
     "rollouts_per_s": 5.0,  # settle + plan + the feasible 3.3 s motor programs (docs/actions.md)
-    "rollouts_per_s_native": 25.0,  # the same with dataset.engine=native (study preset, 2026-12-02)
+    # the same with dataset.engine=native: C settle, reach screen, C execution; the paper
+    # preset's whole data stage at batch 1,024, 448,512 rollouts in 2,977 s (2026-12-05)
+    "rollouts_per_s_native": 150.0,
     "feature_compile": 40.0,
-    "feature_scenes_per_s": 12.0,
+    "feature_scenes_per_s": 110.0,  # the paper preset's features stage: 90,000 scenes in 811 s (2026-12-05)
     "cpu_s_per_fit": 0.01,  # a forest of ~100 trees, fit + predict, fast engine (docs/learning.md)
     "cpu_s_per_fit_sklearn": 0.15,  # the same with experiment.forest.engine=sklearn
-    "cpu_s_per_fit_compiled": 0.003,  # the same with the compiled engine (docs/benchmarks.md, issue 26)
+    # the same with the compiled engine: the paper preset's experiment, 2,207,079 forests (the
+    # count before the run) in 1,471 s on two workers (2026-12-05, docs/reproduce.md)
+    "cpu_s_per_fit_compiled": 0.0013,
     "report_fixed": 60.0,
     "report_per_example": 1.5,
 }
@@ -47,7 +54,8 @@ def estimate_seconds(cfg: Any, jobs: int, cpus: int) -> dict[str, float]:
 
     n, a = cfg.dataset.n_samples, len(cfg.reproduce.actions)
     rate = COST["rollouts_per_s_native" if cfg.dataset.engine == "native" else "rollouts_per_s"]
-    gen = COST["sim_compile"] + a * n * COST["rollouts_per_sample"] / rate
+    per_sample = COST["rollouts_per_sample_feasible" if cfg.dataset.population == "feasible" else "rollouts_per_sample"]
+    gen = COST["sim_compile"] + a * n * per_sample / rate
     feat = COST["feature_compile"] + a * n / COST["feature_scenes_per_s"]
     fits = sum(forests_per_space(cfg.experiment, a, s) for s in cfg.reproduce.spaces)
     per_fit = COST[{"sklearn": "cpu_s_per_fit_sklearn", "compiled": "cpu_s_per_fit_compiled"}.get(
