@@ -31,28 +31,48 @@ ISA_FLAGS = ("sse4_2", "avx", "avx2", "fma", "avx512f", "avx512bw", "avx512vl", 
 
 
 def parse_cpuinfo(text: str) -> dict[str, Any]:
-    """The first processor's ``model name`` and which of ``ISA_FLAGS`` its ``flags`` hold,
-    from the text of Linux's ``/proc/cpuinfo``."""
-    model, flags = None, set()
+    """The first processor's ``model name``, ``cpu family`` and ``model`` numbers and which of
+    ``ISA_FLAGS`` its ``flags`` hold, from the text of Linux's ``/proc/cpuinfo``. The numbers
+    say more than a virtual machine's generic name ("AMD EPYC"), and OpenBLAS picks its kernels
+    from them (``blas_kernels``)."""
+    fields: dict[str, str] = {}
     for line in text.splitlines():
         key, _, value = line.partition(":")
-        key = key.strip()
-        if key == "model name" and model is None:
-            model = value.strip()
-        elif key == "flags" and not flags:
-            flags = set(value.split())
-    return {"cpu_model": model, "isa": [f for f in ISA_FLAGS if f in flags]}
+        fields.setdefault(key.strip(), value.strip())
+    number = lambda k: int(fields[k]) if fields.get(k, "").isdigit() else None
+    flags = set(fields.get("flags", "").split())
+    return {"cpu_model": fields.get("model name"), "cpu_family": number("cpu family"), "cpu_model_number": number("model"),
+            "isa": [f for f in ISA_FLAGS if f in flags]}
+
+
+def blas_kernels() -> list[dict[str, Any]]:
+    """The BLAS libraries loaded for numpy and scipy and the kernels each chose at run time
+    (``threadpoolctl``; OpenBLAS's ``architecture``: Haswell, SkylakeX, ...). JAX's CPU linear
+    algebra (``jnp.linalg.eigh``, so the PCA features) calls scipy's LAPACK, whose OpenBLAS picks
+    its kernels from the CPU it finds: on this machine forcing SkylakeX kernels instead of Haswell
+    moves PCA features by up to 1.4e-6 and leaves RHF's bits alone (docs/reproduce.md). Empty
+    when threadpoolctl (scikit-learn's dependency) or scipy is missing."""
+    try:
+        import scipy.linalg  # noqa: F401  loads scipy's OpenBLAS, which jax's LAPACK calls go to
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return []
+    keep = ("internal_api", "version", "architecture", "filepath")
+    return [{k: Path(d[k]).name if k == "filepath" else d.get(k) for k in keep if k in d}
+            for d in threadpool_info() if d.get("user_api") == "blas"]
 
 
 def machine() -> dict[str, Any]:
-    """Platform, CPU architecture, model, vector extensions and core count (XLA's code, and so
-    float rounding and contact outcomes, depend on the CPU's features)."""
+    """Platform, CPU architecture, model, vector extensions, core count and BLAS kernels (XLA's
+    code, and so float rounding and contact outcomes, depend on the CPU's features; the PCA
+    features' eigen-solver on the BLAS kernels)."""
     out = {"platform": platform.platform(), "machine": platform.machine(), "cpus": os.cpu_count()}
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as f:
             out.update(parse_cpuinfo(f.read()))
     except OSError:  # not Linux: the processor string is all there is
         out.update(cpu_model=platform.processor() or None, isa=None)
+    out["blas"] = blas_kernels()
     return out
 
 

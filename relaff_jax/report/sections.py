@@ -292,6 +292,9 @@ def run_blocks(run_info: Mapping[str, Any] | None, report_s: float | None = None
     if m:
         isa = ", ".join(m.get("isa") or []) or "-"
         items.append(f"machine: {m.get('cpu_model')}, {m.get('cpus')} cores, {m.get('machine')} ({isa}); {m.get('platform')}")
+        if m.get("blas"):  # the kernels the PCA features' eigen-solver ran on (older logs lack them)
+            items.append("BLAS kernels: " + ", ".join(f"{b.get('internal_api')} {b.get('version')} {b.get('architecture')}"
+                                                      for b in m["blas"]))
     if load is not None:
         items.append("load average as the report was written: " + " / ".join(f"{x:.2f}" for x in load)
                      + " (1 / 5 / 15 min)")
