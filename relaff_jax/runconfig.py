@@ -103,9 +103,10 @@ def preset(name: str) -> RunConfig:
 
     ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
     repetitions, 4000 test samples, the paper's forests), from the feasible rollouts
-    (``dataset.population=feasible``; ``--set dataset.population=all`` for today's reading): 1 h 32 min
-    on two cores with ``--engine native --set experiment.forest.engine=compiled`` (measured
-    2026-12-05, docs/reproduce.md); MJX's data stage takes several times longer.
+    (``dataset.population=feasible``; ``--set dataset.population=all`` for today's reading), its
+    forests built by the compiled engine (the same forests): 1 h 32 min on two cores with
+    ``--engine native`` (measured 2026-12-05, docs/reproduce.md); MJX's data stage takes
+    several times longer.
     ``study``: numbers that can be read beside the paper's (docs/results.md): 1,000 samples
     per action, every n in 2..50, 10 repetitions in both spaces, 500 balanced test scenes per
     action, per scene outcomes kept for intervals; projected at about 2-3 hours here, most of

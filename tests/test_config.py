@@ -68,8 +68,32 @@ def test_presets():
     assert {p.dataset.population for p in (tiny, quick, study)} == {"all"}
     assert tiny.experiment.forest.max_trees == 8
     assert quick.experiment.sizes == (2,) + tuple(range(4, 26))
+    # the long presets build the same forests with the compiled engine, the short ones need no numba compile
+    assert [p.experiment.forest.engine for p in (tiny, quick, study, paper)] == ["fast", "fast", "compiled", "compiled"]
     with pytest.raises(UserError, match="unknown preset"):
         runconfig.preset("fast")
+
+
+def test_result_differences_ignore_the_forest_engine_and_analysis_keys_a_folder_lacks():
+    """The rule the experiment's status and its resume check share, by hand: the engine is
+    never a difference; an analysis-only key is one only when the stored config has it; any
+    other key, nested or not, is."""
+    from relaff_jax.io import jsonable
+    from relaff_jax.learn import ExperimentConfig
+    from relaff_jax.learn.config import result_differences
+
+    cfg = ExperimentConfig()
+    stored = jsonable(to_dict(cfg))
+    assert result_differences(stored, cfg) == []
+    engine = copy.deepcopy(stored)
+    engine["forest"]["engine"] = "compiled"
+    assert result_differences(engine, cfg) == []
+    older = {k: v for k, v in stored.items() if k not in ("chance_tol_scenes", "min_defined_share")}
+    assert result_differences(older, cfg) == []
+    changed = dict(stored, chance_tol_scenes=stored["chance_tol_scenes"] + 1, reps_pca=7)
+    changed["forest"] = dict(stored["forest"], max_depth=3, engine="sklearn")
+    assert result_differences(changed, cfg) == ["chance_tol_scenes", "forest.max_depth", "reps_pca"]
+    assert result_differences(None, cfg)  # no stored config: everything differs
 
 
 def test_a_criterion_the_engine_cannot_build_is_refused_when_the_config_is_built(capsys, tmp_path):

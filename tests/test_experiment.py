@@ -296,8 +296,12 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
     # another seed gives other draws; another config in the same folder is refused
     other = np.load(E.run_experiment(data3, tmp_path / "c", cfg, ["pca"], seed=3, jobs=1, progress=False)["pca"])
     assert not np.array_equal(other["acc"], acc, equal_nan=True)
-    with pytest.raises(ValueError, match=r"different \['config'\]"):
+    with pytest.raises(ValueError, match=r"different \['config.reps_pca'\]"):
         E.run_experiment(data3, tmp_path / "b", override(cfg, {"reps_pca": 3}), ["pca"], seed=2, jobs=1, progress=False)
+    # the forest engine changes no result: the finished folder is the same experiment
+    d = np.load(E.run_experiment(data3, tmp_path / "b", override(cfg, {"forest.engine": "sklearn"}), ["pca"], seed=2,
+                                 jobs=1, progress=False)["pca"])
+    np.testing.assert_array_equal(d["acc"], acc)
     changed = {a: dict(data3[a]) for a in ACTS3}
     changed["take"]["label"] = ~changed["take"]["label"]
     with pytest.raises(ValueError, match=r"different \['pca data'\]"):

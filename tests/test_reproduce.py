@@ -313,6 +313,22 @@ def test_stale_results_are_recomputed(base, tmp_path):
         np.testing.assert_array_equal(a, results_of(out0)[s])
 
 
+def test_another_forest_engine_resumes_the_same_run(base, tmp_path):
+    """The forest engine changes no result: a finished run asked again with another engine
+    skips every stage (results not stale) and its log records the change; another protocol
+    setting is still refused."""
+    out0, *_ = base
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    log = run(out, overrides=dict(FAST, **{"experiment.forest.engine": "compiled"}))
+    assert set(statuses(log).values()) == {"skipped"}
+    changed = log["speed_settings_changed"]
+    assert [(c["key"], c["was"], c["now"]) for c in changed] == [("experiment.forest.engine", "fast", "compiled")]
+    assert log["config"]["experiment"]["forest"]["engine"] == "compiled"
+    with pytest.raises(R.ReproduceError, match="experiment.forest.max_depth"):
+        run(out, overrides=dict(FAST, **{"experiment.forest.engine": "compiled", "experiment.forest.max_depth": 7}))
+
+
 def test_a_damaged_run_log_is_rebuilt_and_the_finished_stages_kept(base, tmp_path):
     """A run.json cut short: --status and a rerun refuse it with the repair, and --rebuild-log
     with the run's options starts a new log in which every finished stage is skipped."""

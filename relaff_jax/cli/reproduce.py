@@ -20,7 +20,8 @@ def register(sub) -> None:
     p.add_argument("--preset", choices=PRESETS, default="quick",
                    help="quick: 9.2 min on 2 idle cores, 4.4 with --engine native (docs/benchmarks.md, "
                         "'Engines at 2,000 scenes per action'); study: 29 min with --engine native (docs/results.md); paper: the full protocol "
-                        "(3 h 11 min measured with --engine native --set experiment.forest.engine=compiled: data 1 h 57 min, features 24 min, experiment 48 min; docs/reproduce.md 'The paper preset, run'); tiny: for tests")
+                        "(1 h 32 min measured with --engine native: data 50 min, features 14 min, experiment 25 min, report 4 min; "
+                        "docs/reproduce.md 'The paper preset, run again in one stretch'); tiny: for tests")
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
     p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",
                    help="the run folder, as a positional argument for --status (same as --out DIR)")

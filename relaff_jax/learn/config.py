@@ -9,6 +9,7 @@ max over the nine affordances).
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 
@@ -111,12 +112,18 @@ WINDOW = tuple(range(4, 26))  # the paper's window of the average bootstrap fact
 
 
 def experiment_preset(name: str) -> ExperimentConfig:
-    """``paper``: the full protocol. ``quick``: every condition at n = 2 and every n of the
-    window 4..25, 2 repetitions, shrunk to small datasets, outcomes per test scene kept.
+    """``paper``: the full protocol, forests built by the compiled engine. ``quick``: every
+    condition at n = 2 and every n of the window 4..25, 2 repetitions, shrunk to small
+    datasets, outcomes per test scene kept.
     ``study``: every n from 2 to 50, 10 repetitions, 500 balanced test scenes per action
-    and 300 source + 100 correlation scenes: 1,000 samples per action leave 100 training scenes."""
+    and 300 source + 100 correlation scenes: 1,000 samples per action leave 100 training scenes;
+    the compiled engine, like ``paper``. ``quick`` keeps the default ``fast`` engine, whose
+    forests are the same, and so does every preset built on it."""
+    # the long presets build their forests with the compiled engine: the same forests
+    # (tests/test_engine.py), 4-10x faster per forest, for a ~26 s numba compile on first use
+    compiled = ForestConfig(engine="compiled")
     if name == "paper":  # without the outcomes the held-out "best" rows and the threshold study are not measurable
-        return ExperimentConfig(keep_outcomes=True)
+        return ExperimentConfig(keep_outcomes=True, forest=compiled)
     if name == "quick":
         return ExperimentConfig(
             sizes=(2,) + WINDOW, reps_pca=2, reps_rhf=2, test_size=2000, shrink_to_data=True, keep_outcomes=True,
@@ -124,7 +131,7 @@ def experiment_preset(name: str) -> ExperimentConfig:
     if name == "study":
         return ExperimentConfig(
             sizes=tuple(range(2, 51)), reps_pca=10, reps_rhf=10, test_size=500, source_size=300, corr_scenes=100,
-            keep_outcomes=True,
+            keep_outcomes=True, forest=compiled,
         )
     raise UserError(f"unknown preset {name!r}; expected 'quick', 'study' or 'paper'")
 
@@ -148,6 +155,38 @@ def check_experiment_node(cfg: ExperimentConfig) -> None:
         raise UserError(f"experiment.ci_level must be in [0.5, 1) and ci_resamples >= 10, got {cfg.ci_level}, {cfg.ci_resamples}")
     if min(cfg.reps_pca, cfg.reps_rhf, cfg.test_size, cfg.source_size, cfg.corr_scenes, cfg.sizes_per_block) < 1:
         raise UserError("experiment: reps, test_size, source_size, corr_scenes and sizes_per_block must be >= 1")
+
+
+# ExperimentConfig keys (dotted) that change no result: a folder made with other values holds the
+# same experiment. The forest engines build bit-identical forests (tests/test_engine.py), so a run
+# may resume with another; the sweep never reads the analysis keys, which a folder begun before
+# they existed lacks.
+SPEED_ONLY = ("forest.engine",)
+ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share")
+
+
+def _dotted(tree: Any, prefix: str = "") -> dict[str, Any]:
+    if not isinstance(tree, dict):
+        return {prefix: tree}
+    out: dict[str, Any] = {}
+    for k, v in tree.items():
+        out.update(_dotted(v, f"{prefix}.{k}" if prefix else str(k)))
+    return out
+
+
+def result_differences(stored: Any, cfg: Any) -> list[str]:
+    """The dotted keys at which a stored experiment config (``experiment.json``'s, a JSON tree)
+    and ``cfg`` (an ``ExperimentConfig`` or its JSON tree) would make different results:
+    every key but ``SPEED_ONLY``, and ``ANALYSIS_ONLY`` only where ``stored`` has it. The one
+    rule ``learn.status`` and the sweep's resume check share."""
+    from relaff_jax import io as rio
+    from relaff_jax.config import to_dict
+
+    now = _dotted(rio.jsonable(cfg if isinstance(cfg, dict) else to_dict(cfg)))
+    old = _dotted(stored if isinstance(stored, dict) else {})
+    keys = sorted(set(now) | set(old))
+    return [k for k in keys if k not in SPEED_ONLY and not (k in ANALYSIS_ONLY and k not in old)
+            and old.get(k, "<absent>") != now.get(k, "<absent>")]
 
 
 def check_config(cfg: ExperimentConfig) -> None:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from relaff_jax import io as rio
-from relaff_jax.config import to_dict
+from relaff_jax.learn.config import result_differences
 
 from relaff_jax.learn import folder as L
 from relaff_jax.learn.folder import META  # noqa: F401 (re-exported)
@@ -32,8 +32,9 @@ def experiment_status(out: str | os.PathLike, datasets: Mapping[str, Mapping[str
         meta = rio.read_json(out / META)
     except ValueError as e:
         return "corrupt", str(e)
-    if meta.get("config") != rio.jsonable(to_dict(cfg)):
-        return "stale", "made with other experiment settings"
+    changed = result_differences(meta.get("config"), cfg)
+    if changed:
+        return "stale", f"made with other experiment settings ({', '.join(changed[:4])}{', ...' if len(changed) > 4 else ''})"
     if meta.get("seed") != seed:
         return "stale", f"made with seed {meta.get('seed')}, not {seed}"
     if meta.get("actions") != list(actions):

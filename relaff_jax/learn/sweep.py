@@ -41,7 +41,7 @@ from relaff_jax.constants import ACTIONS, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn.blocks import SUBSETS, read_block, run_block_to_file
-from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config
+from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config, result_differences
 from relaff_jax.learn.datasets import check_datasets, fingerprint
 from relaff_jax.learn.draws import draw_rep
 from relaff_jax.learn.parallel import run_parallel
@@ -59,7 +59,6 @@ from relaff_jax.learn.results import FORMAT_VERSION
 from relaff_jax.learn.states import state_features
 
 
-ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share")  # ExperimentConfig keys the sweep never reads
 
 
 def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
@@ -90,9 +89,10 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         # same protocol, seed, actions and data; a space may be added to a finished one
         old = rio.read_json(meta_path)
         now = rio.jsonable(meta)
-        # settings only the analysis reads, added after a run began, do not make it another run
-        now = dict(now, config={k: v for k, v in now["config"].items() if k in old.get("config", {}) or k not in ANALYSIS_ONLY})
-        diff = [k for k in ("format", "config", "seed", "actions") if old.get(k) != now[k]]
+        # the forest engine, and settings only the analysis reads added after a run began, do
+        # not make it another run (config.result_differences)
+        diff = [k for k in ("format", "seed", "actions") if old.get(k) != now[k]]
+        diff += [f"config.{k}" for k in result_differences(old.get("config"), cfg)]
         diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
         if diff:
             raise UserError(f"{out} holds an experiment with different {diff}; use a new --out to start another")

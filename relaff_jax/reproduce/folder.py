@@ -99,6 +99,13 @@ def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
     return node == wanted
 
 
+def _speed_only(key: str) -> bool:
+    """A run log key of a setting that changes no result (``learn.config.SPEED_ONLY``)."""
+    from relaff_jax.learn.config import SPEED_ONLY
+
+    return key.startswith("config.experiment.") and key.removeprefix("config.experiment.") in SPEED_ONLY
+
+
 def damaged_log_hint(root: Path) -> str:
     return (f"every stage's own output is untouched: rebuild the log with `relaff reproduce --out {root} "
             "--rebuild-log` and the --preset, --seed and --set options the run was made with (stages made "
@@ -151,12 +158,20 @@ def _check_log(log: dict, want: dict, root: Path) -> dict:
     stored = {k: log.get(k, "<absent>") for k in want}
     diff = differences(stored, want)
     added = [d for d in diff if _added_at_default(*d)]
-    diff = [d for d in diff if d not in added]
-    if added and not diff:
+    speed = [d for d in diff if _speed_only(d[0])]
+    diff = [d for d in diff if d not in added and d not in speed]
+    if (added or speed) and not diff:
         # settings that did not exist when the run began, requested at their defaults (which
-        # keep the old behaviour): the same run; the log records them from now on
+        # keep the old behaviour), and settings that change no result (the forest engine): the
+        # same run; the log records the requested values from now on, and when a speed setting changed
         log["config"] = want["config"]
         log.setdefault("added_settings", []).extend(k.removeprefix("config.") for k, _, _ in added)
+        log.setdefault("speed_settings_changed", []).extend(
+            {"at": now(), "key": k.removeprefix("config."), "was": a, "now": b} for k, a, b in speed)
+        if not log["speed_settings_changed"]:
+            del log["speed_settings_changed"]
+        if not log["added_settings"]:
+            del log["added_settings"]
         rio.atomic_write_json(root / RUN_LOG, log)
     if diff:
         what = sorted({key.split(".")[0] for key, _, _ in diff})
