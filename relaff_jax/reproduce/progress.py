@@ -29,7 +29,10 @@ COST = {
     "rollouts_per_s_native": 150.0,
     "feature_compile": 40.0,
     "feature_scenes_per_s": 110.0,  # the paper preset's features stage: 90,000 scenes in 811 s (2026-12-05)
-    "cpu_s_per_fit": 0.01,  # a forest of ~100 trees, fit + predict, fast engine (docs/learning.md)
+    # a forest of ~100 trees, fit + predict, fast engine: 5.4 ms in the quick preset, 4.2 in the
+    # study preset (541 s for <= 260,154 forests on two workers), 2.6-3.4 in the paper preset's
+    # 2,850-3,715 s (2026-12-02/03, docs/reproduce.md); it was 10 ms, 3x the paper run
+    "cpu_s_per_fit": 0.004,
     "cpu_s_per_fit_sklearn": 0.15,  # the same with experiment.forest.engine=sklearn
     # the same with the compiled engine: the paper preset's experiment, 2,207,079 forests (the
     # count before the run) in 1,471 s on two workers (2026-12-05, docs/reproduce.md)
