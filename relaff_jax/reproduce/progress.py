@@ -38,6 +38,9 @@ COST = {
     # count before the run) in 1,471 s on two workers (2026-12-05, docs/reproduce.md)
     "cpu_s_per_fit_compiled": 0.0013,
     "report_fixed": 60.0,
+    # the report's resampling grows with the sweep: 255 s for the paper preset's 2,207,079
+    # forests (2026-12-05), 33 s for the study preset's <= 260,154 (2026-12-02): ~1.2e-4 s each
+    "report_s_per_forest": 1.2e-4,
     "report_per_example": 1.5,
 }
 TRUST_AFTER = 0.25  # fraction of a stage after which the measured rate alone gives its ETA
@@ -64,7 +67,8 @@ def estimate_seconds(cfg: Any, jobs: int, cpus: int) -> dict[str, float]:
     per_fit = COST[{"sklearn": "cpu_s_per_fit_sklearn", "compiled": "cpu_s_per_fit_compiled"}.get(
         cfg.experiment.forest.engine, "cpu_s_per_fit")]
     exp = fits * per_fit / max(1, min(jobs, cpus))
-    rep = COST["report_fixed"] + a * cfg.reproduce.examples_per_action * COST["report_per_example"]
+    rep = max(COST["report_fixed"], fits * COST["report_s_per_forest"]) \
+        + a * cfg.reproduce.examples_per_action * COST["report_per_example"]
     return {"generate": gen, "features": feat, "experiment": exp, "report": rep}
 
 
