@@ -58,8 +58,9 @@ def blas_kernels() -> list[dict[str, Any]]:
     except ImportError:
         return []
     keep = ("internal_api", "version", "architecture", "filepath")
-    return [{k: Path(d[k]).name if k == "filepath" else d.get(k) for k in keep if k in d}
-            for d in threadpool_info() if d.get("user_api") == "blas"]
+    out = [{k: Path(d[k]).name if k == "filepath" else d.get(k) for k in keep if k in d}
+           for d in threadpool_info() if d.get("user_api") == "blas"]
+    return sorted(out, key=lambda b: (str(b.get("internal_api")), str(b.get("filepath"))))  # in load order otherwise
 
 
 def machine() -> dict[str, Any]:

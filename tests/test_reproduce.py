@@ -329,6 +329,23 @@ def test_another_forest_engine_resumes_the_same_run(base, tmp_path):
         run(out, overrides=dict(FAST, **{"experiment.forest.engine": "compiled", "experiment.forest.max_depth": 7}))
 
 
+def test_a_run_resumed_on_another_machine_says_where(base, tmp_path, monkeypatch):
+    """An invocation on the machine that began the run records nothing more; one on another
+    machine (here: other BLAS kernels) records that machine in its own entry."""
+    import relaff_jax.reproduce.run as reproduce_run
+
+    out0, *_ = base
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    log = run(out)
+    assert "machine" not in log["runs"][-1] and log["machine"]["blas"] is not None
+    other = dict(log["machine"], blas=[{"internal_api": "openblas", "version": "0.3.30", "architecture": "SkylakeX"}])
+    monkeypatch.setattr(reproduce_run, "machine", lambda: other)
+    log = run(out)
+    assert log["runs"][-1]["machine"] == other
+    assert json.loads((out / R.RUN_LOG).read_text())["runs"][-1]["machine"] == other
+
+
 def test_a_damaged_run_log_is_rebuilt_and_the_finished_stages_kept(base, tmp_path):
     """A run.json cut short: --status and a rerun refuse it with the repair, and --rebuild-log
     with the run's options starts a new log in which every finished stage is skipped."""

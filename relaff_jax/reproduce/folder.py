@@ -3,8 +3,8 @@
 ::
 
     DIR/run.json          run log: preset, the whole resolved config tree, seeds, package
-                          versions, machine, and per invocation the status and wall time of
-                          every stage
+                          versions, machine (CPU, BLAS kernels), and per invocation the status
+                          and wall time of every stage, and the machine when it is another
     DIR/data/<action>/    the balanced datasets with their PCA/RHF features (relaff_jax.data)
     DIR/results/          the experiment folder (relaff_jax.learn), both state spaces
     DIR/report/           report.md, report.html, Table II, figures, examples (relaff_jax.report)

@@ -26,6 +26,7 @@ from relaff_jax.reproduce import experiment, features, generate, report
 from relaff_jax.reproduce.folder import Paths, ReproduceError, damaged_log_hint, now, open_log
 from relaff_jax.reproduce.progress import Progress, estimate_seconds, sample_bound
 from relaff_jax.errors import UserError
+from relaff_jax.provenance import machine
 from relaff_jax.reproduce.stage import Run, Status
 from relaff_jax.runconfig import PRESETS, RunConfig, check_tree, from_json, preset
 
@@ -129,6 +130,11 @@ def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, roll
              "force": list(force), **({"redo": list(redo)} if redo else {}), "status": "running", "stages": {}}
     if client is not None:
         entry["cluster"] = {"scheduler": client.scheduler.address, "threads": nthreads(client)}
+    here = machine()
+    if here != log.get("machine"):
+        # resumed on another machine (or VM build, or BLAS kernels): its stages' float bits
+        # may differ from the first machine's (docs/reproduce.md), so the invocation says where
+        entry["machine"] = here
     log["runs"].append(entry)
     prog = Progress(estimate_seconds(cfg, jobs, cpus), enabled=progress, stream=stream)
     default_features, default_feature_config = features.factories_for(cfg)
