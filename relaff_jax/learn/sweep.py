@@ -59,8 +59,6 @@ from relaff_jax.learn.results import FORMAT_VERSION
 from relaff_jax.learn.states import state_features
 
 
-
-
 def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
                    spaces: Sequence[str] = SPACES, seed: int = 0, jobs: int = 1, progress: bool = True,
                    data_desc: Sequence[str] = (), client: Any = None) -> dict[str, Path]:
