@@ -135,3 +135,15 @@ def from_dict(cls: type[T], data: Mapping[str, Any]) -> T:
         else:
             flat[key] = value
     return override(default, flat)
+
+
+def differences(stored: Any, wanted: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
+    """The dotted keys at which two JSON trees differ, with the stored and the wanted value
+    (a key missing on one side shows as ``<absent>``)."""
+    if isinstance(stored, dict) and isinstance(wanted, dict):
+        out = []
+        for k in sorted(set(stored) | set(wanted), key=str):
+            key = f"{prefix}.{k}" if prefix else str(k)
+            out += differences(stored.get(k, "<absent>"), wanted.get(k, "<absent>"), key)
+        return out
+    return [] if stored == wanted else [(prefix, stored, wanted)]

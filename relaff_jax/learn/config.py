@@ -165,28 +165,18 @@ SPEED_ONLY = ("forest.engine",)
 ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share")
 
 
-def _dotted(tree: Any, prefix: str = "") -> dict[str, Any]:
-    if not isinstance(tree, dict):
-        return {prefix: tree}
-    out: dict[str, Any] = {}
-    for k, v in tree.items():
-        out.update(_dotted(v, f"{prefix}.{k}" if prefix else str(k)))
-    return out
-
-
 def result_differences(stored: Any, cfg: Any) -> list[str]:
     """The dotted keys at which a stored experiment config (``experiment.json``'s, a JSON tree)
     and ``cfg`` (an ``ExperimentConfig`` or its JSON tree) would make different results:
     every key but ``SPEED_ONLY``, and ``ANALYSIS_ONLY`` only where ``stored`` has it. The one
     rule ``learn.status`` and the sweep's resume check share."""
     from relaff_jax import io as rio
-    from relaff_jax.config import to_dict
+    from relaff_jax.config import differences, to_dict
 
-    now = _dotted(rio.jsonable(cfg if isinstance(cfg, dict) else to_dict(cfg)))
-    old = _dotted(stored if isinstance(stored, dict) else {})
-    keys = sorted(set(now) | set(old))
-    return [k for k in keys if k not in SPEED_ONLY and not (k in ANALYSIS_ONLY and k not in old)
-            and old.get(k, "<absent>") != now.get(k, "<absent>")]
+    now = rio.jsonable(cfg if isinstance(cfg, dict) else to_dict(cfg))
+    old = stored if isinstance(stored, dict) else {}
+    return [k for k, was, _ in differences(old, now)
+            if k not in SPEED_ONLY and not (k in ANALYSIS_ONLY and was == "<absent>")]
 
 
 def check_config(cfg: ExperimentConfig) -> None:

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from relaff_jax import io as rio
-from relaff_jax.config import to_dict
+from relaff_jax.config import differences, to_dict
 from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed, machine, versions
@@ -71,18 +71,6 @@ def seeds(seed: int) -> dict[str, Any]:
 
 def now() -> str:
     return time.strftime("%Y-%m-%d %H:%M:%S")
-
-
-def differences(stored: Any, wanted: Any, prefix: str = "") -> list[tuple[str, Any, Any]]:
-    """The dotted keys at which two JSON trees differ, with the stored and the wanted value
-    (a key missing on one side shows as ``<absent>``)."""
-    if isinstance(stored, dict) and isinstance(wanted, dict):
-        out = []
-        for k in sorted(set(stored) | set(wanted), key=str):
-            key = f"{prefix}.{k}" if prefix else str(k)
-            out += differences(stored.get(k, "<absent>"), wanted.get(k, "<absent>"), key)
-        return out
-    return [] if stored == wanted else [(prefix, stored, wanted)]
 
 
 def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
