@@ -47,3 +47,22 @@ def test_dbn_repeats_learner_count(data3):
 
     assert L.block_fits(plan, 1, repeats=condition_repeats(plan, tiny_cfg(), "pca", 2)) < \
         L.block_fits(plan, 1, repeats=condition_repeats(plan, cfg, "pca", 2))
+
+
+def test_robustness_rows_hand_worked():
+    from relaff_jax.report.robustness import robustness_rows, robustness_table
+
+    def f(fid, verdict, est, lo, hi):
+        return {"id": fid, "finding": fid.upper(), "verdict": verdict,
+                "claims": [{"estimate": est, "interval": [lo, hi]}]}
+
+    readings = {"a": [f("x", "reproduced", 1.0, 0.9, 1.1), f("y", "reproduced", 2.0, 1.5, 2.5)],
+                "b": [f("x", "reproduced", 1.2, 1.0, 1.4), f("y", "undecided at this scale", 1.0, 0.5, 1.5)],
+                "c": [f("x", "reproduced", 0.8, 0.7, 0.9), f("y", "not reproduced", 0.2, 0.1, 0.3)]}
+    rows = {r["id"]: r for r in robustness_rows(readings)}
+    assert rows["x"]["survives"] == "yes"
+    assert rows["y"]["survives"] == "no: only in a"
+    assert rows["y"]["cells"]["c"] == ("not reproduced", "0.20 [0.10, 0.30]")
+    header, body = robustness_table(readings)
+    assert header == ["finding", "a", "b", "c", "reproduced in every reading"]
+    assert body[1][2] == "**undecided at this scale**: 1.00 [0.50, 1.50]"

@@ -71,6 +71,22 @@ def findings_blocks(found: Sequence[Mapping[str, Any]]) -> list[tuple]:
     return blocks
 
 
+def robustness_blocks(readings: Mapping[str, Sequence[Mapping[str, Any]]], cfg: Any) -> list[tuple]:
+    """Every finding in each analysis-only reading of the same results (``robustness.by_reading``)."""
+    from relaff_jax.report.robustness import robustness_table
+
+    header, rows = robustness_table(readings)
+    return [("h", 3, "Each finding in every reading of the stored results"),
+            ("p", f"The findings above read 'best after ten' as `after_ten={cfg.after_ten}`. The paper leaves open "
+                  "whether its 'best after ten' row is the whole curve of the learner kept after ten samples "
+                  "(`whole`) or has chosen nothing before ten (`causal`); both are computed from the same results "
+                  "(no refit). Readings that change the fits (`dbn_repeats`, `forest.subsample`, "
+                  "`category_labels`) need a run each: `relaff compare NAME=REPORT ...` ends with this table over "
+                  "them. Each cell: verdict, then each claim's estimate [interval] (docs/learning.md, 'The paper's "
+                  "open choices')."),
+            ("table", header, rows)]
+
+
 def _rate(r) -> str:
     return "-" if r is None else f"{100 * r:.0f} %"
 
