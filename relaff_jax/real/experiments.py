@@ -29,7 +29,9 @@ accuracies over ``reps`` repetitions:
 (paper VI-A). Seeds: ``derive_seed(seed, 17, space, rep, experiment, n)``.
 ``summarise`` gives mean, std and a percentile bootstrap interval over repetitions, and the
 bootstrap factor curve with the count of sizes where it is undefined (P_sl <= 0.5) and an
-interval of its early mean (repetitions resampled).
+interval of its mean over the window ``cfg.bf_sizes`` of training sizes (repetitions
+resampled), the paired differences the claims are decided on (``differences``) and the
+per-pair error table (``pair_errors``).
 """
 from __future__ import annotations
 
@@ -94,6 +96,9 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
     out = {k: np.zeros(cfg.reps) for k in ("sim_fair", "sim_full", "real", "fair_to_real", "full_to_real")}
     out["curve_sl"] = np.zeros((len(sizes), cfg.reps))
     out["curve_bl"] = np.zeros((len(sizes), cfg.reps))
+    # per real test pair and repetition: 1 right, 0 wrong, NaN not tested (the per-pair error table)
+    for k in HITS:
+        out[f"pairs_{k}"] = np.full((cfg.reps, len(yt)), np.nan)
     if test is not None:  # per test pair and repetition: right or wrong (an interval over test scenes)
         for k in HITS:
             out[f"hits_{k}"] = np.zeros((cfg.reps, len(yt)), bool)
@@ -110,6 +115,7 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
             out[f"sim_{name}"][r] = float(np.mean(predict(forest, Xs[te]) == ys[te]))
             pred_t = predict(forest, Xt)
             out[f"{name}_to_real"][r] = balanced_accuracy(pred_t, yt)
+            out[f"pairs_{name}_to_real"][r] = (np.asarray(pred_t) > 0.5) == yt
             if test is not None:
                 out[f"hits_{name}_to_real"][r] = (np.asarray(pred_t) > 0.5) == yt
             if name == "full":  # the bootstrap input, on the training pairs and on the test pairs
@@ -125,6 +131,7 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
         forest = fit(Xr[tr], yr[tr], derive_seed(cfg.seed, 17, code, r, 2), fcfg)
         pred = predict(forest, Xte)
         out["real"][r] = balanced_accuracy(pred, yte)
+        out["pairs_real"][r, slice(None) if te is None else te] = (np.asarray(pred) > 0.5) == yte
         if test is not None:
             out["hits_real"][r] = (np.asarray(pred) > 0.5) == yte
         # 4: learning curves without / with the SIM_full prediction
@@ -148,6 +155,10 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
     out["test_counts"] = np.asarray([int((~yte).sum()), int(yte.sum())])
     if test is not None:
         out["test_y"], out["test_scene"] = yt, np.asarray(test["scene"]).astype(str)
+    tdata = real if test is None else test  # the pairs the per-pair arrays' columns are
+    out["pairs_scene"] = np.asarray(tdata["scene"]).astype(str)
+    out["pairs_ab"] = np.asarray([f"{a},{b}" for a, b in zip(tdata.get("a", [""] * len(yt)), tdata.get("b", [""] * len(yt)))])
+    out["pairs_y"] = yt
     return out
 
 
@@ -278,7 +289,7 @@ def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> 
     bf = bootstrap_factor(bl, sl)
     sizes = np.asarray(res["sizes"])
     undefined = sizes[~np.isfinite(bf)]
-    early = sizes <= max(4, sizes[len(sizes) // 3])
+    early = (sizes >= cfg.bf_sizes[0]) & (sizes <= cfg.bf_sizes[1])  # the window in training sizes
     with np.errstate(invalid="ignore"):
         bf_early = float(np.nanmean(bf[early])) if np.isfinite(bf[early]).any() else float("nan")
     bf_ci = _bf_interval(res["curve_sl"], res["curve_bl"], early, rng, cfg.n_boot)
@@ -296,4 +307,62 @@ def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> 
                 split=dict(kind=str(res.get("kind", "pair")), real_pool_per_class=pool, real_train_per_class=train,
                            real_test=test, real_test_counts=[int(v) for v in res.get("test_counts", (test, test))],
                            sim_fair_train=n_fair, sim_full_train=n_full), reps=len(res["real"]),
-                sim_only=sim_only)
+                sim_only=sim_only, bf_window=list(cfg.bf_sizes), differences=differences(res, rng, cfg.n_boot),
+                pair_errors=pair_errors(res))
+
+
+def differences(res: dict, rng: np.random.Generator, n_boot: int) -> dict:
+    """The paired differences the claims are decided on: per repetition (the same draws make
+    both), mean and percentile interval; with per-pair hits on a fixed test folder also the
+    interval with the test scenes resampled. ``std real-sim_fair``: the difference of the
+    standard deviations over repetitions, its interval with the repetitions resampled."""
+    out = {}
+    for a, b in (("sim_fair", "real"), ("full_to_real", "real")):
+        d = np.asarray(res[a], float) - np.asarray(res[b], float)
+        out[f"{a}-{b}"] = dict(mean=float(d.mean()), ci95=interval(d, rng, n_boot))
+        if f"hits_{a}" in res and f"hits_{b}" in res:
+            out[f"{a}-{b}"]["ci95_scenes"] = scene_interval_diff(res[f"hits_{a}"], res[f"hits_{b}"], res["test_y"],
+                                                                 res["test_scene"], rng, n_boot)
+    x, y = np.asarray(res["real"], float), np.asarray(res["sim_fair"], float)
+    if len(x) > 1:
+        i = rng.integers(0, len(x), (n_boot, len(x)))
+        v = x[i].std(1, ddof=1) - y[i].std(1, ddof=1)
+        out["std real-sim_fair"] = dict(mean=float(x.std(ddof=1) - y.std(ddof=1)),
+                                        ci95=tuple(float(q) for q in np.quantile(v, [0.025, 0.975])))
+    return out
+
+
+def scene_interval_diff(hits_a: np.ndarray, hits_b: np.ndarray, y: np.ndarray, scene: np.ndarray,
+                        rng: np.random.Generator, n_boot: int) -> tuple[float, float] | None:
+    """``scene_interval`` of the difference of two balanced accuracies on the same test pairs
+    (the same scenes drawn for both: paired)."""
+    y = np.asarray(y).astype(bool)
+    pa, pb = np.asarray(hits_a, float).mean(0), np.asarray(hits_b, float).mean(0)
+    vals = [_balanced(pa[i], y[i]) - _balanced(pb[i], y[i]) for i in scene_resamples(y, scene, rng, n_boot)]
+    if len(vals) < n_boot / 2:
+        return None
+    lo, hi = np.quantile(vals, [0.025, 0.975])
+    return float(lo), float(hi)
+
+
+def pair_errors(res: dict) -> list[dict]:
+    """Per real test pair: scene, pair (object ids), relation, and per classifier of ``HITS``
+    the share of the repetitions that tested it in which it was wrong (None: never tested);
+    the pairs some classifier got wrong, most often wrong first. Empty for results made
+    before the per-pair arrays were kept."""
+    from relaff_jax.constants import RELATIONS
+
+    if "pairs_real" not in res:
+        return []
+    rows = []
+    for j, (sc, ab, yv) in enumerate(zip(res["pairs_scene"], res["pairs_ab"], res["pairs_y"])):
+        wrong, tested = {}, {}
+        for k in HITS:
+            col = np.asarray(res[f"pairs_{k}"], float)[:, j]
+            n = int(np.isfinite(col).sum())
+            tested[k] = n
+            wrong[k] = None if n == 0 else float(1.0 - np.nanmean(col))
+        if any(w for w in wrong.values() if w is not None):
+            rows.append(dict(scene=str(sc), pair=str(ab), relation=RELATIONS[ON_TOP if bool(yv) else BESIDE],
+                             wrong=wrong, tested=tested))
+    return sorted(rows, key=lambda r: (-max(w or 0.0 for w in r["wrong"].values()), r["scene"], r["pair"]))
