@@ -66,3 +66,52 @@ def test_robustness_rows_hand_worked():
     header, body = robustness_table(readings)
     assert header == ["finding", "a", "b", "c", "reproduced in every reading"]
     assert body[1][2] == "**undecided at this scale**: 1.00 [0.50, 1.50]"
+
+
+# ---------------------------------------------------------------- beyond the paper's statistics
+
+
+def test_window_area_and_samples_saved_hand_made():
+    from relaff_jax.learn import gains as G
+
+    sizes = [2, 4, 10, 25, 50]
+    gain = np.array([0.5, 0.1, 0.1, 0.1, 0.0])
+    assert G.window_area(gain, sizes, 4, 25) == pytest.approx(0.1 * 21)
+    nb = np.array([0.5, 0.6, 0.7, 0.8, 0.9])
+    # the bootstrapped learner at n = 10 is at 0.75: NB gets there halfway from 10 to 25
+    bl = np.array([0.6, 0.7, 0.75, 0.85, 0.9])
+    saved, cens = G.samples_saved(bl, nb, sizes, 10)
+    assert saved == pytest.approx(17.5 - 10) and not cens
+    # at 0.95 NB never gets there: censored at the largest size (a lower bound)
+    saved, cens = G.samples_saved(np.array([0.9, 0.9, 0.95, 0.95, 0.95]), nb, sizes, 10)
+    assert saved == pytest.approx(40) and cens
+    # no better than NB: NB needs at most as many (here exactly ten, none saved)
+    assert G.samples_saved(nb, nb, sizes, 10)[0] == pytest.approx(0)
+    # below NB's first size: NB's first size
+    assert G.samples_needed(nb, sizes, np.array(0.3))[0] == pytest.approx(2)
+
+
+def test_probability_of_improvement_and_holm_hand_worked():
+    from relaff_jax.learn import gains as G
+
+    x = np.array([[0.9, 0.8], [0.5, 0.5]])  # task 0: both above NB's; task 1: tied pairs and one lower
+    y = np.array([[0.7, 0.6], [0.5, 0.6]])
+    # task 0: 4 of 4 pairs x > y -> 1; task 1: (0.5 vs 0.5 tie, 0.5 < 0.6) twice -> (0.5 + 0 + 0.5 + 0) / 4
+    assert G.probability_of_improvement(x, y) == pytest.approx((1.0 + 0.25) / 2)
+    # rliable's normalised U statistic on one task
+    from scipy.stats import mannwhitneyu
+
+    rng = np.random.default_rng(0)
+    a, b = rng.integers(0, 5, 7).astype(float), rng.integers(0, 5, 6).astype(float)
+    u = mannwhitneyu(a, b, alternative="greater").statistic / (7 * 6)
+    assert G.probability_of_improvement(a[None], b[None]) == pytest.approx(u)
+    boot = G.stratified_poi(x, y, 200, np.random.default_rng(1))
+    assert boot.shape == (200,) and np.all((boot >= 0) & (boot <= 1))
+    assert G.bootstrap_p(np.array([0.6, 0.7, 0.8, 0.4]), 0.5) == pytest.approx(0.5)
+    # Holm on 0.01, 0.04, 0.03, 0.2 (m = 4): 0.04, 0.09 (0.03 x 3), 0.09 (0.04 x 2, made monotone), 0.2
+    adj, rej = G.holm([0.01, 0.04, 0.03, 0.2], 0.05)
+    np.testing.assert_allclose(adj, [0.04, 0.09, 0.09, 0.2])
+    assert rej.tolist() == [True, False, False, False]
+    adj, rej = G.holm([0.01, np.nan, 0.02], 0.05)
+    np.testing.assert_allclose(adj, [0.02, np.nan, 0.02])
+    assert rej.tolist() == [True, False, True]

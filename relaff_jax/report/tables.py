@@ -152,6 +152,7 @@ def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures
             "cb1_best": {t: x["conditions"][i] for t, i in zip(x["actions"], x["best_cb1"])},
             "cb1_best_after_ten": {t: x["conditions"][i] for t, i in zip(x["actions"], x["ten_cb1"])},
             "corr": res[s]["corr"],
+            "against_nb": {k: v for k, v in x.get("methods", {}).items() if k != "weights"},
             "categories_per_threshold": categories_per_threshold(res[s]["corr"], res["config"].thresholds),
         }
         for s, x in an.items()

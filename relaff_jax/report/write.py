@@ -104,6 +104,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + S.robustness_blocks(readings, cfg)
               + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
               + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset"))
+              + [b for s in spaces for b in S.methods_blocks(an[s], cfg, s)]
               + [b for s in spaces for b in borrow_blocks(lend[s], s)] + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
               + S.run_blocks(info, time.perf_counter() - t0, _load(), provenance.machine()))
