@@ -115,3 +115,27 @@ def test_probability_of_improvement_and_holm_hand_worked():
     adj, rej = G.holm([0.01, np.nan, 0.02], 0.05)
     np.testing.assert_allclose(adj, [0.02, np.nan, 0.02])
     assert rej.tolist() == [True, False, True]
+
+
+def test_category_labels_changes_the_categories_only(data3, tmp_path):
+    from relaff_jax.learn.prep import category_labels
+
+    labels = {"a": np.array([1, 0, 1, 0], bool), "b": np.array([1, 1, 0, 0], bool)}
+    src = {"a": np.array([0, 1, 2]), "b": np.array([1, 3])}
+    other = {"a": {"b": np.array([1.0, 0.0])}, "b": {"a": np.array([0.0, 1.0, 1.0])}}
+    # a's scenes: own (1, 0, 1) with b's predicted (0, 1, 1); b's scenes: own (1, 0) with a's (1, 0)
+    assert category_labels(("a", "b"), labels, src, other, "union").tolist() == [1, 0, 1, 1, 0]
+    assert category_labels(("a", "b"), labels, src, other, "both").tolist() == [0, 0, 1, 1, 0]
+    assert category_labels(("a", "b"), labels, src, other, "either").tolist() == [1, 1, 1, 1, 0]
+    runs = {}
+    for reading in ("union", "both"):
+        cfg = tiny_cfg(category_labels=reading)
+        runs[reading] = np.load(L.run_experiment(data3, tmp_path / reading, cfg, ["pca"], seed=2, jobs=1,
+                                                 progress=False)["pca"])
+    lay = L.layout(3, len(tiny_cfg().thresholds))
+    cats = set(lay["CB1"].tolist()) | set(lay["CBn"].tolist())
+    keep = [c for c in range(lay["n"]) if c not in cats]
+    u, b = runs["union"], runs["both"]
+    np.testing.assert_array_equal(u["acc"][:, keep], b["acc"][:, keep])
+    np.testing.assert_array_equal(u["corr"], b["corr"])  # the heuristic reads the source predictors only
+    assert not np.array_equal(u["correct"][:, lay["CB1"]], b["correct"][:, lay["CB1"]])

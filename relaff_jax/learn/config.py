@@ -33,6 +33,7 @@ ONLINE = " (online)"
 CAUSAL = " (causal)"
 AFTER_TEN = ("whole", "causal")  # readings of "best after ten" (docs/learning.md, "The paper's open choices")
 DBN_REPEATS = ("same", "once")  # DBn's inputs: each repeated as DB1's (6 PCA / 30 RHF), or once
+CATEGORY_LABELS = ("union", "both", "either")  # a category's training labels
 
 
 def _ten_rows(fam: str) -> tuple[str, ...]:
@@ -89,6 +90,10 @@ class ExperimentConfig:
     # DBn's eight inputs: "same" repeats each as often as DB1's one (66 PCA columns), "once"
     # adds each once (26): the paper states the repetition for DB1 and CB1 only (learning.md)
     dbn_repeats: str = "same"
+    # a category's training labels on the union of its two source sets: "union" each scene its
+    # own action's label; "both" / "either": positive where both / either affordance holds (the
+    # other's label predicted by its source predictor: the datasets hold one action each)
+    category_labels: str = "union"
     thresholds: tuple[float, ...] = (0.0, 0.125, 0.5)  # correlation heuristic, paper V-F
     cbn_threshold: float = 0.5  # categories used by CBn in Table II (paper V-G)
     categories_with_target: bool = False  # may a category built from the target itself be used?
@@ -177,6 +182,8 @@ def check_experiment_node(cfg: ExperimentConfig) -> None:
         raise UserError(f"experiment.sizes: no training size inside experiment.bf_sizes {cfg.bf_sizes}")
     if cfg.after_ten not in AFTER_TEN:
         raise UserError(f"experiment.after_ten must be one of {AFTER_TEN}, got {cfg.after_ten!r}")
+    if cfg.category_labels not in CATEGORY_LABELS:
+        raise UserError(f"experiment.category_labels must be one of {CATEGORY_LABELS}, got {cfg.category_labels!r}")
     if cfg.dbn_repeats not in DBN_REPEATS:
         raise UserError(f"experiment.dbn_repeats must be one of {DBN_REPEATS}, got {cfg.dbn_repeats!r}")
     if cfg.cbn_threshold not in cfg.thresholds:
@@ -197,6 +204,9 @@ def check_experiment_node(cfg: ExperimentConfig) -> None:
 # they existed lacks.
 SPEED_ONLY = ("forest.engine",)
 ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share", "after_ten")
+# fit-changing keys added after runs began whose default is what those runs did (issue 44): a
+# folder without the key holds the default's experiment
+ADDED_AS_BEFORE = {"dbn_repeats": "same", "category_labels": "union"}
 
 
 def result_differences(stored: Any, cfg: Any) -> list[str]:
@@ -209,8 +219,9 @@ def result_differences(stored: Any, cfg: Any) -> list[str]:
 
     now = rio.jsonable(cfg if isinstance(cfg, dict) else to_dict(cfg))
     old = stored if isinstance(stored, dict) else {}
-    return [k for k, was, _ in differences(old, now)
-            if k not in SPEED_ONLY and not (k in ANALYSIS_ONLY and was == "<absent>")]
+    return [k for k, was, new in differences(old, now)
+            if k not in SPEED_ONLY and not (k in ANALYSIS_ONLY and was == "<absent>")
+            and not (was == "<absent>" and k in ADDED_AS_BEFORE and new == ADDED_AS_BEFORE[k])]
 
 
 def check_config(cfg: ExperimentConfig) -> None:
