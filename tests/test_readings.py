@@ -139,3 +139,33 @@ def test_category_labels_changes_the_categories_only(data3, tmp_path):
     np.testing.assert_array_equal(u["acc"][:, keep], b["acc"][:, keep])
     np.testing.assert_array_equal(u["corr"], b["corr"])  # the heuristic reads the source predictors only
     assert not np.array_equal(u["correct"][:, lay["CB1"]], b["correct"][:, lay["CB1"]])
+
+
+@pytest.mark.parametrize("n", [3, 10, 25, 60])
+def test_subsample_trees_are_sklearns_on_the_subsample_alone(n):
+    """Each tree of the subsample reading is scikit-learn's DecisionTreeClassifier fitted on
+    its 2/3 of the rows alone (bootstrap=False on a subsample): the zero weights leave the
+    other rows out of the tree entirely."""
+    from sklearn.tree import DecisionTreeClassifier
+
+    from relaff_jax.learn.forests import subsample_size, subsample_weights
+
+    rng = np.random.default_rng(n)
+    X = rng.normal(size=(n, 18)).astype(np.float32)
+    y = rng.random(n) < 0.5
+    y[:2] = [True, False]
+    cfg = L.ForestConfig(per_tree="subsample", engine="sklearn")
+    forest = L.fit_forest(X, y, 5, cfg)
+    checked = 0
+    for est in forest.estimators_:
+        w = subsample_weights(np.random.RandomState(), est.random_state, n)
+        assert w.sum() == subsample_size(n) == max(1, 2 * n // 3) and set(np.unique(w)) <= {0.0, 1.0}
+        sub = np.flatnonzero(w)
+        if len(np.unique(y[sub])) < 2:  # one class: a lone tree would know one class only
+            continue
+        alone = DecisionTreeClassifier(max_features="sqrt", max_depth=200, random_state=est.random_state).fit(X[sub], y[sub])
+        for k in ("feature", "threshold", "children_left", "children_right"):
+            np.testing.assert_array_equal(getattr(est.tree_, k), getattr(alone.tree_, k))
+        np.testing.assert_array_equal(est.predict(X), alone.predict(X))
+        checked += 1
+    assert checked >= len(forest.estimators_) // 2
