@@ -80,7 +80,7 @@ def robustness_blocks(readings: Mapping[str, Sequence[Mapping[str, Any]]], cfg: 
             ("p", f"The findings above read 'best after ten' as `after_ten={cfg.after_ten}`. The paper leaves open "
                   "whether its 'best after ten' row is the whole curve of the learner kept after ten samples "
                   "(`whole`) or has chosen nothing before ten (`causal`); both are computed from the same results "
-                  "(no refit). Readings that change the fits (`dbn_repeats`, `forest.subsample`, "
+                  "(no refit). Readings that change the fits (`dbn_repeats`, `forest.per_tree`, "
                   "`category_labels`) need a run each: `relaff compare NAME=REPORT ...` ends with this table over "
                   "them. Each cell: verdict, then each claim's estimate [interval] (docs/learning.md, 'The paper's "
                   "open choices')."),
