@@ -69,8 +69,10 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
         f"n = {span(cfg.sizes, *cfg.best_sizes)}, 'best after ten' = highest mean accuracy at n = {cfg.select_size}, both chosen "
         "on one half of each test set and scored on the other (both ways, averaged); '(in-sample oracle)' = the paper's "
         "choice, on the very scores it reports; '(online)' = per repetition, highest leave-one-out accuracy on its "
-        f"{cfg.select_size} training samples; every 'after ten' learner uses its choice from n = {cfg.select_size} on "
-        "(before it: an equal share of the candidates); tied candidates share the choice equally.",
+        f"{cfg.select_size} training samples; an 'after ten' row is the whole curve of the learner kept at "
+        f"n = {cfg.select_size}, its '(causal)' row uses the choice from n = {cfg.select_size} on (before it: an equal "
+        f"share of the candidates); the findings read `after_ten={cfg.after_ten}`; tied candidates share the choice "
+        "equally.",
         "",
     ]
     for space, a in an.items():
