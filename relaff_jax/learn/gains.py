@@ -187,7 +187,8 @@ def rep_scores(acc_x: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int]
     """Per repetition the mean accuracy over the window: methods ``(M, A, R)`` and NB ``(A, R)``
     (the scores the probability of improvement compares) from ``acc_x (A, C', S, R)``."""
     m = size_mask(sizes, *cfg.bf_sizes)
-    win = np.asarray(acc_x, float)[:, :, m].mean(2)  # (A, C', R)
+    with np.errstate(invalid="ignore", divide="ignore"):  # no size in the window: NaN scores
+        win = np.asarray(acc_x, float)[:, :, m].mean(2)  # (A, C', R)
     x = np.einsum("mac,acr->mar", w, np.nan_to_num(win))
     x = np.where(w.sum(-1)[..., None] > 0, x, np.nan)
     return x, win[:, lay["NB"]]
