@@ -23,6 +23,7 @@ from relaff_jax import io as rio
 from relaff_jax.errors import UserError
 from relaff_jax.report import folder as F
 from relaff_jax.report.findings import correlation_clusters
+from relaff_jax.learn.config import AFTER_TEN
 from relaff_jax.report.robustness import robustness_table
 
 FILES = F.JSON_FILES
@@ -162,7 +163,9 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
     every = {}
     for n in names:
         own = r[n]["findings"].get("readings") or {"": r[n]["findings"]["findings"]}
-        every.update({f"{n} {k}".strip(): v for k, v in own.items()})
+        order = [f"after_ten={x}" for x in AFTER_TEN]  # the default reading first (JSON sorts the keys)
+        for k in sorted(own, key=lambda k: order.index(k) if k in order else len(order)):
+            every[f"{n} {k}".strip()] = own[k]
     header, rows = robustness_table(every)
     lines += ["", "## Robustness: each finding in every reading", "",
               "Verdict, then each claim's estimate [interval]; the readings are the reports given and, within each, "
