@@ -176,7 +176,13 @@ def test_train_test_study_through_the_cli(tmp_path, monkeypatch, capsys):
     assert cli.main(base + ["--split", "pair"]) == 2  # the labels name scenes the folders lack
     assert "unknown scene" in capsys.readouterr().err
     assert cli.main(base + ["--split", "pair", "--only-present"]) == 0
+    printed = capsys.readouterr().out
+    assert "pca claim d)" in printed and "(CI " in printed  # intervals and verdicts in the terminal
     res = json.loads((out / "results.json").read_text())
+    # the per-pair error table: every listed pair is a test folder pair, wrong in some repetition
+    for row in res["cross"]["pca"]["pair_errors"]:
+        assert row["relation"] in ("beside", "on_top") and max(v or 0 for v in row["wrong"].values()) > 0
+        assert row["tested"]["real"] == 2
     assert res["claims_decided_on"] == "cross"
     assert res["summary"]["pca"]["split"]["kind"] == "pair"
     cross = res["cross"]["pca"]
