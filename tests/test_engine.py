@@ -176,12 +176,18 @@ def test_large_n_nodes_between_the_sort_paths():
     {"max_samples": 2 / 3}, {"max_samples": 0.05}, {"bootstrap": False},
     {"base_trees": 3, "max_trees": 7, "samples_per_extra_tree": 5}, {"min_samples_leaf": 3},
     {"max_depth": 2}, {"max_features": "log2"}, {"max_features": "0.5"}, {"max_features": "6"},
-    {"max_features": None},
+    {"max_features": None}, {"per_tree": "subsample"}, {"per_tree": "subsample", "min_samples_leaf": 3},
 ])
 def test_parameters_match_sklearn(cfg):
     # 0.05 x 40 = 2 draws per tree: scikit-learn warns, and so does the engine
     with pytest.warns(UserWarning) if cfg.get("max_samples") == 0.05 else contextlib.nullcontext():
         _check(*_data(40, 24, 2), seed=3, cfg=override(L.ForestConfig(), cfg))
+
+
+@pytest.mark.parametrize("kind, n", [("plain", 2), ("plain", 3), ("ties", 25), ("plain", 100), ("one_class", 10)])
+def test_subsample_reading_matches_sklearn(kind, n):
+    """The 2/3 subsample without replacement: the same trees in every engine."""
+    _check(*_data(n, 24, 4, kind), seed=11, cfg=override(L.ForestConfig(), {"per_tree": "subsample"}))
 
 
 @pytest.mark.slow

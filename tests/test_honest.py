@@ -99,7 +99,8 @@ def test_tied_candidates_share_best_and_best_after_ten():
     bf_take = (1 + 0.3 / 0.2 + 0.5 / 0.3) / 3
     # the in-sample rows (no outcomes kept: the held-out ones are NaN); before n = 10 the after-ten
     # learner is an equal share of pull and take, which is what the tie gives here too
-    for row in ("DB1 best (in-sample oracle)", "DB1 best after ten (in-sample oracle)"):
+    for row in ("DB1 best (in-sample oracle)", "DB1 best after ten (in-sample oracle)",
+                "DB1 best after ten (causal) (in-sample oracle)"):
         assert an["table2_per_target"][E.TABLE2_ROWS.index(row), 0] == pytest.approx((bf_pull + bf_take) / 2)
     assert np.isnan(an["table2_per_target"][E.TABLE2_ROWS.index("DB1 best"), 0])
     assert an["ties_db1"][0] == 2
@@ -128,10 +129,15 @@ def test_online_choice_differs_from_the_offline_one_in_the_known_way():
     p = online.mean(-1)
     at4 = (acc[0, LAY["DB1"][1], 1].mean() + acc[0, LAY["DB1"][2], 1].mean()) / 2  # 0.75
     want = np.mean([(at4 - 0.5) / 0.1] + list((p[2:] - 0.5) / 0.1))
-    assert an["table2_per_target"][E.TABLE2_ROWS.index("DB1 best after ten (online)"), 0] == pytest.approx(want)
+    row = lambda name: an["table2_per_target"][E.TABLE2_ROWS.index(name), 0]  # noqa: E731
+    assert row("DB1 best after ten (causal) (online)") == pytest.approx(want)
     off = np.mean([(at4 - 0.5) / 0.1] + list((acc[0, LAY["DB1"][1], 2:].mean(-1) - 0.5) / 0.1))
-    assert an["table2_per_target"][E.TABLE2_ROWS.index("DB1 best after ten (in-sample oracle)"), 0] == pytest.approx(off)
+    assert row("DB1 best after ten (causal) (in-sample oracle)") == pytest.approx(off)
     assert want < off
+    # the whole-curve reading: the kept learners' own curves at every size of the window
+    assert row("DB1 best after ten (online)") == pytest.approx(np.mean((p[1:] - 0.5) / 0.1))
+    assert row("DB1 best after ten (in-sample oracle)") == pytest.approx(
+        np.mean((acc[0, LAY["DB1"][1], 1:].mean(-1) - 0.5) / 0.1))
 
 
 def test_leave_one_out_accuracy_matches_sklearn_forests_on_nine_samples():

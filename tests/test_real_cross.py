@@ -176,7 +176,13 @@ def test_train_test_study_through_the_cli(tmp_path, monkeypatch, capsys):
     assert cli.main(base + ["--split", "pair"]) == 2  # the labels name scenes the folders lack
     assert "unknown scene" in capsys.readouterr().err
     assert cli.main(base + ["--split", "pair", "--only-present"]) == 0
+    printed = capsys.readouterr().out
+    assert "pca claim d)" in printed and "(CI " in printed  # intervals and verdicts in the terminal
     res = json.loads((out / "results.json").read_text())
+    # the per-pair error table: every listed pair is a test folder pair, wrong in some repetition
+    for row in res["cross"]["pca"]["pair_errors"]:
+        assert row["relation"] in ("beside", "on_top") and max(v or 0 for v in row["wrong"].values()) > 0
+        assert row["tested"]["real"] == 2
     assert res["claims_decided_on"] == "cross"
     assert res["summary"]["pca"]["split"]["kind"] == "pair"
     cross = res["cross"]["pca"]
@@ -259,14 +265,50 @@ def test_claim_d_is_undefined_when_bf_mostly_is():
     bl = np.tile(np.array([0.7, 0.7, 0.9, 0.8, 0.8, 0.8])[:, None], (1, 4))
     res = dict(sim_fair=np.ones(4), sim_full=np.ones(4), real=np.full(4, 0.5), fair_to_real=np.ones(4),
                full_to_real=np.full(4, 0.6), curve_sl=sl, curve_bl=bl, sizes=sizes, split=np.array([8, 5, 3, 10, 60]))
-    s = ex.summarise(res, RealExperimentConfig(n_boot=50))
+    s = ex.summarise(res, RealExperimentConfig(n_boot=50, bf_sizes=(2, 4)))
     assert s["bf_early_sizes"] == [2, 3, 4]
     assert s["bf_undefined_sizes"] == [2, 3]
     assert s["bf_early_mean"] == pytest.approx(4.0)
     d = [c for c in report.claims({"pca": s}) if c["claim"].startswith("d)")][0]
-    assert d["holds"] is None
+    assert d["holds"] is None and d["verdict"] == "not measurable"
     assert "defined at 1 of 3" in d["numbers"]
     assert "| undefined |" in report.markdown({"pca": s}, {})
+    # the default window is the paper's early range in training sizes, whatever the folder's size
+    assert ex.summarise(res, RealExperimentConfig(n_boot=50))["bf_early_sizes"] == [4, 5, 6, 7]
+    res2 = dict(res, curve_sl=np.tile(np.linspace(0.6, 0.9, 40)[:, None], (1, 4)),
+                curve_bl=np.tile(np.linspace(0.8, 0.95, 40)[:, None], (1, 4)), sizes=np.arange(2, 42))
+    assert ex.summarise(res2, RealExperimentConfig(n_boot=50))["bf_early_sizes"] == list(range(4, 26))
+
+
+def test_real_claims_decided_by_intervals():
+    """Every claim is decided by an interval: claim d holds when the window's bf interval is
+    above 1, is undecided when it straddles 1, in either space."""
+    from relaff_jax.real import experiments as ex
+    from relaff_jax.real import report
+
+    assert report.decide((1.02, 1.3), 1.0, True) == "holds"
+    assert report.decide((0.9, 1.3), 1.0, True) == "undecided"
+    assert report.decide((0.5, 0.9), 1.0, True) == "does not hold"
+    assert report.decide(None, 1.0, True) == "not measurable"
+    rng = np.random.default_rng(0)
+    sizes = np.arange(2, 12)
+    sl = 0.6 + 0.02 * np.arange(10)[:, None] + 0.01 * rng.standard_normal((10, 8))
+    res = dict(sim_fair=np.full(8, 0.9) + 0.01 * rng.standard_normal(8), sim_full=np.ones(8),
+               real=np.full(8, 0.85) + 0.02 * rng.standard_normal(8), fair_to_real=np.ones(8),
+               full_to_real=np.full(8, 0.9), curve_sl=sl, curve_bl=sl + 0.1, sizes=sizes,
+               split=np.array([8, 5, 3, 10, 60]))
+    cfg = RealExperimentConfig(n_boot=200)
+    s = ex.summarise(res, cfg)
+    for space in ("pca", "rhf"):
+        by = {c["claim"][:2]: c["verdict"] for c in report.claims({space: s}, space)}
+        assert by["d)"] == "holds" and by["a)"] == "holds" and by["b)"] == "holds"
+    flat = dict(res, curve_bl=sl + 0.02 * rng.standard_normal(sl.shape))  # bf around 1
+    s2 = ex.summarise(flat, cfg)
+    d = [c for c in report.claims({"pca": s2}) if c["claim"].startswith("d)")][0]
+    assert d["verdict"] in ("undecided", "does not hold")
+    lines = report.terminal_lines({"pca": s})
+    assert any("REAL 0.8" in x and "(CI " in x and "bf n = 4..25" in x for x in lines)
+    assert any(x.startswith("pca claim d)") and "holds" in x for x in lines)
 
 
 def test_voxel_size_set_reaches_a_real_study(tmp_path, monkeypatch):
@@ -303,3 +345,25 @@ def test_voxel_size_set_reaches_a_real_study(tmp_path, monkeypatch):
     assert not np.array_equal(stored, default["pca"])
     assert json.loads((out / "relaff_config.json").read_text())["config"]["perception"]["voxel"]["size"] == 0.03
     assert json.loads((out / "sim" / "sim_relations.json").read_text())["perception"]["voxel_size"] == 0.03
+
+
+def test_pair_error_table_hand_made():
+    """Per pair: the share of the repetitions that tested it in which a classifier was wrong."""
+    from relaff_jax.real import experiments as ex
+    from relaff_jax.real import report
+
+    nan = np.nan
+    res = dict(sim_fair=np.ones(4), sim_full=np.ones(4), real=np.full(4, 0.8), fair_to_real=np.ones(4),
+               full_to_real=np.full(4, 0.9), curve_sl=np.full((3, 4), 0.7), curve_bl=np.full((3, 4), 0.8),
+               sizes=np.arange(2, 5), split=np.array([8, 5, 3, 10, 60]),
+               pairs_scene=np.array(["s1", "s1", "s2"]), pairs_ab=np.array(["1,2", "2,3", "1,2"]),
+               pairs_y=np.array([True, False, False]),
+               pairs_real=np.array([[1, nan, 1], [0, nan, 1], [nan, 1, 1], [nan, 1, 1]], float),
+               pairs_fair_to_real=np.ones((4, 3)),
+               pairs_full_to_real=np.array([[1, 0, 1], [1, 0, 1], [1, 1, 1], [1, 0, 1]], float))
+    rows = ex.summarise(res, RealExperimentConfig(n_boot=20))["pair_errors"]
+    assert [(r["scene"], r["pair"], r["relation"]) for r in rows] == [("s1", "2,3", "beside"), ("s1", "1,2", "on_top")]
+    assert rows[0]["wrong"] == {"real": 0.0, "fair_to_real": 0.0, "full_to_real": 0.75}
+    assert rows[1]["wrong"]["real"] == 0.5 and rows[1]["tested"]["real"] == 2
+    md = "\n".join(report.pair_error_lines({"pair_errors": rows}))
+    assert "| s1 | 2,3 | beside | 0.00 (2) | 0.00 (4) | 0.75 (4) |" in md

@@ -340,3 +340,16 @@ def test_cli_report_takes_the_datasets(scene_run, tmp_path, capsys):
     capsys.readouterr()
     assert cli.main(argv + ["--data", str(lift), str(lift)]) == 2
     assert "are both lift datasets" in capsys.readouterr().err
+
+
+def test_after_ten_reading_changes_the_after_ten_finding_only():
+    rows = dict(GOOD, **{"DB1 best after ten (causal)": 1.2, "CB1 best after ten (causal)": 1.3})
+    an = _analysis([0.6] * 4, [0.7] * 4, rows, [2.0] * 3)
+    whole = {f["id"]: f for f in R.findings(an, CFG)}
+    causal = {f["id"]: f for f in R.findings(an, override(CFG, {"after_ten": "causal"}))}
+    assert whole["best_after_ten"]["verdict"] == "reproduced"
+    assert causal["best_after_ten"]["verdict"] == "not reproduced"
+    assert causal["best_after_ten"]["values"]["DB1"]["rows"][0] == "DB1 best after ten (causal)"
+    for fid in whole:
+        if fid != "best_after_ten":
+            assert whole[fid] == causal[fid]

@@ -115,7 +115,9 @@ def register(subparsers) -> None:
                               description="Read the report folders of runs that differ in one setting (e.g. "
                               "dataset.population=all and feasible) and print one markdown page: what the labels "
                               "consist of, NB by test subset in PCA and RHF, the predictors' correlations with "
-                              "feasible and stacked, the correlation clusters, Table II and every finding's verdict.")
+                              "feasible and stacked, the correlation clusters, Table II, every finding's verdict and, last, "
+                              "the robustness table: each finding's verdict and intervals in every reading (each "
+                              "report and its after_ten readings) and whether it is reproduced in all of them.")
     c.add_argument("readings", nargs="+", metavar="NAME=REPORT_DIR",
                    help="two or more readings, each a name and a report folder, e.g. all=runs/a/report")
     c.add_argument("--size", type=int, default=10, help="training size of the NB comparison (default 10)")

@@ -19,6 +19,7 @@ import numpy as np
 
 from relaff_jax.learn.config import ORACLE, TABLE2_ROWS, ExperimentConfig
 from relaff_jax.learn.correlation import categories_above, category_pairs
+from relaff_jax.learn import gains as G
 from relaff_jax.learn import halfrows
 from relaff_jax.learn.intervals import (bc_interval, fast_outcomes, half_sizes, resampled_means, scene_halves,
                                          target_blocks, whole)
@@ -168,9 +169,39 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
         out[f"ties_{fam.lower()}"] = (tie_weights(best_score) > 0).sum(-1)
         out[f"online_{fam.lower()}"] = w_on[fam]
     out["thresholds"] = threshold_study(mean[:, : lay["n"]], bf[:, : lay["n"]], masks, sizes, cfg, lay, t2)
+    out["methods"] = against_nb(acc_x, mean, sizes, cfg, lay, cbn_ok, seed)
     if intervals:
         out.update(_intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, out, reference, hm))
     return out
+
+
+def against_nb(acc_x: np.ndarray, mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, lay: dict,
+               cbn_ok: np.ndarray, seed: int) -> dict[str, Any]:
+    """Each of ``gains.METHODS`` against NB (``gains.py``): the gain curve's area over the
+    window and the samples saved at ``select_size`` (mean over targets; intervals added by
+    ``_intervals`` from the same resamples as Table II's), and the probability of improvement
+    over NB of the per-repetition window accuracies across affordances and repetitions, its
+    interval from ``cfg.ci_resamples`` stratified resamples, its p-value against 0.5 and the
+    Holm correction over the methods (``holm_reject`` at 1 - ``ci_level``)."""
+    w = G.method_weights(mean, lay, cfg, sizes, cbn_ok)
+    st = G.curve_stats(mean, w, lay, sizes, cfg)
+    x, y = G.rep_scores(acc_x, w, lay, sizes, cfg)
+    rng = np.random.default_rng(derive_seed(seed, 23))
+    poi, ci, p = [], [], []
+    for k in range(len(G.METHODS)):
+        keep = np.isfinite(x[k]).any(-1) & np.isfinite(y).any(-1)  # the tasks the method ran for
+        if not keep.any():
+            poi.append(np.nan), ci.append((np.nan, np.nan)), p.append(np.nan)
+            continue
+        est = G.probability_of_improvement(x[k][keep], y[keep])
+        boot = G.stratified_poi(x[k][keep], y[keep], cfg.ci_resamples, rng)
+        poi.append(est)
+        ci.append(tuple(float(v[0]) for v in bc_interval(boot[:, None], np.array([est]), cfg.ci_level)))
+        p.append(G.bootstrap_p(boot, 0.5))
+    adj, rej = G.holm(p, 1 - cfg.ci_level)
+    return {"names": list(G.METHODS), "weights": w, "area": st["area"], "saved": st["saved"],
+            "censored": st["censored"], "poi": np.asarray(poi), "poi_ci": np.asarray(ci), "poi_p": np.asarray(p),
+            "poi_holm_p": adj, "poi_holm_reject": rej}
 
 
 def unmeasurable(a: Mapping[str, Any], cfg: ExperimentConfig) -> dict[str, str]:
@@ -224,7 +255,7 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
     outcomes = bool(corr_x.shape[-1])
     fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]), np.isfinite(pt["gain_per_target"])
     fixed_thr = np.isfinite(pt["thresholds"]["per_target"])
-    boot: dict[str, list] = {k: [] for k in ("bf", "held", "gain", "per", "thr", "nb", "mean")}
+    boot: dict[str, list] = {k: [] for k in ("bf", "held", "gain", "per", "thr", "nb", "mean", "area", "saved")}
     for b in range(0, len(hm), CI_CHUNK):
         h = hm[b : b + CI_CHUNK]
         m = whole(h, hs)
@@ -237,7 +268,12 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
         with _quiet():
             boot["nb"].append(np.nanmean(m[:, :, lay["NB"]], 1))  # (b, S) mean NB over targets
         boot["mean"].append(m)
+        st = G.curve_stats(m, pt["methods"]["weights"], lay, sizes, cfg)
+        boot["area"].append(st["area"]), boot["saved"].append(st["saved"])
     bt = {k: np.concatenate(v) for k, v in boot.items()}
+    meth = pt["methods"]
+    meth["area_ci"] = np.stack(bc_interval(bt["area"], meth["area"], cfg.ci_level), -1)
+    meth["saved_ci"] = np.stack(bc_interval(bt["saved"], meth["saved"], cfg.ci_level), -1)
     level = cfg.ci_level
     ci = lambda vals, est: np.stack(bc_interval(vals, est, level), -1)  # noqa: E731
     return {"table2_ci": ci(bt["bf"], pt["table2"][:, 0]), "gain_ci": ci(bt["gain"], pt["gain"][:, 0]),

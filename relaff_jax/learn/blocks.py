@@ -14,7 +14,7 @@ samples: the online "best after ten"). ``run_block`` is its accuracies alone.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Sequence
+from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -30,25 +30,27 @@ SUBSETS = ("positives", "feasible negatives", "infeasible negatives")
 
 
 def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tuple[int, tuple[int, ...]]],
-                   train_order: np.ndarray, test_idx: np.ndarray, sizes: Sequence[int], repeats: int,
+                   train_order: np.ndarray, test_idx: np.ndarray, sizes: Sequence[int], repeats: int | Mapping[int, int],
                    n_conditions: int, forest: ForestConfig, seed_keys: Sequence[int],
                    loo_size: int | None = None, loo_conditions: Sequence[int] = ()) -> dict[str, np.ndarray]:
     """Outcomes of one (target, repetition) over a chunk of sizes.
 
     X: (M, D) target-pool states in the target's order; y: (M,) labels; boot: (R, M) 0/1
     bootstrap inputs on the same scenes; plan: ``[(condition, rows of boot)]``; train_order:
-    (>= max(sizes),) training sample order (size n uses its first n); test_idx: (T,).
+    (>= max(sizes),) training sample order (size n uses its first n); test_idx: (T,);
+    repeats: how often each bootstrap input is repeated (``states.augment``), one number or
+    per condition of the plan (``condition_repeats``: DBn's may differ).
     Returns ``acc: (C, S)`` test accuracy, ``correct: (C, S, T)`` bool per test scene and
     ``loo: (C,)`` leave-one-out accuracy at ``loo_size`` of the ``loo_conditions`` (NaN
     elsewhere, or everywhere when ``loo_size`` is not in ``sizes``). Conditions not in the
-    plan stay NaN (``correct`` False). Conditions with the same rows share one learner.
+    plan stay NaN (``correct`` False). Conditions with the same rows and repeats share one learner.
     Forest seeds come from ``seed_keys`` + (n, first condition with these rows) and, for the
     leave-one-out forests, + (held-out position + 1).
     """
     acc = np.full((n_conditions, len(sizes)), np.nan)
     correct = np.zeros((n_conditions, len(sizes), len(test_idx)), bool)
     loo = np.full(n_conditions, np.nan)
-    first: dict[tuple[int, ...], int] = {}
+    first: dict[tuple, int] = {}  # (rows, repeats) -> the first condition with them
     y = np.asarray(y).astype(bool)
     X = np.asarray(X, dtype=np.float32)
     d0 = X.shape[1]
@@ -83,25 +85,27 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
     loo_hits: dict[int, list[bool]] = {}
     batch = 1 if forest.engine == "sklearn" else FLUSH
     for cond, rows in plan:
-        if rows in first:
+        key = learner_key(rows, repeats, cond)
+        if key in first:
             continue
-        first[rows] = cond
+        first[key] = cond
+        rep = key[1]
         inputs = boot[list(rows)]
         if not np.all(np.isfinite(inputs)):
             raise ValueError(f"condition {cond}: bootstrap inputs {rows} were not computed for this space")
-        colmap = np.concatenate([np.arange(d0), d0 + np.repeat(np.asarray(rows, dtype=np.intp), repeats)])
+        colmap = np.concatenate([np.arange(d0), d0 + np.repeat(np.asarray(rows, dtype=np.intp), rep)])
         for si, n in enumerate(sizes):
             tr = train_order[:n]
-            fits.append((augment(X[tr], inputs[:, tr], repeats), y[tr], derive_seed(*seed_keys, n, cond)))
+            fits.append((augment(X[tr], inputs[:, tr], rep), y[tr], derive_seed(*seed_keys, n, cond)))
             colmaps.append(colmap)
             slots.append((cond, si))
             if len(fits) >= batch:
                 flush()
-        if loo_n is not None and any(c in loo_conditions for c, r in plan if r == rows):
+        if loo_n is not None and any(c in loo_conditions for c, r in plan if learner_key(r, repeats, c) == key):
             loo_hits[cond] = []
             for i in range(loo_n):
                 keep = np.delete(tr_loo, i)
-                loo_fits.append((augment(X[keep], inputs[:, keep], repeats), y[keep],
+                loo_fits.append((augment(X[keep], inputs[:, keep], rep), y[keep],
                                   derive_seed(*seed_keys, loo_n, cond, i + 1)))
                 loo_maps.append(colmap)
                 loo_slots.append((cond, i))
@@ -112,13 +116,21 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
     for c, hits in loo_hits.items():
         loo[c] = np.mean(hits)
     for cond, rows in plan:
-        if first[rows] != cond:
-            acc[cond], correct[cond], loo[cond] = acc[first[rows]], correct[first[rows]], loo[first[rows]]
+        f = first[learner_key(rows, repeats, cond)]
+        if f != cond:
+            acc[cond], correct[cond], loo[cond] = acc[f], correct[f], loo[f]
     return {"acc": acc, "correct": correct, "loo": loo}
 
 
+def learner_key(rows: tuple[int, ...], repeats: int | Mapping[int, int], cond: int) -> tuple[tuple[int, ...], int]:
+    """What makes a condition's learner: its bootstrap rows and how often each is repeated
+    (none without rows: NB's learner whatever the number)."""
+    rep = int(repeats if isinstance(repeats, (int, np.integer)) else repeats[cond])
+    return tuple(rows), (rep if rows else 0)
+
+
 def run_block(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tuple[int, tuple[int, ...]]],
-              train_order: np.ndarray, test_idx: np.ndarray, sizes: Sequence[int], repeats: int,
+              train_order: np.ndarray, test_idx: np.ndarray, sizes: Sequence[int], repeats: int | Mapping[int, int],
               n_conditions: int, forest: ForestConfig, seed_keys: Sequence[int]) -> np.ndarray:
     """Accuracies ``(C, len(sizes))`` of one (target, repetition) over a chunk of sizes
     (``block_outcomes``' ``acc``)."""

@@ -24,15 +24,27 @@ SPACE_CODE = {"pca": 0, "rhf": 1}
 # "best" / "best after ten" are chosen on one half of the test scenes and scored on the other
 # (cross-fitted, measures.py); "(in-sample oracle)" is the paper's: chosen on the scores it
 # reports; "(online)" chooses per repetition by leave-one-out accuracy on the ten training
-# samples, what an agent has after ten samples. Every "after ten" row uses its choice only from
-# n = 10 on (before it: an equal share of the candidates). The paper has no held-out or online row.
-TABLE2_ROWS = (
-    "NB", "DB1 average", "DB1 best", "DB1 best (in-sample oracle)", "DB1 best after ten",
-    "DB1 best after ten (in-sample oracle)", "DB1 best after ten (online)", "DBn",
-    "CB1 average", "CB1 best", "CB1 best (in-sample oracle)", "CB1 best after ten",
-    "CB1 best after ten (in-sample oracle)", "CB1 best after ten (online)", "CBn",
-)
+# samples, what an agent has after ten samples. Every "after ten" row is given in both readings
+# (``ExperimentConfig.after_ten``): without a suffix the whole curve of the learner kept at
+# n = 10; "(causal)" uses its choice only from n = 10 on (before it: an equal share of the
+# candidates). The paper has no held-out, online or causal row.
 ORACLE = " (in-sample oracle)"
+ONLINE = " (online)"
+CAUSAL = " (causal)"
+AFTER_TEN = ("whole", "causal")  # readings of "best after ten" (docs/learning.md, "The paper's open choices")
+DBN_REPEATS = ("same", "once")  # DBn's inputs: each repeated as DB1's (6 PCA / 30 RHF), or once
+CATEGORY_LABELS = ("union", "both", "either")  # a category's training labels
+
+
+def _ten_rows(fam: str) -> tuple[str, ...]:
+    ten = f"{fam} best after ten"
+    return tuple(t + s for t in (ten, ten + CAUSAL) for s in ("", ORACLE, ONLINE))
+
+
+TABLE2_ROWS = (
+    ("NB", "DB1 average", "DB1 best", "DB1 best (in-sample oracle)") + _ten_rows("DB1") + ("DBn",
+     "CB1 average", "CB1 best", "CB1 best (in-sample oracle)") + _ten_rows("CB1") + ("CBn",)
+)
 PAPER_TABLE2 = {
     "NB": (1.0, 1.0, 1.0),
     "DB1 average": (1.356, 0.8055, 1.582),
@@ -49,8 +61,17 @@ PAPER_TABLE2 = {
 def paper_row(name: str) -> tuple[float, float, float]:
     """The paper's avg/min/max of a Table II row (NaN for rows the paper has not). The paper's
     "best" rows chose in-sample: their numbers stand beside the oracle rows."""
-    return PAPER_TABLE2.get(name.replace(ORACLE, ""), (float("nan"),) * 3) if name.endswith(ORACLE) or name in (
+    return PAPER_TABLE2.get(name.replace(ORACLE, "").replace(CAUSAL, ""), (float("nan"),) * 3) if name.endswith(ORACLE) or name in (
         "NB", "DB1 average", "DBn", "CB1 average", "CBn") else (float("nan"),) * 3
+
+
+def after_ten_row(name: str, after_ten: str) -> str:
+    """The Table II row of an "after ten" row ``name`` (its whole-curve name) in reading
+    ``after_ten``; other rows are their own."""
+    if "after ten" not in name or after_ten == "whole":
+        return name
+    i = name.index("after ten") + len("after ten")
+    return name[:i] + CAUSAL + name[i:]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -66,6 +87,13 @@ class ExperimentConfig:
     shrink_to_data: bool = False  # quick preset: shrink source/corr/test sizes to small datasets
     repeats_pca: int = 6  # bootstrap input repetitions (24-dim PCA state with one input)
     repeats_rhf: int = 30  # (348-dim RHF state with one input)
+    # DBn's eight inputs: "same" repeats each as often as DB1's one (66 PCA columns), "once"
+    # adds each once (26): the paper states the repetition for DB1 and CB1 only (learning.md)
+    dbn_repeats: str = "same"
+    # a category's training labels on the union of its two source sets: "union" each scene its
+    # own action's label; "both" / "either": positive where both / either affordance holds (the
+    # other's label predicted by its source predictor: the datasets hold one action each)
+    category_labels: str = "union"
     thresholds: tuple[float, ...] = (0.0, 0.125, 0.5)  # correlation heuristic, paper V-F
     cbn_threshold: float = 0.5  # categories used by CBn in Table II (paper V-G)
     categories_with_target: bool = False  # may a category built from the target itself be used?
@@ -74,6 +102,9 @@ class ExperimentConfig:
     bf_sizes: tuple[int, int] = (4, 25)  # average bootstrap factor interval (paper V-C)
     best_sizes: tuple[int, int] = (2, 100)  # "best" = highest mean accuracy over these n
     select_size: int = 10  # "best after ten" (offline: mean test accuracy; online: leave-one-out)
+    # which "after ten" rows the findings use: "whole" (the whole curve of the learner kept at
+    # select_size) or "causal" (nothing chosen before it); both are always computed and shown
+    after_ten: str = "whole"
     online_select: bool = True  # fit the leave-one-out forests of the online choice (off: its rows are NaN)
     chance: float = 0.5
     # test and training draws (draws.py): one test set per target, balanced by class; the
@@ -103,6 +134,10 @@ class ExperimentConfig:
 
     def repeats(self, space: str) -> int:
         return self.repeats_pca if space == "pca" else self.repeats_rhf
+
+    def dbn_repeat(self, space: str) -> int:
+        """How often each of DBn's inputs is repeated in ``space``."""
+        return self.repeats(space) if self.dbn_repeats == "same" else 1
 
     def conditions(self, space: str) -> tuple[str, ...]:
         return self.conditions_pca if space == "pca" else self.conditions_rhf
@@ -145,6 +180,12 @@ def check_experiment_node(cfg: ExperimentConfig) -> None:
         raise UserError(f"experiment.select_size {cfg.select_size} ('best after ten') must be one of sizes {cfg.sizes}")
     if not any(cfg.bf_sizes[0] <= s <= cfg.bf_sizes[1] for s in cfg.sizes):
         raise UserError(f"experiment.sizes: no training size inside experiment.bf_sizes {cfg.bf_sizes}")
+    if cfg.after_ten not in AFTER_TEN:
+        raise UserError(f"experiment.after_ten must be one of {AFTER_TEN}, got {cfg.after_ten!r}")
+    if cfg.category_labels not in CATEGORY_LABELS:
+        raise UserError(f"experiment.category_labels must be one of {CATEGORY_LABELS}, got {cfg.category_labels!r}")
+    if cfg.dbn_repeats not in DBN_REPEATS:
+        raise UserError(f"experiment.dbn_repeats must be one of {DBN_REPEATS}, got {cfg.dbn_repeats!r}")
     if cfg.cbn_threshold not in cfg.thresholds:
         raise UserError(f"experiment.cbn_threshold {cfg.cbn_threshold} must be one of thresholds {cfg.thresholds}")
     for space in SPACES:
@@ -162,7 +203,10 @@ def check_experiment_node(cfg: ExperimentConfig) -> None:
 # may resume with another; the sweep never reads the analysis keys, which a folder begun before
 # they existed lacks.
 SPEED_ONLY = ("forest.engine",)
-ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share")
+ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share", "after_ten")
+# fit-changing keys added after runs began whose default is what those runs did (issue 44): a
+# folder without the key holds the default's experiment
+ADDED_AS_BEFORE = {"dbn_repeats": "same", "category_labels": "union"}
 
 
 def result_differences(stored: Any, cfg: Any) -> list[str]:
@@ -175,8 +219,9 @@ def result_differences(stored: Any, cfg: Any) -> list[str]:
 
     now = rio.jsonable(cfg if isinstance(cfg, dict) else to_dict(cfg))
     old = stored if isinstance(stored, dict) else {}
-    return [k for k, was, _ in differences(old, now)
-            if k not in SPEED_ONLY and not (k in ANALYSIS_ONLY and was == "<absent>")]
+    return [k for k, was, new in differences(old, now)
+            if k not in SPEED_ONLY and not (k in ANALYSIS_ONLY and was == "<absent>")
+            and not (was == "<absent>" and k in ADDED_AS_BEFORE and new == ADDED_AS_BEFORE[k])]
 
 
 def check_config(cfg: ExperimentConfig) -> None:

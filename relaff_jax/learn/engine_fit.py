@@ -36,7 +36,7 @@ from sklearn.tree._criterion import Gini
 from sklearn.tree._splitter import BestSplitter
 from sklearn.tree._tree import DepthFirstTreeBuilder, Tree
 
-from relaff_jax.learn.forests import ForestConfig, max_features_value, n_trees
+from relaff_jax.learn.forests import ForestConfig, max_features_value, n_trees, subsample_weights
 
 MAX_INT = np.iinfo(np.int32).max  # sklearn.ensemble._forest.MAX_INT
 _RS = np.random.RandomState(0)  # reseeded per tree: constructing one costs ~100 us
@@ -117,7 +117,9 @@ def fit_trees(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = Fores
     trees = []
     for s in seeds:
         sw = None
-        if cfg.bootstrap:
+        if cfg.per_tree == "subsample":
+            sw = subsample_weights(rs, s, n)
+        elif cfg.bootstrap:
             rs.seed(s)
             sw = np.bincount(rs.randint(0, n, nb), minlength=n).astype(np.float64)
         rs.seed(s)  # the splitter draws its seed from a fresh RandomState(s) in BestSplitter.init

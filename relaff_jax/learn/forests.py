@@ -23,6 +23,30 @@ from relaff_jax.errors import UserError
 
 # the forest builders (ForestConfig.engine)
 ENGINES = ("fast", "sklearn", "compiled")
+# readings of "each tree uses 2/3 of the samples" (ForestConfig.per_tree; docs/learning.md)
+PER_TREE = ("bootstrap", "subsample")
+
+
+def subsample_size(n: int) -> int:
+    """Distinct samples per tree in the ``subsample`` reading: 2/3 of ``n`` (floor), at least 1."""
+    return max(1, (2 * int(n)) // 3)
+
+
+def subsample_weights(rs: np.random.RandomState, seed: int, n: int) -> np.ndarray:
+    """``(n,)`` float64 0/1 weights of one tree's subsample without replacement: a partial
+    Fisher-Yates shuffle of 0..n-1 by ``RandomState(seed).randint(i, n)`` for i < m (m =
+    ``subsample_size(n)``), the first m kept. The one definition every engine draws (the
+    compiled engine's ``rng.draw_subsample``): a zero weight leaves a sample out of the tree,
+    as if the tree were fitted on the m kept rows alone (scikit-learn's splitter skips them)."""
+    rs.seed(int(seed))
+    idx = np.arange(n)
+    m = subsample_size(n)
+    for i in range(m):
+        j = rs.randint(i, n)
+        idx[i], idx[j] = idx[j], idx[i]
+    w = np.zeros(n, np.float64)
+    w[idx[:m]] = 1.0
+    return w
 
 
 def max_features_value(mf: str | None) -> str | int | float | None:
@@ -52,6 +76,11 @@ def check_forest_node(cfg: ForestConfig) -> None:
                         "only (the paper's); set experiment.forest.engine=sklearn for another criterion")
     if not cfg.bootstrap and cfg.max_samples is not None:
         raise UserError("experiment.forest.max_samples needs experiment.forest.bootstrap=true")
+    if cfg.per_tree not in PER_TREE:
+        raise UserError(f"experiment.forest.per_tree must be one of {PER_TREE}, got {cfg.per_tree!r}")
+    if cfg.per_tree == "subsample" and (not cfg.bootstrap or cfg.max_samples is not None):
+        raise UserError("experiment.forest.per_tree=subsample draws each tree's 2/3 itself: it needs "
+                        "experiment.forest.bootstrap=true and max_samples=null")
     # scikit-learn's parameter constraints, without importing it (check_forest_config runs its own)
     for name in ("base_trees", "samples_per_extra_tree", "max_trees"):
         if not is_int(getattr(cfg, name), 1):
@@ -97,6 +126,9 @@ class ForestConfig:
     max_features: str = "sqrt"
     bootstrap: bool = True
     max_samples: float | None = None
+    # "bootstrap": N draws with replacement (Breiman's, ~63 % distinct: "2/3"); "subsample": 2/3
+    # of the samples without replacement (``subsample_weights``), the other reading of III-B
+    per_tree: str = "bootstrap"
     # "fast": the same trees built by scikit-learn's Cython builder without the estimator and
     # evaluated in one jitted program (learn/engine.py), bit-identical to "sklearn", the
     # RandomForestClassifier reference (tests/test_engine.py); "compiled": the same trees and
@@ -155,7 +187,18 @@ def checked_inputs(X: np.ndarray, y: np.ndarray, who: str) -> tuple[np.ndarray, 
 
 
 def fit_checked(X: np.ndarray, y: np.ndarray, seed: int, cfg: ForestConfig = ForestConfig()) -> RandomForestClassifier:
-    """``fit_forest`` on inputs ``checked_inputs`` gave (not checked again)."""
+    """``fit_forest`` on inputs ``checked_inputs`` gave (not checked again). The ``subsample``
+    reading: the forest scikit-learn builds without a bootstrap, each tree then refitted by
+    scikit-learn's ``DecisionTreeClassifier.fit`` on its own 2/3 subsample (``subsample_weights``
+    from the tree's seed, the one scikit-learn gave it)."""
+    if cfg.per_tree == "subsample":
+        forest = make_forest(len(y), seed, dataclasses.replace(cfg, bootstrap=False, per_tree="bootstrap"))
+        with _fast():
+            forest.fit(X, y)  # the tree seeds (each estimator's random_state) and the fitted attributes
+            rs = np.random.RandomState()
+            for est in forest.estimators_:
+                est.fit(X, y, sample_weight=subsample_weights(rs, est.random_state, len(y)))
+        return forest
     forest = make_forest(len(y), seed, cfg)
     with _fast():
         return forest.fit(X, y)

@@ -20,8 +20,11 @@ Choices use ``tie_weights``: every candidate tied at the highest score gets an e
 (a uniform random choice among them). "best" and "best after ten" are chosen on one half of
 the test scenes and scored on the other, both ways, averaged (cross-fitting: a choice never
 scores itself); the paper's choice on the very scores it reports is kept as the "(in-sample
-oracle)" rows. Every "after ten" learner (offline, oracle, online) has chosen nothing before
-n = ``select_size``: there it is an equal share of every candidate. ``summarise`` gives each
+oracle)" rows. Each "after ten" learner (offline, oracle, online) is given in two readings of
+the paper (config ``after_ten`` says which the findings use), from the same curves: its rows
+without a suffix are the whole curve of the learner kept at n = ``select_size`` (``whole``);
+its "(causal)" rows have chosen nothing before n = ``select_size``, and are there an equal
+share of every candidate (``causal``). ``summarise`` gives each
 row's avg/min/max over the targets with a value and how many those are (``n_targets``).
 """
 from __future__ import annotations
@@ -30,7 +33,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from relaff_jax.learn.config import TABLE2_ROWS, ExperimentConfig
+from relaff_jax.learn.config import CAUSAL, ONLINE, ORACLE, TABLE2_ROWS, ExperimentConfig
 
 TIE_TOL = 1e-12  # scores closer than this are tied (accuracies are multiples of 1/T)
 ROUND = 1e-12  # float64 round-off of a mean of k/T: far below one scene (1/T)
@@ -154,19 +157,24 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
         cells = (bf, gain)[key_i][..., idx, :]
         fm, ran, w_best, w_ten = family(mean, idx, allowed)
         best_o = wm(_mix(cells, w_best))
-        ten_o = wm(_from_ten(cells, _mix(cells, w_ten), ran, after))
+        kept = _mix(cells, w_ten)  # the learner kept at n = select_size, its whole curve
+        ten_o, ten_c = wm(kept), wm(_from_ten(cells, kept, ran, after))
         with _quiet():
             avg = np.nanmean(np.where(ran, wm(cells), np.nan), -1)
         if halves is None:
-            return nan, best_o, nan, ten_o, avg, ran
-        held_b, held_t = [], []
+            return {"best": nan, "best_o": best_o, "ten": nan, "ten_o": ten_o, "ten_c": nan, "ten_co": ten_c,
+                    "avg": avg, "ran": ran}
+        held_b, held_t, held_c = [], [], []
         for h in range(2):  # choose on half h, score on the other half
             _, ran_h, wb_h, wt_h = family(halves[..., h, :, :, :], idx, allowed, h)
             other = split[1 - h][key_i][..., idx, :]
             held_b.append(wm(_mix(other, wb_h)))
-            held_t.append(wm(_from_ten(other, _mix(other, wt_h), ran_h, after)))
+            kept_h = _mix(other, wt_h)
+            held_t.append(wm(kept_h))
+            held_c.append(wm(_from_ten(other, kept_h, ran_h, after)))
         with _quiet():
-            return np.nanmean(held_b, 0), best_o, np.nanmean(held_t, 0), ten_o, avg, ran
+            return {"best": np.nanmean(held_b, 0), "best_o": best_o, "ten": np.nanmean(held_t, 0), "ten_o": ten_o,
+                    "ten_c": np.nanmean(held_c, 0), "ten_co": ten_c, "avg": avg, "ran": ran}
 
     defined = window_mean(bf[..., lay["NB"], :], sizes, lo, hi)[1]  # (..., A)
     enough = defined >= (min_defined(cfg, sizes) if min_cells is None else min_cells)
@@ -176,10 +184,13 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
         rows: dict[str, np.ndarray] = {"NB": wm(cells[..., lay["NB"], :])}
         for fam in ("DB1", "CB1"):
             idx = lay[fam]
-            b_h, b_o, t_h, t_o, avg, ran = choices(key_i, idx, np.ones(len(idx), bool))
-            rows.update({f"{fam} average": avg, f"{fam} best": b_h, f"{fam} best (in-sample oracle)": b_o,
-                         f"{fam} best after ten": t_h, f"{fam} best after ten (in-sample oracle)": t_o,
-                         f"{fam} best after ten (online)": wm(_from_ten(cells[..., idx, :], cells[..., on[fam], :], ran, after))})
+            c = choices(key_i, idx, np.ones(len(idx), bool))
+            online = cells[..., on[fam], :]  # per repetition the learner kept at select_size, its whole curve
+            ten, causal = f"{fam} best after ten", f"{fam} best after ten{CAUSAL}"
+            rows.update({f"{fam} average": c["avg"], f"{fam} best": c["best"], f"{fam} best{ORACLE}": c["best_o"],
+                         ten: c["ten"], ten + ORACLE: c["ten_o"], ten + ONLINE: wm(online),
+                         causal: c["ten_c"], causal + ORACLE: c["ten_co"],
+                         causal + ONLINE: wm(_from_ten(cells[..., idx, :], online, c["ran"], after))})
         rows["DBn"] = wm(cells[..., lay["DBn"], :])
         cbn = wm(cells[..., lay["CBn"][list(cfg.thresholds).index(cfg.cbn_threshold)], :])
         rows["CBn"] = cbn if cbn_ok is None else np.where(cbn_ok, cbn, np.nan)
@@ -187,7 +198,7 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
         out[key] = np.where(enough[..., None, :], val, np.nan) if key == "bf" else val
         if masks is not None:
             per_t = [choices(key_i, lay["CB1"], np.asarray(m, bool)) for m in masks]  # m: (A, K)
-            for name, j in (("thr", 0), ("thr_oracle", 1)):
+            for name, j in (("thr", "best"), ("thr_oracle", "best_o")):
                 v = np.stack([c[j] for c in per_t], -2)  # (..., T, A)
                 out[f"{name}_{key}"] = np.where(enough[..., None, :], v, np.nan) if key == "bf" else v
     # bf(n) is defined where P_sl(n) > chance + tol: the same sizes for every row of a target

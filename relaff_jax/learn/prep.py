@@ -40,15 +40,43 @@ def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, a
     return [on(t, targets[t]) for t in actions], np.concatenate([on(b, corr_idx[b]) for b in actions])
 
 
+def _source_on_sources(feats: dict, action: str, labels: np.ndarray, src: dict, space: str, seed: int,
+                       fcfg: ForestConfig, scfg: StateConfig = StateConfig()) -> dict:
+    """``{b: (len(src[b]),)}`` the action's source predictor (the same forest as ``_source_job``'s:
+    same data and seed) on every other action's source scenes: the other affordance's label
+    where the dataset has none (``category_labels`` both / either)."""
+    def states(b: str, idx: np.ndarray) -> np.ndarray:
+        return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space, scfg)
+
+    forest = fit(states(action, src[action]), labels[src[action]],
+                 derive_seed(seed, 2, SPACE_CODE[space], ACTIONS.index(action)), fcfg)
+    return {b: predict(forest, states(b, src[b])) for b in src if b != action}
+
+
+def category_labels(pair: tuple[str, str], labels: dict, src: dict, other: dict | None, reading: str) -> np.ndarray:
+    """The labels a category of ``pair`` trains on, over the union of the two source sets (a's
+    scenes, then b's): ``union`` each scene with its own action's label (the default); ``both`` /
+    ``either``: its own label and / or the other action's, which its dataset lacks, predicted by
+    that action's source predictor (``other[x][y]``: x's predictor on y's source scenes)."""
+    a, b = pair
+    own_a, own_b = labels[a][src[a]], labels[b][src[b]]
+    if reading == "union":
+        return np.concatenate([own_a, own_b])
+    op = np.logical_and if reading == "both" else np.logical_or
+    return np.concatenate([op(own_a, np.asarray(other[b][a]) > 0.5), op(own_b, np.asarray(other[a][b]) > 0.5)])
+
+
 def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, actions: list[str],
-                  targets: dict, space: str, seed: int, fcfg: ForestConfig, scfg: StateConfig = StateConfig()):
-    """Fit one category on the union of two source sets (canonical order: toy first)."""
+                  targets: dict, space: str, seed: int, fcfg: ForestConfig, scfg: StateConfig = StateConfig(),
+                  y: np.ndarray | None = None):
+    """Fit one category on the union of two source sets (canonical order: toy first), labelled
+    ``y`` (default: each scene its own action's label, ``category_labels`` "union")."""
     def canon(b: str, idx: np.ndarray) -> np.ndarray:
         return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, None, space, scfg)
 
     a, b = pair
     x = np.concatenate([canon(a, src[a]), canon(b, src[b])])
-    y = np.concatenate([labels[a][src[a]], labels[b][src[b]]])
+    y = np.concatenate([labels[a][src[a]], labels[b][src[b]]]) if y is None else np.asarray(y, bool)
     k = category_pairs(ACTIONS).index((ACTIONS.index(a), ACTIONS.index(b)))
     forest = fit(x, y, derive_seed(seed, 3, SPACE_CODE[space], k), fcfg)
     return [predict(forest, canon(t, targets[t])) for t in actions]
@@ -78,7 +106,15 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     with_cats = bool({"CB1", "CBn"} & set(cfg.conditions(space)))
     calls = [delayed(_source_job)(feats, a, labels[a], src[a], actions, targets, corr_idx, space, seed, cfg.forest,
                                   cfg.state) for a in actions]
-    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest, cfg.state)
+    ys = {p: None for p in pairs}
+    if with_cats and cfg.category_labels != "union":  # the other affordance's labels: the source predictors'
+        other_calls = [delayed(_source_on_sources)(feats, a, labels[a], src, space, seed, cfg.forest, cfg.state)
+                       for a in actions]
+        other = dict(zip(actions, run_parallel(other_calls, jobs, progress, total=len(actions),
+                                               desc=f"{space} source predictors on the source scenes", unit="forest",
+                                               client=client)))
+        ys = {p: category_labels(p, labels, src, other, cfg.category_labels) for p in pairs}
+    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest, cfg.state, ys[p])
               for p in pairs] if with_cats else []
     desc = f"{space} source predictors" + (" + categories" if with_cats else "")
     results = run_parallel(calls, jobs, progress, total=len(calls), desc=desc, unit="forest", client=client)

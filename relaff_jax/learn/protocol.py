@@ -117,13 +117,24 @@ def split_pools(n: int, action_index: int, cfg: ExperimentConfig, seed: int) -> 
 
 
 def block_fits(plan: Sequence[tuple[int, tuple[int, ...]]], n_sizes: int, loo_size: int = 0,
-               loo_conditions: Sequence[int] = ()) -> int:
-    """Forests one block fits: one per distinct set of bootstrap rows in ``plan`` and size
-    (conditions with the same rows share one learner, ``blocks.block_outcomes``), plus, when
-    the block holds the selection size, ``loo_size`` leave-one-out forests per distinct set
-    of rows among ``loo_conditions``."""
-    loo = len({rows for c, rows in plan if c in set(loo_conditions)}) * loo_size
-    return len({rows for _, rows in plan}) * n_sizes + loo
+               loo_conditions: Sequence[int] = (), repeats: int | dict[int, int] = 1) -> int:
+    """Forests one block fits: one per distinct learner (bootstrap rows and their repeats,
+    ``blocks.learner_key``) in ``plan`` and size (conditions with the same learner share it,
+    ``blocks.block_outcomes``), plus, when the block holds the selection size, ``loo_size``
+    leave-one-out forests per distinct learner among ``loo_conditions``."""
+    from relaff_jax.learn.blocks import learner_key
+
+    key = lambda c, rows: learner_key(rows, repeats, c)  # noqa: E731
+    loo = len({key(c, rows) for c, rows in plan if c in set(loo_conditions)}) * loo_size
+    return len({key(c, rows) for c, rows in plan}) * n_sizes + loo
+
+
+def condition_repeats(plan: Sequence[tuple[int, tuple[int, ...]]], cfg: ExperimentConfig, space: str,
+                      n_actions: int) -> dict[int, int]:
+    """``{condition: repeats}`` of a plan: every bootstrap input repeated ``cfg.repeats(space)``
+    times, DBn's ``cfg.dbn_repeat(space)`` times (the paper leaves DBn's open: learning.md)."""
+    dbn = int(layout(n_actions, len(cfg.thresholds))["DBn"])
+    return {int(c): (cfg.dbn_repeat(space) if c == dbn else cfg.repeats(space)) for c, _ in plan}
 
 
 def loo_conditions(n_actions: int, n_thresholds: int) -> tuple[int, ...]:
@@ -161,6 +172,6 @@ def forests_per_space(cfg: ExperimentConfig, n_actions: int, space: str, corr: n
         names = list(range(a))  # the plan depends on the number of actions only
         n_loo = cfg.select_size if cfg.select_size in cfg.sizes and cfg.online_select else 0
         cands = loo_conditions(a, len(cfg.thresholds))
-        sweep = sum(block_fits(condition_plan(names, t, np.asarray(corr), cfg, space), len(cfg.sizes), n_loo, cands)
-                    for t in range(a))
+        plans = [condition_plan(names, t, np.asarray(corr), cfg, space) for t in range(a)]
+        sweep = sum(block_fits(p, len(cfg.sizes), n_loo, cands, condition_repeats(p, cfg, space, a)) for p in plans)
     return prep + sweep * cfg.reps(space)

@@ -54,6 +54,7 @@ from relaff_jax.learn.protocol import (
     condition_plan,
     layout,
     loo_conditions,
+    condition_repeats,
 )
 from relaff_jax.learn.results import FORMAT_VERSION
 from relaff_jax.learn.states import state_features
@@ -128,6 +129,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     chunks = [sizes[i : i + cfg.sizes_per_block] for i in range(0, len(sizes), cfg.sizes_per_block)]
     corr = prep["corr"]
     plans = [condition_plan(actions, ti, corr, cfg, space) for ti in range(a)]
+    reps_of = [condition_repeats(p, cfg, space, a) for p in plans]  # per condition (DBn's may differ)
     acc = np.full((a, n_cond, len(sizes), reps), np.nan)
     loo = np.full((a, n_cond, reps), np.nan)
     loo_conds = loo_conditions(a, len(cfg.thresholds))
@@ -150,7 +152,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
             draws = None
             for ci, chunk in enumerate(chunks):
                 path = L.block(sdir, t, r, ci)
-                fits = block_fits(plans[ti], len(chunk), loo_n if loo_n in chunk else 0, loo_conds)
+                fits = block_fits(plans[ti], len(chunk), loo_n if loo_n in chunk else 0, loo_conds, reps_of[ti])
                 total_fits += fits
                 s0 = sizes.index(chunk[0])
                 got = read_block(path, n_cond, chunk, packed=True)
@@ -173,7 +175,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                 test_idx, train_order = draws
                 seed_keys = (seed, 5, SPACE_CODE[space], ACTIONS.index(t), r)
                 calls.append((run_block_to_file, (str(path), X, y, boot, plans[ti], train_order, test_idx, chunk,
-                                           cfg.repeats(space), n_cond, cfg.forest, seed_keys, loo_n or None, loo_conds,
+                                           reps_of[ti], n_cond, cfg.forest, seed_keys, loo_n or None, loo_conds,
                                            cfg.keep_outcomes, subsets[t]), {}))
                 weights.append(fits)
                 keys.append((ti, s0, len(chunk), r))

@@ -215,6 +215,9 @@ class RealExperimentConfig:
     seed: int = 0
     engine: str = "fast"
     split: str = "scene"
+    # the bootstrap factor's window in real training sizes: the paper's early range (V-C: "roughly
+    # from samples 4 to 25"; VI gives none of its own); only the summary reads it
+    bf_sizes: tuple[int, int] = (4, 25)
 
     def forest(self):
         from relaff_jax.learn.forests import ForestConfig
@@ -260,6 +263,8 @@ def check_real_node(cfg: RealRunConfig) -> None:
         raise UserError(f"unknown real.experiment.split {e.split!r}; valid: {list(SPLITS)}")
     if not 0 < e.train_fraction < 1:
         raise UserError(f"real.experiment.train_fraction must lie in (0, 1), got {e.train_fraction}")
+    if len(e.bf_sizes) != 2 or not 2 <= e.bf_sizes[0] <= e.bf_sizes[1]:
+        raise UserError(f"real.experiment.bf_sizes must be [lo, hi] training sizes with 2 <= lo <= hi, got {list(e.bf_sizes)}")
     for name, v, lo in (("real.experiment.reps", e.reps, 1), ("real.experiment.trees", e.trees, 1),
                         ("real.experiment.n_full", e.n_full, 2), ("real.sim.per_relation", s.per_relation, 1),
                         ("real.sim.chunk", s.chunk, 1), ("real.sim.feature_batch", s.feature_batch, 1)):

@@ -29,7 +29,9 @@ accuracies over ``reps`` repetitions:
 (paper VI-A). Seeds: ``derive_seed(seed, 17, space, rep, experiment, n)``.
 ``summarise`` gives mean, std and a percentile bootstrap interval over repetitions, and the
 bootstrap factor curve with the count of sizes where it is undefined (P_sl <= 0.5) and an
-interval of its early mean (repetitions resampled).
+interval of its mean over the window ``cfg.bf_sizes`` of training sizes (repetitions
+resampled), the paired differences the claims are decided on (``differences``) and the
+per-pair error table (``pair_errors``).
 """
 from __future__ import annotations
 
@@ -43,7 +45,8 @@ from relaff_jax.learn.states import augment, state_features
 from relaff_jax.data.progress import progress_bar
 from relaff_jax.provenance import derive_seed
 
-from . import splits
+from . import paired, splits
+from .paired import HITS, _balanced, interval, scene_resamples  # noqa: F401  (the protocol's helpers, re-exported)
 from .config import RealExperimentConfig
 from .splits import balanced_take, split_sizes  # noqa: F401  (re-exported: the experiments' protocol)
 
@@ -94,6 +97,9 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
     out = {k: np.zeros(cfg.reps) for k in ("sim_fair", "sim_full", "real", "fair_to_real", "full_to_real")}
     out["curve_sl"] = np.zeros((len(sizes), cfg.reps))
     out["curve_bl"] = np.zeros((len(sizes), cfg.reps))
+    # per real test pair and repetition: 1 right, 0 wrong, NaN not tested (the per-pair error table)
+    for k in HITS:
+        out[f"pairs_{k}"] = np.full((cfg.reps, len(yt)), np.nan)
     if test is not None:  # per test pair and repetition: right or wrong (an interval over test scenes)
         for k in HITS:
             out[f"hits_{k}"] = np.zeros((cfg.reps, len(yt)), bool)
@@ -110,6 +116,7 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
             out[f"sim_{name}"][r] = float(np.mean(predict(forest, Xs[te]) == ys[te]))
             pred_t = predict(forest, Xt)
             out[f"{name}_to_real"][r] = balanced_accuracy(pred_t, yt)
+            out[f"pairs_{name}_to_real"][r] = (np.asarray(pred_t) > 0.5) == yt
             if test is not None:
                 out[f"hits_{name}_to_real"][r] = (np.asarray(pred_t) > 0.5) == yt
             if name == "full":  # the bootstrap input, on the training pairs and on the test pairs
@@ -125,6 +132,7 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
         forest = fit(Xr[tr], yr[tr], derive_seed(cfg.seed, 17, code, r, 2), fcfg)
         pred = predict(forest, Xte)
         out["real"][r] = balanced_accuracy(pred, yte)
+        out["pairs_real"][r, slice(None) if te is None else te] = (np.asarray(pred) > 0.5) == yte
         if test is not None:
             out["hits_real"][r] = (np.asarray(pred) > 0.5) == yte
         # 4: learning curves without / with the SIM_full prediction
@@ -148,28 +156,10 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
     out["test_counts"] = np.asarray([int((~yte).sum()), int(yte.sum())])
     if test is not None:
         out["test_y"], out["test_scene"] = yt, np.asarray(test["scene"]).astype(str)
-    return out
-
-
-HITS = ("real", "fair_to_real", "full_to_real")  # the accuracies measured on a fixed test folder
-
-
-def _balanced(per_pair: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Balanced accuracy of per-pair hit rates ``(..., N)`` against ``y (N,)``: (...,)."""
-    return 0.5 * (per_pair[..., y].mean(-1) + per_pair[..., ~y].mean(-1))
-
-
-def scene_resamples(y: np.ndarray, scene: np.ndarray, rng: np.random.Generator, n_boot: int) -> list[np.ndarray]:
-    """Index sets of test pairs, whole test scenes drawn with replacement; those without both
-    relations are dropped (so fewer than ``n_boot`` may come back)."""
-    y, scene = np.asarray(y).astype(bool), np.asarray(scene)
-    names = np.unique(scene)
-    rows = [np.flatnonzero(scene == s) for s in names]
-    out = []
-    for _ in range(n_boot):
-        idx = np.concatenate([rows[i] for i in rng.integers(0, len(names), len(names))])
-        if y[idx].any() and not y[idx].all():
-            out.append(idx)
+    tdata = real if test is None else test  # the pairs the per-pair arrays' columns are
+    out["pairs_scene"] = np.asarray(tdata["scene"]).astype(str)
+    out["pairs_ab"] = np.asarray([f"{a},{b}" for a, b in zip(tdata.get("a", [""] * len(yt)), tdata.get("b", [""] * len(yt)))])
+    out["pairs_y"] = yt
     return out
 
 
@@ -241,14 +231,6 @@ def run_sim_only(sim: dict, space: str, cfg: RealExperimentConfig = RealExperime
     return out
 
 
-def interval(x: np.ndarray, rng: np.random.Generator, n_boot: int, level: float = 0.95) -> tuple[float, float]:
-    """Percentile bootstrap interval of the mean of ``x`` (R,)."""
-    x = np.asarray(x, float)
-    means = x[rng.integers(0, len(x), (n_boot, len(x)))].mean(axis=1)
-    lo, hi = np.quantile(means, [(1 - level) / 2, (1 + level) / 2])
-    return float(lo), float(hi)
-
-
 def _bf_interval(sl: np.ndarray, bl: np.ndarray, early: np.ndarray, rng: np.random.Generator,
                  n_boot: int) -> tuple[float, float] | None:
     """Percentile bootstrap interval (95 %) of the early mean bootstrap factor, resampling
@@ -278,7 +260,7 @@ def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> 
     bf = bootstrap_factor(bl, sl)
     sizes = np.asarray(res["sizes"])
     undefined = sizes[~np.isfinite(bf)]
-    early = sizes <= max(4, sizes[len(sizes) // 3])
+    early = (sizes >= cfg.bf_sizes[0]) & (sizes <= cfg.bf_sizes[1])  # the window in training sizes
     with np.errstate(invalid="ignore"):
         bf_early = float(np.nanmean(bf[early])) if np.isfinite(bf[early]).any() else float("nan")
     bf_ci = _bf_interval(res["curve_sl"], res["curve_bl"], early, rng, cfg.n_boot)
@@ -296,4 +278,5 @@ def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> 
                 split=dict(kind=str(res.get("kind", "pair")), real_pool_per_class=pool, real_train_per_class=train,
                            real_test=test, real_test_counts=[int(v) for v in res.get("test_counts", (test, test))],
                            sim_fair_train=n_fair, sim_full_train=n_full), reps=len(res["real"]),
-                sim_only=sim_only)
+                sim_only=sim_only, bf_window=list(cfg.bf_sizes), differences=paired.differences(res, rng, cfg.n_boot),
+                pair_errors=paired.pair_errors(res))

@@ -112,48 +112,138 @@ def split_note(sp: dict) -> str:
             f"per class, train {sp['real_train_per_class']}, test {sp['real_test']}")
 
 
-def claims(summary: dict) -> list[dict]:
-    """Claims a-d of paper VI-C (and the VI-B observations) on the PCA space, with verdicts
-    (decided on the figures given: the cross-folder ones when the study has a test folder,
-    whose intervals then resample the test scenes)."""
-    acc = summary["pca"]["accuracy"]
+VERDICTS = ("holds", "does not hold", "undecided", "not measurable")
+
+
+def decide(iv, bound: float, above: bool) -> str:
+    """A claim "x > bound" (``above``) or "x < bound" from the interval ``iv`` of x: holds if
+    the whole interval is on the claimed side, does not hold if wholly on the other, else
+    undecided; no interval: not measurable. Never decided on a point value."""
+    if iv is None or not all(np.isfinite(v) for v in iv):
+        return "not measurable"
+    lo, hi = iv
+    if (lo > bound) if above else (hi < bound):
+        return "holds"
+    if (hi < bound) if above else (lo > bound):
+        return "does not hold"
+    return "undecided"
+
+
+def both(*verdicts: str) -> str:
+    """All parts must hold (the order of ``VERDICTS`` after "holds": the worst wins)."""
+    for v in ("not measurable", "does not hold", "undecided"):
+        if v in verdicts:
+            return v
+    return "holds"
+
+
+def _within(iv, lo: float, hi: float) -> str:
+    """A claim "lo < x < hi" from the interval of x."""
+    if iv is None:
+        return "not measurable"
+    return both(decide(iv, lo, True), decide(iv, hi, False))
+
+
+def _iv(x: dict | None, scenes: bool = True):
+    if not x:
+        return None
+    return tuple(x.get("ci95_scenes") or x["ci95"]) if scenes else tuple(x["ci95"])
+
+
+def _d(x: dict | None) -> str:
+    if not x:
+        return "-"
+    lo, hi = _iv(x)
+    return f"{x['mean']:.3f} [{lo:.3f}, {hi:.3f}]"
+
+
+def claims(summary: dict, space: str = "pca") -> list[dict]:
+    """Claims a-d of paper VI-C (and the VI-B observations) in one space, each decided by an
+    interval (``decide``: the one over test scenes when measured, across folders, else over
+    repetitions): ``verdict`` one of ``VERDICTS``, ``holds`` True / False / None."""
+    s = summary[space]
+    acc, dif = s["accuracy"], s.get("differences", {})
     real, fair, full = acc["real"], acc["sim_fair"], acc["sim_full"]
     s2r = acc["full_to_real"]
-    good = lambda a: a["mean"] >= GOOD and _widest(a)[0] > 0.5  # noqa: E731
-    bfe = summary["pca"]["bf_early_mean"]
-    early = summary["pca"]["bf_early_sizes"]
-    defined = [n for n in early if n not in summary["pca"]["bf_undefined_sizes"]]
+    early = s["bf_early_sizes"]
+    defined = [n for n in early if n not in s["bf_undefined_sizes"]]
+    bf_iv = s.get("bf_early_ci95_scenes") or s.get("bf_early_ci95")
+    d_fair, d_s2r = dif.get("sim_fair-real"), dif.get("full_to_real-real")
+    d_std = dif.get("std real-sim_fair")
+    lo, hi = (s.get("bf_window") or [early[0] if early else None, early[-1] if early else None])[:2]
     out = [
-        dict(claim="a) PCA states give good results on noisy real data",
-             test=f"REAL mean >= {GOOD} and its 95 % interval above 0.5",
-             numbers=f"REAL {_ci(real)}, std {real['std']:.3f}",
-             holds=bool(good(real))),
+        dict(claim="a) PCA states give good results on noisy real data" if space == "pca" else
+             f"a) {space.upper()} states give good results on noisy real data",
+             test=f"REAL's 95 % interval above {GOOD}", numbers=f"REAL {_ci(real)}, std {real['std']:.3f}",
+             verdict=decide(_widest(real), GOOD, True)),
         dict(claim="b) real and simulation classifiers do not differ by a large margin",
-             test=f"abs(SIM_fair - REAL) <= {MARGIN}",
-             numbers=f"SIM_fair {_ci(fair)}, REAL {_ci(real)}",
-             holds=bool(abs(fair["mean"] - real["mean"]) <= MARGIN)),
+             test=f"the interval of SIM_fair - REAL (paired repetitions) within +-{MARGIN}",
+             numbers=f"SIM_fair {_ci(fair)}, REAL {_ci(real)}; difference {_d(d_fair)}",
+             verdict=_within(_iv(d_fair), -MARGIN, MARGIN)),
         dict(claim="c) simulation-trained classifiers apply to real scenes (good, competitive with REAL)",
-             test=f"SIM_full->REAL good and >= REAL - {MARGIN}",
-             numbers=f"SIM_full->REAL {_ci(s2r)} (std {s2r['std']:.3f}), REAL {_ci(real)}",
-             holds=bool(good(s2r) and s2r["mean"] >= real["mean"] - MARGIN)),
+             test=f"SIM_full->REAL's interval above {GOOD} and that of SIM_full->REAL - REAL above -{MARGIN}",
+             numbers=f"SIM_full->REAL {_ci(s2r)} (std {s2r['std']:.3f}), REAL {_ci(real)}; difference {_d(d_s2r)}",
+             verdict=both(decide(_widest(s2r), GOOD, True), decide(_iv(d_s2r), -MARGIN, True))),
         dict(claim="d) bootstrapping from simulation helps real learning early",
-             test="mean bootstrap factor over the early sizes > 1 (undefined unless bf is defined at most of them)",
-             numbers=f"bf {bfe:.3f}{_bf_ci(summary['pca'])} over n = {early}; defined at {len(defined)} of "
-                     f"{len(early)}; undefined at n = {summary['pca']['bf_undefined_sizes']}",
+             test=f"the interval of the mean bootstrap factor over n = {lo}..{hi} above 1 (not measurable unless bf "
+                  "is defined at most of those sizes)",
+             numbers=f"bf {s['bf_early_mean']:.3f}{_bf_ci(s)} over n = {early}; defined at {len(defined)} of "
+                     f"{len(early)}; undefined at n = {s['bf_undefined_sizes']}",
              # P_sl <= 0.5 (the real learner at chance) leaves bf undefined: a mean over the few
              # sizes where it is defined says nothing
-             holds=None if 2 * len(defined) <= len(early) else bool(np.isfinite(bfe) and bfe > 1.0)),
+             verdict="not measurable" if 2 * len(defined) <= len(early) else decide(bf_iv, 1.0, True)),
         dict(claim="VI-B: real classifiers lower and more variable than simulation ones",
-             test="REAL mean < SIM_fair mean and REAL std > SIM_fair std",
+             test="the interval of SIM_fair - REAL above 0 and that of std(REAL) - std(SIM_fair) above 0",
              numbers=f"REAL {real['mean']:.3f} +- {real['std']:.3f}; SIM_fair {fair['mean']:.3f} +- {fair['std']:.3f}; "
-                     f"SIM_full {full['mean']:.3f} +- {full['std']:.3f}",
-             holds=bool(real["mean"] < fair["mean"] and real["std"] > fair["std"])),
+                     f"SIM_full {full['mean']:.3f} +- {full['std']:.3f}; SIM_fair - REAL {_d(d_fair)}; "
+                     f"std difference {_d(d_std)}",
+             verdict=both(decide(_iv(d_fair), 0.0, True), decide(_iv(d_std), 0.0, True))),
         dict(claim="VI-B: SIM->REAL drops significantly from SIM",
              test="SIM_full->REAL interval entirely below SIM_full's",
              numbers=f"SIM_full {_ci(full)}; SIM_full->REAL {_ci(s2r)}",
-             holds=bool(_widest(s2r)[1] < full["ci95"][0])),
+             verdict="holds" if _widest(s2r)[1] < full["ci95"][0] else
+             "does not hold" if _widest(s2r)[0] > full["ci95"][1] else "undecided"),
     ]
+    for c in out:
+        c["holds"] = {"holds": True, "does not hold": False}.get(c["verdict"])
     return out
+
+
+def terminal_lines(summary: dict, cross: dict | None = None) -> list[str]:
+    """What the study prints: per space and folder setting every accuracy and the window's
+    bootstrap factor with their intervals, then each claim's verdict in each space."""
+    lines = []
+    for where, per in (("within", summary), ("cross", cross or {})):
+        for space, s in per.items():
+            acc = ", ".join(f"{name} {_ci(s['accuracy'][k])}" for k, name in BOXES)
+            w = s.get("bf_window") or [min(s["bf_early_sizes"] or [0]), max(s["bf_early_sizes"] or [0])]
+            lines.append(f"{space} {where} ({s['split']['kind']}): {acc}; bf n = {w[0]}..{w[1]} "
+                         f"{s['bf_early_mean']:.3f}{_bf_ci(s)}")
+    decided = cross or summary
+    for space in decided:
+        for c in claims(decided, space):
+            lines.append(f"{space} claim {c['claim']}: {c['verdict']} ({c['numbers']})")
+    return lines
+
+
+def pair_error_lines(s: dict) -> list[str]:
+    """Markdown table of the pairs some classifier got wrong (``experiments.pair_errors``)."""
+    if "pair_errors" not in s:  # a summary made before the per-pair arrays were kept
+        return []
+    rows = s["pair_errors"]
+    if not rows:
+        return ["", "No real test pair was misclassified in any repetition."]
+    names = [n for k, n in BOXES if k in HITS_SHOWN]
+    lines = ["", f"Real test pairs some classifier got wrong ({len(rows)}): share of the repetitions that tested "
+                 "the pair in which it was wrong (times tested)", "",
+             "| scene | pair | relation | " + " | ".join(names) + " |", "|---|---|---|" + "---:|" * len(names)]
+    for r in rows:
+        cells = ["-" if r["wrong"][k] is None else f"{r['wrong'][k]:.2f} ({r['tested'][k]})" for k in HITS_SHOWN]
+        lines.append(f"| {r['scene']} | {r['pair']} | {r['relation']} | " + " | ".join(cells) + " |")
+    return lines
+
+
+HITS_SHOWN = ("real", "fair_to_real", "full_to_real")
 
 
 def _bf_ci(s: dict) -> str:
@@ -195,7 +285,7 @@ def _space_section(space: str, s: dict, title: str) -> list[str]:
     lines += ["", f"bf undefined (P_sl <= 0.5) at n = {s['bf_undefined_sizes']} "
                   f"({len(s['bf_undefined_sizes'])} of {len(s['sizes'])} sizes); mean bf over n = "
                   f"{s['bf_early_sizes']}: {s['bf_early_mean']:.3f}{_bf_ci(s)}"]
-    return lines
+    return lines + pair_error_lines(s)
 
 
 def markdown(summary: dict, context: dict, cross: dict | None = None) -> str:
@@ -211,14 +301,15 @@ def markdown(summary: dict, context: dict, cross: dict | None = None) -> str:
     for space, s in (cross or {}).items():
         lines += _space_section(space, s, "Across folders, ")
     decided = cross or summary
-    if "pca" in decided:
+    for space in decided:
         where = "across folders (trained on the training folder, tested on the test folder)" if cross else \
-            f"within one folder ({decided['pca']['split'].get('kind', 'pair')} split)"
-        lines += ["", f"## Claims of section VI-C (PCA space), decided {where}", "",
+            f"within one folder ({decided[space]['split'].get('kind', 'pair')} split)"
+        lines += ["", f"## Claims of section VI-C ({space.upper()} space), decided {where}", "",
+                  "Each verdict from an interval: holds if it lies wholly on the claimed side, does not hold if "
+                  "wholly on the other, otherwise undecided.", "",
                   "| claim | test | numbers | verdict |", "|---|---|---|---|"]
-        for c in claims(decided):
-            verdict = "undefined" if c["holds"] is None else "holds" if c["holds"] else "does not hold"
-            lines.append(f"| {c['claim']} | {c['test']} | {c['numbers']} | {verdict} |")
+        for c in claims(decided, space):
+            lines.append(f"| {c['claim']} | {c['test']} | {c['numbers']} | **{c['verdict']}** |")
     return "\n".join(lines) + "\n"
 
 
@@ -239,7 +330,9 @@ def write_report(folder: str | Path, raw: dict, summary: dict, context: dict,
                 paths.append(folder / name)
     decided = cross or summary
     doc = dict(context=context, summary=summary, cross=cross,
-               claims=claims(decided) if "pca" in decided else [], claims_decided_on="cross" if cross else "within")
+               claims=claims(decided) if "pca" in decided else [],
+               claims_by_space={sp: claims(decided, sp) for sp in decided},
+               claims_decided_on="cross" if cross else "within")
     rio.atomic_write_json(folder / layout.RESULTS_JSON, doc)
     rio.atomic_write_text(folder / layout.RESULTS_MD, markdown(summary, context, cross))
     return paths + [folder / layout.RESULTS_JSON, folder / layout.RESULTS_MD]

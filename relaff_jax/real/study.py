@@ -42,6 +42,9 @@ from . import folder as layout
 from .config import pipeline_config, sensor_difference
 
 
+SUMMARY_ONLY = ("bf_sizes", "n_boot")  # RealExperimentConfig keys only the summary reads: no refit
+
+
 def _raw(path: Path, key: str):
     if path.exists():
         with np.load(path) as z:
@@ -168,9 +171,10 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
         out / layout.REAL_FEATURES_TEST, test, rows["test"], pipeline, progress)
     sim_summary = sr.build_sim_relations(sim_dir, sensor, sim_cfg, progress, cfg.tolerance, tree.perception)
     sim = sr.load_sim_relations(sim_dir)
-    key = json.dumps(dataclasses.asdict(exp_cfg), sort_keys=True) + lab.rows_sha256(rows["train"]) + \
+    fits = {k: v for k, v in dataclasses.asdict(exp_cfg).items() if k not in SUMMARY_ONLY}  # what the fits depend on
+    key = json.dumps(fits, sort_keys=True) + lab.rows_sha256(rows["train"]) + \
         json.dumps(sim_summary["counts"], sort_keys=True) + "+sim_only" + sr.normals_note(sim_cfg, pipeline) + \
-        perception_key(tree.perception)
+        perception_key(tree.perception) + "+pairs"
     raw, summary, craw, cross = {}, {}, {}, {}
     for space in spaces:
         def within(space=space):
@@ -186,10 +190,8 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
             cross[space] = ex.summarise(craw[space], exp_cfg)
     context = _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test)
     report.write_report(out, raw, summary, context, craw or None, cross or None)
-    for where, per_space in (("within", summary), ("cross", cross)):
-        for space, s in per_space.items():
-            acc = {k: round(v["mean"], 3) for k, v in s["accuracy"].items()}
-            say(f"{space} {where} ({s['split']['kind']}): {json.dumps(acc)}; bf early {s['bf_early_mean']:.3f}")
+    for line in report.terminal_lines(summary, cross or None):
+        say(line)
     from relaff_jax.provenance import record_config
 
     record_config(out, tree, "real study")  # the tree that ran, as every stage's folder holds it

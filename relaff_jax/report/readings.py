@@ -5,7 +5,9 @@ Takes ``{name: REPORT_DIR}`` written by ``write_report`` with datasets (``summar
 ``findings.json``, ``reach.json``); gives ``compare_readings``, a markdown page: what the
 labels consist of per reading (infeasible share of negatives, the oracles), NB by test subset
 at one size, PCA against RHF, the source predictors' correlations with feasible and stacked,
-the correlation clusters, Table II's rows with their intervals, and every finding's verdict.
+the correlation clusters, Table II's rows with their intervals, every finding's verdict and, last,
+the robustness table: each finding's verdict and intervals in every reading (the reports given
+and each report's analysis-only readings) and whether it survives all of them.
 Nothing is recomputed: every number is read from the report folders, so the page says what
 the reports say.
 """
@@ -21,6 +23,8 @@ from relaff_jax import io as rio
 from relaff_jax.errors import UserError
 from relaff_jax.report import folder as F
 from relaff_jax.report.findings import correlation_clusters
+from relaff_jax.learn.config import AFTER_TEN
+from relaff_jax.report.robustness import robustness_table
 
 FILES = F.JSON_FILES
 
@@ -154,4 +158,19 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
             verdict = g.get("verdict") or {True: "reproduced", False: "not reproduced", None: "not measurable"}[g["reproduced"]]
             cells.append(f"**{verdict}**: {g['numbers']}")
         lines.append(f"| {f['finding']} | " + " | ".join(cells) + " |")
+
+    # robustness: every finding in every reading, the analysis-only ones of each report included
+    every = {}
+    for n in names:
+        own = r[n]["findings"].get("readings") or {"": r[n]["findings"]["findings"]}
+        order = [f"after_ten={x}" for x in AFTER_TEN]  # the default reading first (JSON sorts the keys)
+        for k in sorted(own, key=lambda k: order.index(k) if k in order else len(order)):
+            every[f"{n} {k}".strip()] = own[k]
+    header, rows = robustness_table(every)
+    lines += ["", "## Robustness: each finding in every reading", "",
+              "Verdict, then each claim's estimate [interval]; the readings are the reports given and, within each, "
+              "the analysis-only readings of its results (after_ten=whole / causal). A finding reproduced in only "
+              "some readings is a finding about the reading.", "",
+              "| " + " | ".join(header) + " |", "|---|" + "---|" * (len(header) - 1)]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
     return "\n".join(lines) + "\n"

@@ -71,6 +71,52 @@ def findings_blocks(found: Sequence[Mapping[str, Any]]) -> list[tuple]:
     return blocks
 
 
+def robustness_blocks(readings: Mapping[str, Sequence[Mapping[str, Any]]], cfg: Any) -> list[tuple]:
+    """Every finding in each analysis-only reading of the same results (``robustness.by_reading``)."""
+    from relaff_jax.report.robustness import robustness_table
+
+    header, rows = robustness_table(readings)
+    return [("h", 3, "Each finding in every reading of the stored results"),
+            ("p", f"The findings above read 'best after ten' as `after_ten={cfg.after_ten}`. The paper leaves open "
+                  "whether its 'best after ten' row is the whole curve of the learner kept after ten samples "
+                  "(`whole`) or has chosen nothing before ten (`causal`); both are computed from the same results "
+                  "(no refit). Readings that change the fits (`dbn_repeats`, `forest.per_tree`, "
+                  "`category_labels`) need a run each: `relaff compare NAME=REPORT ...` ends with this table over "
+                  "them. Each cell: verdict, then each claim's estimate [interval] (docs/learning.md, 'The paper's "
+                  "open choices')."),
+            ("table", header, rows)]
+
+
+def methods_blocks(a: Mapping[str, Any], cfg: Any, space: str) -> list[tuple]:
+    """Beyond the paper's statistics (``learn.analysis.against_nb``): each method against NB."""
+    m = a.get("methods")
+    if not m:
+        return []
+    lo, hi = cfg.bf_sizes
+    iv = lambda key, i, nd: (f" [{fmt(m[key][i][0], nd)}, {fmt(m[key][i][1], nd)}]" if key in m else "")  # noqa: E731
+    rows = []
+    for i, name in enumerate(m["names"]):
+        cens = int(m["censored"][i])
+        rows.append([name, fmt(m["area"][i], 2) + iv("area_ci", i, 2),
+                     fmt(m["saved"][i], 1) + iv("saved_ci", i, 1) + (f" ({cens} censored)" if cens else ""),
+                     fmt(m["poi"][i], 3) + iv("poi_ci", i, 3), fmt(m["poi_holm_p"][i], 3),
+                     "yes" if m["poi_holm_reject"][i] else "no"])
+    level = 100 * float(cfg.ci_level)
+    return [("h", 3, f"Each method against NB ({space.upper()}), beyond the paper's statistics"),
+            ("p", f"Area: the gain curve P_bl(n) - P_NB(n) integrated over n = {lo}..{hi} (accuracy x samples; "
+                  f"a method 0.1 above NB throughout has {0.1 * (hi - lo):.1f}). Saved: the training samples NB needs "
+                  f"to reach the method's accuracy at n = {cfg.select_size} (interpolated between the sizes run), "
+                  f"minus {cfg.select_size}; where NB never gets there the largest size counts (a lower bound, "
+                  "'censored'). Both are means over the affordances, with the bias-corrected interval of Table II's "
+                  "resamples. P(improvement): the probability that the method's mean window accuracy in a "
+                  "repetition beats NB's in another, per affordance (Mann-Whitney U / (R x R)), averaged over the "
+                  "affordances, with its interval from stratified resamples of the repetitions (as rliable). "
+                  f"Significant: P(improvement) differs from 0.5 at {100 - level:g} % after Holm's correction over "
+                  "the methods. 'best' and 'after ten' are the in-sample choices; 'after ten' the whole curve of the "
+                  "learner kept."),
+            ("table", ["method", "area", "samples saved", "P(improvement)", "Holm p", "significant"], rows)]
+
+
 def _rate(r) -> str:
     return "-" if r is None else f"{100 * r:.0f} %"
 

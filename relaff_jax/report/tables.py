@@ -69,8 +69,10 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
         f"n = {span(cfg.sizes, *cfg.best_sizes)}, 'best after ten' = highest mean accuracy at n = {cfg.select_size}, both chosen "
         "on one half of each test set and scored on the other (both ways, averaged); '(in-sample oracle)' = the paper's "
         "choice, on the very scores it reports; '(online)' = per repetition, highest leave-one-out accuracy on its "
-        f"{cfg.select_size} training samples; every 'after ten' learner uses its choice from n = {cfg.select_size} on "
-        "(before it: an equal share of the candidates); tied candidates share the choice equally.",
+        f"{cfg.select_size} training samples; an 'after ten' row is the whole curve of the learner kept at "
+        f"n = {cfg.select_size}, its '(causal)' row uses the choice from n = {cfg.select_size} on (before it: an equal "
+        f"share of the candidates); the findings read `after_ten={cfg.after_ten}`; tied candidates share the choice "
+        "equally.",
         "",
     ]
     for space, a in an.items():
@@ -152,6 +154,7 @@ def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures
             "cb1_best": {t: x["conditions"][i] for t, i in zip(x["actions"], x["best_cb1"])},
             "cb1_best_after_ten": {t: x["conditions"][i] for t, i in zip(x["actions"], x["ten_cb1"])},
             "corr": res[s]["corr"],
+            "against_nb": {k: v for k, v in x.get("methods", {}).items() if k != "weights"},
             "categories_per_threshold": categories_per_threshold(res[s]["corr"], res["config"].thresholds),
         }
         for s, x in an.items()

@@ -29,6 +29,7 @@ from relaff_jax.report.document import render_html, render_markdown
 from relaff_jax.report.examples import example_scenes
 from relaff_jax.report.figures import dataset_figure, write_figures
 from relaff_jax.report.findings import FindingRules, findings
+from relaff_jax.report.robustness import by_reading
 from relaff_jax.report.formatting import finite
 from relaff_jax.report.borrow import borrow_blocks, borrow_rows
 from relaff_jax.report.reach import predictor_blocks, reach_blocks, reach_figure, reach_json, subset_blocks
@@ -99,12 +100,16 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
     # the document
     found = findings(an, cfg, rules)
-    blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
+    readings = by_reading(an, cfg, rules)  # the analysis-only readings of the same results
+    blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + S.robustness_blocks(readings, cfg)
+              + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
               + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset"))
+              + [b for s in spaces for b in S.methods_blocks(an[s], cfg, s)]
               + [b for s in spaces for b in borrow_blocks(lend[s], s)] + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
               + S.run_blocks(info, time.perf_counter() - t0, _load(), provenance.machine()))
-    rio.atomic_write_json(out / F.FINDINGS, finite({"findings": found, "rules": dataclasses.asdict(rules)}))
+    rio.atomic_write_json(out / F.FINDINGS, finite({"findings": found, "rules": dataclasses.asdict(rules),
+                                                    "readings": readings}))
     rio.atomic_write_text(out / F.MARKDOWN, render_markdown(blocks))
     rio.atomic_write_text(out / F.HTML, render_html(blocks, out, "relaff_jax reproduction report"))
     return out

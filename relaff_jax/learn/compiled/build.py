@@ -24,7 +24,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from relaff_jax.learn.compiled.rng import MAX_INT, RAND_R_MAX, draw_bootstrap, first_randint, mt_seed, mt_seed4, randint
+from relaff_jax.learn.compiled.rng import (MAX_INT, RAND_R_MAX, draw_bootstrap, draw_subsample, first_randint, mt_seed,
+                                           mt_seed4, randint)
 from relaff_jax.learn.compiled.split import best_split, node_impurity
 
 EPSILON = np.finfo(np.float64).eps  # sklearn/tree/_tree.pyx
@@ -135,7 +136,8 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
                   min_leaf, min_split, max_depth, bootstrap):
     """Every tree of F >= 1 forests. Forest f: ``XT = xs[x_start[f]:][:d n].reshape(d, n)``
     (features by row), class codes ``ys[sum(ns[:f]):][:n]`` in [0, ks[f]) (ks <= 2), seed
-    ``seeds[f]`` in [0, 2**32), ``n_trees[f]`` trees of ``n_boot[f]`` draws each,
+    ``seeds[f]`` in [0, 2**32), ``n_trees[f]`` trees of ``n_boot[f]`` draws each (``bootstrap``
+    0: none, 1: with replacement, 2: ``n_boot[f]`` distinct samples, ``rng.draw_subsample``),
     ``max_features[f]`` features per split. Returns ``(feature, threshold, left, right,
     value, tree_start)``: ``(M,)`` int32, float64, int32, int32, ``(M, 2)`` float64 (class
     k in column k < ks[f]) and ``(sum(n_trees) + 1,)`` int64."""
@@ -194,7 +196,9 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
                 mt_seed(mt2, tree_seeds[t])
                 state[0] = randint(mt2, 0, RAND_R_MAX)
             wt = w[:n]
-            if bootstrap:
+            if bootstrap == 2:  # the subsample reading: n_boot[f] distinct samples
+                draw_subsample(mtt, wt, n, n_boot[f])
+            elif bootstrap:
                 wt[:] = 0.0
                 draw_bootstrap(mtt, wt, n, n_boot[f])
             else:

@@ -17,7 +17,7 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax.learn.engine_fit import check_engine_config, max_features_of, n_bootstrap
-from relaff_jax.learn.forests import ForestConfig, checked_states, n_trees
+from relaff_jax.learn.forests import ForestConfig, checked_states, n_trees, subsample_size
 
 MAX_DEPTH = np.iinfo(np.int32).max  # max_depth=None, as BaseDecisionTree._fit
 SEED_LIMIT = 2**32  # RandomState seeds are in [0, 2**32)
@@ -133,7 +133,8 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
             m = max_features_of(d, cfg)
             if not 0 < m <= d:
                 raise ValueError("max_features must be in (0, n_features]")
-            shape = per_shape[n, d] = (n_trees(n, cfg), m, n_bootstrap(n, cfg) if cfg.bootstrap else n, _settings(cfg, n))
+            draws = subsample_size(n) if cfg.per_tree == "subsample" else n_bootstrap(n, cfg) if cfg.bootstrap else n
+            shape = per_shape[n, d] = (n_trees(n, cfg), m, draws, _settings(cfg, n))
         ns[f], ds[f], ks[f], (nt[f], mf[f], nb[f], settings) = n, d, len(c), shape
         xs.append(X.T.ravel())  # features by row
         codes.append(enc.reshape(-1))
@@ -148,7 +149,7 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
         raise ValueError("fit_many: X contains NaN or inf")
     feat, thr, left, right, value, starts = kernels()["build_forests"](
         xs, x_start, ns, ds, np.concatenate(codes).astype(np.int64), ks, np.asarray(seeds, np.int64), nt, nb, mf,
-        msl, min_split, max_depth, bool(cfg.bootstrap))
+        msl, min_split, max_depth, 2 if cfg.per_tree == "subsample" else int(bool(cfg.bootstrap)))
     out, t0 = [], 0
     for f in range(F):
         ts = starts[t0: t0 + nt[f] + 1]

@@ -169,6 +169,21 @@ def draw_bootstrap(mt, wt, n, n_draws):
     mt[N_MT] = pos
 
 
+@njit(cache=True)
+def draw_subsample(mt, wt, n, m):
+    """``forests.subsample_weights``: a partial Fisher-Yates shuffle of 0..n-1 by legacy
+    ``randint(i, n)`` for i < m, weight 1.0 on the first m (``wt`` zeroed first)."""
+    idx = np.arange(n)
+    for i in range(m):
+        j = randint(mt, i, n)
+        t = idx[i]
+        idx[i] = idx[j]
+        idx[j] = t
+    wt[:] = 0.0
+    for i in range(m):
+        wt[idx[i]] = 1.0
+
+
 @njit(cache=True, inline="always")
 def rand_r(state):
     """``our_rand_r`` on ``state: (1,)`` int64 (a uint32 value); returns the 31-bit output."""
