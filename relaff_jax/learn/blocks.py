@@ -19,7 +19,8 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.learn.engine import fit_many, predict_many
+from relaff_jax.learn.engine import predict_many
+from relaff_jax.learn.learners import fit_many
 from relaff_jax.learn.forests import ForestConfig
 from relaff_jax.learn.states import augment
 from relaff_jax.provenance import derive_seed
@@ -36,7 +37,8 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
     """Outcomes of one (target, repetition) over a chunk of sizes.
 
     X: (M, D) target-pool states in the target's order; y: (M,) labels; boot: (R, M) 0/1
-    bootstrap inputs on the same scenes; plan: ``[(condition, rows of boot)]``; train_order:
+    bootstrap inputs on the same scenes; plan: ``[(condition, rows of boot)]``; repeats: each
+    row's repetitions, an int (the paper's) or ``(R,)`` per row (user conditions' rows: 1); train_order:
     (>= max(sizes),) training sample order (size n uses its first n); test_idx: (T,).
     Returns ``acc: (C, S)`` test accuracy, ``correct: (C, S, T)`` bool per test scene and
     ``loo: (C,)`` leave-one-out accuracy at ``loo_size`` of the ``loo_conditions`` (NaN
@@ -89,10 +91,11 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
         inputs = boot[list(rows)]
         if not np.all(np.isfinite(inputs)):
             raise ValueError(f"condition {cond}: bootstrap inputs {rows} were not computed for this space")
-        colmap = np.concatenate([np.arange(d0), d0 + np.repeat(np.asarray(rows, dtype=np.intp), repeats)])
+        rep = repeats if np.ndim(repeats) == 0 else np.asarray(repeats)[list(rows)]  # per row: user conditions
+        colmap = np.concatenate([np.arange(d0), d0 + np.repeat(np.asarray(rows, dtype=np.intp), rep)])
         for si, n in enumerate(sizes):
             tr = train_order[:n]
-            fits.append((augment(X[tr], inputs[:, tr], repeats), y[tr], derive_seed(*seed_keys, n, cond)))
+            fits.append((augment(X[tr], inputs[:, tr], rep), y[tr], derive_seed(*seed_keys, n, cond)))
             colmaps.append(colmap)
             slots.append((cond, si))
             if len(fits) >= batch:
@@ -101,7 +104,7 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
             loo_hits[cond] = []
             for i in range(loo_n):
                 keep = np.delete(tr_loo, i)
-                loo_fits.append((augment(X[keep], inputs[:, keep], repeats), y[keep],
+                loo_fits.append((augment(X[keep], inputs[:, keep], rep), y[keep],
                                   derive_seed(*seed_keys, loo_n, cond, i + 1)))
                 loo_maps.append(colmap)
                 loo_slots.append((cond, i))
