@@ -19,6 +19,7 @@ from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
 from relaff_jax.learn import conditions as C
 from relaff_jax.learn import learners
+from relaff_jax.learn import user_conditions as U
 from relaff_jax.learn.correlation import category_pairs
 from relaff_jax.learn.draws import draw_rep
 from relaff_jax.learn.states import augment, state_features
@@ -145,7 +146,7 @@ def test_built_in_conditions_give_the_plans_columns(data, tmp_path):
         pool = prep[f"target:{t}"]
         X = state_features(data[t]["pca"][pool], None, t, "pca")
         boot = prep[f"boot:{t}"]
-        k = C.knowledge(t, list(ACTS), X, boot, prep["corr"], allowed[ti], cfg.repeats_pca, cfg.thresholds)
+        k = U.knowledge(t, list(ACTS), X, boot, prep["corr"], allowed[ti], cfg.repeats_pca, cfg.thresholds)
         got = {}
         for fam in ("NB", "DB1", "DBn", "CB1", "CBn"):
             for name, cols in C.columns(reg[fam], k):

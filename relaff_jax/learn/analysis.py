@@ -18,7 +18,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from relaff_jax.learn.config import ORACLE, TABLE2_ROWS, ExperimentConfig
-from relaff_jax.learn.conditions import builtin_results
+from relaff_jax.learn.user_conditions import builtin_results
 from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn import halfrows
 from relaff_jax.learn.intervals import (bc_interval, fast_outcomes, half_sizes, resampled_means, scene_halves,

@@ -40,7 +40,7 @@ from relaff_jax.config import to_dict
 from relaff_jax.constants import ACTIONS, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
-from relaff_jax.learn import conditions as user_conditions
+from relaff_jax.learn import user_conditions
 from relaff_jax.learn.blocks import SUBSETS, read_block, run_block_to_file
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config, result_differences
 from relaff_jax.learn.datasets import check_datasets, fingerprint
