@@ -56,6 +56,19 @@ class OneClass:
         return np.full(len(X), self.label)
 
 
+@dataclasses.dataclass(frozen=True)
+class OneThread:
+    """A fitted estimator whose ``predict`` runs on one thread (``fit_many``'s rule)."""
+
+    model: Any
+
+    def predict(self, X: np.ndarray) -> np.ndarray:
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(1):
+            return self.model.predict(X)
+
+
 def learner_of(cfg: Any) -> ForestConfig | SklearnLearner:
     """The learner an ``ExperimentConfig`` names: its ``ForestConfig`` for the paper's forest
     (the engines' path, unchanged), else a ``SklearnLearner``."""
@@ -72,15 +85,15 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
         from relaff_jax.learn import engine  # here: the config imports this module without JAX
 
         return engine.fit_many(Xs, ys, seeds, learner)
+    from threadpoolctl import threadpool_limits
+
     out = []
-    for f, (X, y, s) in enumerate(zip(Xs, ys, seeds)):
-        X, y = checked_inputs(X, y, f"learners.fit_many: model {f}")
-        if np.all(y == y[0]):
-            out.append(OneClass(bool(y[0])))
-            continue
-        est = learner.make(s)
-        with _fast():  # parameters checked once (check_learner), inputs just above
-            out.append(est.fit(X, y))
+    # one thread per fit: parallelism is over fits (worker processes), as for the forest; an
+    # OpenMP learner (HistGradientBoosting) left to spin over busy cores was ~70x slower here
+    with threadpool_limits(1), _fast():  # parameters checked once (check_learner), inputs below
+        for f, (X, y, s) in enumerate(zip(Xs, ys, seeds)):
+            X, y = checked_inputs(X, y, f"learners.fit_many: model {f}")
+            out.append(OneClass(bool(y[0])) if np.all(y == y[0]) else OneThread(learner.make(s).fit(X, y)))
     return out
 
 
