@@ -28,6 +28,9 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         raise UserError("give --data DIR... (one featured dataset per action) or --synthetic N")
     options.precheck(args)
     from relaff_jax import learn
+
+    for path in args.plugins or ():  # the user's conditions, registered before the config names them
+        learn.load_plugin_file(path)
     from relaff_jax.runconfig import RunConfig
 
     spaces = {None: None, "both": tuple(SPACES)}.get(args.space, (args.space,))
@@ -97,6 +100,9 @@ def register(subparsers) -> None:
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
     options.add_cluster(p)
     options.add_set(p, "experiment.reps_pca=5 --set 'experiment.sizes=[2,10,25]'")
+    p.add_argument("--plugins", nargs="+", metavar="FILE.py", default=None,
+                   help="Python files registering conditions (@relaff_jax.learn.register_condition), run where "
+                        "experiment.conditions_pca / conditions_rhf name them; see docs/extending.md")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_experiment)
     r = subparsers.add_parser(

@@ -41,6 +41,9 @@ def register(sub) -> None:
     p.add_argument("--rebuild-log", action="store_true",
                    help="OUT's run.json is damaged: set it aside (run.json.damaged) and start a new log for the "
                         "given --preset, --seed and --set; complete stages are then skipped")
+    p.add_argument("--plugins", nargs="+", metavar="FILE.py", default=None,
+                   help="Python files registering conditions, run where experiment.conditions_pca / "
+                        "conditions_rhf name them (docs/extending.md)")
     p.add_argument("--no-progress", action="store_true", help="no progress line")
     p.set_defaults(func=cmd_reproduce)
 
@@ -66,12 +69,18 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
             print(f"{stage:<10} {st.state:<9} {st.why}")
         return 0
     options.check_out_dir(args.out)
+    if args.plugins:  # the user's conditions, registered before the study's config is checked
+        from relaff_jax.learn import load_plugin_file
+
+        for path in args.plugins:
+            load_plugin_file(path)
     command = ["relaff", "reproduce", "--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
     command += [x for f in args.force or () for x in ("--force", f)]
     command += [x for a in args.redo_dataset or () for x in ("--redo-dataset", a)] + (["--jobs", str(args.jobs)] if args.jobs else [])
     command += [x for s in args.set or () for x in ("--set", s)] + (["--no-progress"] if args.no_progress else [])
     command += ["--cluster", args.cluster] if args.cluster else []
     command += ["--engine", args.engine] if args.engine else []
+    command += ["--plugins", *args.plugins] if args.plugins else []
     with options.cluster(args, args.out) as client:
         log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
                           progress=not args.no_progress, overrides=overrides, argv=command,

@@ -12,6 +12,10 @@ Files, in pipeline order:
 - ``compiled/``: the same forests and predictions from scikit-learn's builder in numba, many
   forests per kernel call (issue 26);
 - ``engine.py``: the engine the sweep and prep use (``ForestConfig.engine``: fast | compiled | sklearn);
+- ``learners.py``: the learner of every forest: the paper's (default) or a scikit-learn classifier
+  by import path (``ExperimentConfig.learner``, ``learner_params``);
+- ``conditions.py``: conditions as registered functions (``register_condition``, ``Knowledge``),
+  the paper's five as built-ins, a user's from ``--plugins FILE.py`` or entry points;
 - ``states.py``: ``state_features`` (manipulated object first), ``augment`` (bootstrap inputs);
 - ``correlation.py``: the categories and the correlation heuristic;
 - ``synthetic.py``: synthetic datasets in ``load_dataset``'s layout (``--synthetic``, tests);
@@ -55,6 +59,12 @@ from relaff_jax.learn.config import (
     check_config,
     experiment_preset,
     paper_row,
+)
+from relaff_jax.learn.conditions import (
+    Knowledge,
+    load_plugin_file,
+    register_condition,
+    registered as registered_conditions,
 )
 from relaff_jax.learn.forests import (
     ForestConfig,
@@ -138,7 +148,7 @@ __getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
     "ACTIONS", "FAMILIES", "SPACES", "FORMAT_VERSION", "PAPER_TABLE2", "SPACE_CODE", "TABLE2_ROWS", "TOY_MANIPULATED",
-    "ExperimentConfig", "ForestConfig", "Results", "ResultsNotFound", "SpaceResults",
+    "ExperimentConfig", "ForestConfig", "Knowledge", "Results", "ResultsNotFound", "SpaceResults",
     "analyse", "augment", "average_bf", "block_fits", "bootstrap_factor", "categories_above", "categories_per_threshold",
     "category_allowed", "category_masks", "category_pairs", "check_action", "check_config", "check_datasets",
     "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep",
@@ -147,5 +157,5 @@ __all__ = [
     "run_block", "run_block_to_file", "run", "run_experiment", "run_space", "select_at", "select_best", "size_mask",
     "split_pools", "state_features", "synthetic_datasets", "threshold_study",
     "block_outcomes", "draw_test", "draw_train", "extend", "online_weights", "paper_row", "percentile_interval",
-    "resampled_means", "summarise", "pool_sizes", "bc_interval", "half_sizes", "scene_halves", "whole", "chance_tolerance", "min_defined", "ORACLE", "table2_rows", "tie_weights", "window_mean",
+    "resampled_means", "summarise", "register_condition", "registered_conditions", "load_plugin_file", "pool_sizes", "bc_interval", "half_sizes", "scene_halves", "whole", "chance_tolerance", "min_defined", "ORACLE", "table2_rows", "tie_weights", "window_mean",
 ]

@@ -18,6 +18,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from relaff_jax.learn.config import ORACLE, TABLE2_ROWS, ExperimentConfig
+from relaff_jax.learn.user_conditions import builtin_results
 from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn import gains as G
 from relaff_jax.learn import halfrows
@@ -128,6 +129,8 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     behind them, and the threshold study. ``reference``: the reference paths (the same bits,
     slower; kept to check the default ones against).
     """
+    # Table II reads the built-in conditions (a user's conditions follow them on the axis)
+    res = builtin_results(res, layout(len(res["actions"]), len(cfg.thresholds))["n"])
     acc, sizes = np.asarray(res["acc"], dtype=float), [int(s) for s in res["sizes"]]
     actions = [str(a) for a in res["actions"]]
     a = len(actions)

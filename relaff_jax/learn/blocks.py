@@ -19,7 +19,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.learn.engine import fit_many, predict_many
+from relaff_jax.learn.engine import predict_many
+from relaff_jax.learn.learners import fit_many
 from relaff_jax.learn.forests import ForestConfig
 from relaff_jax.learn.states import augment
 from relaff_jax.provenance import derive_seed
@@ -39,7 +40,7 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
     bootstrap inputs on the same scenes; plan: ``[(condition, rows of boot)]``; train_order:
     (>= max(sizes),) training sample order (size n uses its first n); test_idx: (T,);
     repeats: how often each bootstrap input is repeated (``states.augment``), one number or
-    per condition of the plan (``condition_repeats``: DBn's may differ).
+    per condition of the plan (``condition_repeats``: DBn's may differ; a user's condition: 1).
     Returns ``acc: (C, S)`` test accuracy, ``correct: (C, S, T)`` bool per test scene and
     ``loo: (C,)`` leave-one-out accuracy at ``loo_size`` of the ``loo_conditions`` (NaN
     elsewhere, or everywhere when ``loo_size`` is not in ``sizes``). Conditions not in the

@@ -15,7 +15,9 @@ import numpy as np
 
 from relaff_jax.constants import FAMILIES, SPACES
 from relaff_jax.errors import UserError
+from relaff_jax.learn.conditions import check_condition_names, check_conditions
 from relaff_jax.learn.forests import ForestConfig, check_forest_config
+from relaff_jax.learn.learners import check_learner, check_learner_node
 from relaff_jax.learn.states import StateConfig
 
 # Integer code of each state space in seed keys (part of every forest's seed: never change).
@@ -125,6 +127,10 @@ class ExperimentConfig:
     # derived or partial states (relative and reach columns, RHF bins only, named RHF parts)
     # for finding what a learner relies on; the default is the paper's PCA and RHF states
     state: StateConfig = StateConfig()
+    # the classifier of every forest above (learners.py): "forest" (the paper's, ForestConfig) or
+    # a scikit-learn classifier's import path, with its constructor's keyword arguments
+    learner: str = "forest"
+    learner_params: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self):  # refused when the config is made (forest and state check themselves)
         check_experiment_node(self)
@@ -188,10 +194,9 @@ def check_experiment_node(cfg: ExperimentConfig) -> None:
         raise UserError(f"experiment.dbn_repeats must be one of {DBN_REPEATS}, got {cfg.dbn_repeats!r}")
     if cfg.cbn_threshold not in cfg.thresholds:
         raise UserError(f"experiment.cbn_threshold {cfg.cbn_threshold} must be one of thresholds {cfg.thresholds}")
-    for space in SPACES:
-        bad = set(cfg.conditions(space)) - set(FAMILIES)
-        if bad or "NB" not in cfg.conditions(space):
-            raise UserError(f"experiment.conditions_{space} must include NB and be among {FAMILIES}, got {cfg.conditions(space)}")
+    for space in SPACES:  # built-ins or names of registered conditions (checked in check_config)
+        check_condition_names(cfg.conditions(space), f"experiment.conditions_{space}")
+    check_learner_node(cfg.learner, cfg.learner_params)
     if not 0.5 <= cfg.ci_level < 1 or cfg.ci_resamples < 10:
         raise UserError(f"experiment.ci_level must be in [0.5, 1) and ci_resamples >= 10, got {cfg.ci_level}, {cfg.ci_resamples}")
     if min(cfg.reps_pca, cfg.reps_rhf, cfg.test_size, cfg.source_size, cfg.corr_scenes, cfg.sizes_per_block) < 1:
@@ -206,7 +211,8 @@ SPEED_ONLY = ("forest.engine",)
 ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share", "after_ten")
 # fit-changing keys added after runs began whose default is what those runs did (issue 44): a
 # folder without the key holds the default's experiment
-ADDED_AS_BEFORE = {"dbn_repeats": "same", "category_labels": "union"}
+ADDED_AS_BEFORE = {"dbn_repeats": "same", "category_labels": "union", "learner": "forest",
+                   "learner_params": {}}
 
 
 def result_differences(stored: Any, cfg: Any) -> list[str]:
@@ -225,7 +231,10 @@ def result_differences(stored: Any, cfg: Any) -> list[str]:
 
 
 def check_config(cfg: ExperimentConfig) -> None:
-    """The node's own check, then scikit-learn's validation of the forest parameters (which
-    needs scikit-learn, so it is not run when the node is made)."""
+    """The node's own check, then scikit-learn's validation of the forest parameters, the
+    learner imported and fitted once and the user's conditions run once on synthetic scenes
+    (which need scikit-learn or the plugins, so they are not run when the node is made)."""
     check_experiment_node(cfg)
     check_forest_config(cfg.forest)
+    check_learner(cfg.learner, cfg.learner_params, min(cfg.sizes))
+    check_conditions(cfg)

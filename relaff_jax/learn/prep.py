@@ -5,7 +5,8 @@ Takes ``{action: dataset}``, the space, the config and the seed; fits the A sour
 CBn, the A(A-1)/2 categories (each on the union of two source pools, canonical order), and
 returns (``prepare``) their 0/1 outputs on every target pool and the correlation matrix of
 the predictors on the held-out correlation scenes. Prep forests never see a target-pool scene.
-Forests are fitted and evaluated by the forest engine (``engine.py``).
+Forests are fitted and evaluated by the forest engine (``engine.py``), another learner by
+``learners.py`` (``ExperimentConfig.learner``).
 """
 from __future__ import annotations
 
@@ -17,8 +18,8 @@ from relaff_jax.constants import ACTIONS
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig
 from relaff_jax.learn.correlation import category_pairs, correlation_matrix, correlation_with
 from relaff_jax.learn.datasets import check_datasets
-from relaff_jax.learn.engine import fit, predict
 from relaff_jax.learn.forests import ForestConfig
+from relaff_jax.learn.learners import SklearnLearner, fit, learner_of, predict
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.protocol import split_pools
 from relaff_jax.learn.states import StateConfig, state_features
@@ -26,7 +27,7 @@ from relaff_jax.provenance import derive_seed
 
 
 def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, actions: list[str],
-                targets: dict, corr_idx: dict, space: str, seed: int, fcfg: ForestConfig,
+                targets: dict, corr_idx: dict, space: str, seed: int, fcfg: ForestConfig | SklearnLearner,
                 scfg: StateConfig = StateConfig()):
     """Fit one action's source predictor; predict every target pool and the corr scenes."""
     def states(b: str, idx: np.ndarray) -> np.ndarray:  # scenes of action b in this source's order
@@ -41,7 +42,7 @@ def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, a
 
 
 def _source_on_sources(feats: dict, action: str, labels: np.ndarray, src: dict, space: str, seed: int,
-                       fcfg: ForestConfig, scfg: StateConfig = StateConfig()) -> dict:
+                       fcfg: ForestConfig | SklearnLearner, scfg: StateConfig = StateConfig()) -> dict:
     """``{b: (len(src[b]),)}`` the action's source predictor (the same forest as ``_source_job``'s:
     same data and seed) on every other action's source scenes: the other affordance's label
     where the dataset has none (``category_labels`` both / either)."""
@@ -67,7 +68,7 @@ def category_labels(pair: tuple[str, str], labels: dict, src: dict, other: dict 
 
 
 def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, actions: list[str],
-                  targets: dict, space: str, seed: int, fcfg: ForestConfig, scfg: StateConfig = StateConfig(),
+                  targets: dict, space: str, seed: int, fcfg: ForestConfig | SklearnLearner, scfg: StateConfig = StateConfig(),
                   y: np.ndarray | None = None):
     """Fit one category on the union of two source sets (canonical order: toy first), labelled
     ``y`` (default: each scene its own action's label, ``category_labels`` "union")."""
@@ -104,17 +105,18 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     pairs = [(actions[i], actions[j]) for i, j in category_pairs(actions)]
     # categories are only trained when this space uses them (the paper's RHF runs NB and DB1)
     with_cats = bool({"CB1", "CBn"} & set(cfg.conditions(space)))
-    calls = [delayed(_source_job)(feats, a, labels[a], src[a], actions, targets, corr_idx, space, seed, cfg.forest,
+    learner = learner_of(cfg)  # the paper's forest (ForestConfig) or a scikit-learn classifier
+    calls = [delayed(_source_job)(feats, a, labels[a], src[a], actions, targets, corr_idx, space, seed, learner,
                                   cfg.state) for a in actions]
     ys = {p: None for p in pairs}
     if with_cats and cfg.category_labels != "union":  # the other affordance's labels: the source predictors'
-        other_calls = [delayed(_source_on_sources)(feats, a, labels[a], src, space, seed, cfg.forest, cfg.state)
+        other_calls = [delayed(_source_on_sources)(feats, a, labels[a], src, space, seed, learner, cfg.state)
                        for a in actions]
         other = dict(zip(actions, run_parallel(other_calls, jobs, progress, total=len(actions),
                                                desc=f"{space} source predictors on the source scenes", unit="forest",
                                                client=client)))
         ys = {p: category_labels(p, labels, src, other, cfg.category_labels) for p in pairs}
-    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, cfg.forest, cfg.state, ys[p])
+    calls += [delayed(_category_job)(feats, p, labels, src, actions, targets, space, seed, learner, cfg.state, ys[p])
               for p in pairs] if with_cats else []
     desc = f"{space} source predictors" + (" + categories" if with_cats else "")
     results = run_parallel(calls, jobs, progress, total=len(calls), desc=desc, unit="forest", client=client)

@@ -49,10 +49,12 @@ def run(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str, Mapping[str,
             raise UserError(f"{d}: no such dataset directory")
     check_writable_dir(Path(out), "--out")
     from relaff_jax.config import override
+    from relaff_jax.learn.config import check_config
     from relaff_jax.learn.datasets import load_datasets
     from relaff_jax.learn.sweep import run_experiment
     from relaff_jax.learn.synthetic import synthetic_datasets
 
+    check_config(tree.experiment)  # the learner and the user's conditions tried once, before the data are read
     if isinstance(data, Mapping):
         datasets, desc = dict(data), list(data_desc or ())
     elif isinstance(data, int):

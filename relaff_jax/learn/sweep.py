@@ -40,15 +40,18 @@ from relaff_jax.config import to_dict
 from relaff_jax.constants import ACTIONS, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
+from relaff_jax.learn import user_conditions
 from relaff_jax.learn.blocks import SUBSETS, read_block, run_block_to_file
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config, result_differences
 from relaff_jax.learn.datasets import check_datasets, fingerprint
 from relaff_jax.learn.draws import draw_rep
+from relaff_jax.learn.learners import learner_of
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.prep import prepare
 from relaff_jax.learn.protocol import (
     pool_sizes,
     block_fits,
+    category_allowed,
     category_masks,
     condition_names,
     condition_plan,
@@ -82,6 +85,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         "actions": actions,
         "spaces": spaces,
         "fingerprint": fingerprint(datasets, spaces),
+        "plugins": user_conditions.record(cfg),  # the user's conditions: origin and sha256 of their source
     }
     meta_path = L.meta(out)
     if meta_path.exists():
@@ -91,6 +95,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         # the forest engine, and settings only the analysis reads added after a run began, do
         # not make it another run (config.result_differences)
         diff = [k for k in ("format", "seed", "actions") if old.get(k) != now[k]]
+        diff += ["plugins"] if old.get("plugins", {}) != now["plugins"] else []
         diff += [f"config.{k}" for k in result_differences(old.get("config"), cfg)]
         diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
         if diff:
@@ -128,8 +133,14 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     n_cond = layout(a, len(cfg.thresholds))["n"]
     chunks = [sizes[i : i + cfg.sizes_per_block] for i in range(0, len(sizes), cfg.sizes_per_block)]
     corr = prep["corr"]
-    plans = [condition_plan(actions, ti, corr, cfg, space) for ti in range(a)]
-    reps_of = [condition_repeats(p, cfg, space, a) for p in plans]  # per condition (DBn's may differ)
+    # the user's conditions (conditions.py) after the built-ins on the condition axis
+    ext = user_conditions.extend({t: _states(datasets[t], prep[f"target:{t}"], t, space, cfg) for t in actions}
+                                 if user_conditions.custom_names(cfg, space) else {}, prep, actions, cfg, space,
+                                 category_allowed(actions, cfg), n_cond)
+    n_cond += len(ext.names)
+    plans = [condition_plan(actions, ti, corr, cfg, space) + ext.plans.get(t, []) for ti, t in enumerate(actions)]
+    reps_of = [{**condition_repeats(p, cfg, space, a), **{c: 1 for c, _ in ext.plans.get(t, [])}}
+               for p, t in zip(plans, actions)]  # per condition (DBn's may differ; a user's: 1)
     acc = np.full((a, n_cond, len(sizes), reps), np.nan)
     loo = np.full((a, n_cond, reps), np.nan)
     loo_conds = loo_conditions(a, len(cfg.thresholds))
@@ -162,12 +173,8 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                     continue
                 if t not in target_data:
                     ds = datasets[t]
-                    target_data[t] = (
-                        state_features(np.asarray(ds["pca"])[pool], np.asarray(ds["rhf"])[pool] if space == "rhf" else None, t, space,
-                                       cfg.state),
-                        np.asarray(ds["label"]).astype(bool)[pool],
-                        prep[f"boot:{t}"],
-                    )
+                    target_data[t] = (_states(ds, pool, t, space, cfg), np.asarray(ds["label"]).astype(bool)[pool],
+                                      ext.boot(t, prep[f"boot:{t}"]))
                 if draws is None:
                     draws = draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), r,
                                      cfg.balanced_test, cfg.balanced_train)
@@ -175,7 +182,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                 test_idx, train_order = draws
                 seed_keys = (seed, 5, SPACE_CODE[space], ACTIONS.index(t), r)
                 calls.append((run_block_to_file, (str(path), X, y, boot, plans[ti], train_order, test_idx, chunk,
-                                           reps_of[ti], n_cond, cfg.forest, seed_keys, loo_n or None, loo_conds,
+                                           reps_of[ti], n_cond, learner_of(cfg), seed_keys, loo_n or None, loo_conds,
                                            cfg.keep_outcomes, subsets[t]), {}))
                 weights.append(fits)
                 keys.append((ti, s0, len(chunk), r))
@@ -190,7 +197,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
         acc=acc,
         sizes=np.asarray(sizes),
         actions=np.asarray(actions),
-        conditions=np.asarray(condition_names(actions, cfg.thresholds)),
+        conditions=np.asarray(condition_names(actions, cfg.thresholds) + ext.names),
         thresholds=np.asarray(cfg.thresholds, dtype=float),
         corr=corr,
         category_masks=masks,
@@ -208,6 +215,12 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
         new_fits=np.asarray(sum(weights)),
     )
     return res_path
+
+
+def _states(ds: Mapping[str, Any], pool: np.ndarray, t: str, space: str, cfg: ExperimentConfig) -> np.ndarray:
+    """``(M, D)`` the states of target ``t``'s pool scenes in ``space``."""
+    return state_features(np.asarray(ds["pca"])[pool], np.asarray(ds["rhf"])[pool] if space == "rhf" else None, t, space,
+                          cfg.state)
 
 
 def subset_codes(ds: Mapping[str, Any], idx: np.ndarray) -> np.ndarray:

@@ -38,10 +38,11 @@ def check_config(cfg: RunConfig, seed: int) -> None:
     """Fail before any simulation if the config cannot give a complete study: the whole tree's
     check (``runconfig.check_tree``; each node checked its own values when it was made), then
     what a study needs of several nodes at once."""
-    from relaff_jax.learn import split_pools
+    from relaff_jax.learn import check_config as check_experiment, split_pools
 
     try:
         check_tree(cfg)
+        check_experiment(cfg.experiment)  # the learner and the user's conditions tried once, before any simulation
     except ReproduceError:
         raise
     except UserError as e:
