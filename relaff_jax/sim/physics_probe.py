@@ -1,0 +1,144 @@
+"""What a rollout's physics does, step by step, read from MuJoCo C contacts (the audit's probe).
+
+Takes a pair's arm-world ``MjModel`` and its ``MjData`` after each ``mj_step`` of a motor
+program (``native.replay_native``'s ``observe`` hook); gives ``Probe``, which records per
+rollout:
+
+- palm contacts: contacts between a geom of the hand body (``arm_hand``: the palm block, not
+  the finger pads) and the toy or the other object, the steps they last and the largest sum of
+  their normal forces;
+- contact forces: at every step, the normal forces (``mj_contactForce``) of all contacts
+  between one body pair that involves an object summed per pair, divided by the weight of the
+  heaviest object of the pair (a box resting on the table reads 1); the peak over steps and
+  pairs, in newtons and in weights, and which pair;
+- penetration: the deepest contact (``-dist``) that involves an object;
+- the objects' speeds (linear, at the centre of mass, ``mj_objectVelocity``) at the step whose
+  positions the goal reads (``ProgramInputs.measure``).
+
+Everything is float64 numpy; ``step_contacts`` is the per-step reading (a pure function of
+the model and data), ``Probe`` accumulates it over the steps of B rollouts.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+
+HAND_BODY = "arm_hand"  # the palm block's body; the pads are on the finger bodies
+
+
+def body_names(m: mujoco.MjModel) -> list[str]:
+    return [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) or f"body{i}" for i in range(m.nbody)]
+
+
+def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, ...], hand: int
+                  ) -> tuple[dict[tuple[int, int], float], float, int]:
+    """One step's contacts that involve an object.
+
+    objects: body ids of the toy and the other object; hand: the hand body's id.
+    Returns ``forces`` {(body a, body b) sorted: summed normal force (N)} over contacts with an
+    object on one side, the deepest penetration (m, >= 0) among them, and the number of
+    hand-object contacts.
+    """
+    n = d.ncon
+    forces: dict[tuple[int, int], float] = {}
+    if n == 0:
+        return forces, 0.0, 0
+    geom = np.asarray(d.contact.geom[:n])
+    bodies = np.asarray(m.geom_bodyid)[geom]  # (n, 2)
+    dist = np.asarray(d.contact.dist[:n])
+    is_obj = np.isin(bodies, objects)
+    rows = np.flatnonzero(is_obj.any(axis=1))
+    deepest = float(max(0.0, -dist[rows].min())) if len(rows) else 0.0
+    f6 = np.zeros(6)
+    n_hand = 0
+    for i in rows:
+        mujoco.mj_contactForce(m, d, int(i), f6)
+        a, b = sorted((int(bodies[i, 0]), int(bodies[i, 1])))
+        forces[(a, b)] = forces.get((a, b), 0.0) + float(f6[0])
+        n_hand += int(hand in (a, b))
+    return forces, deepest, n_hand
+
+
+class Probe:
+    """Accumulates ``step_contacts`` over the steps of B rollouts (an ``observe`` hook).
+
+    ``Probe(n, toy_body, obj_body, timestep)``; call ``probe(b, t, m, d)`` after step t of
+    rollout b; ``result(measure)`` gives (B,) arrays: ``palm_contact`` bool, ``palm_steps``,
+    ``palm_seconds``,
+    ``palm_force_n`` (largest summed hand-object normal force), ``peak_force_n``,
+    ``peak_force_weights`` (peak over steps and pairs of the summed force / the pair's
+    heaviest object's weight), ``peak_pair`` (str "a|b" body names), ``peak_step``,
+    ``max_penetration_m``, ``penetration_pair``, ``speed_toy``/``speed_other`` (m/s at the
+    measuring step ``measure``; NaN if it was not reached), ``speed_end`` (the faster object's
+    speed at the last step).
+    """
+
+    def __init__(self, n: int, toy_body: int, obj_body: int, timestep: float):
+        self.objects = (int(toy_body), int(obj_body))
+        self.timestep = float(timestep)
+        self.palm_steps = np.zeros(n, np.int64)
+        self.palm_force = np.zeros(n)
+        self.peak_n = np.zeros(n)
+        self.peak_w = np.zeros(n)
+        self.peak_pair = np.full(n, "", object)
+        self.peak_step = np.full(n, -1, np.int64)
+        self.pen = np.zeros(n)
+        self.pen_pair = np.full(n, "", object)
+        self.speeds: list[list[tuple[float, float]]] = [[] for _ in range(n)]  # per step (toy, other)
+        self._names: dict[int, list[str]] = {}
+        self._hand: dict[int, int] = {}
+        self._weight: dict[int, np.ndarray] = {}
+        self._vel = np.zeros(6)
+
+    def __call__(self, b: int, t: int, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        key = id(m)
+        if key not in self._names:
+            self._names[key] = body_names(m)
+            self._hand[key] = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, HAND_BODY)
+            self._weight[key] = np.asarray(m.body_mass) * float(np.linalg.norm(m.opt.gravity))
+        hand, names, weight = self._hand[key], self._names[key], self._weight[key]
+        forces, deepest, n_hand = step_contacts(m, d, self.objects, hand)
+        palm = 0.0
+        for (a, c), f in forces.items():
+            w = max(weight[x] for x in (a, c) if x in self.objects)
+            if f / w > self.peak_w[b]:
+                self.peak_w[b], self.peak_n[b], self.peak_step[b] = f / w, f, t
+                self.peak_pair[b] = f"{names[a]}|{names[c]}"
+            if hand in (a, c):
+                palm += f
+        if n_hand:
+            self.palm_steps[b] += 1
+            self.palm_force[b] = max(self.palm_force[b], palm)
+        if deepest > self.pen[b]:
+            self.pen[b] = deepest
+            self.pen_pair[b] = _deepest_pair(m, d, self.objects, names)
+        speed = []
+        for body in self.objects:  # cvel: the velocities of this step's forward pass, as xipos
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, self._vel, 0)
+            speed.append(float(np.linalg.norm(self._vel[3:])))
+        self.speeds[b].append((speed[0], speed[1]))
+        assert len(self.speeds[b]) == t + 1, "observe every step of a rollout in order"
+
+    def result(self, measure: int) -> dict[str, Any]:
+        at = np.asarray([s[measure] if measure < len(s) else (np.nan, np.nan) for s in self.speeds]).reshape(-1, 2)
+        end = np.asarray([max(s[-1]) if s else np.nan for s in self.speeds])
+        return dict(palm_contact=self.palm_steps > 0, palm_steps=self.palm_steps,
+                    palm_seconds=self.palm_steps * self.timestep,
+                    palm_force_n=self.palm_force, peak_force_n=self.peak_n, peak_force_weights=self.peak_w,
+                    peak_pair=self.peak_pair.astype(str), peak_step=self.peak_step,
+                    max_penetration_m=self.pen, penetration_pair=self.pen_pair.astype(str),
+                    speed_toy=at[:, 0], speed_other=at[:, 1], speed_end=end)
+
+
+def _deepest_pair(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, ...], names: list[str]) -> str:
+    """"a|b" body names of the deepest contact that involves an object ("" if none)."""
+    n = d.ncon
+    geom = np.asarray(d.contact.geom[:n])
+    bodies = np.asarray(m.geom_bodyid)[geom]
+    dist = np.where(np.isin(bodies, objects).any(axis=1), np.asarray(d.contact.dist[:n]), np.inf)
+    if not n or not np.isfinite(dist.min()):
+        return ""
+    a, b = sorted(bodies[int(np.argmin(dist))].tolist())
+    return f"{names[a]}|{names[b]}"
