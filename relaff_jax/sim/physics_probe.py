@@ -32,33 +32,36 @@ def body_names(m: mujoco.MjModel) -> list[str]:
     return [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) or f"body{i}" for i in range(m.nbody)]
 
 
-def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, ...], hand: int
-                  ) -> tuple[dict[tuple[int, int], float], float, int]:
+def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, int], hand: int
+                  ) -> tuple[dict[tuple[int, int], float], float, tuple[int, int], int]:
     """One step's contacts that involve an object.
 
     objects: body ids of the toy and the other object; hand: the hand body's id.
     Returns ``forces`` {(body a, body b) sorted: summed normal force (N)} over contacts with an
-    object on one side, the deepest penetration (m, >= 0) among them, and the number of
-    hand-object contacts.
+    object on one side, the deepest penetration (m, >= 0) among them and its body pair, and
+    the number of hand-object contacts.
     """
     n = d.ncon
     forces: dict[tuple[int, int], float] = {}
     if n == 0:
-        return forces, 0.0, 0
-    geom = np.asarray(d.contact.geom[:n])
-    bodies = np.asarray(m.geom_bodyid)[geom]  # (n, 2)
+        return forces, 0.0, (0, 0), 0
+    bodies = np.asarray(m.geom_bodyid)[np.asarray(d.contact.geom[:n])]  # (n, 2)
     dist = np.asarray(d.contact.dist[:n])
-    is_obj = np.isin(bodies, objects)
-    rows = np.flatnonzero(is_obj.any(axis=1))
-    deepest = float(max(0.0, -dist[rows].min())) if len(rows) else 0.0
+    o0, o1 = objects
+    rows = np.flatnonzero((bodies == o0).any(axis=1) | (bodies == o1).any(axis=1))
+    if not len(rows):
+        return forces, 0.0, (0, 0), 0
+    k = rows[int(np.argmin(dist[rows]))]
+    deepest, where = float(max(0.0, -dist[k])), tuple(sorted(bodies[k].tolist()))
     f6 = np.zeros(6)
     n_hand = 0
-    for i in rows:
-        mujoco.mj_contactForce(m, d, int(i), f6)
-        a, b = sorted((int(bodies[i, 0]), int(bodies[i, 1])))
-        forces[(a, b)] = forces.get((a, b), 0.0) + float(f6[0])
-        n_hand += int(hand in (a, b))
-    return forces, deepest, n_hand
+    for i in rows.tolist():
+        mujoco.mj_contactForce(m, d, i, f6)
+        a, b = bodies[i]
+        key = (int(a), int(b)) if a <= b else (int(b), int(a))
+        forces[key] = forces.get(key, 0.0) + float(f6[0])
+        n_hand += int(hand == a or hand == b)
+    return forces, deepest, where, n_hand
 
 
 class Probe:
@@ -99,7 +102,7 @@ class Probe:
             self._hand[key] = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, HAND_BODY)
             self._weight[key] = np.asarray(m.body_mass) * float(np.linalg.norm(m.opt.gravity))
         hand, names, weight = self._hand[key], self._names[key], self._weight[key]
-        forces, deepest, n_hand = step_contacts(m, d, self.objects, hand)
+        forces, deepest, where, n_hand = step_contacts(m, d, self.objects, hand)
         palm = 0.0
         for (a, c), f in forces.items():
             w = max(weight[x] for x in (a, c) if x in self.objects)
@@ -113,7 +116,7 @@ class Probe:
             self.palm_force[b] = max(self.palm_force[b], palm)
         if deepest > self.pen[b]:
             self.pen[b] = deepest
-            self.pen_pair[b] = _deepest_pair(m, d, self.objects, names)
+            self.pen_pair[b] = f"{names[where[0]]}|{names[where[1]]}"
         speed = []
         for body in self.objects:  # cvel: the velocities of this step's forward pass, as xipos
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, self._vel, 0)
@@ -131,14 +134,3 @@ class Probe:
                     max_penetration_m=self.pen, penetration_pair=self.pen_pair.astype(str),
                     speed_toy=at[:, 0], speed_other=at[:, 1], speed_end=end)
 
-
-def _deepest_pair(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, ...], names: list[str]) -> str:
-    """"a|b" body names of the deepest contact that involves an object ("" if none)."""
-    n = d.ncon
-    geom = np.asarray(d.contact.geom[:n])
-    bodies = np.asarray(m.geom_bodyid)[geom]
-    dist = np.where(np.isin(bodies, objects).any(axis=1), np.asarray(d.contact.dist[:n]), np.inf)
-    if not n or not np.isfinite(dist.min()):
-        return ""
-    a, b = sorted(bodies[int(np.argmin(dist))].tolist())
-    return f"{names[a]}|{names[b]}"
