@@ -47,7 +47,7 @@ THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "force_weights": FORCE_WEIGHT
               "penetration_m": PENETRATION_M, "moving_m_s": MOVING_M_S}
 
 
-def _action_config(meta: Mapping[str, Any]):
+def action_config(meta: Mapping[str, Any]):
     from relaff_jax.config import from_dict
     from relaff_jax.sim.templates import ActionConfig
 
@@ -80,7 +80,7 @@ def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int)
     return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
 
 
-def _settled(cfg: Any, meta: Mapping[str, Any], r: Mapping[str, np.ndarray], nthread: int | None
+def settled_velocities(cfg: Any, meta: Mapping[str, Any], r: Mapping[str, np.ndarray], nthread: int | None
              ) -> tuple[np.ndarray, np.ndarray]:
     """(qvel (n, 12) float32, reproduced (n,) bool): the settled velocities and whether the
     re-settle gave the stored settled positions bit for bit (native datasets only)."""
@@ -121,7 +121,7 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
     if meta["status"] != "complete":
         raise DatasetError(f"{path}: generation not finished; audit a finished dataset")
     action = str(meta["action"])
-    cfg = _action_config(meta)
+    cfg = action_config(meta)
     rollouts = load_rollouts(path)
     idx = _sample(rollouts, int(sample), int(seed))
     r = {k: np.asarray(rollouts[k])[idx] for k in ("pair", "qpos0", "qpos_settled", "intended", "label", "feasible",
@@ -133,7 +133,7 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
                                n_audited=len(idx), thresholds=dict(THRESHOLDS))
     rows: list[dict[str, Any]] = []
     if len(idx):
-        qvel, resettled = _settled(cfg, meta, r, nthread)
+        qvel, resettled = settled_velocities(cfg, meta, r, nthread)
         plan = _plan(cfg, action, r["pair"], r["qpos_settled"], int(meta["batch"]))
         world = setup(cfg).world
         measure = int(TPL_MEASURE[action_id(action)])
