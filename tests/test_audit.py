@@ -91,7 +91,8 @@ def _row(**kw):
     row = dict(rollout=0, toy="ball", other="tray", relation="on_top", label=True, replay_label=True,
                plan_feasible=True, resettled=True, palm_contact=False, palm_steps=0, palm_seconds=0.0,
                palm_force_n=0.0, peak_force_n=5.0, peak_force_weights=1.0, peak_pair="world|obj", peak_step=3,
-               max_penetration_m=0.001, penetration_pair="world|obj", speed_toy=0.0, speed_other=0.0, speed_end=0.0)
+               max_penetration_m=0.001, penetration_pair="world|obj", speed_toy=0.0, speed_other=0.0, held_toy=False,
+               held_other=False, speed_end=0.0)
     row.update(kw)
     return row
 
@@ -101,15 +102,17 @@ def test_checks_count_failures_against_the_stated_bounds():
             _row(rollout=2, peak_force_weights=A.FORCE_WEIGHTS + 1, max_penetration_m=A.PENETRATION_M * 2,
                  speed_toy=A.MOVING_M_S * 1.5, replay_label=False),
             _row(rollout=3, peak_force_weights=A.FORCE_WEIGHTS, max_penetration_m=A.PENETRATION_M,
-                 speed_other=A.MOVING_M_S)]  # on the bounds: not failures
+                 speed_other=A.MOVING_M_S),  # on the bounds: not failures
+            _row(rollout=4, speed_other=1.0, held_other=True)]  # a held object moves with the arm: no failure
     s = A.summarise(rows, "native")
     c = s["checks"]
     assert (c["palm_contact"]["count"], c["force"]["count"], c["penetration"]["count"], c["moving"]["count"]) == (1, 1, 1, 1)
-    assert c["palm_contact"]["share"] == 0.25 and not c["palm_contact"]["pass"]
-    assert c["force"]["weights"] == {"median": 5.5, "p95": pytest.approx(np.quantile([1, 1, 11, 10], 0.95)), "max": 11.0}
+    assert c["palm_contact"]["share"] == 0.2 and not c["palm_contact"]["pass"]
+    assert c["force"]["weights"] == {"median": 1.0, "p95": pytest.approx(np.quantile([1, 1, 11, 10, 1], 0.95)),
+                                     "max": 11.0}
     assert s["by_label"]["negative"] == {"n": 1, "palm_contact": 1, "force": 0, "penetration": 0, "moving": 0}
-    assert s["by_relation"]["on_top"]["n"] == 3
-    assert s["replay"]["agree"] == 3 and s["replay"]["disagreements"] == [2]
+    assert s["by_relation"]["on_top"]["n"] == 4
+    assert s["replay"]["agree"] == 4 and s["replay"]["disagreements"] == [2]
     assert A.summarise([_row()], "native")["checks"]["force"]["pass"]
     json.dumps(s)  # serialisable as it is
 

@@ -36,13 +36,14 @@ from relaff_jax.data.load import load_rollouts
 from relaff_jax.data.store import read_sidecar
 
 AUDIT_FILE = "audit.json"
-AUDIT_VERSION = 1
+AUDIT_VERSION = 2
 DEFAULT_SAMPLE = 64
 # The checks' bounds (docs/audit.md gives the reasoning): a rollout fails a check when
 PALM_CONTACTS = 0  # it has more hand-object contact steps than this (the palm is not a gripper)
 FORCE_WEIGHTS = 10.0  # a body pair's summed normal force exceeds 10 weights of its heaviest object
 PENETRATION_M = 0.005  # a contact involving an object is deeper than 5 mm
-MOVING_M_S = 0.02  # an object moves faster than 2 cm/s at the measuring step (scenes' rest_speed)
+MOVING_M_S = 0.02  # an object not held by the hand moves faster than 2 cm/s at the measuring step
+# (the scenes' rest_speed)
 THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "force_weights": FORCE_WEIGHTS,
               "penetration_m": PENETRATION_M, "moving_m_s": MOVING_M_S}
 
@@ -173,7 +174,8 @@ def _dist(x: np.ndarray) -> dict[str, float | None]:
 
 def failures(row: Mapping[str, Any]) -> dict[str, bool]:
     """Which checks one audited rollout fails."""
-    speeds = [s for s in (row["speed_toy"], row["speed_other"]) if s is not None]
+    speeds = [s for s, held in ((row["speed_toy"], row.get("held_toy")), (row["speed_other"], row.get("held_other")))
+              if s is not None and not held]  # a held object moves with the arm
     return {"palm_contact": row["palm_steps"] > PALM_CONTACTS,
             "force": row["peak_force_weights"] > FORCE_WEIGHTS,
             "penetration": row["max_penetration_m"] > PENETRATION_M,
@@ -292,7 +294,7 @@ def format_audit(audits: list[Mapping[str, Any]]) -> str:
     lines.append(f"audited: sampled selected samples whose program ran / all of them. A rollout fails: palm = a "
                  f"contact between the hand body and an object; force = a body pair's summed normal force > "
                  f"{FORCE_WEIGHTS:g} weights of its heaviest object; pen. = a contact with an object deeper than "
-                 f"{1000 * PENETRATION_M:g} mm; moving = an object faster than {MOVING_M_S:g} m/s at the measuring "
-                 f"step. A check passes when no audited rollout fails it. label agr.: the C replay's labels "
+                 f"{1000 * PENETRATION_M:g} mm; moving = an object not held by the hand faster than {MOVING_M_S:g} m/s "
+                 f"at the measuring step. A check passes when no audited rollout fails it. label agr.: the C replay's labels "
                  f"equal to the stored ones.")
     return "\n".join(lines)

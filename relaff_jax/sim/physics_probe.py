@@ -13,7 +13,8 @@ rollout:
   pairs, in newtons and in weights, and which pair;
 - penetration: the deepest contact (``-dist``) that involves an object;
 - the objects' speeds (linear, at the centre of mass, ``mj_objectVelocity``) at the step whose
-  positions the goal reads (``ProgramInputs.measure``).
+  positions the goal reads (``ProgramInputs.measure``), and whether each is then welded to the
+  hand (held: its motion is the arm's).
 
 Everything is float64 numpy; ``step_contacts`` is the per-step reading (a pure function of
 the model and data), ``Probe`` accumulates it over the steps of B rollouts.
@@ -64,6 +65,17 @@ def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, int],
     return forces, deepest, where, n_hand
 
 
+def held_bodies(m: mujoco.MjModel, d: mujoco.MjData, hand: int) -> set[int]:
+    """Bodies welded to the hand by an active equality constraint (the grasp lock, the rake)."""
+    rows = np.flatnonzero((np.asarray(m.eq_type) == mujoco.mjtEq.mjEQ_WELD) & (np.asarray(d.eq_active) != 0))
+    out = set()
+    for r in rows:
+        a, b = int(m.eq_obj1id[r]), int(m.eq_obj2id[r])
+        if hand in (a, b):
+            out.add(b if a == hand else a)
+    return out
+
+
 class Probe:
     """Accumulates ``step_contacts`` over the steps of B rollouts (an ``observe`` hook).
 
@@ -74,8 +86,9 @@ class Probe:
     ``peak_force_weights`` (peak over steps and pairs of the summed force / the pair's
     heaviest object's weight), ``peak_pair`` (str "a|b" body names), ``peak_step``,
     ``max_penetration_m``, ``penetration_pair``, ``speed_toy``/``speed_other`` (m/s at the
-    measuring step ``measure``; NaN if it was not reached), ``speed_end`` (the faster object's
-    speed at the last step).
+    measuring step ``measure``; NaN if it was not reached), ``held_toy``/``held_other`` (welded
+    to the hand at that step: a held object moves with the arm, its speed is the arm's),
+    ``speed_end`` (the faster object's speed at the last step).
     """
 
     def __init__(self, n: int, toy_body: int, obj_body: int, timestep: float):
@@ -90,6 +103,7 @@ class Probe:
         self.pen = np.zeros(n)
         self.pen_pair = np.full(n, "", object)
         self.speeds: list[list[tuple[float, float]]] = [[] for _ in range(n)]  # per step (toy, other)
+        self.held: list[list[tuple[bool, bool]]] = [[] for _ in range(n)]  # welded to the hand, per step
         self._names: dict[int, list[str]] = {}
         self._hand: dict[int, int] = {}
         self._weight: dict[int, np.ndarray] = {}
@@ -121,16 +135,20 @@ class Probe:
         for body in self.objects:  # cvel: the velocities of this step's forward pass, as xipos
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, self._vel, 0)
             speed.append(float(np.linalg.norm(self._vel[3:])))
+        held = held_bodies(m, d, hand)
         self.speeds[b].append((speed[0], speed[1]))
+        self.held[b].append((self.objects[0] in held, self.objects[1] in held))
         assert len(self.speeds[b]) == t + 1, "observe every step of a rollout in order"
 
     def result(self, measure: int) -> dict[str, Any]:
         at = np.asarray([s[measure] if measure < len(s) else (np.nan, np.nan) for s in self.speeds]).reshape(-1, 2)
+        held = np.asarray([h[measure] if measure < len(h) else (False, False) for h in self.held]).reshape(-1, 2)
         end = np.asarray([max(s[-1]) if s else np.nan for s in self.speeds])
         return dict(palm_contact=self.palm_steps > 0, palm_steps=self.palm_steps,
                     palm_seconds=self.palm_steps * self.timestep,
                     palm_force_n=self.palm_force, peak_force_n=self.peak_n, peak_force_weights=self.peak_w,
                     peak_pair=self.peak_pair.astype(str), peak_step=self.peak_step,
                     max_penetration_m=self.pen, penetration_pair=self.pen_pair.astype(str),
-                    speed_toy=at[:, 0], speed_other=at[:, 1], speed_end=end)
+                    speed_toy=at[:, 0], speed_other=at[:, 1], held_toy=held[:, 0], held_other=held[:, 1],
+                    speed_end=end)
 
