@@ -124,9 +124,12 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
     action = str(meta["action"])
     cfg = action_config(meta)
     rollouts = load_rollouts(path)
+    need = ("pair", "qpos0", "qpos_settled", "intended", "label", "feasible", "relation", "toy", "other", "rollout")
+    lack = [k for k in need if k not in rollouts]
+    if lack:
+        raise DatasetError(f"{path}: its rollouts lack {', '.join(lack)}; not the simulation's rollouts, cannot replay")
     idx = _sample(rollouts, int(sample), int(seed))
-    r = {k: np.asarray(rollouts[k])[idx] for k in ("pair", "qpos0", "qpos_settled", "intended", "label", "feasible",
-                                                   "relation", "toy", "other", "rollout")}
+    r = {k: np.asarray(rollouts[k])[idx] for k in need}
     out: dict[str, Any] = dict(version=AUDIT_VERSION, dataset=str(path), action=action, engine=meta.get("engine"),
                                settle=meta.get("settle"), sample=int(sample), seed=int(seed),
                                selection_sha256=meta.get("selection", {}).get("sha256"),

@@ -102,11 +102,16 @@ def audit_one(run: Run, action: str) -> dict:
     """The physics audit of one finished dataset (``data.audit.ensure_audit``: a MuJoCo C
     replay of ``DEFAULT_SAMPLE`` of its rollouts, stored as ``audit.json``; a stored one is
     reused), right after its generation, whose compiled planner it shares; what the run log
-    records of it."""
+    records of it. A dataset the audit cannot replay (no recorded action config or simulation
+    fields) is recorded as not audited."""
     from relaff_jax.data import audit as A
 
     t0 = time.perf_counter()
-    a = A.ensure_audit(run.paths.dataset(action), A.DEFAULT_SAMPLE, 0)
+    try:
+        a = A.ensure_audit(run.paths.dataset(action), A.DEFAULT_SAMPLE, 0)
+    except D.DatasetError as e:  # e.g. rollouts of a stand-in simulation: nothing to replay
+        run.progress.message(f"audit {action}: not audited ({e})")
+        return {"status": "not audited", "why": str(e)}
     c = a["checks"]
     run.progress.message(f"audit {action}: {a['n_audited']} rollouts replayed in MuJoCo C, palm contacts "
                          f"{c['palm_contact']['count']}, peak force {c['force']['weights']['max'] or 0:.0f} weights, "

@@ -32,7 +32,8 @@ def progress(run: Run) -> float:
 
 def _audits(run: Run) -> None:
     """Every dataset's physics audit (``generate.audit_one``): stored ones are reused, a run
-    whose datasets predate the audit gets them here."""
+    whose datasets predate the audit gets them here (one that cannot be replayed is said so at
+    once, ``generate.audit_one``)."""
     from relaff_jax.data.audit import DEFAULT_SAMPLE, stored_audit
     from relaff_jax.reproduce.generate import audit_one
 
