@@ -24,9 +24,11 @@ def inputs(tree: Any, results: str | os.PathLike, data_dirs: Mapping[str, str | 
     from relaff_jax.data.config import FEATURES_SIDECAR, SIDECAR
     from relaff_jax.learn import folder as L
 
+    from relaff_jax.data.audit import AUDIT_FILE
+
     files = [L.meta(results)] + [L.results(results, s) for s in tree.reproduce.spaces]
-    for d in (data_dirs or {}).values():
-        files += [Path(d) / SIDECAR, Path(d) / FEATURES_SIDECAR]
+    for d in (data_dirs or {}).values():  # the physics audit is shown beside the labels
+        files += [Path(d) / SIDECAR, Path(d) / FEATURES_SIDECAR, Path(d) / AUDIT_FILE]
     return files
 
 
