@@ -1,30 +1,63 @@
-"""`relaff show --rollout`: the outline projection on hand-worked boxes, and one sample's
-program replayed in MuJoCo C and written as a GIF."""
+"""`relaff show --rollout`: the ray-cast frames draw shapes as they are (a ball is a disc), the
+title marks an infeasible program, and one sample's program replayed in MuJoCo C and written
+as a GIF."""
+import copy
+
+import mujoco
 import numpy as np
 import pytest
 
 from relaff_jax.sim import animate
 
 
-def test_box_outline_side_and_top_views():
-    aabb = np.array([[0.0, 0.0, 0.0, 0.1, 0.2, 0.3]])  # centre, half sizes
-    xpos = np.array([[1.0, 2.0, 3.0]])
-    eye = np.eye(3).reshape(1, 9)
-    (poly, depth), = animate.geom_outlines(aabb, xpos, eye, animate.VIEWS["side (x-z)"])
-    assert depth == 2.0
-    assert len(poly) == 4
-    np.testing.assert_allclose(poly.min(0), [0.9, 2.7])
-    np.testing.assert_allclose(poly.max(0), [1.1, 3.3])
-    # turned 90 degrees about z: the side view sees the 0.2 half size along x
-    rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]).reshape(1, 9)
-    (poly, _), = animate.geom_outlines(aabb, xpos, rz, animate.VIEWS["side (x-z)"])
-    np.testing.assert_allclose(poly.min(0), [0.8, 2.7], atol=1e-12)
-    # an offset box centre (a geom off its body's origin) moves the outline with the rotation
-    off = np.array([[0.5, 0.0, 0.0, 0.1, 0.1, 0.1]])
-    (poly, _), = animate.geom_outlines(off, xpos, rz, animate.VIEWS["top (x-y)"])
-    np.testing.assert_allclose(poly.mean(0), [1.0, 2.5], atol=1e-12)
+def _ball_scene():
+    from relaff_jax.sim.planning import setup
+    from relaff_jax.sim.templates import ActionConfig
+
+    w = setup(ActionConfig()).world
+    m = copy.copy(w.mj_models[w.pair_index[("ball", "tray")]])
+    m.geom_rgba[:, :3] = 0.6  # everything grey, the ball pure green
+    ball = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "toy_sphere")
+    m.geom_rgba[ball] = (0.0, 1.0, 0.0, 1.0)
+    d = mujoco.MjData(m)
+    d.qpos[:7] = (0.8, 0.15, 0.2, 1, 0, 0, 0)  # the ball in the air beside the tray
+    d.qpos[7:14] = (0.8, -0.15, 0.0, 1, 0, 0, 0)
+    mujoco.mj_forward(m, d)
+    frames = {"model": m, "frames_xpos": d.geom_xpos.copy()[None], "frames_xmat": d.geom_xmat.copy()[None],
+              "object_bodies": (w.toy_body, w.obj_body), "every": 10, "label": False}
+    return frames, m.geom_size[ball, 0]
 
 
+def test_a_ray_cast_ball_is_a_disc():
+    """The ball's pixels fill pi/4 of their bounding box (a disc; its bounding box drawn would
+    fill all of it), its corners empty."""
+    from relaff_jax.perception import rollout_view as rv
+
+    frames, _ = _ball_scene()
+    cam = rv.frame_camera(frames["model"], frames["frames_xpos"], frames["object_bodies"], width=800, height=600)
+    img = rv.shade_frames(frames["model"], frames["frames_xpos"], frames["frames_xmat"], cam)[0].astype(int)
+    mask = (img[..., 1] > img[..., 0] + 30) & (img[..., 1] > img[..., 2] + 30)
+    rows, cols = np.flatnonzero(mask.any(1)), np.flatnonzero(mask.any(0))
+    h, w = rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1
+    assert h > 20 and abs(h - w) <= 2  # round, not squashed, and large enough to judge
+    assert mask.sum() / (h * w) == pytest.approx(np.pi / 4, abs=0.03)
+    box = mask[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+    assert not box[0, 0] and not box[-1, -1] and not box[0, -1] and not box[-1, 0]  # corners empty
+
+
+def test_gif_marks_an_infeasible_program(tmp_path):
+    from PIL import Image
+
+    frames, _ = _ball_scene()
+    shown = []
+    for feasible in (True, False):
+        f = dict(frames, feasible=feasible)
+        animate.write_gif(f, tmp_path / f"{feasible}.gif", title="lift sample 0: ball + tray")
+        im = np.asarray(Image.open(tmp_path / f"{feasible}.gif").convert("RGB")).astype(int)
+        red = (im[..., 0] > 150) & (im[..., 1] < 80) & (im[..., 2] < 80)
+        shown.append(red[:60].sum())
+        assert f["seconds_per_frame"] > 0
+    assert shown[0] == 0 and shown[1] > 50  # only the infeasible title has the red line
 @pytest.mark.slow  # plans (IK compile) and replays 560 C steps
 def test_rollout_gif_of_a_settled_scene(tmp_path, scene_world, settle):
     import jax

@@ -1,4 +1,4 @@
-"""``relaff info``, ``relaff anatomy`` and ``relaff export``: look at a dataset, or export it for other tools.
+"""``relaff info``, ``anatomy``, ``audit`` and ``export``: look at a dataset, audit its physics, or export it.
 
 Takes parsed arguments; prints ``data.info`` as a table or JSON, or writes
 ``data.export_dataset``'s Parquet file, feature schema and dataset card. Problems a user can
@@ -36,6 +36,23 @@ def _cmd_export(args) -> int:
     return 0
 
 
+def _cmd_audit(args) -> int:
+    from relaff_jax.data import audit as A
+    from relaff_jax.errors import UserError
+
+    if args.sample < 1:
+        raise UserError(f"--sample must be >= 1, got {args.sample}")
+    if args.seed < 0:
+        raise UserError(f"--seed must be >= 0, got {args.seed}")
+    folders = A.dataset_folders(args.dir)  # one-line errors before any work
+    audits = [A.ensure_audit(f, args.sample, args.seed) for f in folders]
+    if args.json:
+        print(json.dumps(audits if len(audits) > 1 else audits[0], sort_keys=True))
+    else:
+        print(A.format_audit(audits))
+    return 0
+
+
 def register(subparsers) -> None:
     """Add ``relaff info DIR [--json]`` and ``relaff export DIR --out FILE_OR_DIR``."""
     p = subparsers.add_parser(
@@ -61,6 +78,23 @@ def register(subparsers) -> None:
     p.add_argument("dir", metavar="DIR", help="finished dataset directory")
     p.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     p.set_defaults(func=_cmd_anatomy)
+
+    p = subparsers.add_parser(
+        "audit",
+        help="the physics of a sample of a dataset's rollouts, replayed in MuJoCo C",
+        description="Replay a sample of a finished dataset's rollouts (the selected samples whose "
+        "program ran) in MuJoCo C and check each step's contacts: palm (hand body) contacts with an "
+        "object, peak contact force relative to the heaviest involved object's weight, the deepest "
+        "penetration, and the objects' speeds at the step where the goal is measured; and the replay's "
+        "label agreement with the stored labels (docs/audit.md). DIR is a dataset or a run folder "
+        "(every data/<action>/ dataset). Writes DIR/audit.json per dataset (reused when sample, seed "
+        "and selection match). No settings (no --set): it replays with the dataset's recorded config.",
+    )
+    p.add_argument("dir", metavar="DIR", help="dataset folder or run folder")
+    p.add_argument("--sample", type=int, default=64, help="rollouts audited per dataset")
+    p.add_argument("--seed", type=int, default=0, help="seed of the sample")
+    p.add_argument("--json", action="store_true", help="print JSON (a list for a run folder) instead of a table")
+    p.set_defaults(func=_cmd_audit)
 
     p = subparsers.add_parser(
         "export",

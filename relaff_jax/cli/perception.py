@@ -42,7 +42,8 @@ def register(subparsers) -> None:
         "show", help="draw what the robot saw in one sample of a dataset",
         description="Draw sample --index of a dataset as the robot saw it (depth image, segmentation, "
                     "voxel clouds, PCA frames) into a PNG, or with --rollout animate its motor program, "
-                    "replayed in MuJoCo C, as a GIF.")
+                    "replayed in MuJoCo C with the dataset's recorded action config (--set action.* "
+                    "changes it) and ray cast shape by shape, as a GIF.")
     p.add_argument("dir", type=Path, help="a dataset folder")
     p.add_argument("--index", type=int, default=0, help="which selected sample (0 .. N-1)")
     p.add_argument("--out", type=Path, default=None, help="scene.png (default), or action.gif with --rollout")
@@ -77,7 +78,8 @@ def cmd_show(args) -> int:
 
     bars = options.PhaseBars("show") if args.rollout else None
     try:
-        print(show_sample(tree, args.dir, args.index, out, rollout=args.rollout, progress=bars))
+        acts = {k[len("action."):]: v for k, v in options.overrides_of(args).items() if k.startswith("action.")}
+        print(show_sample(tree, args.dir, args.index, out, rollout=args.rollout, progress=bars, action_overrides=acts))
     finally:
         if bars is not None:
             bars.close()

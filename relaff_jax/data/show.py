@@ -1,5 +1,5 @@
 """``relaff show``'s stage: one sample of a dataset drawn as the simulated Kinect sees it (PNG),
-or its motor program replayed in MuJoCo C (GIF).
+or its motor program replayed in MuJoCo C and ray cast (GIF, ``sim.animate``).
 
     show_sample(tree, folder, index, out, rollout=False, progress=None) -> message
 
@@ -16,9 +16,11 @@ from relaff_jax.errors import UserError
 
 
 def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.PathLike, *,
-                rollout: bool = False, progress: Any = None) -> str:
+                rollout: bool = False, progress: Any = None, action_overrides: Any = None) -> str:
     """Draw sample ``index`` of the dataset ``folder`` into ``out`` with the ``RunConfig``
-    ``tree`` (its perception for the PNG, its action for the GIF); return what was written.
+    ``tree``'s perception (the PNG) or the dataset's recorded action config (the GIF); return
+    what was written. ``action_overrides`` ({"lift_height": 0.3}: the ``--set action.*`` keys)
+    change the recorded action config of the GIF's replay.
     ``progress``: the GIF's phase bars (``sim.animate.animate_sample``)."""
     from relaff_jax.data.load import load_dataset
 
@@ -34,17 +36,48 @@ def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.
              f"{ds['relation'][index]}, label {label}")
     pair, qpos = int(ds["pair"][index]), ds["qpos_settled"][index]
     if rollout:
-        from relaff_jax.sim.animate import animate_sample
-
-        frames = animate_sample(str(ds["action"]), pair, qpos, out, title=title, cfg=tree.action, progress=progress)
-        return (f"wrote {out}: {len(frames['frames_xpos'])} frames; feasible {frames['feasible']}, "
-                f"label in the MuJoCo C replay {frames['label']} (dataset: {label}, MJX)")
+        return _rollout_gif(folder, ds, index, out, progress, action_overrides or {})
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import world as wd
 
     path = from_sim.show_scene(wd.build_world(tree.action.phys), pair, qpos, out,
                                from_sim.show_key(int(ds["rollout_id"][index])), cfg=tree.perception, title=title)
     return f"wrote {path}"
+
+
+ENGINE_NAMES = {"native": "MuJoCo C (native engine)", "mjx": "MJX"}
+
+
+def _rollout_gif(folder: Any, ds: dict, index: int, out: Path, progress: Any, overrides: dict) -> str:
+    """The GIF of sample ``index``: replayed with the dataset's recorded action config and, for
+    a native dataset, its re-settled velocities (``data.audit``), so that the replay is the
+    engine's reference and its label the stored one."""
+    import numpy as np
+
+    from relaff_jax.config import override_under
+    from relaff_jax.data import audit as A
+    from relaff_jax.data.store import read_sidecar
+    from relaff_jax.sim.animate import animate_sample
+
+    meta = read_sidecar(Path(folder))
+    cfg = override_under(A.action_config(meta), overrides, "action.")
+    engine = str(meta.get("engine"))
+    row = {k: np.asarray(ds[k])[index:index + 1] for k in ("pair", "qpos0", "qpos_settled", "intended")}
+    qvel, same = A.settled_velocities(cfg, meta, row, None)
+    label = bool(ds["label"][index])
+    title = (f"{ds['action']} sample {index}: {ds['toy'][index]} + {ds['other'][index]}, {ds['relation'][index]}\n"
+             f"dataset label {label}, simulated by {ENGINE_NAMES.get(engine, engine)}")
+    frames = animate_sample(str(ds["action"]), int(row["pair"][0]), row["qpos_settled"][0], out, title=title,
+                            cfg=cfg, progress=progress, qvel=qvel[0])
+    if overrides:
+        why = "the dataset's settled state with the --set action keys " + ", ".join(sorted(overrides))
+    elif bool(same[0]):
+        why = "the same settled state and plan: the native engine's reference"
+    else:
+        why = "MJX's settled positions at rest, replayed in C (MJX and C agree on ~98 % of labels)"
+    return (f"wrote {out}: {len(frames['frames_xpos'])} frames, {frames['seconds_per_frame']:.2f} s per frame; "
+            f"program feasible {frames['feasible']}; label in the MuJoCo C replay {frames['label']} "
+            f"(dataset: {label}, {ENGINE_NAMES.get(engine, engine)}; replay from {why})")
 
 
 __all__ = ["show_sample"]

@@ -6,6 +6,7 @@
     OUT/reach.json                              what the labels consist of (``reach.py``)
     OUT/fig06_nb_learning.png ... fig12_thresholds.png   paper Figs. 6-12 (``figures.py``)
     OUT/fig_datasets.png, fig_reach.png         the datasets' figures (with datasets)
+    OUT/fig_audit.png                           the datasets' physics audits (``audit.py``)
     OUT/examples/ACTION_IIIII.png               example scenes (``examples.py``)
     OUT/report.md, report.html                  the document (``document.py``)
     OUT/relaff_config.json                      the config record (``stage.py``)
@@ -36,6 +37,7 @@ FIG_CORRELATION = "fig11_correlation.png"
 FIG_THRESHOLDS = "fig12_thresholds.png"
 FIG_DATASETS = "fig_datasets.png"
 FIG_REACH = "fig_reach.png"
+FIG_AUDIT = "fig_audit.png"
 
 JSON_FILES = (SUMMARY, FINDINGS, REACH)  # what ``readings.compare_readings`` reads
 REQUIRED = (MARKDOWN, HTML, SUMMARY)  # a whole report has these and its stamp

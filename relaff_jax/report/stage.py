@@ -24,9 +24,14 @@ def inputs(tree: Any, results: str | os.PathLike, data_dirs: Mapping[str, str | 
     from relaff_jax.data.config import FEATURES_SIDECAR, SIDECAR
     from relaff_jax.learn import folder as L
 
+    from relaff_jax.data.audit import AUDIT_FILE
+
     files = [L.meta(results)] + [L.results(results, s) for s in tree.reproduce.spaces]
     for d in (data_dirs or {}).values():
         files += [Path(d) / SIDECAR, Path(d) / FEATURES_SIDECAR]
+        # the physics audit shown beside the labels, once there is one: a run folder from before
+        # the audit keeps its stamp (its report stays complete; `--force report` adds the audits)
+        files += [Path(d) / AUDIT_FILE] if (Path(d) / AUDIT_FILE).is_file() else []
     return files
 
 

@@ -9,7 +9,8 @@ optionally the dataset folders ``{action: DIR}`` and a run log; analyses every s
 * ``fig06_nb_learning.png`` ... ``fig12_thresholds.png`` (``figures.py``);
 * ``findings.json`` (``findings.py``);
 * with datasets: ``fig_datasets.png``, ``fig_reach.png``, ``reach.json`` (what the labels
-  consist of, ``reach.py``) and ``examples/*.png`` (``examples.py``);
+  consist of, ``reach.py``), ``fig_audit.png`` (their stored physics audits, ``audit.py``) and
+  ``examples/*.png`` (``examples.py``);
 * ``report.md`` and the self-contained ``report.html`` (``sections.py``, ``document.py``).
 """
 from __future__ import annotations
@@ -24,6 +25,7 @@ from relaff_jax import io as rio
 from relaff_jax import provenance
 from relaff_jax.learn import analyse, load_results
 from relaff_jax.report import folder as F
+from relaff_jax.report.audit import audit_blocks, stored_audits
 from relaff_jax.report import sections as S
 from relaff_jax.report.document import render_html, render_markdown
 from relaff_jax.report.examples import example_scenes
@@ -95,6 +97,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
         if anat:
             reach_figure(anat, out / F.FIG_REACH)
         data_blocks += reach_blocks(anat, missing, out) + subset_blocks(res, cfg) + predictor_blocks(res)
+        data_blocks += audit_blocks(*stored_audits(data_dirs), out)
         data_blocks += S.example_blocks(example_scenes(data_dirs, out / F.EXAMPLES, examples_per_action))
     rio.atomic_write_json(out / F.REACH, finite(reach_json(anat, res, cfg)))
 

@@ -92,9 +92,33 @@ def _one(run: Run, action: str, window: int | None) -> dict:
         extra = f"; {s['discarded_chunks']} chunks simulated past the stopping point discarded"
     if s.get("matching_met") is False:
         extra += f"; distance matching NOT met ({s['borrowed']} negatives borrowed)"
+    item["audit"] = audit_one(run, action)
     run.progress.message(f"generate {action}: {cfg.dataset.n_samples} samples from {s['rollouts']} rollouts "
                          f"(positive rate {s['positive_rate']:.1%}) in {dt:.0f} s{extra}")
     return item
+
+
+def audit_one(run: Run, action: str) -> dict:
+    """The physics audit of one finished dataset (``data.audit.ensure_audit``: a MuJoCo C
+    replay of ``DEFAULT_SAMPLE`` of its rollouts, stored as ``audit.json``; a stored one is
+    reused), right after its generation, whose compiled planner it shares; what the run log
+    records of it. A dataset the audit cannot replay (no recorded action config or simulation
+    fields) is recorded as not audited."""
+    from relaff_jax.data import audit as A
+
+    t0 = time.perf_counter()
+    try:
+        a = A.ensure_audit(run.paths.dataset(action), A.DEFAULT_SAMPLE, 0)
+    except D.DatasetError as e:  # e.g. rollouts of a stand-in simulation: nothing to replay
+        run.progress.message(f"audit {action}: not audited ({e})")
+        return {"status": "not audited", "why": str(e)}
+    c = a["checks"]
+    run.progress.message(f"audit {action}: {a['n_audited']} rollouts replayed in MuJoCo C, palm contacts "
+                         f"{c['palm_contact']['count']}, peak force {c['force']['weights']['max'] or 0:.0f} weights, "
+                         f"moving at measuring {c['moving']['count']}, label agreement "
+                         f"{a['replay']['agree']}/{a['replay']['n']} in {time.perf_counter() - t0:.0f} s")
+    return {"n": a["n_audited"], "seconds": round(time.perf_counter() - t0, 2),
+            "failing": {k: v["count"] for k, v in c.items()}, "label_agreement": a["replay"]["label_agreement"]}
 
 
 def run(run: Run, forced: bool) -> dict:

@@ -30,12 +30,26 @@ def progress(run: Run) -> float:
     return 0.0
 
 
+def _audits(run: Run) -> None:
+    """Every dataset's physics audit (``generate.audit_one``): stored ones are reused, a run
+    whose datasets predate the audit gets them here (one that cannot be replayed is said so at
+    once, ``generate.audit_one``)."""
+    from relaff_jax.data.audit import DEFAULT_SAMPLE, stored_audit
+    from relaff_jax.reproduce.generate import audit_one
+
+    todo = [a for a, d in _data_dirs(run).items() if stored_audit(d, DEFAULT_SAMPLE, 0) is None]
+    for k, action in enumerate(todo):
+        run.progress.set(f"physics audit of {action} ({k + 1}/{len(todo)})")
+        audit_one(run, action)
+
+
 def run(run: Run, forced: bool) -> dict:
     out = run.paths.report
     if forced:
         rio.remove_tree(out)
-    run.progress.set("tables, figures, example scenes")
     t0 = time.perf_counter()
+    _audits(run)
+    run.progress.set("tables, figures, example scenes")
     info = {"preset": run.preset, "seed": run.seed, "versions": run.log["versions"],
             "timings": {s: round(t, 1) for s, t in run.log["timings"].items()}}
     report.run(run.cfg, run.paths.results, out, data_dirs=_data_dirs(run), info=info)

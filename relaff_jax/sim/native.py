@@ -10,6 +10,7 @@ replay is the reference of the batched native engine (``native_batch``).
 from __future__ import annotations
 
 import functools
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
@@ -101,7 +102,9 @@ def _plan_fn(cfg: ActionConfig):
 
 
 def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray,
-                  qvel: np.ndarray, result: dict, record_every: int = 0) -> dict[str, np.ndarray]:
+                  qvel: np.ndarray, result: dict, record_every: int = 0,
+                  observe: Callable[[int, int, mujoco.MjModel, mujoco.MjData], None] | None = None
+                  ) -> dict[str, np.ndarray]:
     """Replay the planned programs of an ``action_fn`` result in native MuJoCo C (``mj_step``,
     float64), scene by scene, with the same actuator commands; label them with the same rules.
 
@@ -112,7 +115,8 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     fn's output for these scenes (uses ``q_way``, ``grip_way``, ``feasible``, and
     ``direction`` if present, else a re-plan gives it). ``record_every`` > 0 also records
     every geom's pose before the first step and after every ``record_every``-th step (for
-    animations).
+    animations). ``observe(b, t, m, d)``, if given, is called after every step t of scene b
+    (the audit's ``physics_probe.Probe``; it must not change ``d``).
     Returns ``label``, ``com_m``, ``com_end``, ``qpos_final``, ``reach_after`` as numpy arrays,
     and with ``record_every`` ``frames_xpos`` (B, F, G, 3) and ``frames_xmat`` (B, F, G, 9).
     """
@@ -152,6 +156,8 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
                 d.eq_active[row] = lock
             d.ctrl[:] = inp.ctrl[b, t]
             mujoco.mj_step(m, d)
+            if observe is not None:
+                observe(b, t, m, d)
             if t == inp.measure:  # like MJX: the positions of the step's forward pass
                 cm = d.xipos[bodies].copy()
             if record_every > 0 and (t + 1) % record_every == 0:

@@ -1,0 +1,303 @@
+"""The physics audit of a dataset (``relaff audit``): a MuJoCo C replay of a sample of its rollouts.
+
+Takes a dataset folder; gives ``audit_dataset(path, sample, seed)``, a JSON-serialisable dict
+(schema ``AUDIT_VERSION``), ``stored_audit`` / ``ensure_audit`` (``DIR/audit.json``, written
+atomically, reused when its sample, seed and selection match) and ``summarise`` (the checks).
+
+How a stored rollout is re-simulated: the dataset's sidecar records its ``ActionConfig``
+(``config.action_config``), engine and settle; every rollout records its pair, placement
+(``qpos0``) and settled state (``qpos_settled``). The audit plans the sampled scenes with the
+same jitted planner and batch shape as generation (``rollouts.make_batch_prepare_fn``), and
+replays the programs one ``MjData`` per scene (``native.replay_native``, the reference the
+native engine equals bit for bit) with ``physics_probe.Probe`` reading every step. A native
+dataset's scenes are re-settled in MuJoCo C from ``qpos0`` (``native_settle.settle_batch``,
+what generation ran) for the settled velocities, which are not stored; the settled positions
+are checked against the stored ones. An MJX dataset is replayed in C from its stored settled
+positions at rest: C and MJX agree on about 98 % of labels (docs/actions.md), so its label
+agreement is measured, not exact.
+
+Population: the selected samples whose program ran (``feasible``; an infeasible program
+leaves the arm at home and has no physics); ``sample`` of them (all if fewer), drawn with
+``seed``.
+"""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from relaff_jax import io as rio
+from relaff_jax.constants import RELATIONS
+from relaff_jax.data.errors import DatasetError
+from relaff_jax.data.load import load_rollouts
+from relaff_jax.data.store import read_sidecar
+
+AUDIT_FILE = "audit.json"
+AUDIT_VERSION = 2
+DEFAULT_SAMPLE = 64
+# The checks' bounds (docs/audit.md gives the reasoning): a rollout fails a check when
+PALM_CONTACTS = 0  # it has more hand-object contact steps than this (the palm is not a gripper)
+FORCE_WEIGHTS = 10.0  # a body pair's summed normal force exceeds 10 weights of its heaviest object
+PENETRATION_M = 0.005  # a contact involving an object is deeper than 5 mm
+MOVING_M_S = 0.02  # an object not held by the hand moves faster than 2 cm/s at the measuring step
+# (the scenes' rest_speed)
+THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "force_weights": FORCE_WEIGHTS,
+              "penetration_m": PENETRATION_M, "moving_m_s": MOVING_M_S}
+
+
+def action_config(meta: Mapping[str, Any]):
+    from relaff_jax.config import from_dict
+    from relaff_jax.sim.templates import ActionConfig
+
+    record = meta.get("config")
+    if not isinstance(record, dict) or not isinstance(record.get("action_config"), dict):
+        raise DatasetError(f"{meta.get('action')}: the sidecar records no action_config; cannot replay")
+    return from_dict(ActionConfig, record["action_config"])
+
+
+def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int) -> dict[str, np.ndarray]:
+    """The plans of the scenes, by generation's jitted planner in calls of the dataset's batch
+    (the last padded with repeats: a plan does not depend on the other rows of its call)."""
+    from relaff_jax.constants import action_id
+    from relaff_jax.sim.reach_screen import prepare_screened
+    from relaff_jax.sim.rollouts import jitted_stage_fns
+
+    import jax
+
+    aid = action_id(action)
+    prepare_fn, _ = jitted_stage_fns(cfg)
+    parts = []
+    for lo in range(0, len(pair), batch):
+        rows = np.resize(np.arange(lo, min(lo + batch, len(pair))), batch)
+        if cfg.arm.reach_screen:
+            plan, _ = prepare_screened(prepare_fn, cfg, aid, pair[rows], qpos[rows])
+        else:
+            plan, _ = jax.device_get(prepare_fn(aid, pair[rows], qpos[rows]))
+        k = min(batch, len(pair) - lo)
+        parts.append({f: np.asarray(getattr(plan, f))[:k] for f in ("q_way", "grip_way", "feasible", "direction")})
+    return {f: np.concatenate([p[f] for p in parts]) for f in parts[0]}
+
+
+def settled_velocities(cfg: Any, meta: Mapping[str, Any], r: Mapping[str, np.ndarray], nthread: int | None
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """(qvel (n, 12) float32, reproduced (n,) bool): the settled velocities and whether the
+    re-settle gave the stored settled positions bit for bit (native datasets only)."""
+    n = len(r["pair"])
+    if meta.get("engine") != "native":
+        return np.zeros((n, 12), np.float32), np.zeros(n, bool)
+    from relaff_jax.sim import world as wd
+    from relaff_jax.sim.native_batch import default_threads
+    from relaff_jax.sim.native_settle import settle_batch
+
+    s = settle_batch(wd.build_world(cfg.phys), r["pair"], r["qpos0"], r["intended"], cfg.scene,
+                     default_threads() if nthread is None else nthread)
+    same = np.all(s.qpos == r["qpos_settled"], axis=1)
+    return np.where(same[:, None], s.qvel, 0.0).astype(np.float32), same
+
+
+def _sample(rollouts: Mapping[str, Any], sample: int, seed: int) -> np.ndarray:
+    pop = rollouts["selected"] & rollouts["feasible"] if rollouts["selected"].any() else rollouts["feasible"].copy()
+    idx = np.flatnonzero(pop)
+    if len(idx) > sample:
+        idx = np.sort(np.random.default_rng(seed).choice(idx, sample, replace=False))
+    return idx
+
+
+def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: int = 0,
+                  nthread: int | None = None) -> dict[str, Any]:
+    """Replay ``sample`` rollouts of the dataset ``path`` in MuJoCo C with the physics probe;
+    the per-rollout readings and their summary (``summarise``)."""
+    from relaff_jax.constants import action_id
+    from relaff_jax.sim.native import replay_native
+    from relaff_jax.sim.physics_probe import Probe
+    from relaff_jax.sim.planning import setup
+    from relaff_jax.sim.templates import TPL_MEASURE
+
+    t0 = time.perf_counter()
+    path = Path(path)
+    meta = read_sidecar(path)
+    if meta["status"] != "complete":
+        raise DatasetError(f"{path}: generation not finished; audit a finished dataset")
+    action = str(meta["action"])
+    cfg = action_config(meta)
+    rollouts = load_rollouts(path)
+    need = ("pair", "qpos0", "qpos_settled", "intended", "label", "feasible", "relation", "toy", "other", "rollout")
+    lack = [k for k in need if k not in rollouts]
+    if lack:
+        raise DatasetError(f"{path}: its rollouts lack {', '.join(lack)}; not the simulation's rollouts, cannot replay")
+    idx = _sample(rollouts, int(sample), int(seed))
+    r = {k: np.asarray(rollouts[k])[idx] for k in need}
+    out: dict[str, Any] = dict(version=AUDIT_VERSION, dataset=str(path), action=action, engine=meta.get("engine"),
+                               settle=meta.get("settle"), sample=int(sample), seed=int(seed),
+                               selection_sha256=meta.get("selection", {}).get("sha256"),
+                               population=int((rollouts["selected"] & rollouts["feasible"]).sum()),
+                               n_audited=len(idx), thresholds=dict(THRESHOLDS))
+    rows: list[dict[str, Any]] = []
+    if len(idx):
+        qvel, resettled = settled_velocities(cfg, meta, r, nthread)
+        plan = _plan(cfg, action, r["pair"], r["qpos_settled"], int(meta["batch"]))
+        world = setup(cfg).world
+        measure = int(TPL_MEASURE[action_id(action)])
+        probe = Probe(len(idx), world.toy_body, world.obj_body, cfg.phys.timestep)
+        rep = replay_native(action, cfg, r["pair"], r["qpos_settled"], qvel, plan, observe=probe)
+        got = probe.result(measure)
+        for i in range(len(idx)):
+            rel = r["relation"][i]
+            rows.append(dict(
+                rollout=int(r["rollout"][i]), toy=str(r["toy"][i]), other=str(r["other"][i]),
+                relation=str(RELATIONS[int(rel)] if np.issubdtype(np.asarray(rel).dtype, np.integer) else rel),
+                label=bool(r["label"][i]), replay_label=bool(rep["label"][i]),
+                plan_feasible=bool(plan["feasible"][i]), resettled=bool(resettled[i]),
+                **{k: _jsonable(v[i]) for k, v in got.items()}))
+    out["rollouts"] = rows
+    out.update(summarise(rows, meta.get("engine")))
+    out["seconds"] = round(time.perf_counter() - t0, 2)
+    return out
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, (np.bool_, bool)):
+        return bool(v)
+    if isinstance(v, (np.integer,)):
+        return int(v)
+    if isinstance(v, (np.floating, float)):
+        return None if not np.isfinite(v) else round(float(v), 6)
+    return str(v)
+
+
+def _dist(x: np.ndarray) -> dict[str, float | None]:
+    if not len(x):
+        return {"median": None, "p95": None, "max": None}
+    return {"median": round(float(np.median(x)), 6), "p95": round(float(np.quantile(x, 0.95)), 6),
+            "max": round(float(np.max(x)), 6)}
+
+
+def failures(row: Mapping[str, Any]) -> dict[str, bool]:
+    """Which checks one audited rollout fails."""
+    speeds = [s for s, held in ((row["speed_toy"], row.get("held_toy")), (row["speed_other"], row.get("held_other")))
+              if s is not None and not held]  # a held object moves with the arm
+    return {"palm_contact": row["palm_steps"] > PALM_CONTACTS,
+            "force": row["peak_force_weights"] > FORCE_WEIGHTS,
+            "penetration": row["max_penetration_m"] > PENETRATION_M,
+            "moving": bool(speeds) and max(speeds) > MOVING_M_S}
+
+
+def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[str, Any]:
+    """The checks over audited rollouts ``rows``: per check its statistic, bound, the count and
+    share of failing rollouts and pass (no rollout fails); the shares by label and by relation;
+    the replay's agreement with the stored labels."""
+    n = len(rows)
+    fails = [failures(r) for r in rows]
+    count = {k: sum(f[k] for f in fails) for k in ("palm_contact", "force", "penetration", "moving")}
+    share = lambda k: (count[k] / n) if n else None
+    arr = lambda k: np.asarray([r[k] for r in rows if r[k] is not None], float)
+    checks = {
+        "palm_contact": dict(count=count["palm_contact"], share=share("palm_contact"),
+                             bound="no contact between the hand body (palm) and an object",
+                             palm_seconds=_dist(arr("palm_seconds")), palm_force_n=_dist(arr("palm_force_n"))),
+        "force": dict(count=count["force"], share=share("force"), bound_weights=FORCE_WEIGHTS,
+                      weights=_dist(arr("peak_force_weights")), newtons=_dist(arr("peak_force_n"))),
+        "penetration": dict(count=count["penetration"], share=share("penetration"), bound_m=PENETRATION_M,
+                            metres=_dist(arr("max_penetration_m"))),
+        "moving": dict(count=count["moving"], share=share("moving"), bound_m_s=MOVING_M_S,
+                       speed_toy=_dist(arr("speed_toy")), speed_other=_dist(arr("speed_other"))),
+    }
+    for c in checks.values():
+        c["pass"] = c["count"] == 0
+    groups: dict[str, dict[str, Any]] = {}
+    for key, name in (("label", lambda r: "positive" if r["label"] else "negative"), ("relation", lambda r: r["relation"])):
+        g: dict[str, dict[str, Any]] = {}
+        for r, f in zip(rows, fails):
+            cell = g.setdefault(name(r), {"n": 0, **{k: 0 for k in count}})
+            cell["n"] += 1
+            for k in count:
+                cell[k] += int(f[k])
+        groups[f"by_{key}"] = g
+    agree = sum(r["label"] == r["replay_label"] for r in rows)
+    why = ("exact: the replay is the native engine's reference from the same settled state and plan"
+           if engine == "native" else
+           "the dataset was simulated by MJX; the C replay starts from its settled positions at rest "
+           "(MJX and C agree on ~98 % of labels, docs/actions.md)")
+    replay = dict(label_agreement=(agree / n) if n else None, agree=agree, n=n, why=why,
+                  disagreements=[r["rollout"] for r in rows if r["label"] != r["replay_label"]],
+                  resettled=sum(bool(r["resettled"]) for r in rows),
+                  plan_feasible=sum(bool(r["plan_feasible"]) for r in rows))
+    return {"checks": checks, **groups, "replay": replay}
+
+
+def stored_audit(path: str | os.PathLike, sample: int, seed: int) -> dict[str, Any] | None:
+    """``path/audit.json`` if it was made with this sample, seed and selection, else None."""
+    path = Path(path)
+    try:
+        d = rio.read_json(path / AUDIT_FILE)
+    except (OSError, ValueError):
+        return None
+    sel = read_sidecar(path).get("selection", {}).get("sha256")
+    ok = isinstance(d, dict) and (d.get("version"), d.get("sample"), d.get("seed"), d.get("selection_sha256")) == (
+        AUDIT_VERSION, int(sample), int(seed), sel)
+    return d if ok else None
+
+
+def ensure_audit(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: int = 0,
+                 nthread: int | None = None) -> dict[str, Any]:
+    """The stored audit of ``path`` if it matches (``stored_audit``), else a new one written
+    atomically to ``path/audit.json``: resumable, a killed run leaves no partial file."""
+    d = stored_audit(path, sample, seed)
+    if d is None:
+        d = audit_dataset(path, sample, seed, nthread)
+        rio.atomic_write_json(Path(path) / AUDIT_FILE, d)
+    return d
+
+
+def dataset_folders(path: str | os.PathLike) -> list[Path]:
+    """The dataset folders of ``path``: itself if it is a dataset (has a sidecar), else the
+    ``data/<action>/`` datasets of a run folder, in ``ACTIONS`` order. One-line errors for a
+    missing folder, a file, or a folder that is neither."""
+    from relaff_jax.constants import ACTIONS
+    from relaff_jax.data.config import SIDECAR
+
+    p = Path(path)
+    if not p.exists():
+        raise DatasetError(f"{p}: no such dataset or run folder")
+    if not p.is_dir():
+        raise DatasetError(f"{p}: not a folder")
+    if (p / SIDECAR).is_file():
+        return [p]
+    found = [p / "data" / a for a in ACTIONS if (p / "data" / a / SIDECAR).is_file()]
+    if not found:
+        raise DatasetError(f"{p}: not a relaff dataset (no {SIDECAR}) nor a run folder with data/<action>/ datasets")
+    return found
+
+
+def _pct(x: float | None) -> str:
+    return "-" if x is None else f"{100 * x:.0f}%"
+
+
+def format_audit(audits: list[Mapping[str, Any]]) -> str:
+    """The table ``relaff audit`` prints: one row per dataset, the bounds below."""
+    head = (f"{'action':<11}{'engine':<7}{'audited':>9}  {'palm':>5}  {'force/weight med p95 max':>25}  "
+            f"{'pen. max':>8}  {'moving':>6}  {'label agr.':>10}  checks")
+    lines = [head, "-" * len(head)]
+    for a in audits:
+        c = a["checks"]
+        w = c["force"]["weights"]
+        fmt = lambda v: "-" if v is None else f"{v:.0f}" if v >= 10 else f"{v:.1f}"
+        force = f"{fmt(w['median'])} {fmt(w['p95'])} {fmt(w['max'])}"
+        pen = c["penetration"]["metres"]["max"]
+        failed = [k for k in ("palm_contact", "force", "penetration", "moving") if not c[k]["pass"]]
+        lines.append(
+            f"{a['action']:<11}{str(a['engine']):<7}{a['n_audited']:>4}/{a['population']:<4}  "
+            f"{_pct(c['palm_contact']['share']):>5}  {force:>25}  "
+            f"{'-' if pen is None else f'{1000 * pen:.1f} mm':>8}  {_pct(c['moving']['share']):>6}  "
+            f"{_pct(a['replay']['label_agreement']):>10}  {'FAIL ' + ','.join(failed) if failed else 'pass'}")
+    lines.append("")
+    lines.append(f"audited: sampled selected samples whose program ran / all of them. A rollout fails: palm = a "
+                 f"contact between the hand body and an object; force = a body pair's summed normal force > "
+                 f"{FORCE_WEIGHTS:g} weights of its heaviest object; pen. = a contact with an object deeper than "
+                 f"{1000 * PENETRATION_M:g} mm; moving = an object not held by the hand faster than {MOVING_M_S:g} m/s "
+                 f"at the measuring step. A check passes when no audited rollout fails it. label agr.: the C replay's labels "
+                 f"equal to the stored ones.")
+    return "\n".join(lines)

@@ -1,0 +1,154 @@
+"""What a rollout's physics does, step by step, read from MuJoCo C contacts (the audit's probe).
+
+Takes a pair's arm-world ``MjModel`` and its ``MjData`` after each ``mj_step`` of a motor
+program (``native.replay_native``'s ``observe`` hook); gives ``Probe``, which records per
+rollout:
+
+- palm contacts: contacts between a geom of the hand body (``arm_hand``: the palm block, not
+  the finger pads) and the toy or the other object, the steps they last and the largest sum of
+  their normal forces;
+- contact forces: at every step, the normal forces (``mj_contactForce``) of all contacts
+  between one body pair that involves an object summed per pair, divided by the weight of the
+  heaviest object of the pair (a box resting on the table reads 1); the peak over steps and
+  pairs, in newtons and in weights, and which pair;
+- penetration: the deepest contact (``-dist``) that involves an object;
+- the objects' speeds (linear, at the centre of mass, ``mj_objectVelocity``) at the step whose
+  positions the goal reads (``ProgramInputs.measure``), and whether each is then welded to the
+  hand (held: its motion is the arm's).
+
+Everything is float64 numpy; ``step_contacts`` is the per-step reading (a pure function of
+the model and data), ``Probe`` accumulates it over the steps of B rollouts.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+
+HAND_BODY = "arm_hand"  # the palm block's body; the pads are on the finger bodies
+
+
+def body_names(m: mujoco.MjModel) -> list[str]:
+    return [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) or f"body{i}" for i in range(m.nbody)]
+
+
+def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, int], hand: int
+                  ) -> tuple[dict[tuple[int, int], float], float, tuple[int, int], int]:
+    """One step's contacts that involve an object.
+
+    objects: body ids of the toy and the other object; hand: the hand body's id.
+    Returns ``forces`` {(body a, body b) sorted: summed normal force (N)} over contacts with an
+    object on one side, the deepest penetration (m, >= 0) among them and its body pair, and
+    the number of hand-object contacts.
+    """
+    n = d.ncon
+    forces: dict[tuple[int, int], float] = {}
+    if n == 0:
+        return forces, 0.0, (0, 0), 0
+    bodies = np.asarray(m.geom_bodyid)[np.asarray(d.contact.geom[:n])]  # (n, 2)
+    dist = np.asarray(d.contact.dist[:n])
+    o0, o1 = objects
+    rows = np.flatnonzero((bodies == o0).any(axis=1) | (bodies == o1).any(axis=1))
+    if not len(rows):
+        return forces, 0.0, (0, 0), 0
+    k = rows[int(np.argmin(dist[rows]))]
+    deepest, where = float(max(0.0, -dist[k])), tuple(sorted(bodies[k].tolist()))
+    f6 = np.zeros(6)
+    n_hand = 0
+    for i in rows.tolist():
+        mujoco.mj_contactForce(m, d, i, f6)
+        a, b = bodies[i]
+        key = (int(a), int(b)) if a <= b else (int(b), int(a))
+        forces[key] = forces.get(key, 0.0) + float(f6[0])
+        n_hand += int(hand == a or hand == b)
+    return forces, deepest, where, n_hand
+
+
+def held_bodies(m: mujoco.MjModel, d: mujoco.MjData, hand: int) -> set[int]:
+    """Bodies welded to the hand by an active equality constraint (the grasp lock, the rake)."""
+    rows = np.flatnonzero((np.asarray(m.eq_type) == mujoco.mjtEq.mjEQ_WELD) & (np.asarray(d.eq_active) != 0))
+    out = set()
+    for r in rows:
+        a, b = int(m.eq_obj1id[r]), int(m.eq_obj2id[r])
+        if hand in (a, b):
+            out.add(b if a == hand else a)
+    return out
+
+
+class Probe:
+    """Accumulates ``step_contacts`` over the steps of B rollouts (an ``observe`` hook).
+
+    ``Probe(n, toy_body, obj_body, timestep)``; call ``probe(b, t, m, d)`` after step t of
+    rollout b; ``result(measure)`` gives (B,) arrays: ``palm_contact`` bool, ``palm_steps``,
+    ``palm_seconds``,
+    ``palm_force_n`` (largest summed hand-object normal force), ``peak_force_n``,
+    ``peak_force_weights`` (peak over steps and pairs of the summed force / the pair's
+    heaviest object's weight), ``peak_pair`` (str "a|b" body names), ``peak_step``,
+    ``max_penetration_m``, ``penetration_pair``, ``speed_toy``/``speed_other`` (m/s at the
+    measuring step ``measure``; NaN if it was not reached), ``held_toy``/``held_other`` (welded
+    to the hand at that step: a held object moves with the arm, its speed is the arm's),
+    ``speed_end`` (the faster object's speed at the last step).
+    """
+
+    def __init__(self, n: int, toy_body: int, obj_body: int, timestep: float):
+        self.objects = (int(toy_body), int(obj_body))
+        self.timestep = float(timestep)
+        self.palm_steps = np.zeros(n, np.int64)
+        self.palm_force = np.zeros(n)
+        self.peak_n = np.zeros(n)
+        self.peak_w = np.zeros(n)
+        self.peak_pair = np.full(n, "", object)
+        self.peak_step = np.full(n, -1, np.int64)
+        self.pen = np.zeros(n)
+        self.pen_pair = np.full(n, "", object)
+        self.speeds: list[list[tuple[float, float]]] = [[] for _ in range(n)]  # per step (toy, other)
+        self.held: list[list[tuple[bool, bool]]] = [[] for _ in range(n)]  # welded to the hand, per step
+        self._names: dict[int, list[str]] = {}
+        self._hand: dict[int, int] = {}
+        self._weight: dict[int, np.ndarray] = {}
+        self._vel = np.zeros(6)
+
+    def __call__(self, b: int, t: int, m: mujoco.MjModel, d: mujoco.MjData) -> None:
+        key = id(m)
+        if key not in self._names:
+            self._names[key] = body_names(m)
+            self._hand[key] = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, HAND_BODY)
+            self._weight[key] = np.asarray(m.body_mass) * float(np.linalg.norm(m.opt.gravity))
+        hand, names, weight = self._hand[key], self._names[key], self._weight[key]
+        forces, deepest, where, n_hand = step_contacts(m, d, self.objects, hand)
+        palm = 0.0
+        for (a, c), f in forces.items():
+            w = max(weight[x] for x in (a, c) if x in self.objects)
+            if f / w > self.peak_w[b]:
+                self.peak_w[b], self.peak_n[b], self.peak_step[b] = f / w, f, t
+                self.peak_pair[b] = f"{names[a]}|{names[c]}"
+            if hand in (a, c):
+                palm += f
+        if n_hand:
+            self.palm_steps[b] += 1
+            self.palm_force[b] = max(self.palm_force[b], palm)
+        if deepest > self.pen[b]:
+            self.pen[b] = deepest
+            self.pen_pair[b] = f"{names[where[0]]}|{names[where[1]]}"
+        speed = []
+        for body in self.objects:  # cvel: the velocities of this step's forward pass, as xipos
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, self._vel, 0)
+            speed.append(float(np.linalg.norm(self._vel[3:])))
+        held = held_bodies(m, d, hand)
+        self.speeds[b].append((speed[0], speed[1]))
+        self.held[b].append((self.objects[0] in held, self.objects[1] in held))
+        assert len(self.speeds[b]) == t + 1, "observe every step of a rollout in order"
+
+    def result(self, measure: int) -> dict[str, Any]:
+        at = np.asarray([s[measure] if measure < len(s) else (np.nan, np.nan) for s in self.speeds]).reshape(-1, 2)
+        held = np.asarray([h[measure] if measure < len(h) else (False, False) for h in self.held]).reshape(-1, 2)
+        end = np.asarray([max(s[-1]) if s else np.nan for s in self.speeds])
+        return dict(palm_contact=self.palm_steps > 0, palm_steps=self.palm_steps,
+                    palm_seconds=self.palm_steps * self.timestep,
+                    palm_force_n=self.palm_force, peak_force_n=self.peak_n, peak_force_weights=self.peak_w,
+                    peak_pair=self.peak_pair.astype(str), peak_step=self.peak_step,
+                    max_penetration_m=self.pen, penetration_pair=self.pen_pair.astype(str),
+                    speed_toy=at[:, 0], speed_other=at[:, 1], held_toy=held[:, 0], held_other=held[:, 1],
+                    speed_end=end)
+

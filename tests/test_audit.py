@@ -1,0 +1,168 @@
+"""The physics audit (``relaff audit``, ``data/audit.py``, ``sim/physics_probe.py``): the probe's
+readings on hand-built MuJoCo C scenes with known answers, the checks and their JSON, the
+command's one-line errors, and (slow) the replay of a generated native dataset."""
+import json
+import subprocess
+import sys
+
+import mujoco
+import numpy as np
+import pytest
+
+from relaff_jax.data import audit as A
+from relaff_jax.sim.physics_probe import Probe
+
+# A 1 kg box on the table; above it a "hand" body (the probe's arm_hand) on a vertical slide,
+# weightless (gravcomp), pushed down by a motor with a known force.
+PRESS = """
+<mujoco>
+  <option timestep="0.004" cone="pyramidal"/>
+  <worldbody>
+    <geom name="table" type="plane" size="2 2 0.1"/>
+    <body name="toy" pos="0.5 0.5 0.05"><freejoint/>
+      <geom type="sphere" size="0.05" mass="0.2"/></body>
+    <body name="obj" pos="0 0 {z}"><freejoint/>
+      <geom type="box" size="0.05 0.05 0.05" mass="1.0"/></body>
+    <body name="arm_hand" pos="0 0 {hz}" gravcomp="1">
+      <joint name="slide" type="slide" axis="0 0 1" damping="50"/>
+      <geom name="arm_palm" type="box" size="0.03 0.03 0.015" mass="0.5"/>
+    </body>
+  </worldbody>
+  <actuator><motor joint="slide" gear="1"/></actuator>
+</mujoco>
+"""
+G = 9.81
+
+
+def _run(xml: str, steps: int, force: float = 0.0):
+    m = mujoco.MjModel.from_xml_string(xml)
+    m.opt.gravity[:] = (0.0, 0.0, -G)
+    d = mujoco.MjData(m)
+    toy = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "toy")
+    obj = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "obj")
+    probe = Probe(1, toy, obj, m.opt.timestep)
+    for t in range(steps):
+        d.ctrl[:] = -force * min(1.0, t / 500)  # ramped: quasi-static, no impact overshoot
+        mujoco.mj_step(m, d)
+        probe(0, t, m, d)
+    return probe, m, d
+
+
+def test_probe_reads_a_known_palm_press():
+    """A weightless palm pushed down with a force ramped to 98.1 N (10 weights of the 1 kg box)
+    onto the box: at rest the palm-box pair carries 98.1 N and the box-table pair 107.9 N (11 weights), the
+    peak; the palm touches the box from its first contact on."""
+    probe, m, d = _run(PRESS.format(z=0.05, hz=0.1149), 1500, force=10 * G)  # touching
+    r = probe.result(1499)
+    assert r["palm_contact"][0]
+    assert r["peak_pair"][0] == "world|obj"
+    assert r["peak_force_weights"][0] == pytest.approx(11.0, rel=0.02)
+    assert r["peak_force_n"][0] == pytest.approx(11 * G, rel=0.02)
+    assert r["palm_force_n"][0] == pytest.approx(10 * G, rel=0.02)
+    assert r["palm_steps"][0] > 1000
+    # both objects rest at the end: the ball on the table, the box pressed
+    assert r["speed_toy"][0] < 1e-3 and r["speed_other"][0] < 1e-3
+
+
+def test_probe_without_a_press_reads_one_weight_and_no_palm():
+    probe, _, _ = _run(PRESS.format(z=0.05, hz=0.2), 300, force=-5.0)  # the palm held up, away
+    r = probe.result(299)
+    assert not r["palm_contact"][0] and r["palm_steps"][0] == 0
+    # the box placed on the soft table sinks in and rebounds (1.4 weights at the first steps),
+    # then rests at one weight
+    assert r["peak_pair"][0] == "world|obj" and r["peak_step"][0] < 20
+    assert 1.0 < r["peak_force_weights"][0] < 1.5
+
+
+def test_probe_reads_a_known_penetration_and_a_known_speed():
+    """The box starts 3 mm into the table: the first step's contacts read that depth (the
+    deepest of the run, as the solver pushes it out). The ball, lifted off the table, falls
+    freely: at step t its velocity in the step's forward pass is g * dt * t (semi-implicit Euler)."""
+    xml = PRESS.format(z=0.047, hz=0.2).replace('pos="0.5 0.5 0.05"', 'pos="0.5 0.5 1.0"')
+    probe, m, _ = _run(xml, 40, force=-5.0)
+    r = probe.result(30)
+    assert r["max_penetration_m"][0] == pytest.approx(0.003, abs=1e-9)
+    assert r["penetration_pair"][0] == "world|obj"
+    assert r["speed_toy"][0] == pytest.approx(G * m.opt.timestep * 30, rel=1e-9)
+    assert np.isnan(probe.result(40)["speed_toy"][0])  # a step not simulated
+
+
+def _row(**kw):
+    row = dict(rollout=0, toy="ball", other="tray", relation="on_top", label=True, replay_label=True,
+               plan_feasible=True, resettled=True, palm_contact=False, palm_steps=0, palm_seconds=0.0,
+               palm_force_n=0.0, peak_force_n=5.0, peak_force_weights=1.0, peak_pair="world|obj", peak_step=3,
+               max_penetration_m=0.001, penetration_pair="world|obj", speed_toy=0.0, speed_other=0.0, held_toy=False,
+               held_other=False, speed_end=0.0)
+    row.update(kw)
+    return row
+
+
+def test_checks_count_failures_against_the_stated_bounds():
+    rows = [_row(), _row(rollout=1, palm_contact=True, palm_steps=5, label=False, replay_label=False, relation="beside"),
+            _row(rollout=2, peak_force_weights=A.FORCE_WEIGHTS + 1, max_penetration_m=A.PENETRATION_M * 2,
+                 speed_toy=A.MOVING_M_S * 1.5, replay_label=False),
+            _row(rollout=3, peak_force_weights=A.FORCE_WEIGHTS, max_penetration_m=A.PENETRATION_M,
+                 speed_other=A.MOVING_M_S),  # on the bounds: not failures
+            _row(rollout=4, speed_other=1.0, held_other=True)]  # a held object moves with the arm: no failure
+    s = A.summarise(rows, "native")
+    c = s["checks"]
+    assert (c["palm_contact"]["count"], c["force"]["count"], c["penetration"]["count"], c["moving"]["count"]) == (1, 1, 1, 1)
+    assert c["palm_contact"]["share"] == 0.2 and not c["palm_contact"]["pass"]
+    assert c["force"]["weights"] == {"median": 1.0, "p95": pytest.approx(np.quantile([1, 1, 11, 10, 1], 0.95)),
+                                     "max": 11.0}
+    assert s["by_label"]["negative"] == {"n": 1, "palm_contact": 1, "force": 0, "penetration": 0, "moving": 0}
+    assert s["by_relation"]["on_top"]["n"] == 4
+    assert s["replay"]["agree"] == 4 and s["replay"]["disagreements"] == [2]
+    assert A.summarise([_row()], "native")["checks"]["force"]["pass"]
+    json.dumps(s)  # serialisable as it is
+
+
+def test_cli_one_line_errors(tmp_path):
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "x.txt").write_text("x")
+    (tmp_path / "f.txt").write_text("x")
+    for target, msg in ((tmp_path / "missing", "no such dataset or run folder"),
+                        (tmp_path / "foreign", "not a relaff dataset"), (tmp_path / "f.txt", "not a folder")):
+        p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(target)], capture_output=True, text=True)
+        assert p.returncode == 2, p.stderr
+        lines = p.stderr.strip().splitlines()
+        assert len(lines) == 1 and lines[0].startswith("relaff audit: error: ") and msg in lines[0], p.stderr
+    p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(tmp_path), "--sample", "0"],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and p.stderr.strip() == "relaff audit: error: --sample must be >= 1, got 0"
+
+
+ROLLOUT_KEYS = {"rollout", "toy", "other", "relation", "label", "replay_label", "plan_feasible", "resettled",
+                "palm_contact", "palm_steps", "palm_seconds", "palm_force_n", "peak_force_n", "peak_force_weights",
+                "peak_pair", "peak_step", "max_penetration_m", "penetration_pair", "speed_toy", "speed_other",
+                "held_toy", "held_other", "speed_end"}
+TOP_KEYS = {"version", "dataset", "action", "engine", "settle", "sample", "seed", "selection_sha256", "population",
+            "n_audited", "thresholds", "rollouts", "checks", "by_label", "by_relation", "replay", "seconds"}
+
+
+@pytest.mark.slow  # generates a small native dataset (plan compile) and replays it in C
+def test_audit_of_a_native_dataset_reproduces_its_labels(tmp_path):
+    """The replay of a native dataset reproduces every stored label and settled state exactly;
+    the JSON has its schema; audit.json is written and reused; a run folder lists its datasets."""
+    run = tmp_path / "run"
+    d = run / "data" / "pour"
+    p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "generate", "pour", "--samples", "6", "--out", str(d),
+                        "--engine", "native", "--batch", "8", "--seed", "3"], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(run), "--json", "--sample", "5"],
+                       capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    a = json.loads(p.stdout)
+    assert set(a) == TOP_KEYS and a["version"] == A.AUDIT_VERSION and a["engine"] == "native"
+    assert set(a["checks"]) == {"palm_contact", "force", "penetration", "moving"}
+    assert all({"count", "share", "pass"} <= set(c) for c in a["checks"].values())
+    assert 1 <= a["n_audited"] == len(a["rollouts"]) <= 5 and all(set(r) == ROLLOUT_KEYS for r in a["rollouts"])
+    assert a["replay"]["label_agreement"] == 1.0 and a["replay"]["resettled"] == a["n_audited"]
+    assert a["replay"]["plan_feasible"] == a["n_audited"]
+    assert all(r["peak_force_weights"] >= 0.9 for r in a["rollouts"])  # everything rests on something
+    stored = json.loads((d / A.AUDIT_FILE).read_text())
+    assert stored == a and A.stored_audit(d, 5, 0) == a and A.stored_audit(d, 6, 0) is None
+    p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(d), "--sample", "5"],
+                       capture_output=True, text=True)  # the stored audit, as a table
+    rows = [x for x in p.stdout.splitlines() if x.startswith("pour ")]
+    assert p.returncode == 0 and len(rows) == 1 and "100%" in rows[0], p.stdout
