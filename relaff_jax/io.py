@@ -11,6 +11,7 @@ colleague, a notebook server or a web server running as another user.
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 import shutil
@@ -48,8 +49,41 @@ def _fsync_dir(path: Path) -> None:
             os.close(fd)
 
 
+NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
+
+
+def free_bytes(folder: str | os.PathLike) -> int | None:
+    """Bytes free to this user in the file system of ``folder`` (its nearest existing
+    ancestor), or None if it cannot be told."""
+    probe = Path(folder)
+    while not probe.exists() and probe.parent != probe:
+        probe = probe.parent
+    try:
+        st = os.statvfs(probe)
+    except OSError:
+        return None
+    return st.f_bavail * st.f_frsize
+
+
+def _mb(n: float) -> str:
+    return f"{n / 1e6:.1f} MB"
+
+
+def disk_full(e: OSError, folder: str | os.PathLike, needed: int | None = None) -> "DiskFullError":
+    """The one-line error of a write that found no space in ``folder``'s file system."""
+    from relaff_jax.errors import DiskFullError
+
+    free = free_bytes(folder)
+    need = f"; this write needed {_mb(needed)}" if needed else ""
+    have = f" ({_mb(free)} free)" if free is not None else ""
+    return DiskFullError(f"no space left in {folder}{have}{need}: free some space (or give a folder on another "
+                         "disk) and rerun the same command; what was finished is kept")
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
-    """Write ``data`` to ``path`` atomically (temp file in the same dir + rename)."""
+    """Write ``data`` to ``path`` atomically (temp file in the same dir + rename). A full
+    disk is a ``DiskFullError`` naming the folder and the size of the write; the old file,
+    if any, is untouched."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
@@ -61,9 +95,11 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
         _chmod_default(tmp, directory=False)
         os.replace(tmp, path)
         _fsync_dir(path.parent)
-    except BaseException:
+    except BaseException as e:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+        if isinstance(e, OSError) and e.errno in NO_SPACE:
+            raise disk_full(e, path.parent, len(data)) from e
         raise
 
 
@@ -92,12 +128,40 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
 
 
 def read_json(path: str | os.PathLike) -> Any:
-    """Read JSON, turning a corrupt file into a ValueError that names it."""
+    """Read JSON, turning a corrupt file (bad JSON, not UTF-8) into a ``CorruptFileError``
+    (a ``UserError``, so a ``ValueError``) that names it."""
+    from relaff_jax.errors import CorruptFileError
+
     path = Path(path)
     try:
         return json.loads(path.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
-        raise ValueError(f"{path}: corrupt JSON ({e})") from e
+        raise CorruptFileError(f"{path}: corrupt JSON ({e})") from e
+    except UnicodeDecodeError as e:
+        raise CorruptFileError(f"{path}: not a UTF-8 JSON file (byte {e.start}: {e.reason})") from e
+    except IsADirectoryError as e:
+        raise CorruptFileError(f"{path}: a folder where a JSON file is expected") from e
+
+
+def load_npz(path: str | os.PathLike, keys: Any = None) -> dict[str, np.ndarray]:
+    """Every array (or those in ``keys``) of the ``.npz`` file ``path``, read at once; a
+    truncated or foreign file is a ``CorruptFileError`` naming it (``np.load`` raises one of
+    half a dozen types, depending on where the damage lies)."""
+    import zipfile
+    import zlib
+
+    from relaff_jax.errors import CorruptFileError
+
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            names = z.files if keys is None else [k for k in keys if k in z.files]
+            return {k: z[k] for k in names}
+    except (FileNotFoundError, PermissionError):
+        raise
+    except (zipfile.BadZipFile, zlib.error, EOFError, ValueError, KeyError, AttributeError, TypeError, OSError) as e:
+        raise CorruptFileError(f"{path}: truncated or not a numpy .npz file ({type(e).__name__}: {e}); "
+                               "delete it and rerun the command that wrote it") from e
 
 
 def atomic_save_npz(path: str | os.PathLike, **arrays: np.ndarray) -> None:
@@ -140,7 +204,14 @@ def folder_lock(path: str | os.PathLike, busy: str, name: str = ".relaff.lock") 
 
     from relaff_jax.errors import UserError
 
-    fd = os.open(Path(path) / name, os.O_RDWR | os.O_CREAT, 0o644)
+    lock = Path(path) / name
+    try:  # never through a link: a planted .relaff.lock symlink must not create or lock its target
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+    except OSError as e:
+        if e.errno == errno.ELOOP or lock.is_symlink():
+            raise UserError(f"{lock} is a symbolic link; relaff locks only a plain file there: remove the link "
+                            "and rerun") from None
+        raise
     try:
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -154,7 +225,12 @@ def folder_lock(path: str | os.PathLike, busy: str, name: str = ".relaff.lock") 
 def remove_tree(path: str | os.PathLike) -> None:
     """Delete a folder so that a kill leaves no half-deleted output under its name: it is
     renamed to a hidden ``.NAME.old.tmp`` first (``clean_leftovers`` removes those)."""
+    from relaff_jax.errors import UserError
+
     path = Path(path)
+    if path.is_symlink():
+        raise UserError(f"{path} is a symbolic link (to {os.readlink(path)}); relaff does not delete through "
+                        "links: replace the link by a folder (or remove it) and rerun")
     if not path.exists():
         return
     tmp = path.parent / f".{path.name}.old.tmp"
@@ -169,6 +245,39 @@ def clean_leftovers(root: str | os.PathLike) -> None:
         shutil.rmtree(p, ignore_errors=True)
 
 
+def _exists(path: Path) -> bool:
+    """``path.exists()``, False where the name itself is unusable (too long)."""
+    try:
+        return path.exists()
+    except OSError:
+        return False
+
+
+def check_path_length(path: str | os.PathLike, what: str = "--out") -> None:
+    """Fail at once (``UserError``) if ``path`` or one of its parts is longer than its file
+    system allows (NAME_MAX, usually 255 bytes; PATH_MAX, usually 4096), leaving room for
+    the hidden temporary siblings the atomic writes make (``.NAME.xxxxxxxx.tmp``)."""
+    from relaff_jax.errors import UserError
+
+    path = Path(path)
+    probe = path.absolute()
+    while not _exists(probe) and probe.parent != probe:
+        probe = probe.parent
+    try:
+        name_max, path_max = os.pathconf(probe, "PC_NAME_MAX"), os.pathconf(probe, "PC_PATH_MAX")
+    except (OSError, ValueError):
+        name_max, path_max = 255, 4096
+    room = 24  # ".NAME." + mkstemp's 8 characters + ".old.tmp"
+    for part in path.parts:
+        n = len(os.fsencode(part))
+        if n + room > name_max:
+            raise UserError(f"{what} {path}: the name {part[:20]}...{part[-10:]} is {n} bytes long; this file "
+                            f"system allows {name_max} (and relaff needs {room} more for its temporary files)")
+    if len(os.fsencode(str(path.absolute()))) + room > path_max:
+        raise UserError(f"{what} {path}: the path is {len(os.fsencode(str(path.absolute())))} bytes long; this "
+                        f"system allows {path_max}")
+
+
 def check_writable_dir(path: str | os.PathLike, what: str = "--out") -> None:
     """Fail at once (``UserError``) if ``path`` cannot be an output folder: it is a file, lies
     under a file, or its nearest existing ancestor cannot be written. Called before any
@@ -176,6 +285,7 @@ def check_writable_dir(path: str | os.PathLike, what: str = "--out") -> None:
     from relaff_jax.errors import UserError
 
     path = Path(path)
+    check_path_length(path, what)
     if path.exists() and not path.is_dir():
         raise UserError(f"{what} {path} exists and is a file, not a folder")
     probe = path
@@ -196,6 +306,7 @@ def check_writable_file(path: str | os.PathLike, what: str = "--out") -> None:
     from relaff_jax.errors import UserError
 
     path = Path(path)
+    check_path_length(path, what)
     if path.is_dir():
         raise UserError(f"{what} {path} is a folder; give a file name")
     check_writable_dir(path.parent, what=f"{what} {path}: folder")

@@ -7,7 +7,8 @@ library functions; the stages themselves know nothing of argparse.
 Errors: a ``relaff_jax.errors.UserError`` (bad option, unusable folder, corrupt data) is
 printed as one line, ``relaff COMMAND: error: MESSAGE`` (``relaff real SUBCOMMAND: ...``
 for the ``real`` commands), exit code 2, the prefix argparse uses
-for its own errors. Any other exception is a bug and keeps its full traceback (exit 1).
+for its own errors; a full disk (ENOSPC, wherever it surfaces) is one line naming the folder and
+the space left, exit code 2. Any other exception is a bug and keeps its full traceback (exit 1).
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import sys
 
 from relaff_jax import quiet
 from relaff_jax.errors import UserError
+from relaff_jax.io import NO_SPACE, disk_full
 
 # Modules that contribute subcommands, in pipeline order.
 COMMAND_MODULES = (
@@ -61,11 +63,23 @@ class _Commands(argparse._SubParsersAction):
         return super().add_parser(name, **kwargs)
 
 
+def version() -> str:
+    """The installed package's version (and where it runs from)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as v
+
+    try:
+        return v("relaff_jax")
+    except PackageNotFoundError:  # run from a source tree that was not installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="relaff",
         description="Relational affordances of object pairs: simulate, perceive, learn, bootstrap.",
     )
+    parser.add_argument("--version", action="version", version=f"relaff {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
@@ -78,8 +92,22 @@ def command_name(args: argparse.Namespace) -> str:
     return " ".join(x for x in (args.command, getattr(args, "real_command", None)) if x)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C: the stages' cleanup and the run log's
+    "interrupted" entry run as for an interrupt, and the command ends with one line."""
+
+
+def _on_sigterm(signum, frame):  # pragma: no cover - exercised through a subprocess
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     quiet.install()
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, _on_sigterm)
     parser = build_parser()
     args = parser.parse_args(argv)
     name = command_name(args)
@@ -88,10 +116,19 @@ def main(argv: list[str] | None = None) -> int:
     except UserError as e:
         print(f"relaff {name}: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"relaff {name}: interrupted; what was finished is kept, rerun the same command "
+    except OSError as e:
+        if e.errno not in NO_SPACE:
+            raise
+        from pathlib import Path
+
+        where = Path(e.filename).parent if getattr(e, "filename", None) else Path.cwd()
+        print(f"relaff {name}: error: {disk_full(e, where)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as e:
+        how, code = ("terminated (SIGTERM)", 143) if isinstance(e, Terminated) else ("interrupted", 130)
+        print(f"relaff {name}: {how}; what was finished is kept, rerun the same command "
               "to continue", file=sys.stderr)
-        return 130
+        return code
 
 
 if __name__ == "__main__":  # pragma: no cover

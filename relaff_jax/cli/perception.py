@@ -54,6 +54,7 @@ def register(subparsers) -> None:
 
 def cmd_features(args) -> int:
     """``relaff features``: attach features, print their shapes."""
+    options.check_counts(args, seed="--seed")
     options.precheck(args)
     options.check_in_dir(args.dir)
     from relaff_jax.reproduce.features import add_features
@@ -68,6 +69,7 @@ def cmd_features(args) -> int:
 
 def cmd_show(args) -> int:
     """``relaff show``: draw sample ``--index`` of the dataset into ``--out``."""
+    options.check_counts(args, index="--index")
     options.precheck(args)
     options.check_in_dir(args.dir)
     out = args.out or Path("action.gif" if args.rollout else "scene.png")

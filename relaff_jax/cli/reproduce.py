@@ -55,6 +55,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     args.out = args.out if args.out is not None else args.dir
     if args.out is None:
         raise UserError("the run folder is required: --out DIR")
+    options.check_counts(args, seed="--seed", jobs="--jobs")
     overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine)})
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported

@@ -28,7 +28,7 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.data.config import CHUNKS, FORMAT, FORMAT_VERSION, LOCK, SELECTION, SIDECAR
-from relaff_jax.data.errors import CorruptDatasetError, DatasetError, ForeignDirectoryError
+from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, ForeignDirectoryError
 
 CHUNK_RE = re.compile(r"^chunk_(\d{6})$")
 
@@ -182,9 +182,33 @@ def read_sidecar(path: Path) -> dict[str, Any]:
     for key in ("action", "n_samples", "seed", "batch", "status", "counts"):
         if key not in meta:
             raise CorruptDatasetError(f"{path}: sidecar lacks {key!r}")
+    _check_types(path, meta)
     meta.setdefault("engine", "mjx")  # sidecars from before the native engine existed are MJX's
     meta["config"] = config_record(meta.get("config"), meta["action"])
     return meta
+
+
+_SIDECAR_TYPES = {"action": str, "status": str, "n_samples": int, "seed": int, "batch": int, "counts": dict,
+                  "selection": dict, "selection_scheme": dict, "engine": str}
+_COUNT_KEYS = ("chunks", "positives", "negatives", "in_hand", "rollouts")
+
+
+def _check_types(path: Path, meta: dict) -> None:
+    """Each field the readers use has its JSON type (a sidecar edited by hand, or by another
+    program, is refused by name rather than failing deep inside ``info`` or ``load``)."""
+    def bad(key, want, got):
+        return CorruptDatasetError(f"{path}: sidecar {SIDECAR}: {key} should be {want}, got {got!r:.60}")
+
+    for key, t in _SIDECAR_TYPES.items():
+        v = meta.get(key)
+        if key in meta and (not isinstance(v, t) or (t is int and isinstance(v, bool))):
+            raise bad(key, "an integer" if t is int else f"a JSON {'object' if t is dict else 'string'}", v)
+    for key in _COUNT_KEYS:
+        v = meta["counts"].get(key)
+        if key in meta["counts"] and (isinstance(v, bool) or not isinstance(v, int) or v < 0):
+            raise bad(f"counts.{key}", "an integer >= 0", v)
+    if "chunks" not in meta["counts"]:
+        raise CorruptDatasetError(f"{path}: sidecar {SIDECAR} lacks counts.chunks")
 
 
 def config_record(record: Any, action: str) -> Any:
@@ -225,6 +249,27 @@ def writer_lock(path: Path) -> Iterator[None]:
         yield
     finally:
         os.close(fd)
+
+
+def check_dataset_dir(path: Path, expected: Mapping[str, Any]) -> None:
+    """What ``prepare_dir`` and a resume would refuse, told before any simulation is built
+    (MJX compiles for minutes): ``path`` a file, a foreign non-empty folder, a truncated
+    dataset, or a dataset of other ``expected`` sidecar values (action, seed, ...). Writes nothing."""
+    path = Path(path)
+    if not path.exists() or (path.is_dir() and not any(p.name != LOCK for p in path.iterdir())):
+        return
+    if not path.is_dir():
+        raise DatasetError(f"{path}: exists and is not a directory")
+    if not (path / SIDECAR).exists():
+        if (path / CHUNKS).exists() or (path / SELECTION).exists():
+            raise CorruptDatasetError(f"{path}: dataset sidecar {SIDECAR} is missing (truncated dataset)")
+        raise ForeignDirectoryError(f"{path}: exists, is not empty and is not a relaff dataset; give a new or "
+                                    "empty folder")
+    meta = read_sidecar(path)
+    diff = mismatch(meta, dict(expected), sorted(expected))
+    if diff:
+        raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff)
+                                   + "; write to a new folder, or resume it with its own settings")
 
 
 def prepare_dir(path: Path) -> bool:

@@ -34,7 +34,18 @@ def read_report(path: str | os.PathLike) -> dict[str, Any]:
             raise UserError(f"{p} is not a report folder with datasets: {f} is missing (relaff report, or a "
                             f"report written by this version with the datasets)")
         out[f.split(".")[0]] = rio.read_json(p / f)
+        need = _KEYS.get(f.split(".")[0], ())
+        if not isinstance(out[f.split(".")[0]], dict) or not all(k in out[f.split(".")[0]] for k in need):
+            raise UserError(f"{p / f}: not a relaff report file (expected a JSON object with {', '.join(need)}); "
+                            "write the report again with relaff report")
     return out
+
+
+_KEYS = {"reach": ("datasets", "spaces"), "findings": ("findings",), "summary": ()}
+
+
+def _sizes(r: Mapping[str, Any]) -> set:
+    return {x for sp in r["reach"]["spaces"].values() for x in sp.get("sizes", [])}
 
 
 def _f(x: Any, nd: int = 3) -> str:
@@ -58,7 +69,11 @@ def compare(reports: Mapping[str, str | os.PathLike], out: str | os.PathLike | N
     there atomically (``out`` checked before any report is read). Returns the page."""
     if out is not None:
         rio.check_writable_file(out)
-    page = compare_readings(reports, size=size)
+    try:
+        page = compare_readings(reports, size=size)
+    except (KeyError, TypeError, IndexError, AttributeError) as e:  # a file of the right shape, wrong content
+        raise UserError(f"the reports {', '.join(map(str, reports.values()))} hold an entry this version cannot "
+                        f"read ({type(e).__name__}: {e}); write them again with relaff report") from e
     if out is not None:
         rio.atomic_write_text(out, page)
     return page
@@ -70,6 +85,10 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
         raise UserError("compare needs at least two readings NAME=REPORT_DIR")
     r = {name: read_report(p) for name, p in reports.items()}
     names = list(r)
+    for n in names:
+        if size not in _sizes(r[n]):
+            raise UserError(f"--size {size} is not a training size of {reports[n]} (its sizes: "
+                            f"{', '.join(map(str, sorted(_sizes(r[n])))) or 'none'})")
     lines = ["# The same study in " + " and ".join(f"`{n}`" for n in names), ""]
     lines += [f"- `{n}`: `{reports[n]}`" for n in names] + [""]
 

@@ -59,6 +59,18 @@ def check_config(cfg: RunConfig, seed: int) -> None:
         raise ReproduceError(f"the experiment cannot run on {d.n_samples} samples per action: {e}") from e
 
 
+def check_no_links(paths: Paths, force: Sequence[str], redo: Sequence[str]) -> None:
+    """The folders ``--force`` and ``--redo-dataset`` delete must be folders, not symbolic
+    links: refused before any work (``io.remove_tree`` does not delete through a link)."""
+    doomed = {"generate": [paths.data], "experiment": [paths.results], "report": [paths.report]}
+    for p in [q for s in force for q in doomed.get(s, [])] + [paths.dataset(a) for a in redo]:
+        if p.is_symlink():
+            flag = f"--redo-dataset {p.name}" if p.parent == paths.data and p != paths.data else "--force"
+            raise ReproduceError(f"{p} is a symbolic link (to {os.readlink(p)}); {flag} deletes that folder and "
+                                 "relaff does not delete through links: replace the link by the folder itself "
+                                 "(or remove it) and rerun")
+
+
 def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0, *,
               force: Sequence[str] = (), jobs: int = 0, progress: bool = True,
               overrides: Mapping[str, Any] | None = None, cfg: RunConfig | None = None,
@@ -109,6 +121,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
         rio.check_writable_dir(root)
     except UserError as e:
         raise ReproduceError(str(e)) from e
+    check_no_links(paths, force, redo)
     if rebuild_log and not root.is_dir():
         raise ReproduceError(f"{root} does not exist: nothing to rebuild")
     os.makedirs(root, exist_ok=True)
