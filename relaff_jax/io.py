@@ -80,6 +80,15 @@ def disk_full(e: OSError, folder: str | os.PathLike, needed: int | None = None) 
                          "disk) and rerun the same command; what was finished is kept")
 
 
+_FENCE: list = []  # [callable]: whether this process may still write (set in worker processes)
+
+
+def set_write_fence(allowed) -> None:
+    """In a worker process: ``allowed()`` is asked before every atomic rename; False (its
+    driver, which holds the folder's lock, is gone) discards the write and ends the process."""
+    _FENCE[:] = [allowed]
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically (temp file in the same dir + rename). A full
     disk is a ``DiskFullError`` naming the folder and the size of the write; the old file,
@@ -93,6 +102,9 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
             f.flush()
             os.fsync(f.fileno())
         _chmod_default(tmp, directory=False)
+        if _FENCE and not _FENCE[0]():  # a worker whose driver is gone: its lock went with it
+            os.unlink(tmp)
+            os._exit(0)
         os.replace(tmp, path)
         _fsync_dir(path.parent)
     except BaseException as e:

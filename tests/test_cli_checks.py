@@ -261,7 +261,7 @@ def test_compare_unwritable_out_fails_before_reading_the_reports(monkeypatch, ca
     import relaff_jax.report.readings
 
     monkeypatch.setattr(relaff_jax.report.readings, "compare_readings", no_work)
-    argv = ["compare", f"a={tmp_path}", f"b={tmp_path}", "--out", f"{a_file}/page.md"]
+    argv = ["compare", f"a={tmp_path}/a", f"b={tmp_path}/b", "--out", f"{a_file}/page.md"]
     assert cli.main(argv) == 2
     assert "is a file" in one_line_error(capsys, "compare")
 

@@ -7,10 +7,23 @@ otherwise joblib's process pool, results collected as they finish. With ``client
 (``cluster.map_calls``; ``jobs`` is then ignored), with the same results and progress. The
 bar counts ``weights`` (forest fits per call) from ``initial`` (fits already on disk) to
 ``total``.
+
+Workers end with their driver: joblib's (loky) workers outlive a driver killed by SIGKILL
+for minutes (their idle timeout), still fitting and writing blocks. Each worker therefore
+watches the driver's pid (a thread, every ``WATCH_SECONDS``) and exits when it is gone, and
+fences its writes (``io.set_write_fence``): an atomic write whose driver is gone is
+discarded before its rename, so no file appears in the run folder once the driver (and with
+it the folder's lock) has gone.
 """
 from __future__ import annotations
 
+import os
+import threading
+import time
 from typing import Any
+
+WATCH_SECONDS = 0.5
+_watching: list[int] = []  # the driver pid this worker process watches (set once)
 
 
 def run_parallel(calls: list, jobs: int, progress: bool, total: int, desc: str, unit: str, weights=None, initial: int = 0,
@@ -38,7 +51,8 @@ def run_parallel(calls: list, jobs: int, progress: bool, total: int, desc: str, 
         else:
             from joblib import Parallel
 
-            indexed = [(_indexed, (i, c), {}) for i, c in enumerate(calls)]
+            driver = os.getpid()
+            indexed = [(_indexed, (i, c, driver), {}) for i, c in enumerate(calls)]
             for i, r in Parallel(n_jobs=jobs, return_as="generator_unordered")(indexed):
                 done(i, r)
     finally:
@@ -46,6 +60,47 @@ def run_parallel(calls: list, jobs: int, progress: bool, total: int, desc: str, 
     return results
 
 
-def _indexed(i: int, call):
+def driver_alive(driver: int) -> bool:
+    """Whether process ``driver`` still runs (a worker's parent: its pid is the parent's, until
+    the parent dies and the worker is handed to init or a subreaper)."""
+    if os.getppid() == driver:
+        return True
+    try:
+        os.kill(driver, 0)  # not our parent (another process tree): is it alive at all?
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return not _is_zombie(driver)
+
+
+def _is_zombie(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] == "Z"
+    except (OSError, IndexError):
+        return False
+
+
+def _watch(driver: int) -> None:
+    """In a worker process: end it when the driver is gone; fence its writes meanwhile."""
+    if _watching or driver == os.getpid():
+        return
+    from relaff_jax import io as rio
+
+    _watching.append(driver)
+    rio.set_write_fence(lambda: driver_alive(driver))
+
+    def loop():
+        while driver_alive(driver):
+            time.sleep(WATCH_SECONDS)
+        os._exit(0)  # nobody is left to read this worker's results
+
+    threading.Thread(target=loop, name="relaff-driver-watch", daemon=True).start()
+
+
+def _indexed(i: int, call, driver: int | None = None):
+    if driver is not None:
+        _watch(driver)
     fn, args, kwargs = call
     return i, fn(*args, **kwargs)

@@ -1,0 +1,81 @@
+"""Workers end with their driver (issue 48): a joblib worker watches its driver's pid and
+exits when it is gone, and its atomic writes are fenced, so that no file appears in a run
+folder after the driver (and with it the folder's lock) has gone.
+
+On some machines a killed driver's loky workers are reaped at once by a subreaper (as on
+the machine these tests were written on); elsewhere they ran on for minutes. The tests
+therefore make the "driver" a separate process the worker is told to watch, and kill that."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+
+import pytest
+import time
+
+WORKER = textwrap.dedent("""
+    import sys, time
+    import numpy as np
+    from relaff_jax import io as rio
+    from relaff_jax.learn import parallel
+    driver, out, seconds = int(sys.argv[1]), sys.argv[2], float(sys.argv[3])
+    parallel._watch(driver)
+    print("watching", flush=True)
+    end = time.time() + seconds
+    while time.time() < end:  # busy in numpy, as a forest fit is
+        np.linalg.svd(np.random.default_rng(0).random((120, 120)))
+    rio.atomic_write_text(out, "late")
+""")
+
+
+def _worker(driver_pid, out, seconds):
+    p = subprocess.Popen([sys.executable, "-c", WORKER, str(driver_pid), str(out), str(seconds)],
+                         stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "watching"
+    return p
+
+
+@pytest.mark.slow
+def test_a_worker_ends_within_seconds_of_its_driver_and_writes_nothing(tmp_path):
+    driver = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+    worker = _worker(driver.pid, tmp_path / "block.npz", 8.0)
+    try:
+        time.sleep(0.5)
+        assert worker.poll() is None  # alive while its driver is
+        os.kill(driver.pid, signal.SIGKILL)  # a zombie until reaped: counted as gone
+        t0 = time.monotonic()
+        worker.wait(timeout=5)
+        assert time.monotonic() - t0 < 3.0
+        time.sleep(8.5 - (time.monotonic() - t0))  # past the moment it would have written
+        assert list(tmp_path.iterdir()) == []
+    finally:
+        for p in (driver, worker):
+            p.kill()
+            p.wait()
+
+
+def test_a_write_after_the_driver_is_gone_is_discarded(tmp_path):
+    """The fence alone (the watcher's poll not yet run): the rename is never made."""
+    code = textwrap.dedent(f"""
+        from relaff_jax import io as rio
+        rio.atomic_write_text({str(tmp_path / 'kept.txt')!r}, "early")
+        rio.set_write_fence(lambda: False)
+        rio.atomic_write_text({str(tmp_path / 'late.txt')!r}, "late")
+        raise SystemExit(3)  # not reached: a fenced write ends the process
+    """)
+    r = subprocess.run([sys.executable, "-c", code])
+    assert r.returncode == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.txt"]
+
+
+def test_the_driver_itself_is_never_fenced():
+    from relaff_jax.learn import parallel
+
+    assert parallel.driver_alive(os.getpid()) and parallel.driver_alive(os.getppid())
+    parallel._watch(os.getpid())  # the in-process path (jobs == 1): no watcher, no fence
+    from relaff_jax import io as rio
+
+    assert rio._FENCE == [] and parallel._watching == []
