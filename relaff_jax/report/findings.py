@@ -15,7 +15,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax.learn import ORACLE, PAPER_TABLE2, TABLE2_ROWS, bc_interval
-from relaff_jax.report.formatting import fmt, nanmean
+from relaff_jax.report.formatting import fmt, interval, nanmean
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,7 +82,7 @@ def combine(parts: list[dict[str, Any]]) -> str:
 def _text(label: str, j: Mapping[str, Any], nd: int = 3) -> str:
     lo, hi = j["interval"]
     side = ">" if j["above"] else "<"
-    return f"{label} {fmt(j['estimate'], nd)} [{fmt(lo, nd)}, {fmt(hi, nd)}] (claim {side} {j['bound']:g})"
+    return f"{label} {fmt(j['estimate'], nd)} {interval(lo, hi, nd)} (claim {side} {j['bound']:g})"
 
 
 def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:

@@ -101,7 +101,9 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
     # the document
     found = findings(an, cfg, rules)
-    blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
+    top = S.findings_blocks(found)
+    top[1:1] = S.scale_caveat_blocks(an[main], (info or {}).get("preset"))  # beside the verdicts, not pages later
+    blocks = (S.intro_blocks(res, results_dir, info) + top + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
               + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset"))
               + [b for s in spaces for b in borrow_blocks(lend[s], s)] + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
