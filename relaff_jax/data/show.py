@@ -42,6 +42,10 @@ def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import world as wd
 
+    if "feasible" in ds:  # whether the arm could run the program: a negative label may be reach, not relation
+        title += f", program {'feasible' if bool(ds['feasible'][index]) else 'infeasible (out of reach)'}"
+    else:
+        title += ", program feasibility not recorded"
     path = from_sim.show_scene(wd.build_world(tree.action.phys), pair, qpos, out,
                                from_sim.show_key(int(ds["rollout_id"][index])), cfg=tree.perception, title=title)
     return f"wrote {path}"

@@ -18,7 +18,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax import io as rio
+from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
+from relaff_jax.learn import TABLE2_ROWS
 from relaff_jax.report import folder as F
 from relaff_jax.report.findings import correlation_clusters
 
@@ -93,7 +95,8 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
     lines += [f"- `{n}`: `{reports[n]}`" for n in names] + [""]
 
     # what the labels consist of
-    acts = list(r[names[0]]["reach"]["datasets"])
+    seen = {a for n in names for a in r[n]["reach"]["datasets"]}  # the JSON keys are sorted: the paper's order
+    acts = [a for a in ACTIONS if a in seen] + sorted(seen - set(ACTIONS))
     lines += ["## What the labels consist of (balanced selection)", "",
               "| action | " + " | ".join(f"{n}: neg. infeasible / label=feasible / relation / borrowed" for n in names) + " |",
               "|---|" + "---|" * len(names)]
@@ -150,6 +153,7 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
     # Table II
     lines += ["", "## Table II (average bootstrap factor over the window, avg over affordances, interval, rests on)", ""]
     rows = list(r[names[0]]["summary"]["pca"]["table2"]) if "pca" in r[names[0]]["summary"] else []
+    rows = [x for x in TABLE2_ROWS if x in rows] + [x for x in rows if x not in TABLE2_ROWS]  # the paper's order
     lines += ["| row | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
     for row in rows:
         cells = []
