@@ -369,3 +369,17 @@ def test_a_full_disk_anywhere_is_one_line_from_the_cli(tmp_path, capsys, monkeyp
     assert cli.main(["info", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"no space left in {tmp_path / 'x'}" in err[0]
+
+
+def test_the_dataset_writer_lock_never_follows_a_symlink(tmp_path):
+    from relaff_jax.data import DatasetError
+    from relaff_jax.data.config import LOCK
+    from relaff_jax.data.store import writer_lock
+
+    target = tmp_path / "victim"
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / LOCK).symlink_to(target)
+    with pytest.raises(DatasetError, match="symbolic link"):
+        with writer_lock(tmp_path / "d"):
+            pass
+    assert not target.exists()

@@ -229,9 +229,12 @@ def writer_lock(path: Path) -> Iterator[None]:
     """
     import fcntl
 
-    try:
-        fd = os.open(path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:  # never through a link: a planted lock symlink must not create or lock its target
+        fd = os.open(path / LOCK, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
     except OSError as e:
+        if (path / LOCK).is_symlink():
+            raise DatasetError(f"{path / LOCK} is a symbolic link; relaff locks only a plain file there: remove "
+                               "the link and rerun") from None
         raise DatasetError(f"{path}: directory is not writable ({e})") from e
     try:
         try:
