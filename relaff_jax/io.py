@@ -280,13 +280,15 @@ def check_path_length(path: str | os.PathLike, what: str = "--out") -> None:
     except (OSError, ValueError):
         name_max, path_max = 255, 4096
     room = 24  # ".NAME." + mkstemp's 8 characters + ".old.tmp"
+    text = str(path)
+    shown = text if len(text) <= 100 else f"{text[:40]}...{text[-40:]}"
     for part in path.parts:
         n = len(os.fsencode(part))
         if n + room > name_max:
-            raise UserError(f"{what} {path}: the name {part[:20]}...{part[-10:]} is {n} bytes long; this file "
+            raise UserError(f"{what} {shown}: the name {part[:20]}...{part[-10:]} is {n} bytes long; this file "
                             f"system allows {name_max} (and relaff needs {room} more for its temporary files)")
     if len(os.fsencode(str(path.absolute()))) + room > path_max:
-        raise UserError(f"{what} {path}: the path is {len(os.fsencode(str(path.absolute())))} bytes long; this "
+        raise UserError(f"{what} {shown}: the path is {len(os.fsencode(str(path.absolute())))} bytes long; this "
                         f"system allows {path_max}")
 
 

@@ -122,6 +122,10 @@ def case_experiment_negative_synthetic(t, results):
     return ["experiment", "--synthetic", "-5", "--out", str(t / "out")], "--synthetic"
 
 
+def case_experiment_too_few_synthetic_samples(t, results):
+    return ["experiment", "--synthetic", "5", "--out", str(t / "out")], "5 samples, but the protocol needs"
+
+
 def case_real_check_latin1(t, results):
     lab = _labels(t, b"scene,object_a,object_b,relation,sha256\nlearn0\xe9.pcd,2,3,beside," + SHA.encode() + b"\n")
     return ["real", "check", str(_scenes(t)), "--labels", str(lab)], "not UTF-8"
