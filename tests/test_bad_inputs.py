@@ -387,3 +387,52 @@ def test_the_dataset_writer_lock_never_follows_a_symlink(tmp_path):
         with writer_lock(tmp_path / "d"):
             pass
     assert not target.exists()
+
+
+def test_damaged_cloud_files_are_user_errors_never_tracebacks(tmp_path):
+    """Truncations, byte flips, inserted bytes, deleted and replaced header tokens of a small
+    cloud in every format: each read either succeeds or is a ``UserError``."""
+    import re
+    import warnings
+
+    from relaff_jax.errors import UserError
+    from relaff_jax.real.cloud import make_cloud
+    from relaff_jax.real.pcd import write_pcd
+    from relaff_jax.real.ply import write_ply
+    from relaff_jax.real.readers import read_cloud, write_npz
+
+    rng = np.random.default_rng(2)
+    c = make_cloud(rng.normal(size=(6, 8, 3)).astype(np.float32), rgb=rng.integers(0, 255, (6, 8, 3)).astype(np.uint8),
+                   label=rng.integers(0, 50, (6, 8)).astype(np.uint32))
+    files = []
+    for mode in ("ascii", "binary", "binary_compressed"):
+        write_pcd(tmp_path / f"{mode}.pcd", c, mode)
+        files.append(tmp_path / f"{mode}.pcd")
+    write_ply(tmp_path / "c.ply", c)
+    write_npz(tmp_path / "c.npz", c)
+    files += [tmp_path / "c.ply", tmp_path / "c.npz"]
+    for f in files:
+        raw = f.read_bytes()
+        head = max(raw.find(b"DATA") if f.suffix == ".pcd" else raw.find(b"end_header"), 1)
+        for _ in range(150):
+            b, k = bytearray(raw), rng.integers(0, 5)
+            if k == 0:
+                b = b[:rng.integers(0, len(b))]
+            elif k == 1:
+                for _ in range(rng.integers(1, 4)):
+                    b[rng.integers(0, head + 20)] = rng.integers(0, 256)
+            elif k == 2:
+                i = rng.integers(0, len(b))
+                b = b[:i] + bytes(rng.integers(0, 256, rng.integers(1, 20)).astype(np.uint8)) + b[i:]
+            else:
+                toks = list(re.finditer(rb"\S+" if k == 3 else rb"\d+", bytes(b[:head])))
+                m = toks[rng.integers(0, len(toks))]
+                b = b[:m.start()] + (b"" if k == 3 else str(rng.choice([0, 1, -1, 7, 10**12])).encode()) + b[m.end():]
+            q = tmp_path / f"damaged{f.suffix}"
+            q.write_bytes(bytes(b))
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                try:
+                    read_cloud(q)
+                except UserError:
+                    pass

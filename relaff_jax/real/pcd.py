@@ -74,7 +74,7 @@ def _layout(h: dict, path) -> tuple[list, list, int, int]:
         width = int(h.get("WIDTH", ["0"])[0])
         height = int(h.get("HEIGHT", ["1"])[0])
         points = int(h.get("POINTS", [str(width * height)])[0])
-    except ValueError:
+    except (ValueError, IndexError):
         raise UserError(f"{path}: WIDTH, HEIGHT and POINTS must be integers") from None
     if min(width, height, points) < 0:
         raise UserError(f"{path}: WIDTH, HEIGHT and POINTS must be >= 0, got {width}, {height}, {points}")
@@ -160,8 +160,14 @@ def read_pcd(path) -> RealCloud:
     fields = {n: v[:, 0].reshape(shape) if v.shape[1] == 1 else v.reshape(shape + (v.shape[1],))
               for n, v in cols.items()}
     vp = h.get("VIEWPOINT")
+    try:
+        vp = [float(v) for v in vp] if vp else None
+    except ValueError:
+        raise UserError(f"{path}: VIEWPOINT must be 7 numbers, got {' '.join(vp)!r:.60}") from None
+    if vp is not None and (len(vp) != 7 or not np.all(np.isfinite(vp))):
+        raise UserError(f"{path}: VIEWPOINT must be 7 finite numbers (tx ty tz qw qx qy qz), got {len(vp)}")
     return make_cloud(xyz.reshape(shape + (3,)), rgb=rgb, label=label, fields=fields,
-                      viewpoint=[float(v) for v in vp] if vp else None, path=os.fspath(path))
+                      viewpoint=vp, path=os.fspath(path))
 
 
 def write_pcd(path, cloud: RealCloud, data: str = "binary_compressed") -> None:
