@@ -78,8 +78,11 @@ def cmd_show(args) -> int:
     from relaff_jax.data.show import show_sample
 
     bars = options.PhaseBars("show") if args.rollout else None
+    import sys
+
+    say = lambda m: print(f"show: {m}", file=sys.stderr, flush=True)  # noqa: E731
     try:
-        print(show_sample(tree, args.dir, args.index, out, rollout=args.rollout, progress=bars))
+        print(show_sample(tree, args.dir, args.index, out, rollout=args.rollout, progress=bars, say=say))
     finally:
         if bars is not None:
             bars.close()

@@ -16,9 +16,10 @@ from relaff_jax.errors import UserError
 
 
 def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.PathLike, *,
-                rollout: bool = False, progress: Any = None) -> str:
+                rollout: bool = False, progress: Any = None, say: Any = None) -> str:
     """Draw sample ``index`` of the dataset ``folder`` into ``out`` with the ``RunConfig``
     ``tree`` (its perception for the PNG, its action for the GIF); return what was written.
+    ``say(text)``: told what the PNG's silent part does (building the world, compiling).
     ``progress``: the GIF's phase bars (``sim.animate.animate_sample``)."""
     from relaff_jax.data.load import load_dataset
 
@@ -39,6 +40,8 @@ def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.
         frames = animate_sample(str(ds["action"]), pair, qpos, out, title=title, cfg=tree.action, progress=progress)
         return (f"wrote {out}: {len(frames['frames_xpos'])} frames; feasible {frames['feasible']}, "
                 f"label in the MuJoCo C replay {frames['label']} (dataset: {label}, MJX)")
+    if say is not None:  # the inputs are checked; what follows compiles for tens of seconds: say so
+        say(f"sample {index}: building the world and compiling the camera (tens of seconds the first time)...")
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import world as wd
 
