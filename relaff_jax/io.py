@@ -229,9 +229,35 @@ def folder_lock(path: str | os.PathLike, busy: str, name: str = ".relaff.lock") 
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             raise UserError(busy) from None
-        yield
+        _HELD.append(str(lock))
+        try:
+            yield
+        finally:
+            _HELD.remove(str(lock))
     finally:
         os.close(fd)
+
+
+_HELD: list[str] = []  # the lock files this process holds (``folder_lock``), for its workers' fence
+
+
+def held_locks() -> list[str]:
+    """The folder locks this process holds now: a worker's writes are fenced on them."""
+    return list(_HELD)
+
+
+def lock_is_held(path: str | os.PathLike) -> bool | None:
+    """Whether some process holds a ``flock`` on the file ``path`` (Linux's ``/proc/locks``),
+    read without taking it; None where that cannot be told. A lock goes when its holder's
+    files close, before its children are handed to init: the exact moment a worker must stop
+    writing."""
+    try:
+        st = os.lstat(path)
+        key = f" {os.major(st.st_dev):02x}:{os.minor(st.st_dev):02x}:{st.st_ino} "
+        with open("/proc/locks", encoding="ascii", errors="replace") as f:
+            return any(key in line and "FLOCK" in line and "->" not in line for line in f)
+    except OSError:
+        return None
 
 
 def remove_tree(path: str | os.PathLike) -> None:

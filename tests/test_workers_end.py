@@ -79,3 +79,31 @@ def test_the_driver_itself_is_never_fenced():
     from relaff_jax import io as rio
 
     assert rio._FENCE == [] and parallel._watching == []
+
+
+def test_the_fence_follows_the_folder_lock(tmp_path):
+    """A lock held by another process reads as held, and as gone once that process ends; a
+    worker's fence on it then refuses (the lock goes before the pid changes hands)."""
+    from relaff_jax.io import lock_is_held
+    from relaff_jax.learn import parallel
+
+    code = textwrap.dedent(f"""
+        import sys, time
+        from relaff_jax import io as rio
+        with rio.folder_lock({str(tmp_path)!r}, "busy"):
+            print("locked", flush=True)
+            time.sleep(60)
+    """)
+    holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        lock = tmp_path / ".relaff.lock"
+        assert lock_is_held(lock) is True
+        assert parallel.driver_alive(os.getppid(), [str(lock)])
+        holder.kill()
+        holder.wait()
+        assert lock_is_held(lock) is False
+        assert not parallel.driver_alive(os.getppid(), [str(lock)])  # our own parent lives; the lock is gone
+    finally:
+        holder.kill()
+        holder.wait()
