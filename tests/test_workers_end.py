@@ -107,3 +107,62 @@ def test_the_fence_follows_the_folder_lock(tmp_path):
     finally:
         holder.kill()
         holder.wait()
+
+
+JOB = textwrap.dedent("""
+    import time
+    import numpy as np
+    from relaff_jax import io as rio
+
+    def job(path, seconds):
+        end = time.time() + seconds
+        while time.time() < end:
+            np.linalg.svd(np.random.default_rng(0).random((120, 120)))
+        rio.atomic_write_text(path, "block")
+        return 1
+""")
+
+DRIVER = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    from relaff_jax import io as rio
+    from relaff_jax.learn.parallel import run_parallel
+    from relaff_job import job
+    out = sys.argv[2]
+    with rio.folder_lock(out, "busy"):
+        calls = [(job, (f"{out}/b{i}.txt", 0.2 if i < 2 else 6.0), {}) for i in range(6)]
+        run_parallel(calls, 2, False, 6, "x", "x")
+""")
+
+
+@pytest.mark.slow  # starts a driver with two joblib workers and kills it
+def test_kill_9_of_a_driver_leaves_no_worker_and_no_late_file(tmp_path):
+    (tmp_path / "relaff_job.py").write_text(JOB)
+    out = tmp_path / "run"
+    out.mkdir()
+    driver = subprocess.Popen([sys.executable, "-c", DRIVER, str(tmp_path), str(out)])
+    try:
+        t0 = time.time()
+        while time.time() - t0 < 120 and len(list(out.glob("b*.txt"))) < 2:  # the workers run the long jobs now
+            time.sleep(0.05)
+        assert len(list(out.glob("b*.txt"))) >= 2, "the workers never started"
+        kids = [int(p) for p in open(f"/proc/{driver.pid}/task/{driver.pid}/children").read().split()]
+        before = {p.name for p in out.iterdir()}
+        os.kill(driver.pid, signal.SIGKILL)
+        driver.wait()
+        t_kill = time.monotonic()
+        while time.monotonic() - t_kill < 5 and any(os.path.exists(f"/proc/{k}") and not _zombie(k) for k in kids):
+            time.sleep(0.1)
+        assert not any(os.path.exists(f"/proc/{k}") and not _zombie(k) for k in kids), "a worker outlived its driver"
+        time.sleep(7)  # past the moment the long jobs would have written
+        assert {p.name for p in out.iterdir()} == before
+    finally:
+        driver.kill()
+        driver.wait()
+
+
+def _zombie(pid: int) -> bool:
+    try:
+        return open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0] == "Z"
+    except OSError:
+        return True
