@@ -82,7 +82,8 @@ def combine(parts: list[dict[str, Any]]) -> str:
 def _text(label: str, j: Mapping[str, Any], nd: int = 3) -> str:
     lo, hi = j["interval"]
     side = ">" if j["above"] else "<"
-    return f"{label} {fmt(j['estimate'], nd)} {interval(lo, hi, nd)} (claim {side} {j['bound']:g})"
+    ci = interval(lo, hi, nd)
+    return f"{label} {fmt(j['estimate'], nd)}{'' if ci == '-' else ' ' + ci} (claim {side} {j['bound']:g})"
 
 
 def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:

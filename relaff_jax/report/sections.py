@@ -158,11 +158,12 @@ def scale_caveat_blocks(x: Mapping[str, Any], preset: str | None) -> list[tuple]
     if not (preset == "quick" or not np.isfinite(width) or width > 1.0):
         return []
     scale = " (the quick preset: 100 samples per action, 2 repetitions)" if preset == "quick" else ""
-    return [("p", f"**Read these verdicts with this run's scale{scale}:** its Table II intervals are "
-                  + (f"{fmt(width, 2)} wide in bootstrap factor (median), " if np.isfinite(width) else "not computed, ")
-                  + "too wide to compare this run with the paper (whose rows span 1.36-2.90). A verdict here says "
-                  "what this run's intervals allow, and shows that the pipeline runs end to end; it does not say "
-                  "whether the paper's findings hold (the study or paper preset does).")]
+    why = (f"its Table II intervals are {fmt(width, 2)} wide in bootstrap factor (median), too wide to compare "
+           "this run with the paper (whose rows span 1.36-2.90)" if np.isfinite(width) else
+           "it has no Table II interval to compare with the paper by (too few sizes, repetitions or affordances)")
+    return [("p", f"**Read these verdicts with this run's scale{scale}:** {why}. A verdict here says what this "
+                  "run's numbers allow, and shows that the pipeline runs end to end; it does not say whether the "
+                  "paper's findings hold (the study or paper preset does).")]
 
 
 def comparability(x: Mapping[str, Any], paper: bool, preset: str | None) -> str:
