@@ -89,6 +89,22 @@ def set_write_fence(allowed) -> None:
     _FENCE[:] = [allowed]
 
 
+def is_no_space(e: BaseException) -> bool:
+    """Whether ``e`` (or what caused it) is a full disk: an ``OSError`` ENOSPC/EDQUOT, or the
+    text of one wrapped by another library (tensorstore, under orbax, raises ``ValueError``
+    "RESOURCE_EXHAUSTED ... No space left on device [os_error_code='28']")."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        seen.add(id(e))
+        if isinstance(e, OSError) and e.errno in NO_SPACE:
+            return True
+        text = str(e)
+        if "No space left on device" in text or "Disk quota exceeded" in text or "os_error_code='28'" in text:
+            return True
+        e = e.__cause__ or e.__context__
+    return False
+
+
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically (temp file in the same dir + rename). A full
     disk is a ``DiskFullError`` naming the folder and the size of the write; the old file,

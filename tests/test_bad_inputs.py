@@ -438,3 +438,22 @@ def test_damaged_cloud_files_are_user_errors_never_tracebacks(tmp_path):
                     read_cloud(q)
                 except UserError:
                     pass
+
+
+def test_a_full_disk_under_orbax_is_one_line_and_leaves_no_chunk(tmp_path, monkeypatch):
+    """tensorstore reports ENOSPC as a ValueError ("RESOURCE_EXHAUSTED ... [os_error_code='28']"):
+    a chunk write that meets it is a ``DiskFullError`` naming the chunks folder, and no
+    temporary chunk folder is left."""
+    from relaff_jax.data import store
+    from relaff_jax.errors import DiskFullError
+
+    class Full:
+        def save(self, *a, **k):
+            raise ValueError("RESOURCE_EXHAUSTED: Error writing local file \"/x/manifest.ocdbt\": "
+                             "No space left on device [os_error_code='28']")
+
+    monkeypatch.setattr(store, "_checkpointer", lambda: Full())
+    (tmp_path / "chunks").mkdir()
+    with pytest.raises(DiskFullError, match=f"no space left in {tmp_path / 'chunks'}"):
+        store.write_chunk(tmp_path / "chunks" / "chunk_000000", {"label": np.zeros(8, bool)}, {})
+    assert list((tmp_path / "chunks").iterdir()) == []

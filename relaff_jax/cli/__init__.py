@@ -18,7 +18,7 @@ import sys
 
 from relaff_jax import quiet
 from relaff_jax.errors import UserError
-from relaff_jax.io import NO_SPACE, disk_full
+from relaff_jax.io import disk_full, is_no_space
 
 # Modules that contribute subcommands, in pipeline order.
 COMMAND_MODULES = (
@@ -92,6 +92,19 @@ def command_name(args: argparse.Namespace) -> str:
     return " ".join(x for x in (args.command, getattr(args, "real_command", None)) if x)
 
 
+def _where(e: BaseException):
+    """The folder a failed write named (``OSError.filename``, or a quoted path in the text of
+    a wrapped error), else the working folder."""
+    import re
+    from pathlib import Path
+
+    name = getattr(e, "filename", None)
+    if not name:
+        m = re.search(r'"(/[^"]+)"', str(e))
+        name = m.group(1) if m else None
+    return Path(name).parent if name else Path.cwd()
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised in the main thread like Ctrl-C: the stages' cleanup and the run log's
     "interrupted" entry run as for an interrupt, and the command ends with one line."""
@@ -124,13 +137,10 @@ def _run(argv: list[str] | None) -> int:
     except UserError as e:
         print(f"relaff {name}: error: {e}", file=sys.stderr)
         return 2
-    except OSError as e:
-        if e.errno not in NO_SPACE:
+    except Exception as e:  # a full disk, wherever it surfaces and whatever wraps it; else a bug
+        if not is_no_space(e):
             raise
-        from pathlib import Path
-
-        where = Path(e.filename).parent if getattr(e, "filename", None) else Path.cwd()
-        print(f"relaff {name}: error: {disk_full(e, where)}", file=sys.stderr)
+        print(f"relaff {name}: error: {disk_full(e, _where(e))}", file=sys.stderr)
         return 2
     except KeyboardInterrupt as e:
         how, code = ("terminated (SIGTERM)", 143) if isinstance(e, Terminated) else ("interrupted", 130)

@@ -64,7 +64,12 @@ def write_chunk(path: Path, arrays: Mapping[str, np.ndarray], extra: Mapping[str
     meta["arrays"] = {k: {"dtype": a.dtype.str, "shape": list(a.shape), "sha256": sha256(a)} for k, a in tree.items()}
     meta["vocab"] = vocab
     with rio.atomic_directory(path) as tmp:
-        _checkpointer().save(str((tmp / "arrays").resolve()), tree)
+        try:
+            _checkpointer().save(str((tmp / "arrays").resolve()), tree)
+        except Exception as e:  # tensorstore's full disk is a ValueError: one line naming the folder
+            if rio.is_no_space(e):
+                raise rio.disk_full(e, path.parent, sum(a.nbytes for a in tree.values())) from None
+            raise
         rio.atomic_write_json(tmp / "meta.json", meta)
         # Only a chunk that reads back lands: a killed driver's task still writing on a worker
         # can have its temporary folder removed under it by the restarted driver's clean_tmp
