@@ -21,6 +21,8 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from relaff_jax.diskspace import NO_SPACE, disk_full, free_bytes, is_no_space  # noqa: F401  (rio.disk_full, ...)
+
 
 def _umask() -> int:
     """The process umask, read without changing it where Linux allows (``os.umask`` can only
@@ -49,37 +51,6 @@ def _fsync_dir(path: Path) -> None:
             os.close(fd)
 
 
-NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
-
-
-def free_bytes(folder: str | os.PathLike) -> int | None:
-    """Bytes free to this user in the file system of ``folder`` (its nearest existing
-    ancestor), or None if it cannot be told."""
-    probe = Path(folder)
-    while not probe.exists() and probe.parent != probe:
-        probe = probe.parent
-    try:
-        st = os.statvfs(probe)
-    except OSError:
-        return None
-    return st.f_bavail * st.f_frsize
-
-
-def _mb(n: float) -> str:
-    return f"{n / 1e6:.1f} MB"
-
-
-def disk_full(e: OSError, folder: str | os.PathLike, needed: int | None = None) -> "DiskFullError":
-    """The one-line error of a write that found no space in ``folder``'s file system."""
-    from relaff_jax.errors import DiskFullError
-
-    free = free_bytes(folder)
-    need = f"; this write needed {_mb(needed)}" if needed else ""
-    have = f" ({_mb(free)} free)" if free is not None else ""
-    return DiskFullError(f"no space left in {folder}{have}{need}: free some space (or give a folder on another "
-                         "disk) and rerun the same command; what was finished is kept")
-
-
 _FENCE: list = []  # [callable]: whether this process may still write (set in worker processes)
 
 
@@ -87,22 +58,6 @@ def set_write_fence(allowed) -> None:
     """In a worker process: ``allowed()`` is asked before every atomic rename; False (its
     driver, which holds the folder's lock, is gone) discards the write and ends the process."""
     _FENCE[:] = [allowed]
-
-
-def is_no_space(e: BaseException) -> bool:
-    """Whether ``e`` (or what caused it) is a full disk: an ``OSError`` ENOSPC/EDQUOT, or the
-    text of one wrapped by another library (tensorstore, under orbax, raises ``ValueError``
-    "RESOURCE_EXHAUSTED ... No space left on device [os_error_code='28']")."""
-    seen = set()
-    while e is not None and id(e) not in seen:
-        seen.add(id(e))
-        if isinstance(e, OSError) and e.errno in NO_SPACE:
-            return True
-        text = str(e)
-        if "No space left on device" in text or "Disk quota exceeded" in text or "os_error_code='28'" in text:
-            return True
-        e = e.__cause__ or e.__context__
-    return False
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
