@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -50,6 +51,21 @@ def sha256(a: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
 
 
+class _NoSpaceFilter(logging.Filter):
+    """Drops orbax's own log of a full disk (an ERROR with its thread's traceback): the write
+    re-raises it and the CLI reports it as one line; every other record passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return not ((exc is not None and rio.is_no_space(exc)) or "No space left on device" in record.getMessage())
+
+
+def _quiet_full_disk_logs() -> None:
+    log = logging.getLogger("absl")
+    if not any(isinstance(f, _NoSpaceFilter) for f in log.filters):
+        log.addFilter(_NoSpaceFilter())
+
+
 def write_chunk(path: Path, arrays: Mapping[str, np.ndarray], extra: Mapping[str, Any]) -> None:
     """Write one chunk dir (orbax tree ``arrays/`` + ``meta.json``) atomically to ``path``."""
     tree: dict[str, np.ndarray] = {}
@@ -63,6 +79,7 @@ def write_chunk(path: Path, arrays: Mapping[str, np.ndarray], extra: Mapping[str
     meta = dict(extra)
     meta["arrays"] = {k: {"dtype": a.dtype.str, "shape": list(a.shape), "sha256": sha256(a)} for k, a in tree.items()}
     meta["vocab"] = vocab
+    _quiet_full_disk_logs()
     with rio.atomic_directory(path) as tmp:
         try:
             _checkpointer().save(str((tmp / "arrays").resolve()), tree)
