@@ -125,7 +125,7 @@ def cmd_generate(args) -> int:
                          names=("--samples", "--max-rollouts (dataset.max_rollouts)"))
     if bound:
         raise UserError(bound)
-    from relaff_jax.data.store import check_dataset_dir
+    from relaff_jax.data.validate import check_dataset_dir
 
     # a foreign folder, or a dataset of other settings, refused before the motor programs compile
     check_dataset_dir(Path(args.out), {"action": args.action, "n_samples": n, "seed": args.seed, "batch": batch,

@@ -29,7 +29,7 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.data.config import CHUNKS, FORMAT, FORMAT_VERSION, LOCK, SELECTION, SIDECAR
-from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, ForeignDirectoryError
+from relaff_jax.data.errors import CorruptDatasetError, DatasetError, ForeignDirectoryError
 
 CHUNK_RE = re.compile(r"^chunk_(\d{6})$")
 
@@ -274,27 +274,6 @@ def writer_lock(path: Path) -> Iterator[None]:
         yield
     finally:
         os.close(fd)
-
-
-def check_dataset_dir(path: Path, expected: Mapping[str, Any]) -> None:
-    """What ``prepare_dir`` and a resume would refuse, told before any simulation is built
-    (MJX compiles for minutes): ``path`` a file, a foreign non-empty folder, a truncated
-    dataset, or a dataset of other ``expected`` sidecar values (action, seed, ...). Writes nothing."""
-    path = Path(path)
-    if not path.exists() or (path.is_dir() and not any(p.name != LOCK for p in path.iterdir())):
-        return
-    if not path.is_dir():
-        raise DatasetError(f"{path}: exists and is not a directory")
-    if not (path / SIDECAR).exists():
-        if (path / CHUNKS).exists() or (path / SELECTION).exists():
-            raise CorruptDatasetError(f"{path}: dataset sidecar {SIDECAR} is missing (truncated dataset)")
-        raise ForeignDirectoryError(f"{path}: exists, is not empty and is not a relaff dataset; give a new or "
-                                    "empty folder")
-    meta = read_sidecar(path)
-    diff = mismatch(meta, dict(expected), sorted(expected))
-    if diff:
-        raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff)
-                                   + "; write to a new folder, or resume it with its own settings")
 
 
 def prepare_dir(path: Path) -> bool:
