@@ -6,7 +6,8 @@ bits.
 
 Hashes every array of every dataset (``relaff_jax.load_dataset``: rollout ids, labels,
 states, PCA and RHF features, ...), every array of ``results/<space>/results.npz`` (accuracy
-arrays, correlations; not the wall times) and ``report/findings.json``. Reads only the public loader and the
+arrays, correlations; not the wall times nor the fits counter ``new_fits``) and
+``report/findings.json``. Reads only the public loader and the
 stored files, so the same script fingerprints a folder made by an older version. Prints a
 table (key, sha256 prefix, and with --compare: same / DIFFERENT / missing).
 """
@@ -19,6 +20,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
+
+
+# Counters of the work a run did, not of its results: ``new_fits`` counts the forests fitted by
+# the invocation that finished the sweep, so a resumed run (fewer new fits) is not a difference.
+RUN_COUNTERS = ("new_fits",)
 
 
 def _sha(a) -> str:
@@ -44,7 +50,7 @@ def fingerprint(run: Path) -> dict[str, str]:
     for npz in sorted((run / "results").glob("*/results.npz")):
         with np.load(npz) as z:
             for k in sorted(z.files):
-                if k.startswith("seconds"):  # wall times, not results
+                if k.startswith("seconds") or k in RUN_COUNTERS:  # wall times and work counters, not results
                     continue
                 out[f"results/{npz.parent.name}/{k}"] = _sha(z[k])
     f = run / "report" / "findings.json"

@@ -12,3 +12,13 @@ class UserError(ValueError):
 
     Subclasses ``ValueError`` so that library callers catching ``ValueError`` keep working.
     """
+
+
+class CorruptFileError(UserError):
+    """A file on disk that cannot be read as what it should be (corrupt JSON, a truncated
+    ``.npz``, a file of another program); the message names the file."""
+
+
+class DiskFullError(UserError):
+    """A write failed because its file system is full (ENOSPC) or over quota (EDQUOT); the
+    message names the folder and the space it had. What was finished before is kept."""

@@ -68,13 +68,36 @@ def machine() -> dict[str, Any]:
     code, and so float rounding and contact outcomes, depend on the CPU's features; the PCA
     features' eigen-solver on the BLAS kernels)."""
     out = {"platform": platform.platform(), "machine": platform.machine(), "cpus": os.cpu_count()}
+    text = ""
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as f:
-            out.update(parse_cpuinfo(f.read()))
+            text = f.read()
+        out.update(parse_cpuinfo(text))
     except OSError:  # not Linux: the processor string is all there is
         out.update(cpu_model=platform.processor() or None, isa=None)
     out["blas"] = blas_kernels()
+    out["xla_target"] = xla_target(text)
     return out
+
+
+def xla_target(cpuinfo: str) -> dict[str, Any]:
+    """What decides the code XLA:CPU compiles (the MJX engine, the ray caster) on this machine:
+    it targets the host CPU as LLVM sees it, every feature flag the (virtual) CPU exposes, unless
+    ``XLA_FLAGS`` caps it (``--xla_cpu_max_isa``). Two VM builds of one machine kind that expose
+    different flags get different instructions, so other float rounding and, through chaotic
+    contacts, other MJX rollouts (docs/reproduce.md, "Which arrays depend on the machine").
+    Gives the ``XLA_FLAGS`` in force, the stepping and microcode (not in ``parse_cpuinfo``),
+    and the number and sha256 prefix of the whole CPU flag list: equal prefixes, same flags."""
+    import hashlib
+
+    fields: dict[str, str] = {}
+    for line in cpuinfo.splitlines():
+        key, _, value = line.partition(":")
+        fields.setdefault(key.strip(), value.strip())
+    flags = sorted(set(fields.get("flags", "").split()))
+    return {"xla_flags": os.environ.get("XLA_FLAGS", ""), "stepping": fields.get("stepping"),
+            "microcode": fields.get("microcode"), "cpu_flags": len(flags),
+            "cpu_flags_sha256": hashlib.sha256(" ".join(flags).encode()).hexdigest()[:16] if flags else None}
 
 
 def derive_seed(*keys: int) -> int:

@@ -46,8 +46,8 @@ def test_borrow_rows_hand_worked():
     np.testing.assert_allclose(r["nb_hi"], [0.65, 0.8, 0.56])
     # |best corr| 0.9, 0.9, 0.2 against 3, 1, 2: ranks (2.5, 2.5, 1) and (3, 1, 2)
     assert r["spearman"] == pytest.approx(stats.spearmanr([0.9, 0.9, 0.2], [3, 1, 2]).statistic)
-    assert np.isnan(r["db1_ci"]).all()  # no intervals in this analysis: shown as nan, not invented
+    assert np.isnan(r["db1_ci"]).all()  # no intervals in this analysis: shown as absent, not invented
     (_, text), (_, header, table) = borrow_blocks(r, "pca")
     assert "over the 3 affordances" in text
-    assert table[0][:4] == ["a", "3.00", "[nan, nan]", "-0.90 (b)"]
+    assert table[0][:4] == ["a", "3.00", "-", "-0.90 (b)"]
     assert len(header) == len(table[0])

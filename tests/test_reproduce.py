@@ -288,6 +288,7 @@ def test_interrupted_and_killed_run_continues_to_the_same_results(base, tmp_path
     assert log["runs"][1]["status"] == "running"  # a SIGKILL leaves no chance to write more
 
     log = run(out)
+    assert log["runs"][1]["status"].startswith("killed")  # the next run says what happened to it
     assert statuses(log) == {"generate": "skipped", "features": "skipped", "experiment": "ran", "report": "ran"}
     for a in ACTS:
         np.testing.assert_array_equal(D.load_dataset(out / "data" / a)["pca"], D.load_dataset(out0 / "data" / a)["pca"])
@@ -534,3 +535,75 @@ def test_presets():
     assert tiny.dataset.n_samples < 100
     assert quick.experiment.conditions_pca == FAMILIES  # every bootstrapping condition
     assert quick.reproduce.spaces == ("pca", "rhf")
+
+
+def test_a_killed_run_is_marked_and_its_stage_time_counted(tmp_path, monkeypatch):
+    """SIGKILL leaves ``running`` in the log; the heartbeat file says how long the stage had
+    run, and the next invocation marks the run ``killed`` and adds that time to the timings."""
+    from relaff_jax.reproduce import run as RR
+
+    out = tmp_path / "run"
+    first = run(out)
+    paths = R.Paths(out)
+    log = json.loads(paths.log.read_text())
+    before = log["timings"]["experiment"]
+    log["runs"].append({"status": "running", "stages": {}, "started": "x"})  # as SIGKILL leaves it
+    paths.log.write_text(json.dumps(log))
+    (out / RR.HEARTBEAT).write_text(json.dumps({"stage": "experiment", "seconds": 12.5, "run_seconds": 20.0,
+                                                 "at": "2026-12-05 17:00:00"}))
+    log = run(out)
+    killed = log["runs"][-2]
+    assert killed["status"] == "killed (in experiment)"
+    assert killed["stages"]["experiment"] == {"status": "killed", "seconds": 12.5, "counted_until": "2026-12-05 17:00:00"}
+    assert log["timings"]["experiment"] == pytest.approx(before + 12.5)
+    assert not (out / RR.HEARTBEAT).exists() and first["runs"][-1]["status"] == "complete"
+
+
+def test_the_heartbeat_records_the_running_stage(tmp_path, monkeypatch):
+    from relaff_jax.reproduce import run as RR
+
+    monkeypatch.setattr(RR, "HEARTBEAT_SECONDS", 0.05)
+    (tmp_path / "r").mkdir()
+    beat = RR._Heartbeat(R.Paths(tmp_path / "r"), lambda: ("features", 3.0, 7.0))
+    t0 = time.time()
+    while not (tmp_path / "r" / RR.HEARTBEAT).exists() and time.time() - t0 < 10:
+        time.sleep(0.02)
+    got = json.loads((tmp_path / "r" / RR.HEARTBEAT).read_text())
+    beat.stop()
+    assert (got["stage"], got["seconds"], got["run_seconds"]) == ("features", 3.0, 7.0)
+    assert not (tmp_path / "r" / RR.HEARTBEAT).exists()  # a finished invocation's log has the exact figures
+
+
+TERM_SCRIPT = textwrap.dedent("""
+    import json, sys
+    sys.path.insert(0, {tests!r})
+    import test_reproduce as T
+    from relaff_jax import cli
+    from relaff_jax.reproduce import features, generate
+    slow = lambda a, b: (lambda fn: (lambda k, n: (__import__("time").sleep(0.5), fn(k, n))[1]))(T.rollout_factory(a, b)[0])
+    generate.rollout_factory_for = lambda cfg: (lambda a, b: (slow(a, b), {{"stand_in": a}}, None))
+    features.factories_for = lambda cfg: (T.feature_factory, T.HOOKS["feature_config_fn"])
+    sets = [x for k, v in T.FAST.items() for x in ("--set", f"{{k}}={{json.dumps(v)}}")]
+    sys.exit(cli.main(["reproduce", "--preset", "tiny", "--out", sys.argv[1], "--seed", "3", "--jobs", "1",
+                       "--no-progress"] + sets))
+""")
+
+
+@pytest.mark.slow  # a subprocess run stopped with SIGTERM
+def test_sigterm_is_one_line_and_the_run_log_says_terminated(tmp_path):
+    out = tmp_path / "run"
+    script = tmp_path / "go.py"
+    script.write_text(TERM_SCRIPT.format(tests=os.path.dirname(__file__)))
+    proc = subprocess.Popen([sys.executable, str(script), str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    t0 = time.time()
+    while time.time() - t0 < 240 and not (out / "data" / "lift").is_dir():
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 143, err
+    lines = [x for x in err.splitlines() if x.strip()]
+    assert len(lines) == 1 and lines[0].startswith("relaff reproduce: terminated (SIGTERM)"), err
+    log = json.loads((out / R.RUN_LOG).read_text())
+    assert log["runs"][-1]["status"] == "terminated (SIGTERM) (in generate)"
+    assert log["timings"]["generate"] > 0

@@ -4,6 +4,7 @@ real settled scenes (labels from a test rule, not from the arm's actions)."""
 import base64
 import json
 import os
+import shutil
 import re
 import subprocess
 import sys
@@ -310,7 +311,9 @@ def test_full_report(scene_run, tmp_path):
     reach = json.loads((out / "reach.json").read_text())
     assert reach["subsets"] == ["positives", "feasible negatives", "infeasible negatives"]
     cmp_md = tmp_path / "compare.md"
-    assert cli.main(["compare", f"a={out}", f"b={out}", "--size", "10", "--out", str(cmp_md)]) == 0
+    assert cli.main(["compare", f"a={out}", f"b={out}", "--size", "10", "--out", str(cmp_md)]) == 2  # one folder twice
+    shutil.copytree(out, tmp_path / "report_b")
+    assert cli.main(["compare", f"a={out}", f"b={tmp_path / 'report_b'}", "--size", "10", "--out", str(cmp_md)]) == 0
     page = cmp_md.read_text()
     nb = reach["spaces"]["pca"]
     i = nb["sizes"].index(10)

@@ -7,7 +7,8 @@ library functions; the stages themselves know nothing of argparse.
 Errors: a ``relaff_jax.errors.UserError`` (bad option, unusable folder, corrupt data) is
 printed as one line, ``relaff COMMAND: error: MESSAGE`` (``relaff real SUBCOMMAND: ...``
 for the ``real`` commands), exit code 2, the prefix argparse uses
-for its own errors. Any other exception is a bug and keeps its full traceback (exit 1).
+for its own errors; a full disk (ENOSPC, wherever it surfaces) is one line naming the folder and
+the space left, exit code 2. Any other exception is a bug and keeps its full traceback (exit 1).
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import sys
 
 from relaff_jax import quiet
 from relaff_jax.errors import UserError
+from relaff_jax.io import disk_full, is_no_space
 
 # Modules that contribute subcommands, in pipeline order.
 COMMAND_MODULES = (
@@ -61,11 +63,23 @@ class _Commands(argparse._SubParsersAction):
         return super().add_parser(name, **kwargs)
 
 
+def version() -> str:
+    """The installed package's version (and where it runs from)."""
+    from importlib.metadata import PackageNotFoundError
+    from importlib.metadata import version as v
+
+    try:
+        return v("relaff_jax")
+    except PackageNotFoundError:  # run from a source tree that was not installed
+        return "unknown (not installed)"
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = Parser(
         prog="relaff",
         description="Relational affordances of object pairs: simulate, perceive, learn, bootstrap.",
     )
+    parser.add_argument("--version", action="version", version=f"relaff {version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
@@ -78,8 +92,43 @@ def command_name(args: argparse.Namespace) -> str:
     return " ".join(x for x in (args.command, getattr(args, "real_command", None)) if x)
 
 
+def _where(e: BaseException):
+    """The folder a failed write named (``OSError.filename``, or a quoted path in the text of
+    a wrapped error), else the working folder."""
+    import re
+    from pathlib import Path
+
+    name = getattr(e, "filename", None)
+    if not name:
+        m = re.search(r'"(/[^"]+)"', str(e))
+        name = m.group(1) if m else None
+    return Path(name).parent if name else Path.cwd()
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised in the main thread like Ctrl-C: the stages' cleanup and the run log's
+    "interrupted" entry run as for an interrupt, and the command ends with one line."""
+
+
+def _on_sigterm(signum, frame):  # pragma: no cover - exercised through a subprocess
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     quiet.install()
+    import signal
+    import threading
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if main_thread else None
+    try:
+        return _run(argv)
+    finally:
+        if main_thread:  # a caller (a test, a notebook) keeps its own handler
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     name = command_name(args)
@@ -88,10 +137,16 @@ def main(argv: list[str] | None = None) -> int:
     except UserError as e:
         print(f"relaff {name}: error: {e}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"relaff {name}: interrupted; what was finished is kept, rerun the same command "
+    except Exception as e:  # a full disk, wherever it surfaces and whatever wraps it; else a bug
+        if not is_no_space(e):
+            raise
+        print(f"relaff {name}: error: {disk_full(e, _where(e))}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt as e:
+        how, code = ("terminated (SIGTERM)", 143) if isinstance(e, Terminated) else ("interrupted", 130)
+        print(f"relaff {name}: {how}; what was finished is kept, rerun the same command "
               "to continue", file=sys.stderr)
-        return 130
+        return code
 
 
 if __name__ == "__main__":  # pragma: no cover

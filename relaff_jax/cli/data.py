@@ -13,7 +13,24 @@ from relaff_jax import data as D
 from relaff_jax.data import export as X
 
 
+def _not_a_run_folder(path) -> None:
+    """``relaff info RUN_FOLDER`` (a ``relaff reproduce`` folder, not a dataset): name the
+    datasets it holds instead of "not a relaff dataset"."""
+    from pathlib import Path
+
+    from relaff_jax.constants import ACTIONS
+    from relaff_jax.errors import UserError
+
+    root = Path(path)
+    if (root / "run.json").is_file() and not (root / "relaff_dataset.json").exists():
+        held = [a for a in ACTIONS if (root / "data" / a).is_dir()]
+        where = ", ".join(str(root / "data" / a) for a in held[:3]) + (", ..." if len(held) > 3 else "")
+        raise UserError(f"{root} is a relaff reproduce run folder, not a dataset; its datasets are "
+                        f"{root / 'data'}/<action>" + (f" ({where})" if held else " (none made yet)"))
+
+
 def _cmd_info(args) -> int:
+    _not_a_run_folder(args.dir)
     d = D.info(args.dir)
     if args.json:
         print(json.dumps(d, sort_keys=True))
@@ -23,6 +40,7 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_anatomy(args) -> int:
+    _not_a_run_folder(args.dir)
     d = D.anatomy(args.dir)
     print(json.dumps(d, sort_keys=True) if args.json else D.format_anatomy(d))
     return 0
@@ -30,6 +48,7 @@ def _cmd_anatomy(args) -> int:
 
 def _cmd_export(args) -> int:
     # export_dataset checks --out and --format before it loads or writes anything
+    _not_a_run_folder(args.dir)
     paths = D.export_dataset(args.dir, args.out, format=args.format, overwrite=args.overwrite)
     for p in paths.values():
         print(f"wrote {p}")

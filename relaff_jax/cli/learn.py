@@ -26,6 +26,9 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         raise UserError("give either --data or --synthetic, not both")
     if not args.synthetic and not args.data:
         raise UserError("give --data DIR... (one featured dataset per action) or --synthetic N")
+    if args.synthetic < 0:
+        raise UserError(f"--synthetic N takes a number of samples per action >= 1, got {args.synthetic}")
+    options.check_counts(args, seed="--seed", jobs="--jobs")
     options.precheck(args)
     from relaff_jax import learn
 
@@ -54,6 +57,9 @@ def cmd_report(args: argparse.Namespace) -> int:
         data_dirs = {}
         for folder in args.data:
             action = read_sidecar(Path(folder))["action"]
+            if action not in ACTIONS:  # refused, not dropped: the report would silently lack it
+                raise UserError(f"--data {folder}: its sidecar names the action {action!r}, not one of "
+                                f"{', '.join(ACTIONS)}")
             if action in data_dirs:
                 raise UserError(f"--data: {data_dirs[action]} and {folder} are both {action} datasets; give one")
             data_dirs[action] = folder
@@ -68,14 +74,19 @@ def cmd_report(args: argparse.Namespace) -> int:
 def cmd_compare(args: argparse.Namespace) -> int:
     from relaff_jax.report.readings import compare
 
-    reports = {}
+    if args.size < 1:
+        raise UserError(f"--size is a training size >= 1, got {args.size}")
+    reports, folders = {}, {}
     for item in args.readings:
         name, sep, path = item.partition("=")
         if not sep or not name or not path:
             raise UserError(f"a reading is NAME=REPORT_DIR, got {item!r}")
         if name in reports:
             raise UserError(f"reading {name!r} given twice")
-        reports[name] = path
+        real = Path(path).resolve()
+        if real in folders:
+            raise UserError(f"readings {folders[real]!r} and {name!r} are the same folder {path}; give different reports")
+        reports[name], folders[real] = path, name
     page = compare(reports, args.out, size=args.size)
     if args.out:
         print(f"wrote {args.out}")

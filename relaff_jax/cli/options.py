@@ -64,6 +64,23 @@ def overrides_of(args: argparse.Namespace, flags: dict[str, tuple[str, Any]] | N
     return {**out, **sets}
 
 
+_RANGES = {"seed": (0, 2**32, "a seed"), "jobs": (0, 4096, "a number of worker processes (0: all cores)"),
+           "index": (0, None, "a sample index")}
+
+
+def check_counts(args: argparse.Namespace, **flags: str) -> None:
+    """The command's integer options ``{attribute: flag}`` in their ranges (a seed in
+    [0, 2**32), jobs >= 0, ...): one line before any work, not a numpy error after it."""
+    for attr, flag in flags.items():
+        value = getattr(args, attr, None)
+        if value is None:
+            continue
+        lo, hi, what = _RANGES[attr]
+        if value < lo or (hi is not None and value >= hi):
+            span = f">= {lo}" if hi is None else f"in [{lo}, {hi if hi < 2**20 else '2**32'})"
+            raise UserError(f"{flag} is {what} {span}, got {value}")
+
+
 def check_out_dir(path: Path, what: str = "--out") -> None:
     """An output folder must be a folder (or not exist yet) in a writable place
     (``relaff_jax.io.check_writable_dir``)."""

@@ -55,6 +55,7 @@ def register(subparsers) -> None:
 
 def cmd_features(args) -> int:
     """``relaff features``: attach features, print their shapes."""
+    options.check_counts(args, seed="--seed")
     options.precheck(args)
     options.check_in_dir(args.dir)
     from relaff_jax.reproduce.features import add_features
@@ -69,6 +70,7 @@ def cmd_features(args) -> int:
 
 def cmd_show(args) -> int:
     """``relaff show``: draw sample ``--index`` of the dataset into ``--out``."""
+    options.check_counts(args, index="--index")
     options.precheck(args)
     options.check_in_dir(args.dir)
     out = args.out or Path("action.gif" if args.rollout else "scene.png")
@@ -77,9 +79,13 @@ def cmd_show(args) -> int:
     from relaff_jax.data.show import show_sample
 
     bars = options.PhaseBars("show") if args.rollout else None
+    import sys
+
+    say = lambda m: print(f"show: {m}", file=sys.stderr, flush=True)  # noqa: E731
     try:
         acts = {k[len("action."):]: v for k, v in options.overrides_of(args).items() if k.startswith("action.")}
-        print(show_sample(tree, args.dir, args.index, out, rollout=args.rollout, progress=bars, action_overrides=acts))
+        print(show_sample(tree, args.dir, args.index, out, rollout=args.rollout, progress=bars, action_overrides=acts,
+                          say=say))
     finally:
         if bars is not None:
             bars.close()

@@ -9,8 +9,8 @@
 * ``propose SCENES --out labels.csv [--pictures DIR] [--corrections C.csv]``: the geometric
   rule's relation for every pair, pictures to check them by eye, corrections applied, the
   labels file with checksums (``real.labelling``);
-* ``check SCENES --labels L [--only-present]``: validate a labels file against the scenes, count
-  the pairs;
+* ``check SCENES --labels L [--only-present] [--write-checksums]``: validate a labels file
+  against the scenes, count the pairs (first writing its sha256 column with ``--write-checksums``);
 * ``study SCENES --labels L --out DIR [--test T --test-labels TL] [--only-present]``: real
   features, simulated relation scenes from the training folder's sensor pose, the four
   experiments within the folder (split by scene unless ``--set real.experiment.split=pair``) and,
@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from relaff_jax.cli.options import add_set, check_in_dir, check_in_file, check_out_dir, check_out_file
+from relaff_jax.cli.options import add_set, check_counts, check_in_dir, check_in_file, check_out_dir, check_out_file
 from relaff_jax.errors import UserError
 
 SET_EXAMPLE = "real.pipeline.kmeans.background=false"
@@ -82,6 +82,9 @@ def register(subparsers) -> None:
     p.add_argument("--labels", type=Path, required=True, help="labels CSV (relaff real propose, or by hand)")
     p.add_argument("--only-present", action="store_true",
                    help="check only the labelled scenes the folder holds (and say how many were skipped)")
+    p.add_argument("--write-checksums", action="store_true",
+                   help="first write (or rewrite) the labels file's sha256 column from the scene files, in place "
+                        "(a labels file made by hand or in a spreadsheet has none)")
     p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("study", help="the four experiments of paper VI and their report (resumable)",
@@ -145,6 +148,7 @@ def _check_inputs(args) -> None:
 
 
 def cmd_segment(args) -> int:
+    check_counts(args, seed="--seed")
     tree = real_config(args, {"pipeline.kmeans.background": ("--no-background", False if args.no_background else None)})
     _check_inputs(args)
     if args.out:
@@ -156,6 +160,7 @@ def cmd_segment(args) -> int:
 
 
 def cmd_show(args) -> int:
+    check_counts(args, seed="--seed")
     tree = real_config(args)
     check_in_file(args.scene, f"scene file {args.scene} does not exist")
     check_out_file(args.out)
@@ -181,11 +186,12 @@ def cmd_check(args) -> int:
     _check_inputs(args)
     from relaff_jax.real.stages import run_check
 
-    run_check(args.scenes, args.labels, only_present=args.only_present)
+    run_check(args.scenes, args.labels, only_present=args.only_present, write_checksums=args.write_checksums)
     return 0
 
 
 def cmd_study(args) -> int:
+    check_counts(args, seed="--seed")
     cfg = real_config(args, {
         "sim.per_relation": ("--per-relation", args.per_relation), "sim.chunk": ("--chunk", args.chunk),
         "sim.seed": ("--seed", args.seed), "sim.normals": ("--sim-normals", args.sim_normals),

@@ -48,6 +48,37 @@ def register(sub) -> None:
     p.set_defaults(func=cmd_reproduce)
 
 
+def _print_log_summary(root: Path) -> dict:
+    """The run log's figures, printed before the (slower) check of every stage's files: each
+    invocation's start, status and wall time. Returns the per-stage ``timings`` (seconds spent
+    computing each stage's current output). Nothing for a folder without a readable log (the
+    stage check then says why)."""
+    import sys
+
+    from relaff_jax import io as rio
+    from relaff_jax.reproduce.progress import human_time
+
+    try:
+        log = rio.read_json(root / "run.json")
+        runs, timings = list(log["runs"]), dict(log.get("timings", {}))
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+    print(f"{root}: preset {log.get('preset')}, seed {log.get('seed')}, {len(runs)} invocation(s); "
+          f"computing time so far {human_time(sum(timings.values()))}")
+    for r in runs[-3:]:
+        secs, extra = r.get("seconds"), ""
+        if r is runs[-1] and r.get("status") == "running":  # running now, or killed: its heartbeat says where
+            try:
+                beat = rio.read_json(root / ".run.heartbeat.json")
+                extra = f" (last heartbeat {beat['at']}: {beat['stage']}, {human_time(beat['run_seconds'])} in)"
+            except (OSError, ValueError, KeyError, TypeError):
+                pass
+        print(f"  {r.get('started', '?')}  {r.get('status', '?')}{extra}" + (f", {human_time(secs)}" if secs else ""))
+    print(f"{'stage':<10} {'state':<9} {'time':>9}  why (checking the files...)")
+    sys.stdout.flush()
+    return timings
+
+
 def cmd_reproduce(args: argparse.Namespace) -> int:
     from relaff_jax.runconfig import precheck
 
@@ -58,15 +89,19 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     args.out = args.out if args.out is not None else args.dir
     if args.out is None:
         raise UserError("the run folder is required: --out DIR")
+    options.check_counts(args, seed="--seed", jobs="--jobs")
     overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine)})
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     from relaff_jax import reproduce as R
     from relaff_jax.report.folder import html
+    from relaff_jax.reproduce.progress import human_time
 
     if args.status:
+        timings = _print_log_summary(Path(args.out))  # from the run log at once; the stages' check reads their files
         for stage, st in R.status(args.out).items():
-            print(f"{stage:<10} {st.state:<9} {st.why}")
+            t = timings.get(stage)
+            print(f"{stage:<10} {st.state:<9} {'-' if t is None else human_time(t):>9}  {st.why}")
         return 0
     options.check_out_dir(args.out)
     if args.plugins:  # the user's conditions, registered before the study's config is checked

@@ -80,6 +80,9 @@ def cmd_objects(args) -> int:
 
 
 def cmd_scenes(args) -> int:
+    options.check_counts(args, seed="--seed")
+    if args.n < 1 or args.batch < 1:
+        raise UserError(f"N and --batch are counts >= 1, got {args.n} and {args.batch}")
     options.precheck(args)
     from relaff_jax.sim import scenes as sc
     from relaff_jax.sim import world as wd
@@ -104,6 +107,7 @@ def cmd_scenes(args) -> int:
 def cmd_generate(args) -> int:
     if args.action not in ACTIONS:
         raise UserError(f"unknown action {args.action!r}; valid actions: {', '.join(ACTIONS)}")
+    options.check_counts(args, seed="--seed")
     options.check_out_dir(Path(args.out))  # before any simulation (minutes) or world building
     # the flags are aliases of tree keys: everything below reads the tree, which is what is recorded
     tree = options.config(args, flags={
@@ -121,6 +125,11 @@ def cmd_generate(args) -> int:
                          names=("--samples", "--max-rollouts (dataset.max_rollouts)"))
     if bound:
         raise UserError(bound)
+    from relaff_jax.data.validate import check_dataset_dir
+
+    # a foreign folder, or a dataset of other settings, refused before the motor programs compile
+    check_dataset_dir(Path(args.out), {"action": args.action, "n_samples": n, "seed": args.seed, "batch": batch,
+                                       "engine": engine})
     with options.cluster(args, Path(args.out)) as client:
         try:  # the same stage function reproduce runs for each action
             summary = generate_one(tree, args.action, args.out, args.seed, client=client, progress=not args.json)

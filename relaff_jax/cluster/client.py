@@ -53,8 +53,10 @@ def connect(address: str | Address, folder: str | os.PathLike | None = None, tim
     cluster = None
     with dask.config.set({"distributed.worker.multiprocessing-method": "spawn"}):
         if addr.kind == "local":
+            # loopback only (scheduler and dashboard), on free ports: several runs may share a host, and no
+            # other machine can reach them; any local user still can (docs/cluster.md, "Security")
             cluster = distributed.LocalCluster(n_workers=addr.workers, threads_per_worker=1, processes=True,
-                                               dashboard_address=":0",  # a free port: several runs may share a host
+                                               host="127.0.0.1", dashboard_address="127.0.0.1:0",
                                                silence_logs=logging.ERROR)
             client = distributed.Client(cluster)
         else:

@@ -16,11 +16,13 @@ from relaff_jax.errors import UserError
 
 
 def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.PathLike, *,
-                rollout: bool = False, progress: Any = None, action_overrides: Any = None) -> str:
+                rollout: bool = False, progress: Any = None, action_overrides: Any = None,
+                say: Any = None) -> str:
     """Draw sample ``index`` of the dataset ``folder`` into ``out`` with the ``RunConfig``
     ``tree``'s perception (the PNG) or the dataset's recorded action config (the GIF); return
     what was written. ``action_overrides`` ({"lift_height": 0.3}: the ``--set action.*`` keys)
     change the recorded action config of the GIF's replay.
+    ``say(text)``: told what the PNG's silent part does (building the world, compiling).
     ``progress``: the GIF's phase bars (``sim.animate.animate_sample``)."""
     from relaff_jax.data.load import load_dataset
 
@@ -37,9 +39,15 @@ def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.
     pair, qpos = int(ds["pair"][index]), ds["qpos_settled"][index]
     if rollout:
         return _rollout_gif(folder, ds, index, out, progress, action_overrides or {})
+    if say is not None:  # the inputs are checked; what follows compiles for tens of seconds: say so
+        say(f"sample {index}: building the world and compiling the camera (tens of seconds the first time)...")
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import world as wd
 
+    if "feasible" in ds:  # whether the arm could run the program: a negative label may be reach, not relation
+        title += f", program {'feasible' if bool(ds['feasible'][index]) else 'infeasible (out of reach)'}"
+    else:
+        title += ", program feasibility not recorded"
     path = from_sim.show_scene(wd.build_world(tree.action.phys), pair, qpos, out,
                                from_sim.show_key(int(ds["rollout_id"][index])), cfg=tree.perception, title=title)
     return f"wrote {path}"

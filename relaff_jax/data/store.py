@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import logging
 import os
 import re
 import shutil
@@ -50,6 +51,21 @@ def sha256(a: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
 
 
+class _NoSpaceFilter(logging.Filter):
+    """Drops orbax's own log of a full disk (an ERROR with its thread's traceback): the write
+    re-raises it and the CLI reports it as one line; every other record passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        return not ((exc is not None and rio.is_no_space(exc)) or "No space left on device" in record.getMessage())
+
+
+def _quiet_full_disk_logs() -> None:
+    log = logging.getLogger("absl")
+    if not any(isinstance(f, _NoSpaceFilter) for f in log.filters):
+        log.addFilter(_NoSpaceFilter())
+
+
 def write_chunk(path: Path, arrays: Mapping[str, np.ndarray], extra: Mapping[str, Any]) -> None:
     """Write one chunk dir (orbax tree ``arrays/`` + ``meta.json``) atomically to ``path``."""
     tree: dict[str, np.ndarray] = {}
@@ -63,8 +79,14 @@ def write_chunk(path: Path, arrays: Mapping[str, np.ndarray], extra: Mapping[str
     meta = dict(extra)
     meta["arrays"] = {k: {"dtype": a.dtype.str, "shape": list(a.shape), "sha256": sha256(a)} for k, a in tree.items()}
     meta["vocab"] = vocab
+    _quiet_full_disk_logs()
     with rio.atomic_directory(path) as tmp:
-        _checkpointer().save(str((tmp / "arrays").resolve()), tree)
+        try:
+            _checkpointer().save(str((tmp / "arrays").resolve()), tree)
+        except Exception as e:  # tensorstore's full disk is a ValueError: one line naming the folder
+            if rio.is_no_space(e):
+                raise rio.disk_full(e, path.parent, sum(a.nbytes for a in tree.values())) from None
+            raise
         rio.atomic_write_json(tmp / "meta.json", meta)
         # Only a chunk that reads back lands: a killed driver's task still writing on a worker
         # can have its temporary folder removed under it by the restarted driver's clean_tmp
@@ -182,9 +204,33 @@ def read_sidecar(path: Path) -> dict[str, Any]:
     for key in ("action", "n_samples", "seed", "batch", "status", "counts"):
         if key not in meta:
             raise CorruptDatasetError(f"{path}: sidecar lacks {key!r}")
+    _check_types(path, meta)
     meta.setdefault("engine", "mjx")  # sidecars from before the native engine existed are MJX's
     meta["config"] = config_record(meta.get("config"), meta["action"])
     return meta
+
+
+_SIDECAR_TYPES = {"action": str, "status": str, "n_samples": int, "seed": int, "batch": int, "counts": dict,
+                  "selection": dict, "selection_scheme": dict, "engine": str}
+_COUNT_KEYS = ("chunks", "positives", "negatives", "in_hand", "rollouts")
+
+
+def _check_types(path: Path, meta: dict) -> None:
+    """Each field the readers use has its JSON type (a sidecar edited by hand, or by another
+    program, is refused by name rather than failing deep inside ``info`` or ``load``)."""
+    def bad(key, want, got):
+        return CorruptDatasetError(f"{path}: sidecar {SIDECAR}: {key} should be {want}, got {got!r:.60}")
+
+    for key, t in _SIDECAR_TYPES.items():
+        v = meta.get(key)
+        if key in meta and (not isinstance(v, t) or (t is int and isinstance(v, bool))):
+            raise bad(key, "an integer" if t is int else f"a JSON {'object' if t is dict else 'string'}", v)
+    for key in _COUNT_KEYS:
+        v = meta["counts"].get(key)
+        if key in meta["counts"] and (isinstance(v, bool) or not isinstance(v, int) or v < 0):
+            raise bad(f"counts.{key}", "an integer >= 0", v)
+    if "chunks" not in meta["counts"]:
+        raise CorruptDatasetError(f"{path}: sidecar {SIDECAR} lacks counts.chunks")
 
 
 def config_record(record: Any, action: str) -> Any:
@@ -205,9 +251,12 @@ def writer_lock(path: Path) -> Iterator[None]:
     """
     import fcntl
 
-    try:
-        fd = os.open(path / LOCK, os.O_RDWR | os.O_CREAT, 0o644)
+    try:  # never through a link: a planted lock symlink must not create or lock its target
+        fd = os.open(path / LOCK, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
     except OSError as e:
+        if (path / LOCK).is_symlink():
+            raise DatasetError(f"{path / LOCK} is a symbolic link; relaff locks only a plain file there: remove "
+                               "the link and rerun") from None
         raise DatasetError(f"{path}: directory is not writable ({e})") from e
     try:
         try:

@@ -4,18 +4,20 @@ Takes what a ``rollout_fn`` or a feature ``compute_fn`` returned for one batch; 
 of numpy arrays (strings as numpy ``str``, labels bool, int relation codes and object ids
 turned into names) or a ``DatasetError`` saying which field is wrong. ``schema_of`` gives
 each field's dtype and per-sample shape; ``check_schema`` refuses a chunk whose fields differ
-from earlier chunks'.
+from earlier chunks'. ``check_dataset_dir`` tells, before any simulation, whether a folder can
+take (or resume) a dataset of given settings.
 """
 from __future__ import annotations
 
 import re
+from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from relaff_jax.constants import RELATIONS
-from relaff_jax.data.config import REQUIRED_FIELDS, RESERVED_FIELDS
-from relaff_jax.data.errors import DatasetError
+from relaff_jax.data.config import CHUNKS, LOCK, REQUIRED_FIELDS, RESERVED_FIELDS, SELECTION, SIDECAR
+from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, ForeignDirectoryError
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -120,3 +122,26 @@ def standardize_features(out: Any, batch: int, taken: set[str]) -> dict[str, np.
     if "unseen" in arrays and arrays["unseen"].dtype.kind != "b":
         raise DatasetError(f"feature 'unseen' must be bool, got {arrays['unseen'].dtype}")
     return arrays
+
+
+def check_dataset_dir(path: Path, expected: Mapping[str, Any]) -> None:
+    """What ``prepare_dir`` and a resume would refuse, told before any simulation is built
+    (MJX compiles for minutes): ``path`` a file, a foreign non-empty folder, a truncated
+    dataset, or a dataset of other ``expected`` sidecar values (action, seed, ...). Writes nothing."""
+    path = Path(path)
+    if not path.exists() or (path.is_dir() and not any(p.name != LOCK for p in path.iterdir())):
+        return
+    if not path.is_dir():
+        raise DatasetError(f"{path}: exists and is not a directory")
+    if not (path / SIDECAR).exists():
+        if (path / CHUNKS).exists() or (path / SELECTION).exists():
+            raise CorruptDatasetError(f"{path}: dataset sidecar {SIDECAR} is missing (truncated dataset)")
+        raise ForeignDirectoryError(f"{path}: exists, is not empty and is not a relaff dataset; give a new or "
+                                    "empty folder")
+    from relaff_jax.data.store import mismatch, read_sidecar
+
+    meta = read_sidecar(path)
+    diff = mismatch(meta, dict(expected), sorted(expected))
+    if diff:
+        raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff)
+                                   + "; write to a new folder, or resume it with its own settings")

@@ -124,24 +124,51 @@ class PackedBits:
         return full if dtype is None else full.astype(dtype)
 
 
+def _check_meta(meta_path: Path, meta: Any) -> None:
+    """``experiment.json`` is this program's: a JSON object with its format, spaces, actions
+    and config; a foreign or hand-edited file is refused by name."""
+    def bad(what):
+        return ResultsNotFound(f"{meta_path}: not an experiment record of relaff_jax ({what}); give the folder "
+                               "`relaff experiment --out` wrote, or rerun the experiment")
+
+    if not isinstance(meta, dict):
+        raise bad(f"a JSON {type(meta).__name__}, not an object")
+    missing = [k for k in ("format", "spaces", "actions", "config") if k not in meta]
+    if missing:
+        raise bad(f"no {', '.join(missing)}")
+    if meta["format"] != FORMAT_VERSION:
+        raise bad(f"format {meta['format']!r}, this version reads {FORMAT_VERSION}")
+    if not isinstance(meta["spaces"], list) or not set(map(str, meta["spaces"])) <= set(SPACES) or not meta["spaces"]:
+        raise bad(f"spaces {meta['spaces']!r:.60}, expected some of {list(SPACES)}")
+    if not isinstance(meta["actions"], list) or not all(isinstance(a, str) for a in meta["actions"]):
+        raise bad(f"actions {meta['actions']!r:.60}")
+    if not isinstance(meta["config"], dict):
+        raise bad("config is not an object")
+
+
 def load_results(results_dir: str | os.PathLike) -> Results:
-    """The ``Results`` of an experiment folder (every space in its ``experiment.json``)."""
+    """The ``Results`` of an experiment folder (every space in its ``experiment.json``).
+    A foreign or damaged ``experiment.json`` or ``results.npz`` is a ``UserError`` naming the file."""
     root = Path(results_dir)
     meta_path = L.meta(root)
     if not meta_path.exists():
         raise ResultsNotFound(f"{root} is not an experiment folder (no {L.META})")
     meta = rio.read_json(meta_path)
+    _check_meta(meta_path, meta)
+    try:
+        config = from_dict(ExperimentConfig, meta["config"])
+    except (TypeError, ValueError, AttributeError) as e:
+        raise ResultsNotFound(f"{meta_path}: its config cannot be read by this version ({e})") from e
     spaces: dict[str, SpaceResults] = {}
     for space in meta["spaces"]:
         p = L.results(root, space)
         if not p.exists():
             raise ResultsNotFound(f"{p} missing: the {space} sweep has not finished (rerun `relaff experiment`)")
-        with np.load(p) as z:
-            arrays = {k: z[k] for k in z.files}
+        arrays = rio.load_npz(p)
         missing = {f.name for f in dataclasses.fields(SpaceResults)} - set(arrays)
         if missing:
             raise ResultsNotFound(f"{p} lacks {sorted(missing)}: written by another version; rerun the experiment")
         n = int(arrays["n_test"].max(initial=0))
         arrays["correct"] = PackedBits(arrays["correct"], n)
         spaces[space] = SpaceResults(**{f.name: arrays[f.name] for f in dataclasses.fields(SpaceResults)})
-    return Results(meta=meta, config=from_dict(ExperimentConfig, meta["config"]), spaces=spaces)
+    return Results(meta=meta, config=config, spaces=spaces)

@@ -50,6 +50,7 @@ from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.prep import prepare
 from relaff_jax.learn.protocol import (
     pool_sizes,
+    split_pools,
     block_fits,
     category_allowed,
     category_masks,
@@ -77,6 +78,8 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         if s not in SPACES:
             raise UserError(f"unknown space {s!r}; expected one of {SPACES}")
     actions = check_datasets(datasets, spaces)
+    for a in actions:  # every action's pools fit its data: refused before experiment.json is written
+        split_pools(len(datasets[a]["label"]), ACTIONS.index(a), cfg, seed)
     out = Path(out)
     meta = {
         "format": FORMAT_VERSION,

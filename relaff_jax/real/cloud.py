@@ -68,6 +68,9 @@ def make_cloud(xyz, rgb=None, label=None, fields=None, intrinsics=None, viewpoin
     if xyz.ndim not in (2, 3) or xyz.shape[-1] != 3:
         raise UserError(f"xyz must be (H, W, 3) or (N, 3), got shape {xyz.shape}{where}")
     lead = xyz.shape[:-1]
+    n_inf = int(np.isinf(xyz).sum())
+    if n_inf:  # NaN marks a missing point (organized clouds); infinity is damage
+        raise UserError(f"xyz holds {n_inf} infinite coordinates{where} (missing points are NaN)")
     if rgb is not None:
         rgb = np.asarray(rgb)
         if rgb.shape != lead + (3,):

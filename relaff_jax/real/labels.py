@@ -60,13 +60,49 @@ def _parse_id(text: str, where: str, column: str) -> int:
     return value
 
 
-def parse_labels(text: str, name: str = "labels") -> list[Label]:
-    """Rows of a labels CSV given as text; raises ``UserError`` on a bad header or row."""
-    reader = csv.reader(io.StringIO(text))
+def read_text(path: str | Path, what: str = "labels file") -> str:
+    """A CSV file's text: UTF-8, with or without the byte-order mark a spreadsheet writes;
+    another encoding is a ``UserError`` naming the file, the line and the byte."""
+    path = Path(path)
+    data = path.read_bytes()
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        guess = " (it looks like Latin-1 or Windows-1252)" if all(b < 0x80 or b >= 0xa0 for b in data) else ""
+        raise UserError(f"{what} {path}: not UTF-8{guess}: byte 0x{data[e.start]:02x} on line {line}; save it as "
+                        "UTF-8 (in a spreadsheet: 'CSV UTF-8')") from None
+
+
+def scene_name_problem(scene: str) -> str | None:
+    """Why ``scene`` cannot name a file of the scenes folder (a path leaving it, an absolute
+    path, a sub-folder), or None: a labels file names files in its folder only, so that it
+    can neither open nor hash files elsewhere."""
+    if scene in (".", "..") or "/" in scene or "\\" in scene or "\0" in scene or Path(scene).is_absolute():
+        return (f"scene {scene!r} is not a file name in the scenes folder (no folders, '..' or absolute paths; "
+                "e.g. learn17.pcd)")
+    return None
+
+
+NO_SHA_HINT = ("make it with `relaff real check SCENES --labels L --write-checksums`, which adds the column "
+               "from the scene files")
+
+
+def parse_labels(text: str, name: str = "labels", *, need_sha256: bool = True) -> list[Label]:
+    """Rows of a labels CSV given as text; raises ``UserError`` on a bad header or row.
+    ``need_sha256=False``: the ``sha256`` column may be absent (rows get ``sha256=""``), as
+    ``--write-checksums`` reads a file before it adds the column."""
+    reader = csv.reader(io.StringIO(text.removeprefix("\ufeff")))
     rows = [r for r in reader if r and any(c.strip() for c in r)]
     if not rows:
         raise UserError(f"{name}: empty labels file (expected the header {','.join(HEADER)})")
     header = tuple(c.strip() for c in rows[0])
+    no_sha = header == HEADER[:-1]
+    if no_sha:
+        if need_sha256:
+            raise UserError(f"{name}: no sha256 column (the scene files' checksums); {NO_SHA_HINT}")
+        rows = [r + ["0" * 64] for r in rows]
+        header = HEADER
     if header != HEADER:
         raise UserError(f"{name}: header is {','.join(header)!r}, expected {','.join(HEADER)!r}")
     out, seen, digests = [], set(), {}
@@ -77,6 +113,8 @@ def parse_labels(text: str, name: str = "labels") -> list[Label]:
         scene, a, b, rel, digest = (c.strip() for c in row)
         if not scene:
             raise UserError(f"{where}: empty scene name")
+        if scene_name_problem(scene):
+            raise UserError(f"{where}: {scene_name_problem(scene)}")
         ia, ib = _parse_id(a, where, "object_a"), _parse_id(b, where, "object_b")
         if ia == ib:
             raise UserError(f"{where}: object_a and object_b are both {ia}")
@@ -90,16 +128,29 @@ def parse_labels(text: str, name: str = "labels") -> list[Label]:
         seen.add(key)
         if digests.setdefault(scene, digest.lower()) != digest.lower():
             raise UserError(f"{where}: {scene} has two different sha256 values in the file")
-        out.append(Label(scene, ia, ib, rel, digest.lower()))
+        out.append(Label(scene, ia, ib, rel, "" if no_sha else digest.lower()))
     return out
 
 
-def read_labels(path: str | Path) -> list[Label]:
+def read_labels(path: str | Path, *, need_sha256: bool = True) -> list[Label]:
     """The rows of the labels CSV at ``path`` (format checks only; see ``validate``)."""
     path = Path(path)
     if not path.is_file():
         raise UserError(f"labels file {path} does not exist")
-    return parse_labels(path.read_text(encoding="utf-8"), str(path))
+    return parse_labels(read_text(path), str(path), need_sha256=need_sha256)
+
+
+def with_checksums(labels: Sequence[Label], folder: str | Path) -> list[Label]:
+    """``labels`` with each scene file's sha256 (``--write-checksums``); a scene missing from
+    ``folder`` is a ``UserError``."""
+    folder, sums, out = Path(folder), {}, []
+    for lab in labels:
+        if lab.scene not in sums:
+            if not (folder / lab.scene).is_file():
+                raise UserError(f"labels name an unknown scene {lab.scene!r}: no such file in {folder}")
+            sums[lab.scene] = file_sha256(folder / lab.scene)
+        out.append(dataclasses.replace(lab, sha256=sums[lab.scene]))
+    return out
 
 
 def format_labels(labels: Iterable[Label]) -> str:
@@ -129,6 +180,8 @@ def validate(labels: Sequence[Label], folder: str | Path,
     folder = Path(folder)
     ids_cache: dict[str, set[int]] = {}
     for lab in labels:
+        if scene_name_problem(lab.scene):
+            raise UserError(scene_name_problem(lab.scene))
         path = folder / lab.scene
         if lab.scene not in ids_cache:
             if not path.is_file():

@@ -25,6 +25,7 @@ from .cloud import RealCloud, make_cloud, pack_rgb, unpack_rgb
 _TYPES = {("F", 4): "<f4", ("F", 8): "<f8", ("I", 1): "i1", ("I", 2): "<i2", ("I", 4): "<i4",
           ("I", 8): "<i8", ("U", 1): "u1", ("U", 2): "<u2", ("U", 4): "<u4", ("U", 8): "<u8"}
 _DATA = ("ascii", "binary", "binary_compressed")
+_PAD = b"\x00 \t\r\n"  # what may follow the data: PCL's zero padding, a final newline
 
 
 def _header(raw: bytes, path) -> tuple[dict, int]:
@@ -57,8 +58,15 @@ def _layout(h: dict, path) -> tuple[list, list, int, int]:
         raise UserError(f"{path}: FIELDS ({n}), SIZE ({len(sizes)}), TYPE ({len(types)}) and "
                         f"COUNT ({len(counts)}) must have one entry per field")
     dts = []
+    try:
+        sizes, counts = [int(s) for s in sizes], [int(c) for c in counts]
+    except ValueError:
+        raise UserError(f"{path}: SIZE and COUNT must be integers, got {' '.join(map(str, sizes))} and "
+                        f"{' '.join(map(str, counts))}") from None
+    if min(counts) < 1:
+        raise UserError(f"{path}: COUNT must be >= 1 for every field, got {' '.join(map(str, counts))}")
     for name, s, t in zip(names, sizes, types):
-        dt = _TYPES.get((t.upper(), int(s)))
+        dt = _TYPES.get((t.upper(), s))
         if dt is None:
             raise UserError(f"{path}: field {name!r} has unsupported TYPE {t} SIZE {s}")
         dts.append(np.dtype(dt))
@@ -66,14 +74,16 @@ def _layout(h: dict, path) -> tuple[list, list, int, int]:
         width = int(h.get("WIDTH", ["0"])[0])
         height = int(h.get("HEIGHT", ["1"])[0])
         points = int(h.get("POINTS", [str(width * height)])[0])
-    except ValueError:
+    except (ValueError, IndexError):
         raise UserError(f"{path}: WIDTH, HEIGHT and POINTS must be integers") from None
+    if min(width, height, points) < 0:
+        raise UserError(f"{path}: WIDTH, HEIGHT and POINTS must be >= 0, got {width}, {height}, {points}")
     if width * height != points:
         raise UserError(f"{path}: WIDTH x HEIGHT = {width * height} but POINTS = {points}")
     for name in ("x", "y", "z"):
         if name not in names:
             raise UserError(f"{path}: PCD has no {name!r} field (FIELDS: {' '.join(names)})")
-    return list(zip(names, dts, [int(c) for c in counts])), width, height
+    return list(zip(names, dts, counts)), width, height
 
 
 def _columns(layout, raw: bytes, off: int, mode: str, npts: int, path) -> dict:
@@ -83,6 +93,9 @@ def _columns(layout, raw: bytes, off: int, mode: str, npts: int, path) -> dict:
         tokens = raw[off:].split()
         if len(tokens) < npts * width:
             raise UserError(f"{path}: truncated ascii data: {len(tokens)} values, need {npts} x {width}")
+        if len(tokens) > npts * width:  # the header's POINTS is wrong, or two files were joined
+            raise UserError(f"{path}: {len(tokens)} ascii values, but the header's {npts} points x {width} "
+                            f"values make {npts * width}: POINTS (WIDTH x HEIGHT) does not match the data")
         try:  # float64 holds every 32-bit integer exactly; "nan" parses
             vals = np.array(tokens[:npts * width]).astype(np.float64).reshape(npts, width)
         except ValueError:
@@ -97,6 +110,9 @@ def _columns(layout, raw: bytes, off: int, mode: str, npts: int, path) -> dict:
         need = rec * npts
         if len(raw) - off < need:
             raise UserError(f"{path}: truncated binary data: {len(raw) - off} bytes, need {need}")
+        if raw[off + need:].strip(_PAD):
+            raise UserError(f"{path}: {len(raw) - off - need} bytes after the header's {npts} points x {rec} bytes: "
+                            "POINTS (WIDTH x HEIGHT) does not match the data")
         st = np.dtype([(f"f{i}", dt, (c,)) for i, (_, dt, c) in enumerate(layout)])
         arr = np.frombuffer(raw, dtype=st, count=npts, offset=off)
         return {name: np.array(arr[f"f{i}"]).reshape(npts, c) for i, (name, _, c) in enumerate(layout)}
@@ -108,6 +124,9 @@ def _columns(layout, raw: bytes, off: int, mode: str, npts: int, path) -> dict:
                         f"{rec} bytes = {rec * npts})")
     if len(raw) - off - 8 < csize:
         raise UserError(f"{path}: truncated binary_compressed data: {len(raw) - off - 8} of {csize} bytes")
+    if raw[off + 8 + csize:].strip(_PAD):  # PCL pads its files with zero bytes: those are fine
+        raise UserError(f"{path}: {len(raw) - off - 8 - csize} bytes that are not padding after the compressed data ({csize} bytes, "
+                        "as its size word says): a damaged or joined file")
     buf = lzf.decompress(raw[off + 8:off + 8 + csize], usize)
     out, k = {}, 0
     for name, dt, c in layout:
@@ -141,8 +160,14 @@ def read_pcd(path) -> RealCloud:
     fields = {n: v[:, 0].reshape(shape) if v.shape[1] == 1 else v.reshape(shape + (v.shape[1],))
               for n, v in cols.items()}
     vp = h.get("VIEWPOINT")
+    try:
+        vp = [float(v) for v in vp] if vp else None
+    except ValueError:
+        raise UserError(f"{path}: VIEWPOINT must be 7 numbers, got {' '.join(vp)!r:.60}") from None
+    if vp is not None and (len(vp) != 7 or not np.all(np.isfinite(vp))):
+        raise UserError(f"{path}: VIEWPOINT must be 7 finite numbers (tx ty tz qw qx qy qz), got {len(vp)}")
     return make_cloud(xyz.reshape(shape + (3,)), rgb=rgb, label=label, fields=fields,
-                      viewpoint=[float(v) for v in vp] if vp else None, path=os.fspath(path))
+                      viewpoint=vp, path=os.fspath(path))
 
 
 def write_pcd(path, cloud: RealCloud, data: str = "binary_compressed") -> None:

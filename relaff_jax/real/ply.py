@@ -37,14 +37,21 @@ def _parse_header(raw: bytes, path):
         tok = line.split()
         if not tok or tok[0] in ("comment", "obj_info"):
             continue
+        if tok[0] in ("format", "property") and len(tok) < (2 if tok[0] == "format" else 3):
+            raise UserError(f"{path}: PLY header line {line.strip()!r} is incomplete")
         if tok[0] == "format":
             fmt = tok[1]
         elif tok[0] == "element":
+            if len(tok) != 3 or not tok[2].isdigit():
+                raise UserError(f"{path}: PLY element line {' '.join(tok)!r} is not 'element NAME COUNT'")
             elements.append((tok[1], int(tok[2]), []))
         elif tok[0] == "property":
             if not elements:
                 raise UserError(f"{path}: PLY property before any element")
             if tok[1] == "list":
+                if len(tok) != 5:
+                    raise UserError(f"{path}: PLY list property {line.strip()!r} is not 'property list COUNT_TYPE "
+                                    "ITEM_TYPE NAME'")
                 elements[-1][2].append((tok[-1], None))
             else:
                 dt = _PLY_TYPES.get(tok[1])

@@ -59,6 +59,9 @@ def score_scene(cloud, key, cfg: RealConfig = RealConfig(), known_count: bool = 
         raise UserError(f"{cloud.path or 'the cloud'} has no label field: nothing to score against")
     truth = hand_segmentation(cloud.label)
     n_true = len(object_ids(truth))
+    if n_true == 0:  # a single plane (or a scene labelled table only): an IoU mean over no objects is NaN
+        raise UserError(f"{cloud.path or 'the cloud'}: its hand segmentation holds no object (every point is table "
+                        "or background, e.g. a single-plane cloud): nothing to score")
     res = segment_scene(cloud, key, cfg, n_objects=n_true if known_count else None)
     out = object_ious(res["seg"], truth)
     out.update(scene=os.path.basename(cloud.path), n_true=n_true, k=res["k"], seg=res["seg"])

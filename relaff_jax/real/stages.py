@@ -69,7 +69,7 @@ def run_propose(tree, scenes: str | Path, out: str | Path, *, pictures: str | Pa
     from . import labels as lab
     from .labelling import propose_folder
 
-    fixes = read_corrections(corrections)
+    fixes = read_corrections(corrections, scenes)  # every row checked before any proposal
     labels, record = propose_folder(scenes, pictures, fixes, tree.real.rule)
     lab.write_labels(out, labels)
     counts = lab.relation_counts(labels)
@@ -79,11 +79,18 @@ def run_propose(tree, scenes: str | Path, out: str | Path, *, pictures: str | Pa
     return labels
 
 
-def run_check(scenes: str | Path, labels_path: str | Path, *, only_present: bool = False, say=print) -> list:
-    """Validate a labels file against its scenes and count the pairs (no settings)."""
+def run_check(scenes: str | Path, labels_path: str | Path, *, only_present: bool = False,
+              write_checksums: bool = False, say=print) -> list:
+    """Validate a labels file against its scenes and count the pairs (no settings).
+    ``write_checksums``: first (re)write its ``sha256`` column from the scene files (the file
+    may lack the column), atomically in place."""
     from . import labels as lab
     from .scene_source import object_ids
 
+    if write_checksums:
+        rows = lab.with_checksums(lab.read_labels(labels_path, need_sha256=False), scenes)
+        lab.write_labels(labels_path, rows)
+        say(f"{labels_path}: sha256 of {len({x.scene for x in rows})} scene files written")
     labels = lab.read_labels(labels_path)
     skipped = []
     if only_present:
@@ -96,24 +103,48 @@ def run_check(scenes: str | Path, labels_path: str | Path, *, only_present: bool
     return labels
 
 
-def read_corrections(path: str | Path | None) -> dict:
-    """The corrections CSV (scene,object_a,object_b,relation) as {(scene, a, b): relation}; {} for None."""
+def read_corrections(path: str | Path | None, folder: str | Path | None = None) -> dict:
+    """The corrections CSV (scene,object_a,object_b,relation) as {(scene, a, b): relation}; {} for None.
+    Every row is checked before any proposal is computed: its relation (beside, on_top or
+    none), its ids, and with ``folder`` that the scene file is there and holds both objects."""
+    from . import labels as lab
+
     if path is None:
         return {}
     if not Path(path).is_file():
         raise UserError(f"corrections file {path} does not exist")
     out = {}
-    with open(path, newline="") as f:
-        rows = list(csv.reader(f))
+    rows = list(csv.reader(lab.read_text(path, "corrections file").splitlines()))
     if not rows or [c.strip() for c in rows[0]][:4] != ["scene", "object_a", "object_b", "relation"]:
         raise UserError(f"{path}: header must start scene,object_a,object_b,relation")
+    ids: dict[str, set] = {}
     for i, r in enumerate(rows[1:], start=2):
-        if not r or r[0].startswith("#"):
+        if not r or not any(c.strip() for c in r) or r[0].startswith("#"):
             continue
+        where = f"{path} line {i}"
         try:
-            out[(r[0].strip(), int(r[1]), int(r[2]))] = r[3].strip()
+            scene, a, b, rel = r[0].strip(), int(r[1]), int(r[2]), r[3].strip()
         except (IndexError, ValueError):
-            raise UserError(f"{path} line {i}: expected scene,object_a,object_b,relation") from None
+            raise UserError(f"{where}: expected scene,object_a,object_b,relation") from None
+        if lab.scene_name_problem(scene):
+            raise UserError(f"{where}: {lab.scene_name_problem(scene)}")
+        if rel not in lab.REAL_RELATIONS + ("none",):
+            raise UserError(f"{where}: relation {rel!r} is not beside, on_top or none")
+        if a == b or min(a, b) < 2:
+            raise UserError(f"{where}: object ids {a},{b} are not two different ids >= 2")
+        if (scene, a, b) in out or (scene, b, a) in out:
+            raise UserError(f"{where}: pair {a},{b} of {scene} corrected twice")
+        if folder is not None:
+            from .scene_source import object_ids
+
+            if scene not in ids:
+                if not (Path(folder) / scene).is_file():
+                    raise UserError(f"{where}: no scene {scene!r} in {folder}")
+                ids[scene] = {int(x) for x in object_ids(Path(folder) / scene)}
+            for oid in (a, b):
+                if oid not in ids[scene]:
+                    raise UserError(f"{where}: {scene} has no object id {oid} (its objects: {sorted(ids[scene])})")
+        out[(scene, a, b)] = rel
     return out
 
 

@@ -16,7 +16,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax.learn import TABLE2_ROWS, layout
-from relaff_jax.report.formatting import SHORT, fmt
+from relaff_jax.report.formatting import SHORT, fmt, interval
 
 ROW = "DB1 average"
 
@@ -75,9 +75,9 @@ def borrow_blocks(rows: Mapping[str, Any], space: str) -> list[tuple]:
     table = []
     for k, t in enumerate(rows["actions"]):
         c_lo, c_hi = rows["db1_ci"][k]
-        table.append([t, fmt(rows["db1_avg"][k], 2), f"[{fmt(c_lo, 2)}, {fmt(c_hi, 2)}]",
+        table.append([t, fmt(rows["db1_avg"][k], 2), interval(c_lo, c_hi, 2),
                       f"{rows['best_corr'][k]:+.2f} ({SHORT.get(rows['best_with'][k], rows['best_with'][k])})",
-                      "nan" if not np.isfinite(rows["corr_stacked"][k]) else f"{rows['corr_stacked'][k]:+.2f}",
+                      "-" if not np.isfinite(rows["corr_stacked"][k]) else f"{rows['corr_stacked'][k]:+.2f}",
                       fmt(rows["nb_lo"][k]), fmt(rows["nb_hi"][k])])
     n = int(np.isfinite(rows["db1_avg"]).sum())
     text = (f"What one source can lend ({space.upper()}): DB1 adds another action's predicted output to the state, "

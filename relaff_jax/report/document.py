@@ -1,7 +1,7 @@
 """The report document as a list of blocks, rendered as Markdown and as one HTML page.
 
 Blocks: ``("h", level, text)``, ``("p", text)``, ``("ul", [items])``, ``("table", header,
-rows)``, ``("img", relative_path, caption)``; text may hold ``code`` and **bold**.
+rows)``, ``("img", relative_path, caption)``; text may hold ``code``, **bold** and *emphasis*.
 ``render_markdown`` gives ``report.md`` (images as relative links); ``render_html`` gives
 ``report.html``, one self-contained page with the images base64-embedded.
 """
@@ -16,7 +16,9 @@ from pathlib import Path
 def _inline_html(text: str) -> str:
     s = _html.escape(text, quote=False)
     s = re.sub(r"`([^`]+)`", r"<code>\1</code>", s)
-    return re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", s)
+    s = re.sub(r"\*\*([^*]+)\*\*", r"<b>\1</b>", s)
+    # *emphasis*: a word-bounded pair of single asterisks (not a product such as 2 * 3)
+    return re.sub(r"(?<![\w*])\*(?=\S)([^*]+?)(?<=\S)\*(?![\w*])", r"<i>\1</i>", s)
 
 
 _NUMERIC = re.compile(r"^[-+−]?(\d|\.\d|(inf|nan)\b)|^[-–—]$|^n/a$", re.IGNORECASE)

@@ -19,7 +19,7 @@ from relaff_jax.learn.config import after_ten_row
 
 AFTER_TEN_TEXT = {"whole": "the whole curve of the learner kept at n = {n}",
                   "causal": "nothing chosen before n = {n}: there an equal share of every candidate"}
-from relaff_jax.report.formatting import fmt, nanmean
+from relaff_jax.report.formatting import fmt, interval, nanmean
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,7 +86,8 @@ def combine(parts: list[dict[str, Any]]) -> str:
 def _text(label: str, j: Mapping[str, Any], nd: int = 3) -> str:
     lo, hi = j["interval"]
     side = ">" if j["above"] else "<"
-    return f"{label} {fmt(j['estimate'], nd)} [{fmt(lo, nd)}, {fmt(hi, nd)}] (claim {side} {j['bound']:g})"
+    ci = interval(lo, hi, nd)
+    return f"{label} {fmt(j['estimate'], nd)}{'' if ci == '-' else ' ' + ci} (claim {side} {j['bound']:g})"
 
 
 def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Number formatting shared by the report's tables, findings and document.
 
-``fmt`` (a float as text, ``nan`` for undefined), ``finite`` (a JSON-ready copy with NaN as
+``fmt`` (a float as text, ``-`` for undefined), ``interval``, ``finite`` (a JSON-ready copy with NaN as
 None), ``curve_average`` (a bootstrap factor curve ``(S,)`` averaged over the config's bf
 interval), ``nanmean`` (mean of the finite values), ``ci_text`` (an interval as
 ``[lo, hi]``), ``rests_on`` (what a Table II rests on: affordances, sizes, repetitions, test
@@ -18,7 +18,16 @@ SHORT = {"unobstruct": "unob"}
 
 
 def fmt(x: float, nd: int = 3) -> str:
-    return "nan" if x is None or not np.isfinite(x) else f"{x:.{nd}f}"
+    """``x`` with ``nd`` decimals; "-" where it is undefined (None, NaN): a cell that was not
+    measured reads as absent, never as the word ``nan``."""
+    return "-" if x is None or not np.isfinite(x) else f"{x:.{nd}f}"
+
+
+def interval(lo: float, hi: float, nd: int = 3) -> str:
+    """An interval as ``[lo, hi]``; "-" when neither end is defined (no interval)."""
+    if (lo is None or not np.isfinite(lo)) and (hi is None or not np.isfinite(hi)):
+        return "-"
+    return f"[{fmt(lo, nd)}, {fmt(hi, nd)}]"
 
 
 def rows_run(cfg: Any, space: str) -> list[int]:
@@ -33,7 +42,7 @@ def ci_text(a: Any, key: str, i: int, nd: int = 3) -> str:
     if key not in a:
         return "-"
     lo, hi = a[key][i]
-    return f"[{fmt(lo, nd)}, {fmt(hi, nd)}]"
+    return interval(lo, hi, nd)
 
 
 def row_cells(a: Any, i: int, nd: int = 3) -> list[str]:

@@ -20,7 +20,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax import io as rio
+from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
+from relaff_jax.learn import TABLE2_ROWS
 from relaff_jax.report import folder as F
 from relaff_jax.report.findings import correlation_clusters
 from relaff_jax.learn.config import AFTER_TEN
@@ -38,7 +40,18 @@ def read_report(path: str | os.PathLike) -> dict[str, Any]:
             raise UserError(f"{p} is not a report folder with datasets: {f} is missing (relaff report, or a "
                             f"report written by this version with the datasets)")
         out[f.split(".")[0]] = rio.read_json(p / f)
+        need = _KEYS.get(f.split(".")[0], ())
+        if not isinstance(out[f.split(".")[0]], dict) or not all(k in out[f.split(".")[0]] for k in need):
+            raise UserError(f"{p / f}: not a relaff report file (expected a JSON object with {', '.join(need)}); "
+                            "write the report again with relaff report")
     return out
+
+
+_KEYS = {"reach": ("datasets", "spaces"), "findings": ("findings",), "summary": ()}
+
+
+def _sizes(r: Mapping[str, Any]) -> set:
+    return {x for sp in r["reach"]["spaces"].values() for x in sp.get("sizes", [])}
 
 
 def _f(x: Any, nd: int = 3) -> str:
@@ -62,7 +75,11 @@ def compare(reports: Mapping[str, str | os.PathLike], out: str | os.PathLike | N
     there atomically (``out`` checked before any report is read). Returns the page."""
     if out is not None:
         rio.check_writable_file(out)
-    page = compare_readings(reports, size=size)
+    try:
+        page = compare_readings(reports, size=size)
+    except (KeyError, TypeError, IndexError, AttributeError) as e:  # a file of the right shape, wrong content
+        raise UserError(f"the reports {', '.join(map(str, reports.values()))} hold an entry this version cannot "
+                        f"read ({type(e).__name__}: {e}); write them again with relaff report") from e
     if out is not None:
         rio.atomic_write_text(out, page)
     return page
@@ -74,11 +91,16 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
         raise UserError("compare needs at least two readings NAME=REPORT_DIR")
     r = {name: read_report(p) for name, p in reports.items()}
     names = list(r)
+    for n in names:
+        if size not in _sizes(r[n]):
+            raise UserError(f"--size {size} is not a training size of {reports[n]} (its sizes: "
+                            f"{', '.join(map(str, sorted(_sizes(r[n])))) or 'none'})")
     lines = ["# The same study in " + " and ".join(f"`{n}`" for n in names), ""]
     lines += [f"- `{n}`: `{reports[n]}`" for n in names] + [""]
 
     # what the labels consist of
-    acts = list(r[names[0]]["reach"]["datasets"])
+    seen = {a for n in names for a in r[n]["reach"]["datasets"]}  # the JSON keys are sorted: the paper's order
+    acts = [a for a in ACTIONS if a in seen] + sorted(seen - set(ACTIONS))
     lines += ["## What the labels consist of (balanced selection)", "",
               "| action | " + " | ".join(f"{n}: neg. infeasible / label=feasible / relation / borrowed" for n in names) + " |",
               "|---|" + "---|" * len(names)]
@@ -135,6 +157,7 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
     # Table II
     lines += ["", "## Table II (average bootstrap factor over the window, avg over affordances, interval, rests on)", ""]
     rows = list(r[names[0]]["summary"]["pca"]["table2"]) if "pca" in r[names[0]]["summary"] else []
+    rows = [x for x in TABLE2_ROWS if x in rows] + [x for x in rows if x not in TABLE2_ROWS]  # the paper's order
     lines += ["| row | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
     for row in rows:
         cells = []

@@ -191,12 +191,33 @@ def table2_blocks(an: Mapping[str, Mapping[str, Any]], cfg: Any, out: Path, pres
     return blocks
 
 
+def _median_width(x: Mapping[str, Any]) -> float:
+    rows = [i for i, n in enumerate(TABLE2_ROWS) if n != "NB" and np.all(np.isfinite(x["table2_ci"][i]))]
+    return float(np.median([np.diff(x["table2_ci"][i])[0] for i in rows])) if rows else float("nan")
+
+
+def scale_caveat_blocks(x: Mapping[str, Any], preset: str | None) -> list[tuple]:
+    """The scale caveat beside the verdicts, at the top: a run whose Table II intervals are
+    too wide to compare with the paper (``comparability``'s test) says so before its first
+    "reproduced" verdict, not only in the Table II section."""
+    width = _median_width(x) if "table2_ci" in x else float("nan")
+    if not (preset == "quick" or not np.isfinite(width) or width > 1.0):
+        return []
+    scale = " (the quick preset: 100 samples per action, 2 repetitions)" if preset == "quick" else ""
+    why = (f"its Table II intervals are {fmt(width, 2)} wide in bootstrap factor (median), too wide to compare "
+           "this run with the paper (whose rows span 1.36-2.90)" if np.isfinite(width) else
+           "it has no Table II interval to compare with the paper by (too few sizes, repetitions or affordances)")
+    return [("p", f"**Read these verdicts with this run's scale{scale}:** {why}. A verdict here says what this "
+                  "run's numbers allow, and shows that the pipeline runs end to end; it does not say whether the "
+                  "paper's findings hold (the study or paper preset does).")]
+
+
 def comparability(x: Mapping[str, Any], paper: bool, preset: str | None) -> str:
     """Whether this Table II can be read beside the paper's: the widths of its intervals."""
     if "table2_ci" not in x:
         return "No intervals were computed, so these numbers cannot be compared with the paper's."
     rows = [i for i, n in enumerate(TABLE2_ROWS) if n != "NB" and np.all(np.isfinite(x["table2_ci"][i]))]
-    width = float(np.median([np.diff(x["table2_ci"][i])[0] for i in rows])) if rows else float("nan")
+    width = _median_width(x)
     text = f"Median width of the rows' intervals: {fmt(width, 2)} in bootstrap factor"
     if paper:
         has = [i for i in rows if np.isfinite(paper_row(TABLE2_ROWS[i])[0])]

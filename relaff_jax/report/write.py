@@ -64,6 +64,19 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     spaces = list(res["meta"]["spaces"])
     an = {s: analyse(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference) for s in spaces}
     main = "pca" if "pca" in an else spaces[0]
+    infos: dict[str, Any] = {}
+    anat: dict[str, Any] = {}
+    missing: dict[str, str] = {}
+    if data_dirs:  # every input read before the first file is written: a damaged dataset writes nothing
+        from relaff_jax.data import DatasetError, anatomy
+        from relaff_jax.data import info as dataset_info
+
+        infos = {act: dataset_info(d) for act, d in data_dirs.items()}
+        for act, d in data_dirs.items():
+            try:
+                anat[act] = anatomy(d)
+            except DatasetError as e:  # e.g. rollouts without a 'feasible' field
+                missing[act] = str(e)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
 
@@ -78,22 +91,11 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
 
     # datasets and example scenes
     data_blocks: list[tuple] = []
-    anat: dict[str, Any] = {}
     n_samples = None
     if data_dirs:
-        from relaff_jax.data import DatasetError, anatomy
-        from relaff_jax.data import info as dataset_info
-
-        infos = {act: dataset_info(d) for act, d in data_dirs.items()}
         n_samples = {act: i["n"] for act, i in infos.items()}
         dataset_figure(infos, out / F.FIG_DATASETS)
         data_blocks = S.dataset_blocks(infos, F.FIG_DATASETS)
-        missing = {}
-        for act, d in data_dirs.items():
-            try:
-                anat[act] = anatomy(d)
-            except DatasetError as e:  # e.g. rollouts without a 'feasible' field
-                missing[act] = str(e)
         if anat:
             reach_figure(anat, out / F.FIG_REACH)
         data_blocks += reach_blocks(anat, missing, out) + subset_blocks(res, cfg) + predictor_blocks(res)
@@ -104,7 +106,9 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     # the document
     found = findings(an, cfg, rules)
     readings = by_reading(an, cfg, rules)  # the analysis-only readings of the same results
-    blocks = (S.intro_blocks(res, results_dir, info) + S.findings_blocks(found) + S.robustness_blocks(readings, cfg)
+    top = S.findings_blocks(found)
+    top[1:1] = S.scale_caveat_blocks(an[main], (info or {}).get("preset"))  # beside the verdicts, not pages later
+    blocks = (S.intro_blocks(res, results_dir, info) + top + S.robustness_blocks(readings, cfg)
               + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
               + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset"))
               + [b for s in spaces for b in S.methods_blocks(an[s], cfg, s)]

@@ -122,6 +122,13 @@ def stage_left(model: float, spent: float, f: float, first: tuple[float, float] 
     return w * measured_left + (1 - w) * model_left
 
 
+# What a stage does before its first measurable progress (shown until the fraction moves).
+STARTING = {"generate": "building the world, compiling the motor program and settling the first chunk",
+            "features": "compiling the camera and the descriptors",
+            "experiment": "loading the datasets and fitting the source predictors",
+            "report": "analysing the results"}
+
+
 class Progress:
     """The progress line. On a terminal it is redrawn in place; otherwise a line is printed
     when the stage's item changes and every ``every`` seconds."""
@@ -196,10 +203,26 @@ class Progress:
         left = stage_left(self.estimates.get(self.stage, 0.0), now - self.stage_t0, self.fraction, self._first, now)
         return left + sum(self.estimates.get(s, 0.0) for s in STAGES[i + 1:])
 
+    def done(self, stage: str) -> None:
+        """``stage`` finished (ran or skipped): nothing of it is left in the estimate."""
+        with self._lock:
+            self.estimates[stage] = 0.0
+            if stage == self.stage:
+                self._set_fraction(1.0)
+
     def line(self) -> str:
         i = STAGES.index(self.stage) + 1 if self.stage in STAGES else 0
-        return (f"reproduce [{i}/{len(STAGES)} {self.stage}] {self.detail} {100 * self.fraction:3.0f}% | "
-                f"elapsed {fmt_time(time.perf_counter() - self.t0)} | ETA {fmt_time(self.eta())}")
+        now = time.perf_counter()
+        detail = self.detail
+        if self._first is None and self.fraction == 0.0 and STARTING.get(self.stage):
+            # nothing measured yet: say what takes this time (compiles, the first chunk), not a silent 0 %
+            detail = f"{detail}: {STARTING[self.stage]}, {fmt_time(now - self.stage_t0)}" if detail else \
+                f"{STARTING[self.stage]}, {fmt_time(now - self.stage_t0)}"
+        eta = fmt_time(self.eta())
+        if self._first is None and self.fraction < 1.0:
+            eta += " (cost model)"  # no rate measured in this stage yet
+        return (f"reproduce [{i}/{len(STAGES)} {self.stage}] {detail} {100 * self.fraction:3.0f}% | "
+                f"elapsed {fmt_time(now - self.t0)} | ETA {eta}")
 
     def _loop(self) -> None:
         while not self._stop.wait(1.0 if self.tty else 2.0):

@@ -11,6 +11,7 @@ with the results of an uninterrupted one.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import time
 from pathlib import Path
@@ -58,6 +59,18 @@ def check_config(cfg: RunConfig, seed: int) -> None:
             split_pools(d.n_samples, i, cfg.experiment, seed)
     except ValueError as e:
         raise ReproduceError(f"the experiment cannot run on {d.n_samples} samples per action: {e}") from e
+
+
+def check_no_links(paths: Paths, force: Sequence[str], redo: Sequence[str]) -> None:
+    """The folders ``--force`` and ``--redo-dataset`` delete must be folders, not symbolic
+    links: refused before any work (``io.remove_tree`` does not delete through a link)."""
+    doomed = {"generate": [paths.data], "experiment": [paths.results], "report": [paths.report]}
+    for p in [q for s in force for q in doomed.get(s, [])] + [paths.dataset(a) for a in redo]:
+        if p.is_symlink():
+            flag = f"--redo-dataset {p.name}" if p.parent == paths.data and p != paths.data else "--force"
+            raise ReproduceError(f"{p} is a symbolic link (to {os.readlink(p)}); {flag} deletes that folder and "
+                                 "relaff does not delete through links: replace the link by the folder itself "
+                                 "(or remove it) and rerun")
 
 
 def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0, *,
@@ -110,6 +123,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
         rio.check_writable_dir(root)
     except UserError as e:
         raise ReproduceError(str(e)) from e
+    check_no_links(paths, force, redo)
     if rebuild_log and not root.is_dir():
         raise ReproduceError(f"{root} does not exist: nothing to rebuild")
     os.makedirs(root, exist_ok=True)
@@ -124,6 +138,7 @@ def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, roll
     cpus = os.cpu_count() or 1
     jobs = jobs or cpus
     log = open_log(paths, preset_name, cfg, seed, rebuild=rebuild_log)
+    fold_killed_run(paths, log)  # a run killed by SIGKILL: its last heartbeat says how long its stage ran
     rio.clean_leftovers(paths.root)
     for action in redo:  # the other datasets stay; later stages see changed inputs
         rio.remove_tree(paths.dataset(action))
@@ -146,6 +161,7 @@ def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, roll
     prog.start()
     t_run = time.perf_counter()
     stage, t0 = None, t_run
+    beat = _Heartbeat(paths, lambda: (stage, time.perf_counter() - t0, time.perf_counter() - t_run))
     # log["timings"][stage]: wall time spent computing the stage's current output, summed over
     # the runs that worked on it (a killed run's part included); a forced stage starts over.
     for stage in run.force:
@@ -159,6 +175,7 @@ def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, roll
             if st is not None and st.state == "complete":
                 entry["stages"][stage] = {"status": "skipped", "seconds": round(time.perf_counter() - t0, 2), "why": st.why}
                 prog.message(f"{stage}: complete, skipped")
+                prog.done(stage)
                 run.save()
                 continue
             result = module.run(run, forced)
@@ -170,21 +187,77 @@ def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, roll
                                          {k: v for k, v in result.items() if k != "status"})}
             if ran:
                 log["timings"][stage] = round(log["timings"].get(stage, 0.0) + dt, 2)
+            prog.done(stage)
             run.save()
         entry["status"] = "complete"
     except BaseException as e:
         dt = time.perf_counter() - t0
         log["timings"][stage] = round(log["timings"].get(stage, 0.0) + dt, 2)
         entry["stages"][stage] = {"status": "interrupted", "seconds": round(dt, 2)}
-        what = "interrupted" if isinstance(e, KeyboardInterrupt) else f"failed: {type(e).__name__}: {e}"
+        what = ("terminated (SIGTERM)" if type(e).__name__ == "Terminated" else "interrupted"
+                if isinstance(e, KeyboardInterrupt) else f"failed: {type(e).__name__}: {e}")
         entry["status"] = f"{what} (in {stage})"
         raise
     finally:
+        beat.stop()
         entry["finished"] = now()
         entry["seconds"] = round(time.perf_counter() - t_run, 2)
         prog.close()
         run.save()
     return log
+
+
+HEARTBEAT = ".run.heartbeat.json"
+HEARTBEAT_SECONDS = 15.0
+
+
+class _Heartbeat:
+    """Every ``HEARTBEAT_SECONDS`` the running stage and its seconds so far, in a small file
+    of the run folder (not the run log: the log is the main thread's). A run killed by SIGKILL
+    cannot write its log; the next run reads this file (``fold_killed_run``), so the time of
+    the killed part of a stage is counted (to within one beat)."""
+
+    def __init__(self, paths: Paths, where: Callable[[], tuple]):
+        import threading
+
+        self.path, self.where, self._stop = paths.root / HEARTBEAT, where, threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="relaff-heartbeat", daemon=True)
+        self._thread.start()
+
+    def _loop(self) -> None:
+        while not self._stop.wait(HEARTBEAT_SECONDS):
+            stage, seconds, total = self.where()
+            try:
+                rio.atomic_write_json(self.path, {"stage": stage, "seconds": round(seconds, 2),
+                                                  "run_seconds": round(total, 2), "at": now()})
+            except (OSError, UserError):  # a full disk: the main thread reports it
+                pass
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self.path)  # the run log has the exact figures now
+
+
+def fold_killed_run(paths: Paths, log: dict) -> None:
+    """A last run entry still ``running`` was killed (SIGKILL, power): mark it so, with its
+    stage's seconds from the heartbeat file added to the stage's timing."""
+    last = log["runs"][-1] if log.get("runs") else None
+    if not last or last.get("status") != "running":
+        return
+    try:
+        beat = rio.read_json(paths.root / HEARTBEAT)
+        stage, seconds = beat["stage"], float(beat["seconds"])
+    except (OSError, ValueError, KeyError, TypeError):
+        beat, stage, seconds = None, None, 0.0
+    if stage in STAGES:
+        log["timings"][stage] = round(log["timings"].get(stage, 0.0) + seconds, 2)
+        last["stages"][stage] = {"status": "killed", "seconds": round(seconds, 2), "counted_until": beat["at"]}
+        last["seconds"] = beat.get("run_seconds")
+    last["status"] = f"killed (in {stage})" if stage else "killed (before its first heartbeat)"
+    with contextlib.suppress(FileNotFoundError):
+        os.unlink(paths.root / HEARTBEAT)
 
 
 def status(out: str | os.PathLike) -> dict[str, Any]:
