@@ -29,7 +29,8 @@ class Geometry:
     centre; rakes: the grip point). (P, 3) bounding boxes ``toy_lo``/``toy_hi`` and
     ``oth_lo``/``oth_hi``; rake head: ``head_x0`` near face x, ``head_y`` (P, 2) y range;
     ``toy_mass``/``oth_mass`` (P,) kg; ``oth_inner`` (P, 3) a container's inner half extents
-    (x, y) and floor height (its bottom plate's top), zeros for the others."""
+    (x, y) and floor height (its bottom plate's top), zeros for the others; ``toy_radius`` (P,)
+    the ball's radius (its half width in every direction), 0 for the other toys."""
 
     pairing: np.ndarray
     toy_lo: np.ndarray
@@ -41,6 +42,7 @@ class Geometry:
     toy_mass: np.ndarray
     oth_mass: np.ndarray
     oth_inner: np.ndarray
+    toy_radius: np.ndarray
 
 
 def _bbox(spec: lib.ObjectSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -67,7 +69,8 @@ def geometry(world: wd.World) -> Geometry:
         if o.inner is not None:
             plate = dict(o.parts)["base"]
             inner = (o.inner[0], o.inner[1], plate.centre[2] + plate.size[2] / 2)
-        rows.append((lib.PAIRINGS.index(pairing), tl, th, ol, oh, head_x0, head_y, t.mass, o.mass, inner))
+        rows.append((lib.PAIRINGS.index(pairing), tl, th, ol, oh, head_x0, head_y, t.mass, o.mass, inner,
+                     t.sphere_radius))
     cols = list(zip(*rows))
     return Geometry(np.asarray(cols[0], np.int32), *(np.asarray(c, np.float32) for c in cols[1:]))
 

@@ -101,7 +101,7 @@ def _plan_fn(cfg: ActionConfig):
 
 
 def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray,
-                  qvel: np.ndarray, result: dict, record_every: int = 0) -> dict[str, np.ndarray]:
+                  qvel: np.ndarray, result: dict, record_every: int = 0, probe=None) -> dict[str, np.ndarray]:
     """Replay the planned programs of an ``action_fn`` result in native MuJoCo C (``mj_step``,
     float64), scene by scene, with the same actuator commands; label them with the same rules.
 
@@ -115,6 +115,8 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     animations).
     Returns ``label``, ``com_m``, ``com_end``, ``qpos_final``, ``reach_after`` as numpy arrays,
     and with ``record_every`` ``frames_xpos`` (B, F, G, 3) and ``frames_xmat`` (B, F, G, 9).
+    ``probe(b, t, m, d)``, if given, is called after every control step t of scene b (it
+    reads, never writes: ``native_forces.py`` records contact forces with it).
     """
     aid = action_id(action)
     st = setup(cfg)
@@ -153,6 +155,8 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
                 d.eq_active[row] = lock
             d.ctrl[:] = inp.ctrl[b, t]
             mujoco.mj_step(m, d)
+            if probe is not None:
+                probe(b, t, m, d)
             if t == inp.measure:  # like MJX: the positions of the step's forward pass
                 cm = d.xipos[bodies].copy()
             rest.add(t, d.xipos[bodies][None], d.qpos[None, :nqo])

@@ -45,12 +45,13 @@ class Scene(NamedTuple):
     inner: jax.Array
     toy_mass: jax.Array
     oth_mass: jax.Array
+    toy_radius: jax.Array
 
 
 def _scene(geo: Geometry, pair: jax.Array, qpos: jax.Array) -> Scene:
     toy, oth = bodies(geo, pair, qpos)
     g = lambda a: jnp.asarray(a)[pair]
-    return Scene(toy, oth, g(geo.oth_inner), g(geo.toy_mass), g(geo.oth_mass))
+    return Scene(toy, oth, g(geo.oth_inner), g(geo.toy_mass), g(geo.oth_mass), g(geo.toy_radius))
 
 
 def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Array]:
@@ -84,7 +85,8 @@ def _toy_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Arr
     if cfg.programs == "v1":
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
     g = clear_grasp(arm, cfg, g, sc.toy, sc.oth, sc.inner)
-    return g, squeeze_command(arm, cfg, sc.toy.half_width(g.closing), sc.toy_mass)
+    half = jnp.where(sc.toy_radius > 0, sc.toy_radius, sc.toy.half_width(g.closing))  # a ball's is its radius
+    return g, squeeze_command(arm, cfg, half, sc.toy_mass)
 
 
 def _transit_z(arm: A.Arm, cfg: ActionConfig, toy: Body, oth: Body) -> jax.Array:
