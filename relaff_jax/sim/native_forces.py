@@ -44,17 +44,15 @@ def physics(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray, 
 
     def probe(b, t, m, d):
         tot = np.zeros(3)
-        for i in range(d.ncon):
-            c = d.contact[i]
-            k1, k2 = obj[c.geom1], obj[c.geom2]
-            if not (k1 or k2):
-                continue
-            mujoco.mj_contactForce(m, d, i, f6)
+        geom = d.contact.geom[:d.ncon]
+        kind = obj[geom]  # (ncon, 2)
+        for i in np.flatnonzero(kind.any(axis=1)):
+            mujoco.mj_contactForce(m, d, int(i), f6)
             f = abs(f6[0])
-            tot[k1] += f
-            tot[k2] += f
-            depth[b] = max(depth[b], -c.dist)
-            if palm in (c.geom1, c.geom2):
+            tot[kind[i, 0]] += f
+            tot[kind[i, 1]] += f
+            depth[b] = max(depth[b], -float(d.contact.dist[i]))
+            if palm in geom[i]:
                 palm_f[b] = max(palm_f[b], f)
         per_step[b].append(max(tot[1], tot[2]))
 
@@ -69,4 +67,4 @@ def physics(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray, 
     masses = [max(st.world.mj_models[int(p)].body_mass[st.world.toy_body],
                   st.world.mj_models[int(p)].body_mass[st.world.obj_body]) for p in pair]
     return dict(peak=peak, press=press, depth=depth, palm=palm_f, weight=9.81 * np.asarray(masses),
-                label=out["label"], settled=out["settled"])
+                label=out["label"], settled=out["settled"], com_read=out["com_m"])
