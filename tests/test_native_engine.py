@@ -19,7 +19,7 @@ from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 
 CFG = templates.ActionConfig()
-FIELDS = ("label", "com0", "com_m", "com_end", "qpos_final", "reach_after")
+FIELDS = ("label", "com0", "com_m", "com_end", "qpos_final", "reach_after", "settled")
 
 
 def test_weld_relpose_np_hand_worked():
@@ -227,9 +227,16 @@ def test_early_stop_in_c(planned, action):
     measuring step, so the centres of mass there and the labels are bit-identical (only the
     final state moves on); push reads the end, which is the program's end when stopped."""
     pair, q, qvel, plan, before = planned[action]
-    full = templates.ActionConfig(stop_at_program_end=False)
-    a = native_batch.execute_native(action, CFG, pair, q, qvel, plan, before)
+    # v1's fixed reads (v2 reads at rest, where the stop changes nothing: checked below)
+    v1 = templates.ActionConfig(programs="v1")
+    full = templates.ActionConfig(programs="v1", stop_at_program_end=False)
+    a = native_batch.execute_native(action, v1, pair, q, qvel, plan, before)
     b = native_batch.execute_native(action, full, pair, q, qvel, plan, before)
+    a2 = native_batch.execute_native(action, CFG, pair, q, qvel, plan, before)
+    b2 = native_batch.execute_native(action, templates.ActionConfig(stop_at_program_end=False), pair, q, qvel,
+                                     plan, before)
+    for f in FIELDS:
+        np.testing.assert_array_equal(a2[f], b2[f], err_msg=f)
     np.testing.assert_array_equal(a["com_m"], b["com_m"])
     if action == "lift":
         np.testing.assert_array_equal(a["label"], b["label"])

@@ -30,10 +30,14 @@ def _groups(m):
 
 def test_run_steps_by_hand():
     """Each action runs to its measuring step + 1 (template sums, docs/actions.md); untuned: 815."""
-    steps = dict(zip(ACTIONS, templates.run_steps(CFG)))
+    v1 = dataclasses.replace(CFG, programs="v1")
+    steps = dict(zip(ACTIONS, templates.run_steps(v1)))
     assert steps == {"lift": 560, "move": 800, "pull": 755, "push": 755, "rake": 650, "take": 560,
                      "pour": 810, "slide": 810, "unobstruct": 755}
-    assert set(templates.run_steps(templates.untuned(CFG))) == {templates.N_STEPS}
+    assert set(templates.run_steps(templates.untuned(v1))) == {templates.N_STEPS}
+    # v2: up to rest_hold (200) more steps to read the goals at rest
+    assert dict(zip(ACTIONS, templates.run_steps(CFG))) == {a: n + CFG.rest_hold for a, n in steps.items()}
+    assert set(templates.run_steps(templates.untuned(CFG))) == {templates.N_STEPS + CFG.rest_hold}
 
 
 def test_tuned_world_pairs_and_slots():

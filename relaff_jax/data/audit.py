@@ -140,10 +140,10 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
         qvel, resettled = settled_velocities(cfg, meta, r, nthread)
         plan = _plan(cfg, action, r["pair"], r["qpos_settled"], int(meta["batch"]))
         world = setup(cfg).world
-        measure = int(TPL_MEASURE[action_id(action)])
         probe = Probe(len(idx), world.toy_body, world.obj_body, cfg.phys.timestep)
         rep = replay_native(action, cfg, r["pair"], r["qpos_settled"], qvel, plan, observe=probe)
-        got = probe.result(measure)
+        # the step each goal was read at: the template's (v1) or the first at rest after it (v2)
+        got = probe.result(rep.get("read_step", int(TPL_MEASURE[action_id(action)])))
         for i in range(len(idx)):
             rel = r["relation"][i]
             rows.append(dict(

@@ -68,7 +68,11 @@ class Arm:
     ``jnt_axis`` (6, 3), ``jnt_pos`` (6, 3) in body coordinates; ``site_pos`` (3,),
     ``site_mat`` (3, 3) of the tcp in the hand frame; joint limits ``q_lo``/``q_hi`` (6,).
     Gripper geometry: ``finger_range`` (2,) half-opening limits, ``tip_below_tcp`` (m, the
-    fingertips' distance below the tcp along the approach), ``pad_thickness`` (m, one pad).
+    fingertips' distance below the tcp along the approach), ``pad_thickness`` (m, one pad),
+    ``pad_half_x`` (m, a pad's half width across the closing axis), ``palm_above_tip`` (m, the
+    palm's underside above the fingertips: the most of an object the pads can reach around),
+    ``palm_half`` (2,) the palm's half extents (across, along the closing axis),
+    ``finger_kp`` (N/m, the finger servos' gain), ``pad_friction`` (the pads' sliding friction).
     """
 
     nu: int
@@ -95,6 +99,11 @@ class Arm:
     q_hi: np.ndarray
     tip_below_tcp: float
     pad_thickness: float
+    pad_half_x: float
+    palm_above_tip: float
+    palm_half: np.ndarray
+    finger_kp: float
+    pad_friction: float
 
 
 def _id(model: mujoco.MjModel, objtype: mujoco.mjtObj, name: str) -> int:
@@ -139,6 +148,9 @@ def arm_from_model(model: mujoco.MjModel) -> Arm:
     pad = _id(model, G, PAD_GEOMS[0])
     finger_body = int(model.geom_bodyid[pad])
     tip_z = model.body_pos[finger_body][2] + model.geom_pos[pad][2] - model.geom_size[pad][2]
+    palm = _id(model, G, PALM_GEOM)
+    if model.geom_bodyid[palm] != bids[-1] or model.body_pos[finger_body][2] >= 0 or model.geom_quat[palm][0] != 1:
+        raise ValueError("the palm must be an unrotated geom of the hand, above the fingers")
     return Arm(
         nu=int(model.nu),
         qpos_arm=np.array([model.jnt_qposadr[j] for j in jids]),
@@ -164,4 +176,9 @@ def arm_from_model(model: mujoco.MjModel) -> Arm:
         q_hi=_float32_inside(model.jnt_range[jids, 1], -1),
         tip_below_tcp=float(model.site_pos[site][2] - tip_z),
         pad_thickness=float(2 * model.geom_size[pad][1]),
+        pad_half_x=float(model.geom_size[pad][0]),
+        palm_above_tip=float(model.geom_pos[palm][2] - model.geom_size[palm][2] - tip_z),
+        palm_half=np.array(model.geom_size[palm][:2], dtype=np.float64),
+        finger_kp=float(model.actuator_gainprm[_id(model, A, FINGER_ACTUATORS[0])][0]),
+        pad_friction=float(model.geom_friction[pad][0]),
     )

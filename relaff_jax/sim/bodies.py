@@ -27,7 +27,10 @@ from .templates import ActionConfig
 class Geometry:
     """Per-pair object geometry in each object's own frame (origin at the footprint's bottom
     centre; rakes: the grip point). (P, 3) bounding boxes ``toy_lo``/``toy_hi`` and
-    ``oth_lo``/``oth_hi``; rake head: ``head_x0`` near face x, ``head_y`` (P, 2) y range."""
+    ``oth_lo``/``oth_hi``; rake head: ``head_x0`` near face x, ``head_y`` (P, 2) y range;
+    ``toy_mass``/``oth_mass`` (P,) kg; ``oth_inner`` (P, 3) a container's inner half extents
+    (x, y) and floor height (its bottom plate's top), zeros for the others; ``toy_radius`` (P,)
+    the ball's radius (its half width in every direction), 0 for the other toys."""
 
     pairing: np.ndarray
     toy_lo: np.ndarray
@@ -36,6 +39,10 @@ class Geometry:
     oth_hi: np.ndarray
     head_x0: np.ndarray
     head_y: np.ndarray
+    toy_mass: np.ndarray
+    oth_mass: np.ndarray
+    oth_inner: np.ndarray
+    toy_radius: np.ndarray
 
 
 def _bbox(spec: lib.ObjectSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -58,7 +65,12 @@ def geometry(world: wd.World) -> Geometry:
             head = dict(o.parts)["wall_xp"]
             head_x0 = head.centre[0] - head.size[0] / 2
             head_y = (head.centre[1] - head.size[1] / 2, head.centre[1] + head.size[1] / 2)
-        rows.append((lib.PAIRINGS.index(pairing), tl, th, ol, oh, head_x0, head_y))
+        inner = (0.0, 0.0, 0.0)
+        if o.inner is not None:
+            plate = dict(o.parts)["base"]
+            inner = (o.inner[0], o.inner[1], plate.centre[2] + plate.size[2] / 2)
+        rows.append((lib.PAIRINGS.index(pairing), tl, th, ol, oh, head_x0, head_y, t.mass, o.mass, inner,
+                     t.sphere_radius))
     cols = list(zip(*rows))
     return Geometry(np.asarray(cols[0], np.int32), *(np.asarray(c, np.float32) for c in cols[1:]))
 
@@ -129,8 +141,71 @@ class Grasp(NamedTuple):
     fits: jax.Array  # bool: the gripper opens wide enough
 
 
+def _overlap(c: jax.Array, u: jax.Array, half: jax.Array, body: Body) -> jax.Array:
+    """Does the horizontal rectangle centred at ``c`` (3,) with axes (``u``, ``perp(u)``) and
+    half extents ``half`` (2,) overlap the body's footprint rectangle? (separating axes, 2D)"""
+    ax = unit_xy(body.mat[:, 0])
+    ay = perp(ax)
+    b_half = jnp.stack([body.half_width(ax), body.half_width(ay)])
+    w = perp(u)
+    d = body.centre - c
+    sep = [jnp.abs(d @ n) > half[0] * jnp.abs(u @ n) + half[1] * jnp.abs(w @ n)
+           + b_half[0] * jnp.abs(ax @ n) + b_half[1] * jnp.abs(ay @ n) for n in (u, w, ax, ay)]
+    return ~(sep[0] | sep[1] | sep[2] | sep[3])
+
+
+def top_under(body: Body, inner: jax.Array, c: jax.Array, u: jax.Array, half: jax.Array) -> jax.Array:
+    """Height of the body's highest point under a horizontal rectangle (``_overlap``'s), or
+    -1 m if it is not under it. Under a container's opening (the rectangle inside its inner
+    footprint ``inner`` (3,): half x, half y, floor) only its floor counts."""
+    ax = unit_xy(body.mat[:, 0])
+    ay = perp(ax)
+    w = perp(u)
+    corners = jnp.stack([c + su * half[0] * u + sw * half[1] * w for su in (-1, 1) for sw in (-1, 1)])
+    rel = corners - body.pos
+    inside = jnp.all((jnp.abs(rel @ ax) < inner[0]) & (jnp.abs(rel @ ay) < inner[1]))
+    top = jnp.where(inside, body.pos[2] + inner[2], body.z_range()[1])
+    return jnp.where(_overlap(c, u, half, body), top, -1.0)
+
+
+def squeeze_command(arm: A.Arm, cfg: ActionConfig, half: jax.Array, mass: jax.Array) -> jax.Array:
+    """v2's closing command of the fingers (half opening, m): a pad stops on the held object
+    at ``half`` (its half width along the closing axis) and pushes kp x (command - position),
+    so commanding ``half - F / kp`` squeezes with at most F per pad. F is ``squeeze_safety``
+    times what two pads need to hold ``mass`` (kg) by friction alone, within
+    [``squeeze_min``, ``squeeze_max``] N (docs/arm.md, "Bounded forces")."""
+    force = jnp.clip(cfg.squeeze_safety * mass * 9.81 / (2.0 * arm.pad_friction), cfg.squeeze_min, cfg.squeeze_max)
+    return jnp.maximum(half - force / arm.finger_kp, 0.0)
+
+
+def clear_grasp(arm: A.Arm, cfg: ActionConfig, g: Grasp, body: Body, other: Body, inner: jax.Array) -> Grasp:
+    """v2: a grasp that keeps the palm off every object (docs/actions.md, "Programs v1 and v2").
+
+    The fingertips go no lower than ``palm_above_tip - palm_margin`` below the grasped body's
+    top (the palm's underside stays ``palm_margin`` above it) and than the same below the
+    highest point of ``other`` under the palm's footprint (grown by ``palm_margin``); the
+    grasp is refused (``fits`` False) if that leaves the pads less than ``min_grip`` (or, for
+    a thinner body, all its v1 overlap) of the body, or if a pad would come down on ``other``
+    above the fingertips. ``inner``: the other's container opening (``Geometry.oth_inner``
+    for the other slot, zeros for a toy)."""
+    zmin, zmax = body.z_range()
+    reach = arm.palm_above_tip - cfg.palm_margin
+    palm = jnp.asarray(arm.palm_half[::-1], jnp.float32) + cfg.palm_margin  # along, across the closing axis
+    tip0 = g.tcp_z - arm.tip_below_tcp  # v1's fingertip height
+    c = g.xy
+    tip = jnp.maximum(tip0, zmax - reach)
+    tip = jnp.maximum(tip, top_under(other, inner, c, g.closing, palm) + cfg.palm_margin - arm.palm_above_tip)
+    holds = zmax - tip >= jnp.minimum(cfg.min_grip, zmax - tip0) - 1e-6
+    pad = jnp.array([arm.pad_thickness / 2, arm.pad_half_x], jnp.float32)
+    off = g.opening + arm.pad_thickness / 2
+    pads_free = jnp.all(jnp.stack([top_under(other, inner, c + s * off * g.closing, g.closing, pad) < tip
+                                   for s in (-1.0, 1.0)]))
+    return g._replace(tcp_z=tip + arm.tip_below_tcp, fits=g.fits & holds & pads_free)
+
+
 def top_down_grasp(arm: A.Arm, cfg: ActionConfig, body: Body) -> Grasp:
-    """Top-down grasp across the narrower horizontal side of a body's box."""
+    """Top-down grasp across the narrower horizontal side of a body's box (v1's height: the
+    fingertips ``tip_clearance`` above its bottom; v2 raises it, ``clear_grasp``)."""
     ax, ay = unit_xy(body.mat[:, 0]), unit_xy(body.mat[:, 1])
     wx, wy = body.half_width(ax), body.half_width(ay)
     closing = jnp.where(wx <= wy, ax, ay)

@@ -14,6 +14,11 @@ from relaff_jax.config import is_int
 from relaff_jax.errors import UserError
 
 
+# ActionConfig.programs: the motor programs' versions (v1: before issue 43)
+PROGRAMS = ("v1", "v2")
+# ActionConfig fields only v2 reads; a v1 dataset's sidecar leaves them out (templates.stored_config)
+V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window")
+
 # PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
 PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
 
@@ -185,6 +190,18 @@ class ActionConfig:
     # lift, take, pour and slide read the measuring step only, so they cannot change; the
     # other actions read the end, now the program's end (docs/actions.md, "Tuning").
     stop_at_program_end: bool = True
+    # Which motor programs (docs/actions.md, "Programs v1 and v2"): "v2" (default) grasps
+    # below an object's top by at most what the pads allow and refuses a grasp that would put
+    # the palm on an object, squeezes with a force from the held objects' weight, and reads
+    # every goal once the objects are at rest; "v1" the programs before issue 43, bit for bit.
+    programs: str = "v2"
+    palm_margin: float = 0.02  # v2: the palm's underside this far above every object under it
+    min_grip: float = 0.02  # v2: the pads overlap the grasped object by at least this height
+    squeeze_min: float = 5.0  # N, v2: the least squeeze per pad
+    squeeze_max: float = 20.0  # N, v2: the most squeeze per pad (the actuator's limit is 60 N)
+    squeeze_safety: float = 3.0  # v2: squeeze = safety x the held weight / (2 pads x friction)
+    rest_hold: int = 200  # v2: control steps the goal may wait for the objects to come to rest
+    rest_window: int = 10  # control steps both objects must stay below scene.rest_speed
     arm: ArmConfig = ArmConfig()
     phys: PhysicsConfig = PhysicsConfig()
     scene: SceneConfig = SceneConfig()
@@ -194,6 +211,15 @@ class ActionConfig:
                    "move_distance", "rake_pull", "clearance", "grip_margin", "tip_clearance", "rake_gap",
                    "lifted", "moved", "closer", "farther", "aside", "take_opening", "corridor")
         rules = {k: (getattr(self, k) >= 0, f">= 0 m, got {getattr(self, k)}") for k in lengths}
+        rules["programs"] = (self.programs in PROGRAMS, f"one of {', '.join(PROGRAMS)}, got {self.programs!r}")
+        rules["palm_margin"] = (self.palm_margin >= 0, f">= 0 m, got {self.palm_margin}")
+        rules["min_grip"] = (self.min_grip >= 0, f">= 0 m, got {self.min_grip}")
+        rules["squeeze_min"] = (0 < self.squeeze_min <= self.squeeze_max,
+                                f"in (0, squeeze_max = {self.squeeze_max}] N, got {self.squeeze_min}")
+        rules["squeeze_max"] = (self.squeeze_max <= 60.0, f"<= 60 N (the finger actuator's limit), got {self.squeeze_max}")
+        rules["squeeze_safety"] = (self.squeeze_safety > 0, f"> 0, got {self.squeeze_safety}")
+        rules["rest_hold"] = (is_int(self.rest_hold, 0), f"an integer >= 0, got {self.rest_hold!r}")
+        rules["rest_window"] = (is_int(self.rest_window, 1), f"an integer >= 1, got {self.rest_window!r}")
         rules["tilt_deg"] = (0.0 < self.tilt_deg < 180.0, f"in (0, 180), got {self.tilt_deg}")
         rules["move_rule"] = (self.move_rule in ("apart", "both"), f"apart or both, got {self.move_rule!r}")
         _check("action", rules)

@@ -57,3 +57,24 @@ def goals(cfg: ActionConfig, o: Outcome) -> jax.Array:
         "unobstruct": ~o.reach_before & o.reach_after,  # toy reachable now, not before
     }
     return jnp.stack([rules[a] for a in ACTIONS])
+
+
+def read_at_rest(com, window: int, speed: float, dt: float, xp=jnp):
+    """Where a goal is read at rest (v2) and whether the objects had come to rest (one scene).
+
+    ``com`` (T, 2, 3): the centres of mass of (toy, other) at control steps ``measure -
+    window`` .. ``measure + hold`` (T = window + 1 + hold). The objects are at rest at step j
+    when both moved slower than ``speed`` (m/s; the per-step displacement over ``dt``) over
+    each of the ``window`` steps up to j. Returns (i, settled): the index into ``com`` of the
+    first step from ``measure`` on (i >= window) at rest, or of the last step (``settled``
+    False) if none is. With hold 0 this is the fixed step ``measure`` and whether it was at
+    rest. ``xp``: ``jax.numpy`` (MJX, float32) or ``numpy`` (the C engines, float64).
+    """
+    step = xp.sqrt(xp.sum((com[1:] - com[:-1]) ** 2, axis=-1))  # (T-1, 2) displacement per step
+    moving = xp.max(step, axis=-1) >= speed * dt  # (T-1,) step j-1 -> j
+    count = xp.concatenate([xp.zeros(1, xp.int32), xp.cumsum(moving.astype(xp.int32))])  # (T,)
+    j = xp.arange(window, com.shape[0])
+    calm = (count[j] - count[j - window]) == 0  # (hold + 1,)
+    settled = xp.any(calm)
+    return window + xp.where(settled, xp.argmax(calm), calm.shape[0] - 1), settled
+

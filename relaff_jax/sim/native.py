@@ -21,7 +21,7 @@ from . import arm as A
 from . import objects as lib
 from . import scenes as sc
 from . import world as wd
-from .native_program import native_labels, pad_hit, program_inputs, reachable, weld_relpose_np
+from .native_program import RestReader, native_labels, pad_hit, program_inputs, reachable, weld_relpose_np
 from .planning import make_plan_fn, setup
 from .simulate import welds
 from .templates import UNOBSTRUCT_ID, ActionConfig
@@ -116,7 +116,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     ``direction`` if present, else a re-plan gives it). ``record_every`` > 0 also records
     every geom's pose before the first step and after every ``record_every``-th step (for
     animations). ``observe(b, t, m, d)``, if given, is called after every step t of scene b
-    (the audit's ``physics_probe.Probe``; it must not change ``d``).
+    (the audit's ``physics_probe.Probe``, ``native_forces``; it must not change ``d``).
     Returns ``label``, ``com_m``, ``com_end``, ``qpos_final``, ``reach_after`` as numpy arrays,
     and with ``record_every`` ``frames_xpos`` (B, F, G, 3) and ``frames_xmat`` (B, F, G, 9).
     """
@@ -134,7 +134,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     wl = welds(world)
     obj_geoms, toy_geoms = set(wl.obj_geoms.tolist()), set(wl.toy_geoms.tolist())
     bodies = [world.toy_body, world.obj_body]
-    com0, com_m, com_end, finals, frames = [], [], [], [], []
+    com0, com_m, com_end, finals, frames, settled, read_step = [], [], [], [], [], [], []
     for b in range(len(pair)):
         m = world.mj_models[int(pair[b])]
         d = mujoco.MjData(m)
@@ -143,6 +143,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
         com0.append(d.xipos[bodies].copy())
         eq_data0 = m.eq_data.copy()
         cm = None
+        rest = RestReader(cfg, inp)
         shots = [(d.geom_xpos.copy(), d.geom_xmat.copy())] if record_every > 0 else []
         for t in range(inp.n_run):
             # the grasp lock of simulate.run_program_locked, on C contacts
@@ -160,17 +161,28 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
                 observe(b, t, m, d)
             if t == inp.measure:  # like MJX: the positions of the step's forward pass
                 cm = d.xipos[bodies].copy()
+            rest.add(t, d.xipos[bodies][None], d.qpos[None, :nqo])
+            if inp.v2 and rest.done and record_every <= 0:  # the read step is known (as native_batch)
+                break
             if record_every > 0 and (t + 1) % record_every == 0:
                 shots.append((d.geom_xpos.copy(), d.geom_xmat.copy()))
         m.eq_data[:] = eq_data0
+        com_r, q_r, ok = rest.result()
+        settled.append(ok[0])
+        read_step.append(int(rest.read_steps()[0]))
+        if inp.v2:  # every goal and the final state at the read step
+            cm, end, fin = com_r[0], com_r[0], q_r[0]
+        else:
+            end, fin = d.xipos[bodies].copy(), d.qpos[:nqo]
         com_m.append(cm)
-        com_end.append(d.xipos[bodies].copy())
-        finals.append(d.qpos[:nqo].astype(np.float32))
+        com_end.append(end)
+        finals.append(fin.astype(np.float32))
         frames.append(shots)
     com0, com_m, com_end, qf = np.stack(com0), np.stack(com_m), np.stack(com_end), np.stack(finals)
     label, after = native_labels(cfg, aid, pair, com0, com_m, com_end, qf, direction, before,
                                  np.asarray(result["feasible"], bool))
-    out = dict(label=label, com0=com0, com_m=com_m, com_end=com_end, qpos_final=qf, reach_after=after)
+    out = dict(label=label, com0=com0, com_m=com_m, com_end=com_end, qpos_final=qf, reach_after=after,
+               settled=np.asarray(settled, bool), read_step=np.asarray(read_step, np.int32))
     if record_every > 0:
         out["frames_xpos"] = np.stack([np.stack([x for x, _ in f]) for f in frames])
         out["frames_xmat"] = np.stack([np.stack([r for _, r in f]) for f in frames])

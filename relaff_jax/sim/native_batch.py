@@ -28,7 +28,7 @@ import numpy as np
 
 from . import objects as lib
 from . import world as wd
-from .native_program import native_labels, pad_hit, program_inputs, weld_relpose_np
+from .native_program import RestReader, native_labels, pad_hit, program_inputs, weld_relpose_np
 from .planning import Plan, setup
 from .simulate import welds
 from .templates import ActionConfig
@@ -106,6 +106,7 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
     batch.forward()
     com0 = xipos[:, bodies].copy()
     com_m = None
+    rest = RestReader(cfg, inp)
     grasp = {1: (wl.obj, world.obj_body, "obj"), 2: (wl.toy, world.toy_body, "toy")}.get(inp.grasp)
     for t in range(inp.n_run):
         # the grasp lock of simulate.run_program_locked, on the pads' contact sensors (the
@@ -129,8 +130,14 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
         batch.step()
         if t == inp.measure:  # like MJX: the positions of the step's forward pass
             com_m = xipos[:, bodies].copy()
+        rest.add(t, xipos[:, bodies], qpos[:, :nqo])
+        if inp.v2 and rest.done:  # every scene's read step is known: the rest changes nothing
+            break
+    com_r, q_r, settled = rest.result()
+    if inp.v2:  # every goal and the final state at the read step
+        return dict(com0=com0, com_m=com_r, com_end=com_r, qpos_final=q_r.astype(np.float32), settled=settled)
     return dict(com0=com0, com_m=com_m, com_end=xipos[:, bodies].copy(),
-                qpos_final=qpos[:, :nqo].astype(np.float32))
+                qpos_final=qpos[:, :nqo].astype(np.float32), settled=settled)
 
 
 def execute_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
@@ -165,10 +172,11 @@ def execute_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nd
     cat = lambda k, shape, dt: np.concatenate([o[k] for o in outs]) if outs else np.zeros(shape, dt)
     com0, com_m, com_end = (cat(k, (0, 2, 3), np.float64) for k in ("com0", "com_m", "com_end"))
     qf = cat("qpos_final", (0, qpos.shape[-1]), np.float32)
+    settled = cat("settled", (0,), bool)
     feasible = np.asarray(plan.feasible, bool)
     label, after = native_labels(cfg, aid, pair, com0, com_m, com_end, qf, np.asarray(plan.direction),
                                  np.asarray(before, bool), feasible) if n else (np.zeros(0, bool),) * 2
     return dict(label=label, feasible=feasible, ik_error=np.asarray(plan.ik_error), com0=com0, com_m=com_m,
-                com_end=com_end, reach_before=np.asarray(before, bool), reach_after=after, qpos_final=qf,
+                com_end=com_end, reach_before=np.asarray(before, bool), reach_after=after, qpos_final=qf, settled=settled,
                 q_way=np.asarray(plan.q_way), grip_way=np.asarray(plan.grip_way),
                 seg_steps=np.asarray(plan.seg_steps))

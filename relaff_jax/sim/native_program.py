@@ -24,11 +24,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import arm as A
-from .labels import Outcome, goals
+from .labels import Outcome, goals, read_at_rest
 from .planning import setup
 from .programs import toy_reachable
 from .simulate import initial_data
-from .templates import GRASPS, N_STEPS, TPL_CLOSED, TPL_MEASURE, TPL_STEPS, UNOBSTRUCT_ID, ActionConfig, run_steps
+from .templates import GRASPS, UNOBSTRUCT_ID, ActionConfig, run_steps, tables
 
 
 class ProgramInputs(NamedTuple):
@@ -37,8 +37,9 @@ class ProgramInputs(NamedTuple):
     qpos (B, nq), qvel (B, nv), eq_active (B, neq): the action world's initial state;
     ctrl (B, T, nu): the command of every control step (T = ``N_STEPS``); closing (T,) bool:
     does step t belong to a segment that closes the fingers; grasp: 0 none, 1 the other
-    object, 2 the toy (``templates.GRASPS``); measure: the control step of the lift-type goals;
-    n_run: the control steps to simulate (``templates.run_steps``).
+    object, 2 the toy (``templates.GRASPS``); measure: the control step of the lift-type goals
+    (v2: the first step a goal may be read at); n_run: the control steps to simulate
+    (``templates.run_steps``); v2: whether goals are read at rest (``labels.read_at_rest``).
     """
 
     qpos: np.ndarray
@@ -49,20 +50,22 @@ class ProgramInputs(NamedTuple):
     grasp: int
     measure: int
     n_run: int
+    v2: bool
 
 
 @functools.lru_cache(maxsize=4)
 def _jitted(cfg: ActionConfig):
     """The jitted JAX pieces (compiled once per batch shape): initial data, commands, reach."""
     st = setup(cfg)
+    tb = tables(cfg)
 
     def init(aid, qpos, qvel):
         d = jax.vmap(lambda q, v: initial_data(st, cfg, aid, q, v))(qpos, qvel)
         return d.qpos, d.eq_active
 
     def ctrl(aid, q_way, grip_way):
-        seg = jnp.asarray(TPL_STEPS)[aid]
-        one = lambda qw, gw: jax.vmap(lambda t: A.program_ctrl(st.arm, qw, gw, seg, t))(jnp.arange(N_STEPS))
+        seg = jnp.asarray(tb.steps)[aid]
+        one = lambda qw, gw: jax.vmap(lambda t: A.program_ctrl(st.arm, qw, gw, seg, t))(jnp.arange(tb.n_steps))
         return jax.vmap(one)(q_way, grip_way)
 
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
@@ -99,9 +102,47 @@ def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarr
     full_v = np.zeros((len(qpos), nv))
     full_v[:, :nvo] = qvel
     u = np.asarray(_padded(lambda qw, gw: ctrl(a, qw, gw), q_way, grip_way), np.float64)
-    seg = np.asarray(A.segment_index(TPL_STEPS[aid], jnp.arange(N_STEPS)))
-    return ProgramInputs(full_q, full_v, np.asarray(eq0, np.float64), u, np.asarray(TPL_CLOSED[aid])[seg],
-                         int(GRASPS[aid]), int(TPL_MEASURE[aid]), int(run_steps(cfg)[aid]))
+    tb = tables(cfg)
+    seg = np.asarray(A.segment_index(tb.steps[aid], jnp.arange(tb.n_steps)))
+    return ProgramInputs(full_q, full_v, np.asarray(eq0, np.float64), u, np.asarray(tb.closed[aid])[seg],
+                         int(GRASPS[aid]), int(tb.measure[aid]), int(run_steps(cfg)[aid]), cfg.programs == "v2")
+
+
+class RestReader:
+    """The goal's read step at rest in a C execution of B programs (``labels.read_at_rest`` on
+    float64 positions): ``add(t, com (B, 2, 3), qpos (B, nq))`` after every control step t;
+    ``done`` once every scene's read step is known (v2: a run may stop there); ``result()``
+    gives (com_read (B, 2, 3), qpos_read (B, nq), settled (B,)). v1 reads the measuring step
+    (``settled``: were the objects at rest there); v2 the first step at rest from it on, within
+    ``cfg.rest_hold`` steps. Both C executors use it, so they agree bit for bit."""
+
+    def __init__(self, cfg: ActionConfig, inp: ProgramInputs):
+        self.cfg, self.lo = cfg, inp.measure - cfg.rest_window
+        self.hold = cfg.rest_hold if inp.v2 else 0
+        self.com, self.q, self.done = [], [], False
+
+    def add(self, t: int, com: np.ndarray, qpos: np.ndarray) -> None:
+        if t < self.lo or t > self.lo + self.cfg.rest_window + self.hold:
+            return
+        self.com.append(np.array(com, np.float64))
+        self.q.append(np.array(qpos))
+        if len(self.com) > self.cfg.rest_window:
+            i, settled = self._read()
+            self.done = bool(np.all(settled)) or len(self.com) == self.cfg.rest_window + 1 + self.hold
+
+    def _read(self) -> tuple[np.ndarray, np.ndarray]:
+        com = np.stack(self.com, axis=1)  # (B, T, 2, 3)
+        out = [read_at_rest(c, self.cfg.rest_window, self.cfg.scene.rest_speed, self.cfg.phys.timestep, np) for c in com]
+        return np.array([i for i, _ in out]), np.array([s for _, s in out], bool)
+
+    def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        i, settled = self._read()
+        rows = np.arange(len(i))
+        return np.stack(self.com, axis=1)[rows, i], np.stack(self.q, axis=1)[rows, i], settled
+
+    def read_steps(self) -> np.ndarray:
+        """(B,) the control step each scene's goal is read at (v1: the measuring step)."""
+        return self.lo + self._read()[0]
 
 
 def weld_relpose_np(xpos1: np.ndarray, xquat1: np.ndarray, xpos2: np.ndarray,

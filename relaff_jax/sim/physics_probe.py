@@ -140,9 +140,12 @@ class Probe:
         self.held[b].append((self.objects[0] in held, self.objects[1] in held))
         assert len(self.speeds[b]) == t + 1, "observe every step of a rollout in order"
 
-    def result(self, measure: int) -> dict[str, Any]:
-        at = np.asarray([s[measure] if measure < len(s) else (np.nan, np.nan) for s in self.speeds]).reshape(-1, 2)
-        held = np.asarray([h[measure] if measure < len(h) else (False, False) for h in self.held]).reshape(-1, 2)
+    def result(self, measure: int | np.ndarray) -> dict[str, Any]:
+        """``measure``: the step the goal is read at, one for all rollouts or (B,) per rollout
+        (programs v2 read each at rest: ``replay_native``'s ``read_step``)."""
+        ms = np.broadcast_to(np.asarray(measure, int), (len(self.speeds),))
+        at = np.asarray([s[m] if m < len(s) else (np.nan, np.nan) for s, m in zip(self.speeds, ms)]).reshape(-1, 2)
+        held = np.asarray([h[m] if m < len(h) else (False, False) for h, m in zip(self.held, ms)]).reshape(-1, 2)
         end = np.asarray([max(s[-1]) if s else np.nan for s in self.speeds])
         return dict(palm_contact=self.palm_steps > 0, palm_steps=self.palm_steps,
                     palm_seconds=self.palm_steps * self.timestep,

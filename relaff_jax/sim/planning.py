@@ -20,7 +20,7 @@ from . import arm as A
 from . import world as wd
 from .bodies import Geometry, geometry
 from .programs import program
-from .templates import N_TARGETS, TPL_CLOSED, TPL_STEPS, TPL_TARGET, ActionConfig
+from .templates import N_TARGETS, ActionConfig, tables
 
 from relaff_jax.constants import ACTIONS
 
@@ -68,6 +68,7 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     """``plan_fn(action_id (), pair (B,), qpos (B, nq)) -> Plan`` for any of the nine actions
     (``action_id`` indexes ``ACTIONS``; traced, so one compile serves all). Pure; caller jits."""
     st = setup(cfg)
+    tb = tables(cfg)
     q_home = jnp.asarray(st.q_home, jnp.float32)
     grip_home = jnp.asarray(home_grip(cfg))
     branches = [functools.partial(program, a, st.arm, cfg, st.geo) for a in ACTIONS]
@@ -76,13 +77,15 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         prog = jax.lax.switch(action_id, branches, pair, qpos)
         # only the targets the template uses are solved and count (the padding repeats the
         # last one); one value for the whole batch, so the cond stays a branch under vmap
-        n_used = jnp.max(jnp.asarray(TPL_TARGET)[action_id]) + 1
+        n_used = jnp.max(jnp.asarray(tb.target)[action_id]) + 1
         res = A.solve_ik_path(st.arm, cfg.arm, prog.targets, q_home, n_used)
         used = jnp.arange(N_TARGETS) < n_used
         feasible = jnp.all(res.reachable | ~used) & prog.ok
-        q_way = jnp.concatenate([q_home[None], res.q[jnp.asarray(TPL_TARGET)[action_id]]])
+        q_way = jnp.concatenate([q_home[None], res.q[jnp.asarray(tb.target)[action_id]]])
         opening = jnp.clip(prog.opening, 0.0, float(st.arm.finger_range[1]))
-        grip = jnp.where(jnp.asarray(TPL_CLOSED)[action_id], cfg.arm.grip_closed, opening)
+        # closing: v1 commands grip_closed (the 60 N limit squeezes); v2 a squeeze from the
+        # held weight (programs.squeeze_command)
+        grip = jnp.where(jnp.asarray(tb.closed)[action_id], prog.grip_closed, opening)
         g0 = grip_home[action_id]
         grip_way = jnp.concatenate([g0[None], grip])
         # an infeasible program is not executed: the arm holds its home pose
@@ -93,6 +96,6 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     def plan_fn(action_id, pair, qpos):
         action_id = jnp.asarray(action_id, jnp.int32)
         q_way, grip_way, feasible, direction, err = jax.vmap(one, in_axes=(None, 0, 0))(action_id, pair, qpos)
-        return Plan(q_way, grip_way, jnp.asarray(TPL_STEPS)[action_id], feasible, direction, err)
+        return Plan(q_way, grip_way, jnp.asarray(tb.steps)[action_id], feasible, direction, err)
 
     return plan_fn

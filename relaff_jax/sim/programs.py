@@ -15,8 +15,8 @@ import jax
 import jax.numpy as jnp
 
 from . import arm as A
-from .bodies import (DOWN, Body, Geometry, Grasp, bodies, perp, stack_targets, top_down, top_down_grasp,
-                     unit_xy)
+from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, perp, squeeze_command, stack_targets,
+                     top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
 from .templates import N_TARGETS, ActionConfig
 
@@ -33,6 +33,35 @@ class Program(NamedTuple):
     opening: jax.Array  # () pre-grasp half opening
     ok: jax.Array  # () bool: geometric preconditions (object fits the gripper, ...)
     direction: jax.Array  # (3,) the action's horizontal direction (move/pull/push/...), or 0
+    grip_closed: jax.Array  # () the fingers' command while closing (v2: bounded squeeze)
+
+
+class Scene(NamedTuple):
+    """What a program knows of one settled scene: the two bodies, the other's container
+    opening (``Geometry.oth_inner``) and the masses (kg)."""
+
+    toy: Body
+    oth: Body
+    inner: jax.Array
+    toy_mass: jax.Array
+    oth_mass: jax.Array
+    toy_radius: jax.Array
+
+
+def _scene(geo: Geometry, pair: jax.Array, qpos: jax.Array) -> Scene:
+    toy, oth = bodies(geo, pair, qpos)
+    g = lambda a: jnp.asarray(a)[pair]
+    return Scene(toy, oth, g(geo.oth_inner), g(geo.toy_mass), g(geo.oth_mass), g(geo.toy_radius))
+
+
+def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Array]:
+    """The grasp of the other object (base or obstacle) and the closing command: v1 as ever;
+    v2 with the palm clear of both objects and a squeeze for both objects' weight."""
+    g = top_down_grasp(arm, cfg, sc.oth)
+    if cfg.programs == "v1":
+        return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
+    g = clear_grasp(arm, cfg, g, sc.oth, sc.toy, jnp.zeros(3))
+    return g, squeeze_command(arm, cfg, sc.oth.half_width(g.closing), sc.toy_mass + sc.oth_mass)
 
 
 def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
@@ -50,12 +79,23 @@ def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
     return g._replace(closing=closing, opening=opening, fits=opening <= float(arm.finger_range[1]))
 
 
+def _toy_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Array]:
+    """Take's grasp and closing command (v2: palm clear, squeeze for the toy's weight)."""
+    g = _take_grasp(arm, cfg, sc.toy)
+    if cfg.programs == "v1":
+        return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
+    g = clear_grasp(arm, cfg, g, sc.toy, sc.oth, sc.inner)
+    half = jnp.where(sc.toy_radius > 0, sc.toy_radius, sc.toy.half_width(g.closing))  # a ball's is its radius
+    return g, squeeze_command(arm, cfg, half, sc.toy_mass)
+
+
 def _transit_z(arm: A.Arm, cfg: ActionConfig, toy: Body, oth: Body) -> jax.Array:
     return jnp.maximum(toy.z_range()[1], oth.z_range()[1]) + cfg.clearance + arm.tip_below_tcp
 
 
-def _program_lift(arm, cfg, toy, oth, *, grasp_toy: bool, tilt: bool) -> Program:
-    g = _take_grasp(arm, cfg, toy) if grasp_toy else top_down_grasp(arm, cfg, oth)
+def _program_lift(arm, cfg, sc: Scene, *, grasp_toy: bool, tilt: bool) -> Program:
+    toy, oth = sc.toy, sc.oth
+    g, squeeze = _toy_grasp(arm, cfg, sc) if grasp_toy else _base_grasp(arm, cfg, sc)
     up = jnp.maximum(_transit_z(arm, cfg, toy, oth), g.tcp_z + 0.05)
     pos = lambda z: g.xy + jnp.array([0.0, 0.0, 1.0]) * z
     targets = [top_down(pos(up), g.closing), top_down(pos(g.tcp_z), g.closing),
@@ -69,11 +109,12 @@ def _program_lift(arm, cfg, toy, oth, *, grasp_toy: bool, tilt: bool) -> Program
         rot = jnp.where(lean_out, rot.T, rot)
         targets.append(A.IKTarget(pos(g.tcp_z + cfg.lift_height), rot @ DOWN, rot @ g.closing,
                                   jnp.asarray(1.0), jnp.asarray(0.0)))
-    return Program(stack_targets(targets), g.opening, g.fits, jnp.zeros(3))
+    return Program(stack_targets(targets), g.opening, g.fits, jnp.zeros(3), squeeze)
 
 
-def _program_drag(arm, cfg, toy, oth, *, direction: jax.Array, distance: float, raise_by: float) -> Program:
-    g = top_down_grasp(arm, cfg, oth)
+def _program_drag(arm, cfg, sc: Scene, *, direction: jax.Array, distance: float, raise_by: float) -> Program:
+    toy, oth = sc.toy, sc.oth
+    g, squeeze = _base_grasp(arm, cfg, sc)
     up = jnp.maximum(_transit_z(arm, cfg, toy, oth), g.tcp_z + 0.05)
     z = jnp.array([0.0, 0.0, 1.0])
     end = g.xy + direction * distance
@@ -81,7 +122,7 @@ def _program_drag(arm, cfg, toy, oth, *, direction: jax.Array, distance: float, 
                top_down(g.xy + z * (g.tcp_z + raise_by), g.closing),
                top_down(end + z * (g.tcp_z + raise_by), g.closing), top_down(end + z * g.tcp_z, g.closing),
                top_down(end + z * (g.tcp_z + 0.10), g.closing)]
-    return Program(stack_targets(targets), g.opening, g.fits, direction)
+    return Program(stack_targets(targets), g.opening, g.fits, direction, squeeze)
 
 
 def exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax.Array:
@@ -114,17 +155,23 @@ def _program_move(arm, cfg, toy, oth) -> Program:
     far = jnp.linalg.norm(towards[:2]) > 0.02
     d = perp(jnp.where(far, unit_xy(towards), unit_xy(c)))
     d = jnp.where(jnp.dot(d, c) > 0, -d, d)  # the end nearer the robot
-    reach = toy.half_width(d) + arm.pad_thickness + cfg.rake_gap
-    finger = arm.pad_thickness + cfg.rake_gap  # half the closed fingers' footprint, plus a gap
+    tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
+    half = lambda b: arm.pad_thickness  # half the closed fingers' footprint along d
+    if cfg.programs == "v2":  # ... or the palm's (5 cm) where a body reaches up to the palm
+        palm_z = tcp_z - arm.tip_below_tcp + arm.palm_above_tip - cfg.palm_margin
+        half = lambda b: jnp.where(b.z_range()[1] > palm_z, float(arm.palm_half[1]), arm.pad_thickness)
+    reach = toy.half_width(d) + half(toy) + cfg.rake_gap
+    finger = half(oth) + cfg.rake_gap  # half the hand's footprint, plus a gap
     start = c - d * reach
     start = start - d * exit_distance(start, d, oth, finger)
-    tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
     up = _transit_z(arm, cfg, toy, oth)
     z = jnp.array([0.0, 0.0, 1.0])
-    end = c + d * (cfg.move_distance - reach)
+    # the sweep ends where v1's does (its start's reach: the pads beside the toy)
+    end = c + d * (cfg.move_distance - (toy.half_width(d) + arm.pad_thickness + cfg.rake_gap))
     targets = [top_down(start + z * up, d), top_down(start + z * tcp_z, d), top_down(end + z * tcp_z, d),
                top_down(end + z * (tcp_z + 0.10), d)]
-    return Program(stack_targets(targets), jnp.asarray(0.0), jnp.asarray(True), d)
+    return Program(stack_targets(targets), jnp.asarray(0.0), jnp.asarray(True), d,
+                   jnp.asarray(cfg.arm.grip_closed, jnp.float32))
 
 
 def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
@@ -145,7 +192,8 @@ def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     targets = [A.tool_tcp_target(p, tool_mat) for p in (above, low, pulled, raised)]
     # the toy must lie within the head's lateral extent to be caught at all
     covers = y_t - toy.half_width(side) < geo_head_y[1]
-    return Program(stack_targets(targets), jnp.asarray(0.0), covers, -radial)
+    return Program(stack_targets(targets), jnp.asarray(0.0), covers, -radial,
+                   jnp.asarray(cfg.arm.grip_closed, jnp.float32))
 
 
 def _corridor_blocked(cfg: ActionConfig, toy: Body, obst: Body, min_radius: float) -> jax.Array:
@@ -178,6 +226,8 @@ def toy_grasp_target(arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax.Arr
     whether its other conditions hold (the toy fits the gripper, the corridor is clear)."""
     toy, obst = bodies(geo, pair, qpos)
     g = top_down_grasp(arm, cfg, toy)
+    if cfg.programs == "v2":  # the toy's grasp keeps the palm off the obstacle too
+        g = clear_grasp(arm, cfg, g, toy, obst, jnp.zeros(3))
     target = top_down(g.xy + jnp.array([0.0, 0.0, 1.0]) * g.tcp_z, g.closing)
     return target, g.fits & ~_corridor_blocked(cfg, toy, obst, cfg.scene.min_radius)
 
@@ -193,20 +243,21 @@ def program(action: str, arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax
             qpos: jax.Array) -> Program:
     """The per-scene motor program of ``action`` from the settled ``qpos`` (nq,) (one scene);
     its targets padded to ``N_TARGETS`` by repeating the last one."""
-    toy, oth = bodies(geo, pair, qpos)
+    sc = _scene(geo, pair, qpos)
+    toy, oth = sc.toy, sc.oth
     if action in ("lift", "take", "pour", "slide"):
-        prog = _program_lift(arm, cfg, toy, oth, grasp_toy=action == "take",
+        prog = _program_lift(arm, cfg, sc, grasp_toy=action == "take",
                              tilt=action in ("pour", "slide"))
     elif action in ("pull", "push"):
         radial = unit_xy(oth.centre)
         sign = -1.0 if action == "pull" else 1.0
         dist = cfg.pull_distance if action == "pull" else cfg.push_distance
-        prog = _program_drag(arm, cfg, toy, oth, direction=sign * radial, distance=dist,
+        prog = _program_drag(arm, cfg, sc, direction=sign * radial, distance=dist,
                              raise_by=cfg.drag_raise)
     elif action == "unobstruct":
         side = perp(unit_xy(toy.centre))
         d = jnp.where(jnp.dot(oth.centre, side) >= jnp.dot(toy.centre, side), 1.0, -1.0) * side
-        prog = _program_drag(arm, cfg, toy, oth, direction=d, distance=cfg.unobstruct_distance,
+        prog = _program_drag(arm, cfg, sc, direction=d, distance=cfg.unobstruct_distance,
                              raise_by=cfg.drag_raise + 0.01)
     elif action == "move":
         prog = _program_move(arm, cfg, toy, oth)

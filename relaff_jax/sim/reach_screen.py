@@ -41,7 +41,7 @@ import numpy as np
 from . import arm as A
 from .planning import Plan, home_grip, make_plan_fn, setup
 from .programs import program, toy_grasp_target, toy_reachable
-from .templates import N_TARGETS, TPL_STEPS, TPL_TARGET, UNOBSTRUCT_ID, ActionConfig
+from .templates import N_TARGETS, UNOBSTRUCT_ID, ActionConfig, tables
 
 from relaff_jax.constants import ACTIONS
 
@@ -112,7 +112,7 @@ def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
 
     def one(action_id, pair, qpos):
         prog = jax.lax.switch(action_id, branches, pair, qpos)
-        used = jnp.arange(N_TARGETS) < jnp.max(jnp.asarray(TPL_TARGET)[action_id]) + 1
+        used = jnp.arange(N_TARGETS) < jnp.max(jnp.asarray(tables(cfg).target)[action_id]) + 1
         infeasible = jnp.any(far(prog.targets) & used)
         grasp, _ = toy_grasp_target(st.arm, cfg, st.geo, pair, qpos)
         unreachable = jnp.where(action_id == UNOBSTRUCT_ID, beyond_reach(bound, grasp), True)
@@ -166,7 +166,7 @@ def prepare_screened(prepare_fn: Callable, cfg: ActionConfig, aid: int, pair: np
         jitted_screen_fn(cfg)(aid, jnp.asarray(pair), jnp.asarray(qpos)))
     infeasible, unreachable = np.asarray(infeasible, bool), np.asarray(unreachable, bool)
     st = setup(cfg)
-    seg = np.asarray(TPL_STEPS, np.int32)[aid]
+    seg = np.asarray(tables(cfg).steps, np.int32)[aid]
     q_way = np.broadcast_to(np.asarray(st.q_home, np.float32), (n, len(seg) + 1, 6)).copy()
     grip_way = np.full((n, len(seg) + 1), home_grip(cfg)[aid], np.float32)
     feasible, before = np.zeros(n, bool), np.zeros(n, bool)

@@ -125,7 +125,8 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     ``toy``, ``other`` (names), ``pair`` (int32), ``qpos0`` / ``qpos_settled`` (float32 (14,),
     arm-less layout), ``qpos_final``, ``rollout_id`` (int64), ``intended``, ``at_rest``,
     ``feasible``, ``ik_error``, ``reach_before``/``reach_after``, ``simulated`` (bool: the
-    program was executed, by either engine).
+    program was executed, by either engine), ``settled`` (bool: both objects were at rest
+    where the goal was read, ``labels.read_at_rest``; True where nothing was executed).
     ``batch`` is the batch size the caller will use (compiled on the first call).
 
     ``engine``: ``"mjx"`` runs the programs in MJX in calls of ``sim_batch`` scenes;
@@ -223,6 +224,7 @@ def execute_batch(prep: Prepared, cfg: ActionConfig, engine: str = "mjx", sim_ba
     label = np.zeros(len(p), bool)
     qpos_final = qpos.copy()
     after = before.copy()
+    settled = np.ones(len(p), bool)  # a program not executed leaves the settled scene as it was
     run = np.flatnonzero(plan.feasible)
     if engine == "native" and len(run):
         sub = Plan(plan.q_way[run], plan.grip_way[run], plan.seg_steps, plan.feasible[run],
@@ -230,6 +232,7 @@ def execute_batch(prep: Prepared, cfg: ActionConfig, engine: str = "mjx", sim_ba
         out = execute_native(prep.action, cfg, p[run], qpos[run], np.asarray(s.qvel)[run], sub,
                              before[run], nthread=nthread)
         label[run], qpos_final[run], after[run] = out["label"], out["qpos_final"], out["reach_after"]
+        settled[run] = out["settled"]
     if engine == "mjx":
         _, simulate_fn = jitted_stage_fns(cfg)
         for lo in range(0, len(run), sim_batch):
@@ -242,6 +245,7 @@ def execute_batch(prep: Prepared, cfg: ActionConfig, engine: str = "mjx", sim_ba
             label[rows] = out["label"][:k]
             qpos_final[rows] = out["qpos_final"][:k]
             after[rows] = out["reach_after"][:k]
+            settled[rows] = out["settled"][:k]
     simulated = np.zeros(len(p), bool)
     simulated[run] = True
     return dict(
@@ -253,5 +257,5 @@ def execute_batch(prep: Prepared, cfg: ActionConfig, engine: str = "mjx", sim_ba
         qpos_final=np.asarray(qpos_final, np.float32), rollout_id=prep.ids,
         intended=np.asarray(s.intended, np.int32), at_rest=np.asarray(s.at_rest, bool),
         feasible=np.asarray(plan.feasible, bool), ik_error=np.asarray(plan.ik_error, np.float32),
-        reach_before=before, reach_after=after, simulated=simulated,
+        reach_before=before, reach_after=after, simulated=simulated, settled=settled,
     )

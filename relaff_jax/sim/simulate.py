@@ -27,10 +27,10 @@ from mujoco import mjx
 
 from . import arm as A
 from . import world as wd
-from .labels import Outcome, goals
+from .labels import Outcome, goals, read_at_rest
 from .planning import Setup, home_grip, make_plan_fn, setup
 from .programs import toy_reachable
-from .templates import GRASPS, N_STEPS, RAKE_ID, TPL_CLOSED, TPL_MEASURE, UNOBSTRUCT_ID, ActionConfig, run_steps
+from .templates import GRASPS, N_STEPS, RAKE_ID, UNOBSTRUCT_ID, ActionConfig, run_steps, tables
 
 
 def _finger_home(action_id: jax.Array) -> jax.Array:
@@ -73,7 +73,7 @@ def welds(world: wd.World) -> Welds:
 
 
 def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array, mx, d, q_way, grip_way,
-              seg_steps, closed, observe, n_run=None):
+              seg_steps, closed, observe, n_run=None, n_steps=N_STEPS):
     """Run a program on one scene (``lax.scan`` over ``N_STEPS`` control steps) with grasp locks.
 
     With ``n_run`` (scalar, may be traced but not batched) only the first ``n_run`` steps are
@@ -114,7 +114,7 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
         return jax.lax.cond(t < n_run, control_step, lambda c, _: (c, observe(c[0])), carry, t)
 
     body = control_step if n_run is None else step_or_hold
-    (d, _), trace = jax.lax.scan(body, (d, jnp.asarray(mx.eq_data)), jnp.arange(N_STEPS))
+    (d, _), trace = jax.lax.scan(body, (d, jnp.asarray(mx.eq_data)), jnp.arange(n_steps))
     return d, trace
 
 
@@ -144,7 +144,13 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     st = setup(cfg)
     world, arm = st.world, st.arm
     toy_b, obj_b = world.toy_body, world.obj_body
-    observe = lambda d: jnp.stack([d.xipos[toy_b], d.xipos[obj_b]])
+    tb = tables(cfg)
+    v2 = cfg.programs == "v2"
+    com_of = lambda d: jnp.stack([d.xipos[toy_b], d.xipos[obj_b]])
+    nqo = 14  # the two free joints lead the action world's qpos (settled scenes' layout)
+    # v2 reads the objects' state at a step found after the run, so the trace keeps qpos too
+    observe = (lambda d: (com_of(d), d.qpos[:nqo])) if v2 else com_of
+    at_rest = jax.vmap(lambda c: read_at_rest(c, cfg.rest_window, cfg.scene.rest_speed, cfg.phys.timestep))
     forward = jax.vmap(mjx.forward, in_axes=(world.model_axes, 0))
     reach = jax.vmap(lambda p, q: toy_reachable(arm, cfg, st.geo, p, q))
     wl = welds(world)
@@ -156,23 +162,32 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         data = forward(models, data)
         com0 = jnp.stack([data.xipos[:, toy_b], data.xipos[:, obj_b]], 1)
         grasp = jnp.asarray(GRASPS)[action_id]
-        closed = jnp.asarray(TPL_CLOSED)[action_id]
+        closed = jnp.asarray(tb.closed)[action_id]
         # one value for the whole batch, so the cond stays a branch under vmap
         n_run = jnp.asarray(run_steps(cfg))[action_id] if cfg.stop_at_program_end else None
         run = lambda mx, d, qw, gw: run_program_locked(st, cfg, wl, grasp, mx, d, qw, gw, plan.seg_steps,
-                                                         closed, observe, n_run)
+                                                         closed, observe, n_run, tb.n_steps)
         final, trace = jax.vmap(run, in_axes=(world.model_axes, 0, 0, 0))(
             models, data, plan.q_way, plan.grip_way)
-        nqo = qpos.shape[-1]
-        qpos_final = final.qpos[:, :nqo]
+        measure = jnp.asarray(tb.measure)[action_id]
+        com_tr = trace[0] if v2 else trace
+        window = jax.lax.dynamic_slice_in_dim(com_tr, measure - cfg.rest_window, cfg.rest_window + 1 + tb.hold, axis=1)
+        i_read, settled = at_rest(window)
+        if v2:  # every goal and the final state at the first step at rest (or the hold's end)
+            rows = jnp.arange(com_tr.shape[0])
+            t_read = measure - cfg.rest_window + i_read
+            com_m = com_end = com_tr[rows, t_read]
+            qpos_final = trace[1][rows, t_read]
+        else:  # v1: lift-type goals at the measuring step, the others at the end
+            com_m, com_end = com_tr[:, measure], com_tr[:, -1]
+            qpos_final = final.qpos[:, :qpos.shape[-1]]
         after = jax.lax.cond(action_id == UNOBSTRUCT_ID, lambda: reach(pair, qpos_final),
                              lambda: jnp.zeros(pair.shape, bool))
-        com_m = trace[:, jnp.asarray(TPL_MEASURE)[action_id]]
-        out = Outcome(com0, com_m, trace[:, -1], plan.direction, before, after)
+        out = Outcome(com0, com_m, com_end, plan.direction, before, after)
         labels = jax.vmap(lambda o: goals(cfg, o))(out)[:, action_id] & plan.feasible
         return dict(label=labels, feasible=plan.feasible, ik_error=plan.ik_error, com0=com0,
                     com_m=com_m, com_end=out.com_end, reach_before=before, reach_after=after,
-                    qpos_final=qpos_final, q_way=plan.q_way, grip_way=plan.grip_way,
+                    qpos_final=qpos_final, settled=settled, q_way=plan.q_way, grip_way=plan.grip_way,
                     seg_steps=plan.seg_steps)
 
     return simulate_fn

@@ -83,12 +83,39 @@ UNOBSTRUCT_ID = ACTIONS.index("unobstruct")
 GRASPS = np.asarray([{"take": 2, "move": 0, "rake": 0}.get(a, 1) for a in ACTIONS], np.int32)
 
 
+class Tables(NamedTuple):
+    """The templates of one version of the programs as (9, ...) tables in ``ACTIONS`` order:
+    ``steps`` (9, S), ``target`` (9, S), ``closed`` (9, S), ``measure`` (9,) the step the goal
+    is read at (v2: the first step it may be read at), ``n_steps`` the padded length of every
+    program, ``hold`` the control steps v2 may wait after ``measure`` for the objects to rest."""
+
+    steps: np.ndarray
+    target: np.ndarray
+    closed: np.ndarray
+    measure: np.ndarray
+    n_steps: int
+    hold: int
+
+
+def tables(cfg: ActionConfig) -> Tables:
+    """The templates ``cfg.programs`` runs: v1 the module's ``TPL_*`` tables (``N_STEPS``); v2
+    the same segments with the final rest ``cfg.rest_hold`` steps longer, so that a goal read
+    at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after ``measure``."""
+    if cfg.programs == "v1":
+        return Tables(TPL_STEPS, TPL_TARGET, TPL_CLOSED, TPL_MEASURE, N_STEPS, 0)
+    steps = TPL_STEPS.copy()
+    steps[:, -1] += int(cfg.rest_hold)
+    return Tables(steps, TPL_TARGET, TPL_CLOSED, TPL_MEASURE, N_STEPS + int(cfg.rest_hold), int(cfg.rest_hold))
+
+
 def run_steps(cfg: ActionConfig) -> np.ndarray:
     """(9,) int32: control steps simulated per action, ``TPL_MEASURE + 1`` (the program's own
-    end) or every action the padded ``N_STEPS`` (``cfg.stop_at_program_end`` False)."""
+    end; v2 plus the rest hold) or every action the padded length (``cfg.stop_at_program_end``
+    False: ``N_STEPS``, v2 ``N_STEPS + rest_hold``)."""
+    tb = tables(cfg)
     if cfg.stop_at_program_end:
-        return (TPL_MEASURE + 1).astype(np.int32)
-    return np.full(len(ACTIONS), N_STEPS, np.int32)
+        return (tb.measure + 1 + tb.hold).astype(np.int32)
+    return np.full(len(ACTIONS), tb.n_steps, np.int32)
 
 
 def untuned(cfg: ActionConfig = ActionConfig()) -> ActionConfig:
@@ -109,12 +136,21 @@ def stored_config(cfg: ActionConfig) -> dict:
     so that those stay valid and resumable; ``"lm"`` is recorded with its step count, so a
     dataset is never resumed with the other solver's plans.
 
+    The programs' version (``ActionConfig.programs``) is recorded with its settings when it is
+    v2; v1 is recorded by the absence of ``programs`` and of the v2 settings, exactly as every
+    dataset written before issue 43, so those stay valid (and mean v1).
+
     The reach screen (``ArmConfig.reach_screen``, default on) is recorded only when off: it
     changes no stored field but ``ik_error`` (NaN where screened, ``reach_screen.py``), so a
     dataset written before it existed stays valid and resumable (its later chunks screened)."""
     from relaff_jax.config import to_dict
 
+    from .config import V2_FIELDS
+
     d = to_dict(cfg)
+    if cfg.programs == "v1":  # as every dataset written before the option existed
+        for k in ("programs",) + V2_FIELDS:
+            d.pop(k)
     if cfg.arm.ik_solver == "lbfgs":
         d["arm"].pop("ik_solver")
         d["arm"].pop("ik_lm_steps")
