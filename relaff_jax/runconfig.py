@@ -141,7 +141,7 @@ def preset(name: str) -> RunConfig:
         return override(RunConfig(experiment=experiment_preset("quick")), {
             "dataset.n_samples": 100, "dataset.rollout_batch": 64, "dataset.max_rollouts": 20_000,
             "dataset.distance_bins": 10, "dataset.borrow_fraction": 0.05, "dataset.feature_batch": 16,
-            "reproduce.examples_per_action": 2})
+            "reproduce.examples_per_action": 2, "dataset.engine": "native"})
     if name == "tiny":
         exp = override(experiment_preset("quick"), {"sizes": (2,) + tuple(range(4, 11)), "reps_pca": 2, "reps_rhf": 2,
                                                     "forest.base_trees": 8, "forest.max_trees": 8})

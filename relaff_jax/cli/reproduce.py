@@ -42,6 +42,8 @@ def register(sub) -> None:
                    help="OUT's run.json is damaged: set it aside (run.json.damaged) and start a new log for the "
                         "given --preset, --seed and --set; complete stages are then skipped")
     p.add_argument("--no-progress", action="store_true", help="no progress line")
+    p.add_argument("--no-compile-cache", action="store_true", default=argparse.SUPPRESS,
+                   help="do not use JAX's persistent compilation cache (same as `relaff --no-compile-cache`)")
     p.set_defaults(func=cmd_reproduce)
 
 
