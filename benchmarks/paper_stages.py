@@ -14,8 +14,10 @@ its reference in the same run, and the paper preset's wall time, measured and pr
 - forests: the compiled engine (``learn/compiled``, the sweep's) against the fast one
   (scikit-learn's builder per tree + one JAX evaluation), fit + evaluation on 4,000 rows at
   n = 25 and 100, wall and CPU seconds (the experiment runs one worker per core, so CPU).
-- features: the stage's feature function (``from_sim.make_feature_fn``, calls of
-  ``SUB_BATCH``) and one call of 32, against the chain alone on the same precomputed inputs.
+- features: the stage's feature function (``from_sim.make_feature_fn``: capacities sized per
+  call) against the same at the config's capacities (``culled=False``), same scenes, same bits.
+- quick: ``relaff reproduce --preset quick`` into a new folder, a subprocess whose JAX
+  compilation cache is ``--xla-cache`` (so warm from this benchmark's second run on).
 - report: its bootstrap over test scenes (``resampled_means`` + ``half_curves``), the
   reference path against the fast one, one paper-shaped PCA target (``--report-sizes`` sizes).
 
@@ -31,7 +33,8 @@ a report target of 3 sizes) runs in under 5 minutes once JAX's persistent compil
 (``--xla-cache``) holds its programs; batch 64 is slower per rollout than the preset's 1024,
 so its projection is pessimistic. The last line is ``native_per_s=<whole-batch labelled
 rollouts/s, lift> forest_speedup=<compiled/fast CPU s per forest, n = 25, PCA>
-paper_projected_h=<hours, projected>``.
+paper_projected_h=<hours, projected> quick_s=<wall seconds of the quick preset's run>``
+(``--no-quick``: ``quick_s=nan``; the quick run adds 2-4 minutes with a warm cache).
 """
 from __future__ import annotations
 
@@ -211,8 +214,11 @@ def forest_stage(k: int) -> dict:
 
 
 def features_stage(n: int) -> dict:
-    """Scenes/s of today's and the new feature computation and of the chain alone, on the same
-    n C-settled lift scenes in chunks of 32 (the paper preset's feature_batch)."""
+    """Scenes/s of the stage's feature function (``from_sim.make_feature_fn``: capacities sized
+    per call, ``perception.culled``) against the same function at the config's capacities
+    (``culled=False``, the stage before issue 47), on the same n C-settled lift scenes in chunks
+    of 32 (the paper preset's feature_batch), after an untimed pass over every chunk (compiles),
+    chunks alternating which goes first; checks every output equal."""
     from relaff_jax import perception as pc
     from relaff_jax.perception import from_sim
 
@@ -226,34 +232,37 @@ def features_stage(n: int) -> dict:
     chunks = [{"pair": pair[lo:lo + 32], "qpos_settled": np.asarray(s.qpos)[lo:lo + 32], "rollout_id": ids[lo:lo + 32]}
               for lo in range(0, n, 32)]
     pcfg = pc.PerceptionConfig()
-    fns = {"today": from_sim.make_feature_fn(sw, pcfg, 0, sub_batch=32), "new": from_sim.make_feature_fn(sw, pcfg, 0)}
-    feats = pc.make_batched_features(sw.mj_model.geom_type, sw.geom_seg, pcfg)
-    geoms = from_sim.jitted_geoms(sw)
-    inputs = []
-    for c in chunks:
-        g = geoms(jnp.asarray(c["pair"], jnp.int32), jnp.asarray(c["qpos_settled"], jnp.float32))
-        inputs.append(jax.block_until_ready((*g, from_sim.rollout_keys(jax.random.PRNGKey(0), c["rollout_id"]))))
-    sb = from_sim.SUB_BATCH
-    chain = {32: lambda g: jax.block_until_ready(feats.jitted(*g)),
-             sb: lambda g: jax.block_until_ready([feats.jitted(*(x[i:i + sb] for x in g)) for i in range(0, 32, sb)])}
+    fns = {"today": from_sim.make_feature_fn(sw, pcfg, 0, culled=False), "new": from_sim.make_feature_fn(sw, pcfg, 0)}
     for f in fns.values():
-        f(chunks[0])
-    for f in chain.values():
-        f(inputs[0])
-    t = {k: 0.0 for k in ("today", "new", "chain32", "chain_sub")}
+        for c in chunks:
+            f(c)
+    t = {k: 0.0 for k in fns}
     outs = {"today": [], "new": []}
-    for i, (c, g) in enumerate(zip(chunks, inputs)):
-        order = ("today", "new") if i % 2 == 0 else ("new", "today")
-        for name in order:
+    for i, c in enumerate(chunks):
+        for name in (("today", "new") if i % 2 == 0 else ("new", "today")):
             t0 = time.perf_counter()
             outs[name].append(fns[name](c))
             t[name] += time.perf_counter() - t0
-        for name, bs in (("chain32", 32), ("chain_sub", sb)):
-            t0 = time.perf_counter()
-            chain[bs](g)
-            t[name] += time.perf_counter() - t0
     same = all(np.array_equal(a[k], b[k]) for a, b in zip(outs["today"], outs["new"]) for k in a)
-    return dict(n=len(chunks) * 32, rates={k: len(chunks) * 32 / v for k, v in t.items()}, identical=same, sub_batch=sb)
+    return dict(n=len(chunks) * 32, rates={k: len(chunks) * 32 / v for k, v in t.items()}, identical=same)
+
+
+def quick_preset(cache: str) -> dict:
+    """Wall seconds of ``relaff reproduce --preset quick`` into a new folder (a subprocess, the
+    compilation cache in ``cache``: warm from the second run of this benchmark on), and its
+    stage seconds from the run log."""
+    import json
+    import subprocess
+    import tempfile
+
+    env = dict(os.environ, RELAFF_COMPILE_CACHE=cache or "0")
+    with tempfile.TemporaryDirectory(prefix="relaff_quick_") as tmp:
+        t0 = time.perf_counter()
+        subprocess.run([sys.executable, "-m", "relaff_jax.cli", "reproduce", "--preset", "quick", "--out",
+                        os.path.join(tmp, "q"), "--no-progress"], env=env, check=True, capture_output=True)
+        wall = time.perf_counter() - t0
+        run = json.load(open(os.path.join(tmp, "q", "run.json")))["runs"][-1]
+    return dict(seconds=wall, stages={k: v["seconds"] for k, v in run["stages"].items()})
 
 
 def project(rollout: list[dict], feats: dict) -> dict:
@@ -302,6 +311,8 @@ def main() -> None:
     ap.add_argument("--features", type=int, default=256, help="scenes for the features stage")
     ap.add_argument("--forests", type=int, default=16, help="forests per (space, n)")
     ap.add_argument("--report-sizes", type=int, default=20, help="training sizes of the report's resampling target")
+    ap.add_argument("--no-quick", dest="quick", action="store_false",
+                    help="skip the quick preset's run (quick_s=nan)")
     ap.add_argument("--smoke", action="store_true", help="lift, batch 64, 2 batches, few forests and scenes")
     ap.add_argument("--rollouts-only", action="store_true",
                     help="time the native rollout functions (with and without the reach screen) and stop")
@@ -358,10 +369,9 @@ def main() -> None:
     feats = features_stage(args.features)
     stamp("features stage done")
     r = feats["rates"]
-    print(f"\nfeatures, {feats['n']} lift scenes in chunks of 32: one call of 32 {r['today']:.1f} scenes/s, "
-          f"the stage's calls of {feats['sub_batch']} {r['new']:.1f} scenes/s, bit-identical {feats['identical']}; "
-          f"the chain alone: {r['chain32']:.1f} scenes/s in calls of 32, {r['chain_sub']:.1f} in calls of "
-          f"{feats['sub_batch']}; chain / stage {r['chain_sub'] / r['new']:.2f}", flush=True)
+    print(f"\nfeatures, {feats['n']} lift scenes in chunks of 32: at the config's capacities {r['today']:.1f} "
+          f"scenes/s, capacities sized per call {r['new']:.1f} scenes/s, ratio {r['new'] / r['today']:.2f}, "
+          f"bit-identical {feats['identical']}", flush=True)
     rep = report_stage(args.report_sizes, resamples)
     stamp("report stage done")
     print(f"\nreport resampling, one PCA target, {rep['sizes']} sizes, {rep['resamples']} resamples: reference "
@@ -375,9 +385,15 @@ def main() -> None:
               f"{p['total']:.0f} | {p['total'] / 3600:.2f} |")
     lift = next((d for d in rollout if d["action"] == "lift"), rollout[0])
     sp = forest[("pca", 25)]
+    quick = quick_preset(args.xla_cache) if args.quick else {"seconds": float("nan"), "stages": {}}
+    if args.quick:
+        stamp("quick preset done")
+        print("\nquick preset, `relaff reproduce --preset quick` into a new folder, compilation cache "
+              f"{args.xla_cache or 'off'}: {quick['seconds']:.0f} s; stages (s): "
+              + ", ".join(f"{k} {v:.0f}" for k, v in quick["stages"].items()))
     print(f"\nwall time of this benchmark {time.perf_counter() - t_start:.0f} s; load average after {os.getloadavg()[0]:.2f}")
     print(f"native_per_s={lift['per_s']:.1f} forest_speedup={sp['fast'][1] / sp['compiled'][1]:.2f} "
-          f"paper_projected_h={proj['projected']['total'] / 3600:.2f}")
+          f"paper_projected_h={proj['projected']['total'] / 3600:.2f} quick_s={quick['seconds']:.0f}")
 
 
 if __name__ == "__main__":

@@ -112,8 +112,9 @@ def preset(name: str) -> RunConfig:
     action, per scene outcomes kept for intervals; projected at about 2-3 hours here, most of
     it simulation (docs/reproduce.md).
     ``quick``: the README's main job, a small but complete study (all nine actions, both
-    spaces, every bootstrapping condition), 9.2 minutes on two idle cores, 4.4 with the native
-    engine (measured 2026-12-02, docs/reproduce.md):
+    spaces, every bootstrapping condition), its motor programs run by MuJoCo C
+    (``dataset.engine=native``: 4.4 minutes on two idle cores against 9.2 with MJX, measured
+    2026-12-02; a newcomer's first result, docs/reproduce.md "Presets"):
     100 samples per action, n = 2 and every n in 4..25, 2 repetitions, the paper's forests;
     the learning pools shrink to the data (``ExperimentConfig.shrink_to_data``). Its
     intervals are too wide to compare with the paper; its report says so.
@@ -141,7 +142,7 @@ def preset(name: str) -> RunConfig:
         return override(RunConfig(experiment=experiment_preset("quick")), {
             "dataset.n_samples": 100, "dataset.rollout_batch": 64, "dataset.max_rollouts": 20_000,
             "dataset.distance_bins": 10, "dataset.borrow_fraction": 0.05, "dataset.feature_batch": 16,
-            "reproduce.examples_per_action": 2})
+            "reproduce.examples_per_action": 2, "dataset.engine": "native"})
     if name == "tiny":
         exp = override(experiment_preset("quick"), {"sizes": (2,) + tuple(range(4, 11)), "reps_pca": 2, "reps_rhf": 2,
                                                     "forest.base_trees": 8, "forest.max_trees": 8})

@@ -165,3 +165,18 @@ def test_sub_batches_give_the_same_features(small_dataset, scene_world):
         np.testing.assert_array_equal(got[k], want[k], err_msg=k)
     with pytest.raises(UserError, match="sub_batch"):
         features.make_feature_fn(scene_world, sub_batch=0)
+
+
+@pytest.mark.slow  # compiles the 640 x 480 chain at the config's capacities and at the buckets used
+def test_culled_feature_fn_equals_the_full_capacity_chain(small_dataset, scene_world):
+    """The features stage's function (capacities sized per call, RHF tiles of 128) gives the
+    bits of every call at the config's capacities (65,536 rays, 32,768 pixel slots, RHF tiles
+    of 256) on stored scenes, each at a capacity below the config's."""
+    ds = dataset.load_dataset(small_dataset, features=False)
+    i = np.arange(8) % len(ds["pair"])
+    s = {"pair": ds["pair"][i], "qpos_settled": ds["qpos_settled"][i], "rollout_id": ds["rollout_id"][i]}
+    want = features.make_feature_fn(scene_world, culled=False)(s)
+    got = features.make_feature_fn(scene_world)(s)
+    for k in want:
+        np.testing.assert_array_equal(got[k], want[k], err_msg=k)
+    assert np.sum(~want["unseen"].any(1)) >= 4 and np.all(want["rhf"][~want["unseen"].any(1)].sum(1) > 5.9)

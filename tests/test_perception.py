@@ -723,3 +723,22 @@ def test_library_never_changes_the_matplotlib_backend(tmp_path, random_scenes):
         assert matplotlib.get_backend() == "pdf"
     finally:
         matplotlib.use(before)
+
+
+def test_culled_features_equal_the_batched_chain(chain, random_scenes):
+    """``make_culled_features`` (capacities sized per call) gives the bits of
+    ``make_batched_features``: buckets put the three scenes at three capacities (the last at
+    the config's), pixel buffers shorter than the config's included."""
+    scenes, seg = random_scenes
+    b = chain["batch"]
+    n = np.asarray(P.make_tile_counter(scenes[0][0].geom_type, seg, SMALL)(b.size, b.xpos, b.xmat))
+    assert n.max() < SMALL.cull.max_tiles
+    buckets = tuple(int(x) for x in np.sort(n)[:2])
+    assert buckets[0] < buckets[1]  # three different capacities
+    f = P.make_culled_features(scenes[0][0].geom_type, seg, SMALL, sub_batch=1, buckets=buckets)
+    got = f(b.size, b.xpos, b.xmat, chain["keys"])
+    assert sorted(f.capacities) == [*buckets, SMALL.cull.max_tiles]
+    assert P.capacity_config(SMALL, buckets[0]).voxel.max_object_pixels < SMALL.voxel.max_object_pixels
+    for k, want in chain["feats"].items():
+        np.testing.assert_array_equal(got[k], np.asarray(want), err_msg=k)
+    assert not np.all(got["rhf"] == 0)

@@ -72,14 +72,16 @@ def test_generation_estimate_follows_the_engine():
     from relaff_jax.reproduce.progress import COST, estimate_seconds
     from relaff_jax.runconfig import preset, resolve
 
-    mjx = estimate_seconds(preset("quick"), 2, 2)
-    native = estimate_seconds(resolve(preset("quick"), {"dataset.engine": "native"}), 2, 2)
+    mjx = estimate_seconds(resolve(preset("quick"), {"dataset.engine": "mjx"}), 2, 2)
+    native = estimate_seconds(preset("quick"), 2, 2)  # the quick preset's default engine
+    assert preset("quick").dataset.engine == "native"
     sim = 9 * 100 * COST["rollouts_per_sample"]
     assert mjx["generate"] - COST["sim_compile"] == pytest.approx(sim / COST["rollouts_per_s"])
     assert native["generate"] - COST["sim_compile"] == pytest.approx(sim / COST["rollouts_per_s_native"])
     assert {k: v for k, v in mjx.items() if k != "generate"} == {k: v for k, v in native.items() if k != "generate"}
     # the feasible population selects from about twice the rollouts per sample
-    feasible = estimate_seconds(resolve(preset("quick"), {"dataset.population": "feasible"}), 2, 2)
+    feasible = estimate_seconds(resolve(preset("quick"), {"dataset.population": "feasible", "dataset.engine": "mjx"}),
+                                2, 2)
     assert feasible["generate"] - COST["sim_compile"] == pytest.approx(
         9 * 100 * COST["rollouts_per_sample_feasible"] / COST["rollouts_per_s"])
 

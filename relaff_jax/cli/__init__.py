@@ -80,6 +80,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Relational affordances of object pairs: simulate, perceive, learn, bootstrap.",
     )
     parser.add_argument("--version", action="version", version=f"relaff {version()}")
+    parser.add_argument("--no-compile-cache", action="store_true",
+                        help="do not use JAX's persistent compilation cache (on by default in "
+                             "$XDG_CACHE_HOME/relaff_jax/jax; RELAFF_COMPILE_CACHE=0 does the same, "
+                             "RELAFF_COMPILE_CACHE=DIR moves it)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
     for name in COMMAND_MODULES:
@@ -132,6 +136,9 @@ def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     name = command_name(args)
+    from relaff_jax import compile_cache
+
+    compile_cache.configure(disable=args.no_compile_cache)  # before any JAX work (docs/reproduce.md)
     try:
         return int(args.func(args) or 0)
     except UserError as e:

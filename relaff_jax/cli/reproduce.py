@@ -18,8 +18,8 @@ def register(sub) -> None:
                     "stages are skipped. Settings: a preset plus --set overrides of the config tree "
                     "(relaff_jax.runconfig); the run log records the whole resolved tree.")
     p.add_argument("--preset", choices=PRESETS, default="quick",
-                   help="quick: 9.2 min on 2 idle cores, 4.4 with --engine native (docs/benchmarks.md, "
-                        "'Engines at 2,000 scenes per action'); study: 29 min with --engine native (docs/results.md); paper: the full protocol "
+                   help="quick: a small complete study, its motor programs in MuJoCo C (4.4 min on 2 idle cores "
+                        "with the native engine, 9.2 with MJX; docs/reproduce.md 'Presets'); study: 29 min with --engine native (docs/results.md); paper: the full protocol "
                         "(1 h 32 min measured with --engine native: data 50 min, features 14 min, experiment 25 min, report 4 min; "
                         "docs/reproduce.md 'The paper preset, run again in one stretch'); tiny: for tests")
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
@@ -35,8 +35,8 @@ def register(sub) -> None:
     options.add_cluster(p)
     options.add_set(p, "dataset.n_samples=400 --set experiment.reps_pca=5")
     p.add_argument("--engine", choices=SIM_ENGINES, default=None,
-                   help="executor of the motor programs (same as --set dataset.engine=...): mjx (the preset's "
-                        "default) or native (MuJoCo C batches, docs/actions.md)")
+                   help="executor of the motor programs (same as --set dataset.engine=...): mjx (the default of "
+                        "tiny, study and paper) or native (MuJoCo C batches, quick's default; docs/actions.md)")
     p.add_argument("--status", action="store_true", help="print each stage's status in OUT and exit")
     p.add_argument("--rebuild-log", action="store_true",
                    help="OUT's run.json is damaged: set it aside (run.json.damaged) and start a new log for the "
@@ -45,6 +45,8 @@ def register(sub) -> None:
                    help="Python files registering conditions, run where experiment.conditions_pca / "
                         "conditions_rhf name them (docs/extending.md)")
     p.add_argument("--no-progress", action="store_true", help="no progress line")
+    p.add_argument("--no-compile-cache", action="store_true", default=argparse.SUPPRESS,
+                   help="do not use JAX's persistent compilation cache (same as `relaff --no-compile-cache`)")
     p.set_defaults(func=cmd_reproduce)
 
 

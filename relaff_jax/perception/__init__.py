@@ -45,6 +45,7 @@ Files, in dependency order (this module re-exports their public names):
 - ``voxels.py``: stage 3, per-object voxel grid;
 - ``descriptors.py``: stages 4-5, PCA values and RHF histograms;
 - ``pipeline.py``: ``point_cloud``, ``features``, ``make_batched_features``;
+- ``culled.py``: ``make_culled_features`` (the batched chain with capacities sized per call, same bits);
 - ``plots.py``: ``scene_view`` and ``render_scene_png`` (pyplot-free);
 - ``from_sim.py``: dataset samples -> features (``make_feature_fn``,
   ``show_scene``); not imported here (it needs MJX and the world).
@@ -93,6 +94,11 @@ _LAZY = {
     'pixel_normals': 'normals',
     'smallest_eigenvector': 'normals',
     'window_normals': 'normals',
+    'TILE_BUCKETS': 'culled',
+    'capacity_config': 'culled',
+    'make_culled_features': 'culled',
+    'make_tile_counter': 'culled',
+    'tile_capacity': 'culled',
     'SceneFeatures': 'pipeline',
     'features': 'pipeline',
     'features_from_voxels': 'pipeline',
@@ -162,6 +168,7 @@ __all__ = [
     "NOISE_MODELS", "add_depth_noise", "depth_noise_sigma", "pixel_radius",
     "pixel_normals", "smallest_eigenvector", "window_normals",
     "SceneFeatures", "features", "features_from_voxels", "make_batched_features", "point_cloud",
+    "TILE_BUCKETS", "capacity_config", "make_culled_features", "make_tile_counter", "tile_capacity",
     "object_crop", "render_scene_png", "scene_view",
     "cast_rays", "surface_normals",
     "active_tiles", "compact_objects", "render", "render_objects",

@@ -97,18 +97,21 @@ SUB_BATCH = 4
 
 
 def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionConfig(), seed: int = 0,
-                    sub_batch: int = SUB_BATCH):
+                    sub_batch: int = SUB_BATCH, culled: bool = True):
     """``compute(samples) -> dict of numpy arrays`` for ``relaff_jax.data.add_features``.
 
     ``samples`` needs ``pair`` (B,), ``qpos_settled`` (B, nq) and ``rollout_id`` (B,) int64;
     a sample's noise key is ``rollout_keys(PRNGKey(seed), rollout_id)``. The B scenes are
     perceived in calls of ``sub_batch`` (the last one padded by repeating its last scene; the
-    features are the same at any ``sub_batch``). Raises ``UserError`` if fields are missing or
+    features are the same at any ``sub_batch``). ``culled`` (default): capacities sized per call
+    (``perception.culled``, the same bits); False: every call at the config's capacities (the
+    reference, ``benchmarks/perception_culled.py``). Raises ``UserError`` if fields are missing or
     a scene exceeds a perception capacity.
     """
     if int(sub_batch) < 1:
         raise UserError(f"sub_batch must be >= 1, got {sub_batch}")
     feats = pc.make_batched_features(world.mj_model.geom_type, world.geom_seg, cfg)
+    sized = pc.make_culled_features(world.mj_model.geom_type, world.geom_seg, cfg, sub_batch=sub_batch)
     geoms = jitted_geoms(world)
     root = jax.random.PRNGKey(seed)
 
@@ -129,7 +132,7 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
                                  jnp.asarray(samples["qpos_settled"], jnp.float32))
         ids = np.asarray(samples["rollout_id"])
         keys = rollout_keys(root, ids)
-        out = perceive(size, xpos, xmat, keys)
+        out = (sized if culled else perceive)(size, xpos, xmat, keys)
         if out["overflow"].any():
             bad = np.flatnonzero(out["overflow"])
             flags = {k: np.asarray(out[k])[bad].tolist() for k in

@@ -16,7 +16,7 @@ from .camera import camera_frame, camera_rays, intrinsics, tile_rays
 from .config import PerceptionConfig
 from .ops import cumsum, scatter_set
 from .raycast import cast_rays, surface_normals
-from .scene import SceneGeoms, bounding_radius
+from .scene import GEOM_BOX, GEOM_SPHERE, SceneGeoms
 
 
 def _select_static(index, table, default):
@@ -49,21 +49,25 @@ def render(scene: SceneGeoms, cfg: PerceptionConfig) -> dict:
     return dict(depth=t.reshape(cam.height, cam.width), points=points, normal=normal, seg=seg, geom=geom)
 
 
-def active_tiles(scene: SceneGeoms, cfg: PerceptionConfig):
-    """(n_tiles,) bool: tiles that a conservative projection of any object geom's bounding
-    sphere overlaps. For a sphere (X, Y, Z, R) in camera coordinates with Z - R > 0 every
-    point has x / z within the extremes of (X +- R) / (Z +- R) (x / z is monotone in x and
-    z), likewise y / z; a sphere reaching behind the camera activates every tile."""
-    cam, tile = cfg.camera, cfg.cull.tile
-    fx, fy, cx, cy = intrinsics(cam)
-    pos, rot = camera_frame(cam)
-    obj = [i for i, s in enumerate(scene.geom_seg) if s in OBJECT_SEGMENTS]
-    nty, ntx = cam.height // tile, cam.width // tile
-    if not obj:
-        return jnp.zeros(nty * ntx, bool)
-    ia = np.asarray(obj)
-    centres = (scene.xpos[ia] - jnp.asarray(pos, jnp.float32)) @ jnp.asarray(rot, jnp.float32)  # (K, 3)
-    rad = jnp.stack([bounding_radius(scene.geom_type[i], scene.size[i]) for i in obj])
+def _box_bounds(corners_cam, fx, fy, cx, cy):
+    """Pixel bounds (u_lo, u_hi, v_lo, v_hi) (K,) and depth range (z_lo, z_hi) of K convex
+    geoms given by their corners in camera coordinates (K, 8, 3): a convex body in front of the
+    camera projects into the hull of its corners' projections; a corner at or behind the
+    camera plane gives infinite bounds (every tile)."""
+    X, Y, Z = corners_cam[..., 0], corners_cam[..., 1], corners_cam[..., 2]
+    z_lo, z_hi = jnp.min(Z, axis=1), jnp.max(Z, axis=1)
+    front = z_lo > 1e-6
+    zs = jnp.where(front[:, None], Z, 1.0)
+    u, v = X / zs * fx + cx, Y / zs * fy + cy
+    inf = lambda x, s: jnp.where(front, x, s * jnp.inf)
+    return (inf(jnp.min(u, 1), -1), inf(jnp.max(u, 1), 1), inf(jnp.min(v, 1), -1), inf(jnp.max(v, 1), 1),
+            z_lo, z_hi)
+
+
+def _sphere_bounds(centres, rad, fx, fy, cx, cy):
+    """Like ``_box_bounds`` for spheres (K, 3) camera coordinates, (K,) radii: for Z - R > 0
+    every point has x / z within the extremes of (X +- R) / (Z +- R) (x / z is monotone in x
+    and z), likewise y / z."""
     X, Y, Z = centres[:, 0], centres[:, 1], centres[:, 2]
     z_lo, z_hi = Z - rad, Z + rad
     front = z_lo > 1e-6
@@ -74,8 +78,45 @@ def active_tiles(scene: SceneGeoms, cfg: PerceptionConfig):
         hi = jnp.maximum((c + rad) / z_lo_s, (c + rad) / z_hi) * f + cc
         return jnp.where(front, lo, -jnp.inf), jnp.where(front, hi, jnp.inf)
 
-    u_lo, u_hi = extent(X, fx, cx)
-    v_lo, v_hi = extent(Y, fy, cy)
+    return (*extent(X, fx, cx), *extent(Y, fy, cy), z_lo, z_hi)
+
+
+_CORNERS = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], np.float32)  # (8, 3)
+_MARGIN_PX = 1.0  # float32 rounding of the projection: the bounds grow by a pixel
+
+
+def active_tiles(scene: SceneGeoms, cfg: PerceptionConfig):
+    """(n_tiles,) bool: tiles that the projected bounds of some object geom, grown by
+    ``_MARGIN_PX``, overlap. Boxes and capsules: the hull of the projected corners of the
+    geom's box (a capsule's: radius, radius, half-length + radius); spheres: the extremes of
+    (X +- R) / (Z +- R). Every object pixel lies in an active tile (its ray hits the geom, whose
+    projection lies within the bounds); a geom reaching behind the camera activates every tile.
+    """
+    cam, tile = cfg.camera, cfg.cull.tile
+    fx, fy, cx, cy = intrinsics(cam)
+    pos, rot = camera_frame(cam)
+    obj = [i for i, s in enumerate(scene.geom_seg) if s in OBJECT_SEGMENTS]
+    nty, ntx = cam.height // tile, cam.width // tile
+    if not obj:
+        return jnp.zeros(nty * ntx, bool)
+    pos, rot = jnp.asarray(pos, jnp.float32), jnp.asarray(rot, jnp.float32)
+    spheres = [i for i in obj if scene.geom_type[i] == GEOM_SPHERE]
+    boxes = [i for i in obj if scene.geom_type[i] != GEOM_SPHERE]  # boxes and capsules
+    bounds = []
+    if spheres:
+        ia = np.asarray(spheres)
+        centres = (scene.xpos[ia] - pos) @ rot  # (K, 3)
+        bounds.append(_sphere_bounds(centres, scene.size[ia, 0], fx, fy, cx, cy))
+    if boxes:
+        ib = np.asarray(boxes)
+        half = jnp.stack([scene.size[i] if scene.geom_type[i] == GEOM_BOX else
+                          jnp.stack([scene.size[i, 0], scene.size[i, 0], scene.size[i, 1] + scene.size[i, 0]])
+                          for i in boxes])  # (K, 3)
+        local = _CORNERS[None] * half[:, None, :]  # (K, 8, 3)
+        world = scene.xpos[ib][:, None, :] + jnp.einsum("kij,kcj->kci", scene.xmat[ib], local)
+        bounds.append(_box_bounds((world - pos) @ rot, fx, fy, cx, cy))
+    u_lo, u_hi, v_lo, v_hi, z_lo, z_hi = (jnp.concatenate(b) for b in zip(*bounds))
+    u_lo, v_lo, u_hi, v_hi = u_lo - _MARGIN_PX, v_lo - _MARGIN_PX, u_hi + _MARGIN_PX, v_hi + _MARGIN_PX
     visible = (z_hi > cam.near) & (z_lo < cam.far)
     tx = np.arange(ntx) * tile
     ty = np.arange(nty) * tile

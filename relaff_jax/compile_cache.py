@@ -1,0 +1,66 @@
+"""JAX's persistent compilation cache for the ``relaff`` command: on by default, per user.
+
+Takes the environment (and the command's ``--no-compile-cache``); gives ``cache_dir()`` (where
+compiled programs go, or None) and ``configure()`` (turns the cache on or off for this process
+and the worker processes it starts). The folder: ``$RELAFF_COMPILE_CACHE`` if it names one;
+else ``$JAX_COMPILATION_CACHE_DIR`` (JAX's own setting) if set; else
+``$XDG_CACHE_HOME/relaff_jax/jax`` (``~/.cache/relaff_jax/jax``). ``RELAFF_COMPILE_CACHE=0``
+(or off / false / no) or ``--no-compile-cache`` turns it off. A cached program is the
+program XLA compiled, so results do not depend on the cache (docs/reproduce.md, "Compilation
+cache"). Library users keep JAX's own default (off); only the command line calls this.
+"""
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+ENV = "RELAFF_COMPILE_CACHE"
+_OFF = ("0", "off", "false", "no")
+_ON = ("1", "on", "true", "yes")
+
+
+def cache_dir(environ=None) -> Path | None:
+    """The cache folder the environment asks for (see the module doc), or None when it is off."""
+    env = os.environ if environ is None else environ
+    value = env.get(ENV, "").strip()
+    if value.lower() in _OFF:
+        return None
+    if value and value.lower() not in _ON:
+        return Path(value).expanduser()
+    if env.get("JAX_COMPILATION_CACHE_DIR"):
+        return Path(env["JAX_COMPILATION_CACHE_DIR"]).expanduser()
+    base = env.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "relaff_jax" / "jax"
+
+
+def configure(disable: bool = False) -> Path | None:
+    """Turn the cache on (``cache_dir()``) or off for this process and its children; returns
+    the folder in use. Environment variables carry the setting, so it holds for processes
+    started later (the experiment's workers) and for JAX imported after this call; if JAX is
+    already imported its config is updated too. A folder that cannot be made leaves the cache
+    off with one line on stderr: the cache only saves time."""
+    d = None if disable else cache_dir()
+    if d is not None:
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            print(f"relaff: note: compilation cache off, cannot use {d}: {e.strerror}", file=sys.stderr)
+            d = None
+    if d is None:
+        os.environ["JAX_ENABLE_COMPILATION_CACHE"] = "false"
+        os.environ.pop("JAX_COMPILATION_CACHE_DIR", None)
+    else:
+        os.environ["JAX_ENABLE_COMPILATION_CACHE"] = "true"
+        os.environ["JAX_COMPILATION_CACHE_DIR"] = str(d)
+        # Each program loaded from the cache makes XLA print an E-level "cpu_aot_loader" line
+        # about +prefer-no-gather/scatter, tuning hints it mistakes for CPU features (noise:
+        # docs/benchmarks.md); read when jaxlib loads, so only before JAX is imported.
+        os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
+    if "jax" in sys.modules:
+        import jax
+
+        jax.config.update("jax_enable_compilation_cache", d is not None)
+        if d is not None:
+            jax.config.update("jax_compilation_cache_dir", str(d))
+    return d

@@ -1,0 +1,41 @@
+"""JAX's persistent compilation cache of the ``relaff`` command (relaff_jax/compile_cache.py)."""
+import os
+import subprocess
+import sys
+
+from relaff_jax import compile_cache as cc
+from relaff_jax.cli import build_parser
+
+
+def test_cache_folder_from_the_environment(tmp_path):
+    home = {"HOME": str(tmp_path)}
+    assert cc.cache_dir({"XDG_CACHE_HOME": "/x/cache"}) == cc.Path("/x/cache/relaff_jax/jax")
+    assert cc.cache_dir({}) == cc.Path(os.path.expanduser("~")) / ".cache" / "relaff_jax" / "jax"
+    assert cc.cache_dir({"JAX_COMPILATION_CACHE_DIR": "/j", **home}) == cc.Path("/j")  # JAX's own setting
+    assert cc.cache_dir({"RELAFF_COMPILE_CACHE": "/r", "JAX_COMPILATION_CACHE_DIR": "/j"}) == cc.Path("/r")
+    assert cc.cache_dir({"RELAFF_COMPILE_CACHE": "1", "XDG_CACHE_HOME": "/x"}) == cc.Path("/x/relaff_jax/jax")
+    for off in ("0", "off", "False", "no"):
+        assert cc.cache_dir({"RELAFF_COMPILE_CACHE": off, "JAX_COMPILATION_CACHE_DIR": "/j"}) is None
+
+
+def test_no_compile_cache_flag_parses_before_and_after_the_command():
+    p = build_parser()
+    assert p.parse_args(["reproduce", "--out", "x"]).no_compile_cache is False
+    assert p.parse_args(["--no-compile-cache", "reproduce", "--out", "x"]).no_compile_cache is True
+    assert p.parse_args(["reproduce", "--out", "x", "--no-compile-cache"]).no_compile_cache is True
+
+
+def test_configure_turns_jax_cache_on_and_off_in_a_fresh_process(tmp_path):
+    """In a child process (JAX's config is process-wide): the cache folder gets a compiled
+    program when on, and JAX is told the cache is off when off."""
+    code = ("import sys, os; from relaff_jax import compile_cache as cc; d = cc.configure(disable=sys.argv[1] == 'off');"
+            "import jax, jax.numpy as jnp; jax.config.update('jax_persistent_cache_min_compile_time_secs', 0);"
+            "jax.jit(lambda x: jnp.sin(x) * 3)(jnp.arange(5.0)).block_until_ready();"
+            "print(d, jax.config.jax_enable_compilation_cache, jax.config.jax_compilation_cache_dir)")
+    env = dict(os.environ, RELAFF_COMPILE_CACHE=str(tmp_path / "c"))
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    on = subprocess.run([sys.executable, "-c", code, "on"], env=env, capture_output=True, text=True, check=True)
+    assert on.stdout.split() == [str(tmp_path / "c"), "True", str(tmp_path / "c")]
+    assert any((tmp_path / "c").iterdir())
+    off = subprocess.run([sys.executable, "-c", code, "off"], env=env, capture_output=True, text=True, check=True)
+    assert off.stdout.split()[:2] == ["None", "False"]
