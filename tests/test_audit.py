@@ -184,3 +184,15 @@ def test_audit_of_a_native_dataset_reproduces_its_labels(tmp_path):
                        capture_output=True, text=True)  # the stored audit, as a table
     rows = [x for x in p.stdout.splitlines() if x.startswith("pour ")]
     assert p.returncode == 0 and len(rows) == 1 and "100%" in rows[0], p.stdout
+
+
+def test_report_section_plots_the_press_against_the_bound(tmp_path):
+    from relaff_jax.report import audit as RA
+
+    rows = [_row(), _row(rollout=1, press_weights=A.FORCE_WEIGHTS * 2)]
+    a = dict(action="lift", engine="native", n_audited=2, population=2, rollouts=rows, **A.summarise(rows, "native"))
+    blocks = RA.audit_blocks({"lift": a}, {}, tmp_path)
+    assert (tmp_path / RA.F.FIG_AUDIT).is_file()
+    text = " ".join(str(b[1]) for b in blocks if b[0] == "p")
+    assert "held over 0.1 s" in text and f"{1000 * A.PENETRATION_M:g} mm" in text
+    assert "FAIL force" in A.format_audit([a])
