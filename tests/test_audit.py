@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from relaff_jax.data import audit as A
-from relaff_jax.sim.physics_probe import Probe
+from relaff_jax.sim import physics_bounds as bounds
+from relaff_jax.sim.physics_probe import Probe, held_peak
 
 # A 1 kg box on the table; above it a "hand" body (the probe's arm_hand) on a vertical slide,
 # weightless (gravcomp), pushed down by a motor with a known force.
@@ -60,6 +61,11 @@ def test_probe_reads_a_known_palm_press():
     assert r["peak_force_n"][0] == pytest.approx(11 * G, rel=0.02)
     assert r["palm_force_n"][0] == pytest.approx(10 * G, rel=0.02)
     assert r["palm_steps"][0] > 1000
+    # the press sums every contact on the box (palm 98.1 N + table 107.9 N = 21 weights), held
+    # at the end of the ramp; the ball (0.2 kg) is lighter: the weight is the box's
+    assert r["weight_n"][0] == pytest.approx(G)
+    assert r["press_weights"][0] == pytest.approx(21.0, rel=0.02)
+    assert r["press_n"][0] == pytest.approx(21 * G, rel=0.02) and r["object_peak_n"][0] >= r["press_n"][0]
     # both objects rest at the end: the ball on the table, the box pressed
     assert r["speed_toy"][0] < 1e-3 and r["speed_other"][0] < 1e-3
 
@@ -72,6 +78,15 @@ def test_probe_without_a_press_reads_one_weight_and_no_palm():
     # then rests at one weight
     assert r["peak_pair"][0] == "world|obj" and r["peak_step"][0] < 20
     assert 1.0 < r["peak_force_weights"][0] < 1.5
+    # the rebound's impact is brief: the force held over SUSTAIN_STEPS is the box's weight
+    assert r["object_peak_n"][0] > 1.3 * G
+    assert r["press_weights"][0] == pytest.approx(1.0, rel=0.01)
+
+
+def test_held_peak_by_hand():
+    assert held_peak([0, 5, 5, 5, 1], 3) == 5.0 and held_peak([0, 5, 5, 5, 1], 4) == 1.0
+    assert held_peak([3, 1, 3, 2], 2) == 2.0 and held_peak([9, 9], 3) == 0.0
+    assert bounds.SUSTAIN_STEPS == 25 and A.FORCE_WEIGHTS == bounds.PRESS_WEIGHTS  # the audit's bounds are the programs'
 
 
 def test_probe_reads_a_known_penetration_and_a_known_speed():
@@ -91,6 +106,7 @@ def _row(**kw):
     row = dict(rollout=0, toy="ball", other="tray", relation="on_top", label=True, replay_label=True,
                plan_feasible=True, resettled=True, palm_contact=False, palm_steps=0, palm_seconds=0.0,
                palm_force_n=0.0, peak_force_n=5.0, peak_force_weights=1.0, peak_pair="world|obj", peak_step=3,
+               object_peak_n=5.0, press_n=5.0, weight_n=5.0, press_weights=1.0,
                max_penetration_m=0.001, penetration_pair="world|obj", speed_toy=0.0, speed_other=0.0, held_toy=False,
                held_other=False, speed_end=0.0)
     row.update(kw)
@@ -99,10 +115,11 @@ def _row(**kw):
 
 def test_checks_count_failures_against_the_stated_bounds():
     rows = [_row(), _row(rollout=1, palm_contact=True, palm_steps=5, label=False, replay_label=False, relation="beside"),
-            _row(rollout=2, peak_force_weights=A.FORCE_WEIGHTS + 1, max_penetration_m=A.PENETRATION_M * 2,
+            _row(rollout=2, press_weights=A.FORCE_WEIGHTS + 1, max_penetration_m=A.PENETRATION_M * 2,
                  speed_toy=A.MOVING_M_S * 1.5, replay_label=False),
-            _row(rollout=3, peak_force_weights=A.FORCE_WEIGHTS, max_penetration_m=A.PENETRATION_M,
-                 speed_other=A.MOVING_M_S),  # on the bounds: not failures
+            _row(rollout=3, press_weights=A.FORCE_WEIGHTS, max_penetration_m=A.PENETRATION_M,
+                 speed_other=A.MOVING_M_S, peak_force_weights=50.0),  # on the bounds: not failures; an impact
+            # (a one-step peak) above the bound is not a press
             _row(rollout=4, speed_other=1.0, held_other=True)]  # a held object moves with the arm: no failure
     s = A.summarise(rows, "native")
     c = s["checks"]
@@ -135,7 +152,7 @@ def test_cli_one_line_errors(tmp_path):
 ROLLOUT_KEYS = {"rollout", "toy", "other", "relation", "label", "replay_label", "plan_feasible", "resettled",
                 "palm_contact", "palm_steps", "palm_seconds", "palm_force_n", "peak_force_n", "peak_force_weights",
                 "peak_pair", "peak_step", "max_penetration_m", "penetration_pair", "speed_toy", "speed_other",
-                "held_toy", "held_other", "speed_end"}
+                "held_toy", "held_other", "speed_end", "object_peak_n", "press_n", "weight_n", "press_weights"}
 TOP_KEYS = {"version", "dataset", "action", "engine", "settle", "sample", "seed", "selection_sha256", "population",
             "n_audited", "thresholds", "rollouts", "checks", "by_label", "by_relation", "replay", "seconds"}
 
@@ -160,9 +177,22 @@ def test_audit_of_a_native_dataset_reproduces_its_labels(tmp_path):
     assert a["replay"]["label_agreement"] == 1.0 and a["replay"]["resettled"] == a["n_audited"]
     assert a["replay"]["plan_feasible"] == a["n_audited"]
     assert all(r["peak_force_weights"] >= 0.9 for r in a["rollouts"])  # everything rests on something
+    assert all(r["press_weights"] >= 0.9 and r["object_peak_n"] >= r["press_n"] for r in a["rollouts"])
     stored = json.loads((d / A.AUDIT_FILE).read_text())
     assert stored == a and A.stored_audit(d, 5, 0) == a and A.stored_audit(d, 6, 0) is None
     p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(d), "--sample", "5"],
                        capture_output=True, text=True)  # the stored audit, as a table
     rows = [x for x in p.stdout.splitlines() if x.startswith("pour ")]
     assert p.returncode == 0 and len(rows) == 1 and "100%" in rows[0], p.stdout
+
+
+def test_report_section_plots_the_press_against_the_bound(tmp_path):
+    from relaff_jax.report import audit as RA
+
+    rows = [_row(), _row(rollout=1, press_weights=A.FORCE_WEIGHTS * 2)]
+    a = dict(action="lift", engine="native", n_audited=2, population=2, rollouts=rows, **A.summarise(rows, "native"))
+    blocks = RA.audit_blocks({"lift": a}, {}, tmp_path)
+    assert (tmp_path / RA.F.FIG_AUDIT).is_file()
+    text = " ".join(str(b[1]) for b in blocks if b[0] == "p")
+    assert "held over 0.1 s" in text and f"{1000 * A.PENETRATION_M:g} mm" in text
+    assert "FAIL force" in A.format_audit([a])

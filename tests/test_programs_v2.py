@@ -177,15 +177,13 @@ def test_toy_sliding_off_a_tilted_placemat_is_labelled_where_it_rests():
     assert not r["label"][0]
 
 
-# The bounds v2 keeps (docs/arm.md, "Bounded forces"), checked on sampled scenes in C
-PRESS_X_WEIGHT = 10.0  # a force held 0.1 s on an object <= this x the heavier object's weight
-MAX_DEPTH = 0.003  # m: no contact with an object deeper than this
-
-
+# The bounds v2 keeps (sim/physics_bounds.py, the audit's; docs/arm.md, "Bounded forces"),
+# checked on sampled scenes in C
 @pytest.mark.slow  # settles, plans and replays 16 scenes per action in C (~5 min)
 @pytest.mark.parametrize("action", ["lift", "unobstruct"])
 def test_forces_and_penetration_within_bounds(action):
     from relaff_jax.sim import native_forces, rollouts
+    from relaff_jax.sim.physics_bounds import PALM_CONTACT_STEPS, PENETRATION_M, PRESS_WEIGHTS
 
     prep = rollouts.make_batch_prepare_fn(action, V2, settle="native")(jax.random.PRNGKey(3), 16)
     run = np.flatnonzero(prep.plan.feasible)
@@ -193,6 +191,6 @@ def test_forces_and_penetration_within_bounds(action):
     plan = {k: np.asarray(getattr(prep.plan, k))[run] for k in ("q_way", "grip_way", "feasible", "direction")}
     r = native_forces.physics(action, V2, prep.pair[run], np.asarray(prep.scenes.qpos)[run],
                               np.asarray(prep.scenes.qvel)[run], plan)
-    assert np.all(r["palm"] == 0.0), r["palm"]
-    assert np.all(r["press"] <= PRESS_X_WEIGHT * r["weight"]), r["press"] / r["weight"]
-    assert np.all(r["depth"] <= MAX_DEPTH), r["depth"]
+    assert np.all(r["palm_steps"] <= PALM_CONTACT_STEPS) and np.all(r["palm"] == 0.0), r["palm"]
+    assert np.all(r["press"] <= PRESS_WEIGHTS * r["weight"]), r["press"] / r["weight"]
+    assert np.all(r["depth"] <= PENETRATION_M), r["depth"]

@@ -103,7 +103,8 @@ def register(subparsers) -> None:
         help="the physics of a sample of a dataset's rollouts, replayed in MuJoCo C",
         description="Replay a sample of a finished dataset's rollouts (the selected samples whose "
         "program ran) in MuJoCo C and check each step's contacts: palm (hand body) contacts with an "
-        "object, peak contact force relative to the heaviest involved object's weight, the deepest "
+        "object, the contact force on an object held over 0.1 s relative to the heavier object's weight, "
+        "the deepest "
         "penetration, and the objects' speeds at the step where the goal is measured; and the replay's "
         "label agreement with the stored labels (docs/audit.md). DIR is a dataset or a run folder "
         "(every data/<action>/ dataset). Writes DIR/audit.json per dataset (reused when sample, seed "

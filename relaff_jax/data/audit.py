@@ -34,17 +34,21 @@ from relaff_jax.constants import RELATIONS
 from relaff_jax.data.errors import DatasetError
 from relaff_jax.data.load import load_rollouts
 from relaff_jax.data.store import read_sidecar
+from relaff_jax.sim import physics_bounds as bounds
 
 AUDIT_FILE = "audit.json"
-AUDIT_VERSION = 2
+AUDIT_VERSION = 3  # 3: force = the press held 0.1 s (was a pair's one-step peak), penetration 3 mm (was 5)
 DEFAULT_SAMPLE = 64
-# The checks' bounds (docs/audit.md gives the reasoning): a rollout fails a check when
-PALM_CONTACTS = 0  # it has more hand-object contact steps than this (the palm is not a gripper)
-FORCE_WEIGHTS = 10.0  # a body pair's summed normal force exceeds 10 weights of its heaviest object
-PENETRATION_M = 0.005  # a contact involving an object is deeper than 5 mm
-MOVING_M_S = 0.02  # an object not held by the hand moves faster than 2 cm/s at the measuring step
-# (the scenes' rest_speed)
-THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "force_weights": FORCE_WEIGHTS,
+# The checks' bounds are the programs' (sim/physics_bounds.py; reasoning: docs/arm.md,
+# "Bounded forces"): a rollout fails a check when it has more hand-object contact steps than
+# PALM_CONTACTS, its press exceeds FORCE_WEIGHTS weights of the heavier object, a contact with
+# an object is deeper than PENETRATION_M, or an object not held by the hand moves faster than
+# MOVING_M_S at the measuring step
+PALM_CONTACTS = bounds.PALM_CONTACT_STEPS
+FORCE_WEIGHTS = bounds.PRESS_WEIGHTS
+PENETRATION_M = bounds.PENETRATION_M
+MOVING_M_S = bounds.MOVING_M_S
+THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "press_weights": FORCE_WEIGHTS, "press_steps": bounds.SUSTAIN_STEPS,
               "penetration_m": PENETRATION_M, "moving_m_s": MOVING_M_S}
 
 
@@ -180,7 +184,7 @@ def failures(row: Mapping[str, Any]) -> dict[str, bool]:
     speeds = [s for s, held in ((row["speed_toy"], row.get("held_toy")), (row["speed_other"], row.get("held_other")))
               if s is not None and not held]  # a held object moves with the arm
     return {"palm_contact": row["palm_steps"] > PALM_CONTACTS,
-            "force": row["peak_force_weights"] > FORCE_WEIGHTS,
+            "force": row["press_weights"] > FORCE_WEIGHTS,
             "penetration": row["max_penetration_m"] > PENETRATION_M,
             "moving": bool(speeds) and max(speeds) > MOVING_M_S}
 
@@ -199,7 +203,9 @@ def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[
                              bound="no contact between the hand body (palm) and an object",
                              palm_seconds=_dist(arr("palm_seconds")), palm_force_n=_dist(arr("palm_force_n"))),
         "force": dict(count=count["force"], share=share("force"), bound_weights=FORCE_WEIGHTS,
-                      weights=_dist(arr("peak_force_weights")), newtons=_dist(arr("peak_force_n"))),
+                      held_steps=bounds.SUSTAIN_STEPS,
+                      weights=_dist(arr("press_weights")), newtons=_dist(arr("press_n")),
+                      peak_weights=_dist(arr("peak_force_weights")), peak_newtons=_dist(arr("peak_force_n"))),
         "penetration": dict(count=count["penetration"], share=share("penetration"), bound_m=PENETRATION_M,
                             metres=_dist(arr("max_penetration_m"))),
         "moving": dict(count=count["moving"], share=share("moving"), bound_m_s=MOVING_M_S,
@@ -278,7 +284,7 @@ def _pct(x: float | None) -> str:
 
 def format_audit(audits: list[Mapping[str, Any]]) -> str:
     """The table ``relaff audit`` prints: one row per dataset, the bounds below."""
-    head = (f"{'action':<11}{'engine':<7}{'audited':>9}  {'palm':>5}  {'force/weight med p95 max':>25}  "
+    head = (f"{'action':<11}{'engine':<7}{'audited':>9}  {'palm':>5}  {'press/weight med p95 max':>25}  "
             f"{'pen. max':>8}  {'moving':>6}  {'label agr.':>10}  checks")
     lines = [head, "-" * len(head)]
     for a in audits:
@@ -295,8 +301,9 @@ def format_audit(audits: list[Mapping[str, Any]]) -> str:
             f"{_pct(a['replay']['label_agreement']):>10}  {'FAIL ' + ','.join(failed) if failed else 'pass'}")
     lines.append("")
     lines.append(f"audited: sampled selected samples whose program ran / all of them. A rollout fails: palm = a "
-                 f"contact between the hand body and an object; force = a body pair's summed normal force > "
-                 f"{FORCE_WEIGHTS:g} weights of its heaviest object; pen. = a contact with an object deeper than "
+                 f"contact between the hand body and an object; force = the summed normal force on an object held "
+                 f"over {bounds.SUSTAIN_STEPS} steps (a press, not an impact) > {FORCE_WEIGHTS:g} weights of the "
+                 f"heavier object; pen. = a contact with an object deeper than "
                  f"{1000 * PENETRATION_M:g} mm; moving = an object not held by the hand faster than {MOVING_M_S:g} m/s "
                  f"at the measuring step. A check passes when no audited rollout fails it. label agr.: the C replay's labels "
                  f"equal to the stored ones.")

@@ -3,8 +3,8 @@
 Takes the datasets' stored audits (``DIR/audit.json``, ``relaff_jax.data.audit``: a MuJoCo C
 replay of a sample of the rollouts with every step's contacts read) and the report folder;
 gives ``stored_audits`` (the audits a set of dataset folders holds), ``audit_figure``
-(``fig_audit.png``: per action the share of audited rollouts failing each check, and the peak
-contact force in weights of the heaviest involved object against its bound) and
+(``fig_audit.png``: per action the share of audited rollouts failing each check, and the press
+(the force on an object held 0.1 s) in weights of the heavier object against its bound) and
 ``audit_blocks`` (the section: text, the table, the figure).
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ from relaff_jax.data import audit as A
 from relaff_jax.report import folder as F
 from relaff_jax.report.figures import save_png
 
-CHECKS = (("palm_contact", "palm on an object"), ("force", f"force > {A.FORCE_WEIGHTS:g} weights"),
+CHECKS = (("palm_contact", "palm on an object"), ("force", f"press > {A.FORCE_WEIGHTS:g} weights"),
           ("penetration", f"penetration > {1000 * A.PENETRATION_M:g} mm"),
           ("moving", f"moving > {A.MOVING_M_S:g} m/s at measuring"))
 
@@ -48,7 +48,7 @@ def stored_audits(data_dirs: Mapping[str, str | os.PathLike]) -> tuple[dict[str,
 
 def audit_figure(audits: Mapping[str, Mapping[str, Any]], out: Path) -> Path:
     """``fig_audit.png``: left, per action the share of audited rollouts failing each check;
-    right, the peak contact force / weight of every audited rollout (log scale) and the bound."""
+    right, the press / weight of every audited rollout (log scale) and the bound."""
     acts = list(audits)
     fig = Figure(figsize=(12, 4.0))
     ax, bx = fig.subplots(1, 2, gridspec_kw={"width_ratios": [1.3, 1]})
@@ -61,13 +61,13 @@ def audit_figure(audits: Mapping[str, Mapping[str, Any]], out: Path) -> Path:
     ax.set_yticks(np.linspace(0, 1, 6))
     ax.legend(fontsize=7, loc="upper center", ncol=2)
     for i, a in enumerate(acts):
-        y = [r["peak_force_weights"] for r in audits[a]["rollouts"] if r["peak_force_weights"]]
+        y = [r["press_weights"] for r in audits[a]["rollouts"] if r["press_weights"]]
         bx.scatter(np.full(len(y), i) + np.linspace(-0.25, 0.25, len(y)) if y else [], y, s=8, alpha=0.6)
     bx.axhline(A.FORCE_WEIGHTS, color="r", lw=0.8, ls="--", label=f"bound {A.FORCE_WEIGHTS:g}")
     bx.axhline(1.0, color="k", lw=0.6, ls=":", label="resting on the table")
     bx.set_yscale("log")
     bx.set_xticks(np.arange(len(acts)), acts, rotation=30, fontsize=8)
-    bx.set(ylabel="peak contact force / weight", title="Peak force per audited rollout")
+    bx.set(ylabel="force held 0.1 s / weight", title="Press per audited rollout")
     bx.legend(fontsize=7)
     fig.tight_layout()
     return save_png(fig, out, dpi=100)
@@ -82,14 +82,15 @@ def audit_blocks(audits: Mapping[str, Mapping[str, Any]], missing: Mapping[str, 
     blocks: list[tuple] = [("h", 2, "Physics audit"), (
         "p", "Per dataset, a sample of the selected samples whose program ran, replayed in MuJoCo C from the stored "
         "settled scene with the dataset's recorded config, every step's contacts read (`relaff audit DIR`, "
-        "docs/audit.md). A rollout fails a check when the hand's palm touches an object; when a body pair's summed "
-        f"contact normal force exceeds {A.FORCE_WEIGHTS:g} weights of its heaviest object; when a contact with an "
+        "docs/audit.md). A rollout fails a check when the hand's palm touches an object; when the summed contact "
+        f"normal force on an object held over 0.1 s (a press, not an impact) exceeds {A.FORCE_WEIGHTS:g} weights of "
+        "the heavier object; when a contact with an "
         f"object is deeper than {1000 * A.PENETRATION_M:g} mm; when an object not held by the hand moves faster than "
         f"{A.MOVING_M_S:g} m/s "
         "at the step whose positions the goal reads. Shares of failing rollouts, over all audited and over the "
         "positives; `label agr.`: the replay's labels equal to the stored ones.")]
     if audits:
-        header = ["action", "engine", "audited", "palm", "palm (pos.)", "force/weight med / p95 / max",
+        header = ["action", "engine", "audited", "palm", "palm (pos.)", "press/weight med / p95 / max",
                   "pen. max (mm)", "moving", "moving (pos.)", "label agr."]
         rows = []
         for act, a in audits.items():
@@ -103,8 +104,8 @@ def audit_blocks(audits: Mapping[str, Mapping[str, Any]], missing: Mapping[str, 
                          _pct(c["moving"]["share"]), share("moving"), _pct(a["replay"]["label_agreement"])])
         blocks.append(("table", header, rows))
         audit_figure(audits, out / F.FIG_AUDIT)
-        blocks.append(("img", F.FIG_AUDIT, "Physics audit: failing shares per check, and the peak contact force of "
-                       "each audited rollout in weights of the heaviest object involved"))
+        blocks.append(("img", F.FIG_AUDIT, "Physics audit: failing shares per check, and the press (the force on an "
+                       "object held 0.1 s) of each audited rollout in weights of the heavier object"))
     if missing:
         blocks.append(("p", "No audit for " + "; ".join(f"{a} ({why})" for a, why in missing.items())
                        + "; `relaff audit DIR` makes them."))

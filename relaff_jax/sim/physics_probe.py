@@ -11,6 +11,12 @@ rollout:
   between one body pair that involves an object summed per pair, divided by the weight of the
   heaviest object of the pair (a box resting on the table reads 1); the peak over steps and
   pairs, in newtons and in weights, and which pair;
+- the press: at every step, the normal forces of all contacts on each object summed (with
+  the table, the other object, the pads and the palm; a toy-object contact counts for both),
+  the larger of the two; its peak over steps, and its peak held over ``SUSTAIN_STEPS``
+  consecutive steps (the minimum over a window, maximised over windows: a press, not an
+  impact), in newtons and in weights of the heavier object (the bound of
+  ``physics_bounds.PRESS_WEIGHTS``);
 - penetration: the deepest contact (``-dist``) that involves an object;
 - the objects' speeds (linear, at the centre of mass, ``mj_objectVelocity``) at the step whose
   positions the goal reads (``ProgramInputs.measure``), and whether each is then welded to the
@@ -26,6 +32,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from .physics_bounds import SUSTAIN_STEPS
+
 HAND_BODY = "arm_hand"  # the palm block's body; the pads are on the finger bodies
 
 
@@ -34,24 +42,26 @@ def body_names(m: mujoco.MjModel) -> list[str]:
 
 
 def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, int], hand: int
-                  ) -> tuple[dict[tuple[int, int], float], float, tuple[int, int], int]:
+                  ) -> tuple[dict[tuple[int, int], float], np.ndarray, float, tuple[int, int], int]:
     """One step's contacts that involve an object.
 
     objects: body ids of the toy and the other object; hand: the hand body's id.
     Returns ``forces`` {(body a, body b) sorted: summed normal force (N)} over contacts with an
-    object on one side, the deepest penetration (m, >= 0) among them and its body pair, and
+    object on one side, ``on`` (2,) the summed normal force on the toy and on the other object
+    (N, in contact order), the deepest penetration (m, >= 0) among them and its body pair, and
     the number of hand-object contacts.
     """
     n = d.ncon
     forces: dict[tuple[int, int], float] = {}
+    on = np.zeros(2)
     if n == 0:
-        return forces, 0.0, (0, 0), 0
+        return forces, on, 0.0, (0, 0), 0
     bodies = np.asarray(m.geom_bodyid)[np.asarray(d.contact.geom[:n])]  # (n, 2)
     dist = np.asarray(d.contact.dist[:n])
     o0, o1 = objects
     rows = np.flatnonzero((bodies == o0).any(axis=1) | (bodies == o1).any(axis=1))
     if not len(rows):
-        return forces, 0.0, (0, 0), 0
+        return forces, on, 0.0, (0, 0), 0
     k = rows[int(np.argmin(dist[rows]))]
     deepest, where = float(max(0.0, -dist[k])), tuple(sorted(bodies[k].tolist()))
     f6 = np.zeros(6)
@@ -61,8 +71,10 @@ def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, int],
         a, b = bodies[i]
         key = (int(a), int(b)) if a <= b else (int(b), int(a))
         forces[key] = forces.get(key, 0.0) + float(f6[0])
+        for j, o in enumerate(objects):
+            on[j] += float(f6[0]) if o in (a, b) else 0.0
         n_hand += int(hand == a or hand == b)
-    return forces, deepest, where, n_hand
+    return forces, on, deepest, where, n_hand
 
 
 def held_bodies(m: mujoco.MjModel, d: mujoco.MjData, hand: int) -> set[int]:
@@ -88,7 +100,10 @@ class Probe:
     ``max_penetration_m``, ``penetration_pair``, ``speed_toy``/``speed_other`` (m/s at the
     measuring step ``measure``; NaN if it was not reached), ``held_toy``/``held_other`` (welded
     to the hand at that step: a held object moves with the arm, its speed is the arm's),
-    ``speed_end`` (the faster object's speed at the last step).
+    ``speed_end`` (the faster object's speed at the last step), ``object_peak_n`` (the largest
+    summed force on one object in one step), ``press_n`` (the largest held over
+    ``SUSTAIN_STEPS`` steps; 0 for a shorter rollout), ``weight_n`` (the heavier object's
+    weight) and ``press_weights`` (``press_n / weight_n``).
     """
 
     def __init__(self, n: int, toy_body: int, obj_body: int, timestep: float):
@@ -104,6 +119,8 @@ class Probe:
         self.pen_pair = np.full(n, "", object)
         self.speeds: list[list[tuple[float, float]]] = [[] for _ in range(n)]  # per step (toy, other)
         self.held: list[list[tuple[bool, bool]]] = [[] for _ in range(n)]  # welded to the hand, per step
+        self.load: list[list[float]] = [[] for _ in range(n)]  # per step: the larger object's summed force
+        self.weight_n = np.zeros(n)
         self._names: dict[int, list[str]] = {}
         self._hand: dict[int, int] = {}
         self._weight: dict[int, np.ndarray] = {}
@@ -116,7 +133,9 @@ class Probe:
             self._hand[key] = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, HAND_BODY)
             self._weight[key] = np.asarray(m.body_mass) * float(np.linalg.norm(m.opt.gravity))
         hand, names, weight = self._hand[key], self._names[key], self._weight[key]
-        forces, deepest, where, n_hand = step_contacts(m, d, self.objects, hand)
+        forces, on, deepest, where, n_hand = step_contacts(m, d, self.objects, hand)
+        self.load[b].append(float(on.max()))
+        self.weight_n[b] = max(weight[x] for x in self.objects)
         palm = 0.0
         for (a, c), f in forces.items():
             w = max(weight[x] for x in (a, c) if x in self.objects)
@@ -147,11 +166,24 @@ class Probe:
         at = np.asarray([s[m] if m < len(s) else (np.nan, np.nan) for s, m in zip(self.speeds, ms)]).reshape(-1, 2)
         held = np.asarray([h[m] if m < len(h) else (False, False) for h, m in zip(self.held, ms)]).reshape(-1, 2)
         end = np.asarray([max(s[-1]) if s else np.nan for s in self.speeds])
+        press = np.asarray([held_peak(s, SUSTAIN_STEPS) for s in self.load])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            press_w = np.where(self.weight_n > 0, press / self.weight_n, 0.0)
         return dict(palm_contact=self.palm_steps > 0, palm_steps=self.palm_steps,
                     palm_seconds=self.palm_steps * self.timestep,
                     palm_force_n=self.palm_force, peak_force_n=self.peak_n, peak_force_weights=self.peak_w,
                     peak_pair=self.peak_pair.astype(str), peak_step=self.peak_step,
                     max_penetration_m=self.pen, penetration_pair=self.pen_pair.astype(str),
                     speed_toy=at[:, 0], speed_other=at[:, 1], held_toy=held[:, 0], held_other=held[:, 1],
-                    speed_end=end)
+                    speed_end=end, object_peak_n=np.asarray([max(s) if s else 0.0 for s in self.load]),
+                    press_n=press, weight_n=self.weight_n.copy(), press_weights=press_w)
+
+
+def held_peak(series: list[float] | np.ndarray, steps: int) -> float:
+    """The largest value held over ``steps`` consecutive entries of ``series`` (the minimum
+    over a window, maximised over windows); 0.0 for a series shorter than ``steps``."""
+    s = np.asarray(series, float)
+    if len(s) < steps:
+        return 0.0
+    return float(np.lib.stride_tricks.sliding_window_view(s, steps).min(axis=-1).max())
 
