@@ -77,9 +77,10 @@ def test_rollout_gif_of_a_settled_scene(tmp_path, scene_world, settle):
     from relaff_jax.sim import templates
 
     # a frame every 40 steps of the program (the CLI's default is 10; fewer frames keep the
-    # test short), which stops at its end (560 of lift's 815 steps)
+    # test short), which stops at its end (560 of lift's 815 steps, and v2's 200 more to read
+    # the goal at rest)
     n_run = int(templates.run_steps(templates.ActionConfig())[action_id("lift")])
-    assert n_run == 560
+    assert n_run == 560 + templates.ActionConfig().rest_hold
     assert frames["frames_xpos"].shape[0] == 1 + n_run // 40
     # every phase is announced and finished; the frames are counted one by one
     phases = list(dict.fromkeys(h[0] for h in heard))

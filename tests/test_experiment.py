@@ -396,8 +396,8 @@ def test_cli_experiment_and_report(tmp_path):
     assert rows[1][1:7] == ["1.0000"] * 6  # NB is 1 by definition, in the paper too
     by = {r[0]: r for r in rows[1:]}
     assert by["DB1 best (in-sample oracle)"][4:7] == ["2.8190", "0.9760", "3.6570"]  # paper's DB1 best: chosen in sample
-    assert by["DB1 best"][4:7] == ["nan"] * 3  # the held-out row is not in the paper
-    assert by["DB1 best after ten (online)"][4:7] == ["nan"] * 3  # nor the online row
+    assert by["DB1 best"][4:7] == ["-"] * 3  # the held-out row is not in the paper ("-": no value)
+    assert by["DB1 best after ten (online)"][4:7] == ["-"] * 3  # nor the online row
     assert (tmp_path / "rep" / "table2_rhf.csv").exists()
     md = (tmp_path / "rep" / "table2.md").read_text()
     assert "| DB1 best after ten |" in md

@@ -147,7 +147,7 @@ def test_cli_propose_check(tmp_path, capsys):
     assert [(r.scene, r.relation) for r in lab.read_labels(out)] == [("learn17.pcd", "on_top")]
     corr.write_text("scene,object_a,object_b,relation\nlearn0.pcd,2,4,beside\n")
     assert main(["real", "propose", str(scenes), "--out", str(out), "--corrections", str(corr)]) == 2
-    assert "corrections name pairs that are not in" in capsys.readouterr().err
+    assert "learn0.pcd has no object id 4" in capsys.readouterr().err  # checked before any proposal
     lab.write_labels(out, rows)
     (scenes / "learn0.pcd").write_bytes((scenes / "learn0.pcd").read_bytes() + b"\n")
     assert main(["real", "check", str(scenes), "--labels", str(out)]) == 2

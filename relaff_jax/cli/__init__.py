@@ -115,6 +115,18 @@ class Terminated(KeyboardInterrupt):
 
 
 def _on_sigterm(signum, frame):  # pragma: no cover - exercised through a subprocess
+    # An exception raised while a module is being imported can cross a C extension's module
+    # init (jaxlib's nanobind), which then aborts the process: during an import, ask again in
+    # 0.2 s instead of raising.
+    f = frame
+    while f is not None:
+        if f.f_code.co_filename.startswith("<frozen importlib"):
+            import os
+            import threading
+
+            threading.Timer(0.2, os.kill, (os.getpid(), signum)).start()
+            return
+        f = f.f_back
     raise Terminated()
 
 
