@@ -69,11 +69,11 @@ PAPER_RUN_ROLLOUTS = {"lift": 20_480, "move": 31_744, "pull": 20_480, "push": 34
 PAPER_RUN_S = {"data": 7_014, "features": 1_457, "experiment": 2_850, "report": 1_942}
 PAPER_SCENES = 90_000
 # The report stage, reference over new, on a paper-shaped stand-in of the paper run's results
-# (benchmarks/report_stage.py, docs/benchmarks.md "Report stage", 2026-12-04: 455.5 against
+# (benchmarks/report_stage.py, docs/journal/2026-12-04.md "Report stage": 455.5 against
 # 181.6 s in one run, every report file byte-identical). The paper run's 1,942 s over this.
 REPORT_RATIO = 2.51
 # The experiment stage after the fit kernel's rework, over before: benchmarks/experiment_stage.py
-# --ref (both versions in one run, all 314 result arrays equal; docs/benchmarks.md "Fit kernel
+# --ref (both versions in one run, all 314 result arrays equal; docs/journal/2026-12-04.md "Fit kernel
 # faster, same bits", 2026-12-04: 5,494 against 9,630 CPU s). The paper run's 2,850 s times this.
 EXPERIMENT_RATIO = 0.57
 
@@ -325,7 +325,7 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=1024, help="rollouts per batch (the paper preset's)")
     ap.add_argument("--batches", type=int, default=2,
                     help="timed batches per action (after one untimed); a batch's time varies by +-15 %%, so "
-                         "use 16 or more for a projection (docs/benchmarks.md)")
+                         "use 16 or more for a projection (docs/benchmarks.md, \"Reading a benchmark's figure\")")
     ap.add_argument("--features", type=int, default=256, help="scenes for the features stage")
     ap.add_argument("--forests", type=int, default=16, help="forests per (space, n)")
     ap.add_argument("--report-sizes", type=int, default=20, help="training sizes of the report's resampling target")
