@@ -61,7 +61,7 @@ from relaff_jax.sim import world as wd  # noqa: E402
 from relaff_jax.sim.native_batch import default_threads, execute_native  # noqa: E402
 from relaff_jax.sim.planning import Plan  # noqa: E402
 
-# The paper preset as run on this machine (docs/reproduce.md, "The paper preset, run": seed 0,
+# The paper preset as run on this machine (docs/journal/2026-12-03.md, "The paper preset, run": seed 0,
 # --engine native, the compiled forest engine, outcomes kept, 2026-12-03): rollouts per action
 # and seconds per stage; the report's is the re-run with the outcomes bit-packed, machine idle.
 PAPER_RUN_ROLLOUTS = {"lift": 20_480, "move": 31_744, "pull": 20_480, "push": 34_816, "rake": 14_336,
