@@ -4,7 +4,7 @@ A record is ``{id, value, unit, shown, what, rests_on: {preset, sizes, machine, 
 source}``: ``value`` in ``unit`` as measured, ``shown`` how prose quotes it (``display``), and
 ``source`` the command that measures it. The README and the docs pages quote a figure behind
 a marker, ``<!-- fig:ID -->`` followed by exactly ``display(record)``;
-``tests/docs/test_figures.py`` checks every marker against this file. A benchmark that
+``tests/docs/test_docs_figures.py`` checks every marker against this file. A benchmark that
 measures a figure updates its record with ``--write-figures`` (``write_records``: one atomic
 rewrite of the file, other records untouched).
 
