@@ -149,3 +149,26 @@ def test_run_times_writes_a_run_logs_figure(tmp_path):
     assert rec["value"] == 262 and rec["stages_s"]["generate"] == 157
     assert rec["rests_on"]["date"] == "2026-12-02"
     assert rec["rests_on"]["machine"] == "x86_64, CPU, 2 cores"
+
+
+def test_paper_stages_writes_the_quick_figure(tmp_path):
+    """``benchmarks/paper_stages.py --write-figures``: the quick run's wall and stage seconds
+    go to ``quick_native_s`` without a compilation cache, to ``quick_native_warm_s`` with one."""
+    import paper_stages
+
+    figs = tmp_path / "figures.json"
+    figs.write_text((ROOT / "docs" / "figures.json").read_text())
+    old = figures.FIGURES
+    figures.FIGURES = figs
+    try:
+        quick = {"seconds": 250.4, "stages": {"generate": 150.2, "report": 20.0}, "programs": "v2"}
+        paper_stages.write_quick_figure(quick, "")
+        paper_stages.write_quick_figure(dict(quick, seconds=199.6), "/tmp/some_cache")
+    finally:
+        figures.FIGURES = old
+    recs = figures.load(figs)
+    assert recs["quick_native_s"]["value"] == 250
+    assert recs["quick_native_s"]["stages_s"] == {"generate": 150, "report": 20}
+    assert recs["quick_native_s"]["rests_on"]["programs"] == "v2"
+    assert recs["quick_native_warm_s"]["value"] == 200
+    assert figures.display(recs["quick_native_s"]) == "4.2 minutes"
