@@ -133,7 +133,10 @@ def test_run_times_writes_a_run_logs_figure(tmp_path):
         {"started": "2026-12-01T10:00:00Z", "seconds": 50.0,
          "stages": {"generate": {"status": "killed", "seconds": 50.0}}},
         {"started": "2026-12-02T11:00:00Z", "seconds": 262.4,
-         "stages": {"generate": {"status": "ran", "seconds": 157.2}, "features": {"status": "ran", "seconds": 26.0},
+         "stages": {"generate": {"status": "ran", "seconds": 157.2, "actions": {
+                        "lift": {"status": "ran", "seconds": 100.0, "rollouts": 320},
+                        "move": {"status": "ran", "seconds": 57.2, "rollouts": 192}}},
+                    "features": {"status": "ran", "seconds": 26.0},
                     "experiment": {"status": "ran", "seconds": 59.0}, "report": {"status": "ran", "seconds": 19.0}}}]}
     (run / "run.json").write_text(json.dumps(log))
     figs = tmp_path / "figures.json"
@@ -142,6 +145,7 @@ def test_run_times_writes_a_run_logs_figure(tmp_path):
     figures.FIGURES = figs
     try:
         assert run_times.main([str(run), "--write-figures", "quick_native_s"]) == 0
+        assert run_times.main([str(run), "--write-figures", "paper_native_rollouts_per_s"]) == 0
         assert run_times.main([str(run), "--write-figures", "no_such_figure"]) == 2
     finally:
         figures.FIGURES = old
@@ -149,6 +153,7 @@ def test_run_times_writes_a_run_logs_figure(tmp_path):
     assert rec["value"] == 262 and rec["stages_s"]["generate"] == 157
     assert rec["rests_on"]["date"] == "2026-12-02"
     assert rec["rests_on"]["machine"] == "x86_64, CPU, 2 cores"
+    assert figures.load(figs)["paper_native_rollouts_per_s"]["value"] == round(512 / 157.2)
 
 
 def test_paper_stages_writes_the_quick_figure(tmp_path):
