@@ -177,3 +177,16 @@ def test_paper_stages_writes_the_quick_figure(tmp_path):
     assert recs["quick_native_s"]["rests_on"]["programs"] == "v2"
     assert recs["quick_native_warm_s"]["value"] == 200
     assert figures.display(recs["quick_native_s"]) == "4.2 minutes"
+
+
+def test_code_points_to_the_figures_file():
+    """CLI help and docstrings name a figure by its id in docs/figures.json, never copy its value."""
+    recs = figures.load()
+    copies = []
+    for path in sorted((ROOT / "relaff_jax").rglob("*.py")):
+        text = path.read_text()
+        for rid, rec in recs.items():
+            phrase = figures.display(rec)
+            if len(phrase) >= 6 and phrase in text:
+                copies.append(f"{path.relative_to(ROOT)}: {phrase!r} (figure {rid})")
+    assert not copies, "\n".join(copies)
