@@ -3,6 +3,7 @@ its reference in the same run, and the paper preset's wall time, measured and pr
 
     python benchmarks/paper_stages.py [--actions lift ...] [--parts lift ...] [--batch 1024]
                                       [--batches 2] [--features 256] [--forests 16] [--smoke]
+                                      [--write-figures]
 
 - data: the native rollout function itself (``make_rollout_fn(..., engine="native")``: C
   settle, the default L-BFGS plans, C execution; what ``relaff generate --engine native``
@@ -35,6 +36,8 @@ so its projection is pessimistic. The last line is ``native_per_s=<whole-batch l
 rollouts/s, lift> forest_speedup=<compiled/fast CPU s per forest, n = 25, PCA>
 paper_projected_h=<hours, projected> quick_s=<wall seconds of the quick preset's run>``
 (``--no-quick``: ``quick_s=nan``; the quick run adds 2-4 minutes with a warm cache).
+``--write-figures`` writes the quick run's time into ``docs/figures.json`` (record
+``quick_native_s`` with ``--xla-cache ''``, compiles included; else ``quick_native_warm_s``).
 """
 from __future__ import annotations
 
@@ -58,7 +61,7 @@ from relaff_jax.sim import world as wd  # noqa: E402
 from relaff_jax.sim.native_batch import default_threads, execute_native  # noqa: E402
 from relaff_jax.sim.planning import Plan  # noqa: E402
 
-# The paper preset as run on this machine (docs/reproduce.md, "The paper preset, run": seed 0,
+# The paper preset as run on this machine (docs/journal/2026-12-03.md, "The paper preset, run": seed 0,
 # --engine native, the compiled forest engine, outcomes kept, 2026-12-03): rollouts per action
 # and seconds per stage; the report's is the re-run with the outcomes bit-packed, machine idle.
 PAPER_RUN_ROLLOUTS = {"lift": 20_480, "move": 31_744, "pull": 20_480, "push": 34_816, "rake": 14_336,
@@ -66,11 +69,11 @@ PAPER_RUN_ROLLOUTS = {"lift": 20_480, "move": 31_744, "pull": 20_480, "push": 34
 PAPER_RUN_S = {"data": 7_014, "features": 1_457, "experiment": 2_850, "report": 1_942}
 PAPER_SCENES = 90_000
 # The report stage, reference over new, on a paper-shaped stand-in of the paper run's results
-# (benchmarks/report_stage.py, docs/benchmarks.md "Report stage", 2026-12-04: 455.5 against
+# (benchmarks/report_stage.py, docs/journal/2026-12-04.md "Report stage": 455.5 against
 # 181.6 s in one run, every report file byte-identical). The paper run's 1,942 s over this.
 REPORT_RATIO = 2.51
 # The experiment stage after the fit kernel's rework, over before: benchmarks/experiment_stage.py
-# --ref (both versions in one run, all 314 result arrays equal; docs/benchmarks.md "Fit kernel
+# --ref (both versions in one run, all 314 result arrays equal; docs/journal/2026-12-04.md "Fit kernel
 # faster, same bits", 2026-12-04: 5,494 against 9,630 CPU s). The paper run's 2,850 s times this.
 EXPERIMENT_RATIO = 0.57
 
@@ -261,8 +264,10 @@ def quick_preset(cache: str) -> dict:
         subprocess.run([sys.executable, "-m", "relaff_jax.cli", "reproduce", "--preset", "quick", "--out",
                         os.path.join(tmp, "q"), "--no-progress"], env=env, check=True, capture_output=True)
         wall = time.perf_counter() - t0
-        run = json.load(open(os.path.join(tmp, "q", "run.json")))["runs"][-1]
-    return dict(seconds=wall, stages={k: v["seconds"] for k, v in run["stages"].items()})
+        log = json.load(open(os.path.join(tmp, "q", "run.json")))
+    run = log["runs"][-1]
+    programs = log.get("config", {}).get("action", {}).get("programs")
+    return dict(seconds=wall, stages={k: v["seconds"] for k, v in run["stages"].items()}, programs=programs)
 
 
 def project(rollout: list[dict], feats: dict) -> dict:
@@ -298,6 +303,19 @@ def report_stage(sizes: int, resamples: int) -> dict:
                 resamples=resamples)
 
 
+def write_quick_figure(quick: dict, cache: str) -> None:
+    """Update the quick preset's record in ``docs/figures.json`` from this run: its wall
+    seconds and stage seconds, today's date and the machine (``benchmarks/figures.py``)."""
+    import figures
+
+    rid = "quick_native_warm_s" if cache else "quick_native_s"
+    rec = figures.load()[rid]
+    rec = dict(rec, value=round(quick["seconds"]), stages_s={k: round(v) for k, v in quick["stages"].items()})
+    rec["rests_on"] = dict(rec["rests_on"], date=figures.today(), machine=figures.machine_line(),
+                           programs=quick.get("programs") or "not recorded")
+    figures.write_records([rec])
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--actions", nargs="+", default=list(ACTIONS),
@@ -307,7 +325,7 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=1024, help="rollouts per batch (the paper preset's)")
     ap.add_argument("--batches", type=int, default=2,
                     help="timed batches per action (after one untimed); a batch's time varies by +-15 %%, so "
-                         "use 16 or more for a projection (docs/benchmarks.md)")
+                         "use 16 or more for a projection (docs/benchmarks.md, \"Reading a benchmark's figure\")")
     ap.add_argument("--features", type=int, default=256, help="scenes for the features stage")
     ap.add_argument("--forests", type=int, default=16, help="forests per (space, n)")
     ap.add_argument("--report-sizes", type=int, default=20, help="training sizes of the report's resampling target")
@@ -316,9 +334,15 @@ def main() -> None:
     ap.add_argument("--smoke", action="store_true", help="lift, batch 64, 2 batches, few forests and scenes")
     ap.add_argument("--rollouts-only", action="store_true",
                     help="time the native rollout functions (with and without the reach screen) and stop")
+    ap.add_argument("--write-figures", action="store_true",
+                    help="write the quick preset's wall time into docs/figures.json: quick_native_s with "
+                         "--xla-cache '' (compiles included), else quick_native_warm_s (warm cache from the "
+                         "benchmark's second run; benchmarks/figures.py)")
     ap.add_argument("--xla-cache", default=os.path.join(os.environ.get("TMPDIR", "/tmp"), "relaff_paper_stages_xla"),
                     help="JAX's persistent compilation cache ('' for none): a rerun skips the ~2-5 min of compiles")
     args = ap.parse_args()
+    if args.write_figures and (args.smoke or not args.quick):
+        ap.error("--write-figures records the quick preset's run: not with --smoke or --no-quick")
     resamples = 1000
     if args.smoke:
         args.actions, args.parts, args.batch, args.batches, args.features, args.forests = ["lift"], ["lift"], 64, 2, 32, 8
@@ -391,6 +415,8 @@ def main() -> None:
         print("\nquick preset, `relaff reproduce --preset quick` into a new folder, compilation cache "
               f"{args.xla_cache or 'off'}: {quick['seconds']:.0f} s; stages (s): "
               + ", ".join(f"{k} {v:.0f}" for k, v in quick["stages"].items()))
+    if args.write_figures:
+        write_quick_figure(quick, args.xla_cache)
     print(f"\nwall time of this benchmark {time.perf_counter() - t_start:.0f} s; load average after {os.getloadavg()[0]:.2f}")
     print(f"native_per_s={lift['per_s']:.1f} forest_speedup={sp['fast'][1] / sp['compiled'][1]:.2f} "
           f"paper_projected_h={proj['projected']['total'] / 3600:.2f} quick_s={quick['seconds']:.0f}")

@@ -297,9 +297,15 @@ def agreement(jx: dict, nt: dict) -> str:
             f"PCA max |diff| {np.abs(pa - pb).max():.2e}; RHF max L1 per histogram {l1:.2e}")
 
 
-def write_docs(text: str, path: str = "docs/benchmarks.md") -> None:
+def write_docs(text: str, path: str | None = None) -> None:
+    """Put this run's section into today's journal (``docs/journal/YYYY-MM-DD.md``), replacing
+    a section of the same heading written earlier that day."""
+    import time
+
+    day = time.strftime("%Y-%m-%d", time.gmtime())
+    path = path or f"docs/journal/{day}.md"
     head = "## Perception"
-    old = open(path).read() if os.path.exists(path) else "# Benchmarks\n"
+    old = open(path).read() if os.path.exists(path) else f"# Journal, {day}\n"
     lines = old.split("\n")
     try:
         start = lines.index(head)
@@ -318,7 +324,7 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--part", choices=("jax", "native"), help=argparse.SUPPRESS)
-    ap.add_argument("--write-docs", action="store_true", help="replace the Perception section of docs/benchmarks.md")
+    ap.add_argument("--write-docs", action="store_true", help="write the run's section into today's journal, docs/journal/YYYY-MM-DD.md")
     args = ap.parse_args(argv)
     if args.part:
         res = (run_jax if args.part == "jax" else run_native)(args.scenes, args.batch, args.seed)

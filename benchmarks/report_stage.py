@@ -7,7 +7,7 @@ reference path against the default one in the same run, outputs compared byte fo
 The folder (``learn.synthetic_results``: 9 actions, 50 conditions, 4,000 balanced test scenes,
 50 PCA / 25 RHF repetitions, outcomes bit-packed as the sweep writes them, ``--sizes`` training
 sizes 2, 3, ...) is built once in ``--out/results`` and reused. No ``--data``: the dataset
-sections need dataset folders (see ``docs/benchmarks.md`` for what that leaves out).
+sections need dataset folders (see docs/journal/2026-12-04.md, "Report stage", for what that leaves out).
 
 Each variant (``reference``: ``write_report(..., reference=True)``; ``new``: the default path;
 ``base``: the default path of another checkout, ``--base``) runs in its own process,

@@ -55,7 +55,7 @@ def configure(disable: bool = False) -> Path | None:
         os.environ["JAX_COMPILATION_CACHE_DIR"] = str(d)
         # Each program loaded from the cache makes XLA print an E-level "cpu_aot_loader" line
         # about +prefer-no-gather/scatter, tuning hints it mistakes for CPU features (noise:
-        # docs/benchmarks.md); read when jaxlib loads, so only before JAX is imported.
+        # docs/journal/2026-12-05.md, "--smoke on the idle machine"); read when jaxlib loads, so only before JAX is imported.
         os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
     if "jax" in sys.modules:
         import jax

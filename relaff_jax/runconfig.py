@@ -104,17 +104,16 @@ def preset(name: str) -> RunConfig:
     ``paper``: the full protocol (10,000 samples per action, every n in 2..100, 50/25
     repetitions, 4000 test samples, the paper's forests), from the feasible rollouts
     (``dataset.population=feasible``; ``--set dataset.population=all`` for today's reading), its
-    forests built by the compiled engine (the same forests): 1 h 32 min on two cores with
-    ``--engine native`` (measured 2026-12-05, docs/reproduce.md); MJX's data stage takes
-    several times longer.
+    forests built by the compiled engine (the same forests); its time with ``--engine native``
+    is ``paper_native_s`` in docs/figures.json; MJX's data stage takes several times longer.
     ``study``: numbers that can be read beside the paper's (docs/results.md): 1,000 samples
     per action, every n in 2..50, 10 repetitions in both spaces, 500 balanced test scenes per
-    action, per scene outcomes kept for intervals; projected at about 2-3 hours here, most of
-    it simulation (docs/reproduce.md).
+    action, per scene outcomes kept for intervals (its time with ``--engine native``:
+    ``study_native_s`` in docs/figures.json).
     ``quick``: the README's main job, a small but complete study (all nine actions, both
     spaces, every bootstrapping condition), its motor programs run by MuJoCo C
-    (``dataset.engine=native``: 4.4 minutes on two idle cores against 9.2 with MJX, measured
-    2026-12-02; a newcomer's first result, docs/reproduce.md "Presets"):
+    (``dataset.engine=native``: a newcomer's first result, docs/reproduce.md "Presets"; its
+    times, native and MJX: ``quick_native_s``, ``quick_mjx_s`` in docs/figures.json):
     100 samples per action, n = 2 and every n in 4..25, 2 repetitions, the paper's forests;
     the learning pools shrink to the data (``ExperimentConfig.shrink_to_data``). Its
     intervals are too wide to compare with the paper; its report says so.

@@ -18,10 +18,9 @@ def register(sub) -> None:
                     "stages are skipped. Settings: a preset plus --set overrides of the config tree "
                     "(relaff_jax.runconfig); the run log records the whole resolved tree.")
     p.add_argument("--preset", choices=PRESETS, default="quick",
-                   help="quick: a small complete study, its motor programs in MuJoCo C (4.4 min on 2 idle cores "
-                        "with the native engine, 9.2 with MJX; docs/reproduce.md 'Presets'); study: 29 min with --engine native (docs/results.md); paper: the full protocol "
-                        "(1 h 32 min measured with --engine native: data 50 min, features 14 min, experiment 25 min, report 4 min; "
-                        "docs/reproduce.md 'The paper preset, run again in one stretch'); tiny: for tests")
+                   help="quick: a small complete study, its motor programs in MuJoCo C; study: the smallest whose "
+                        "Table II reads beside the paper's; paper: the full protocol; tiny: for tests "
+                        "(docs/reproduce.md 'Presets'; measured times: docs/figures.json)")
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
     p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",
                    help="the run folder, as a positional argument for --status (same as --out DIR)")

@@ -16,6 +16,13 @@ Files:
 - ``examples.py``: example scenes drawn by ``relaff_jax.perception.from_sim.show_scene``;
 - ``sections.py``: the document's sections as blocks;
 - ``document.py``: blocks rendered as ``report.md`` and a self-contained ``report.html``;
+- ``reach.py``: the "Reach or relation" section (what the labels consist of, ``reach.json``);
+- ``audit.py``: the "Physics audit" section from the datasets' stored audits (``fig_audit.png``);
+- ``borrow.py``: what one source can lend each affordance (DB1's bootstrap factor beside the
+  strongest correlation of its predictor with another action's);
+- ``robustness.py``: each finding in every reading (the robustness table);
+- ``readings.py``: ``relaff compare``, several report folders side by side;
+- ``status.py``: the inputs' stamp of a report folder (its status for ``relaff reproduce``);
 - ``formatting.py``: number formatting shared by the above.
 """
 from relaff_jax.lazy import lazy_attributes

@@ -1,6 +1,6 @@
 """``relaff reproduce``: from nothing to the paper's results in one resumable command.
 
-Takes a preset (``tiny``, ``quick``, ``paper``; ``relaff_jax.runconfig``), ``--set`` overrides,
+Takes a preset (``tiny``, ``quick``, ``study``, ``paper``; ``relaff_jax.runconfig``), ``--set`` overrides,
 a seed and a run folder (``folder.py``), and runs the four stages in order: ``generate`` ->
 ``features`` -> ``experiment`` -> ``report`` (one module each, keeping the contract of
 ``stage.py``). A stage whose status is ``complete`` is skipped; ``--force STAGE`` redoes one
@@ -82,7 +82,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
               redo: Sequence[str] = ()) -> dict[str, Any]:
     """Run (or continue) the whole study in ``out``; return the run log.
 
-    preset_name: ``tiny``, ``quick`` or ``paper`` (``cfg`` replaces it); ``overrides``: dotted
+    preset_name: ``tiny``, ``quick``, ``study`` or ``paper`` (``cfg`` replaces it); ``overrides``: dotted
     keys of the config tree, e.g. ``{"dataset.n_samples": 400, "experiment.reps_pca": 5}``.
     force: stages to redo. jobs: experiment worker processes (0: all cores).
     rollout_factory(action, batch) -> (rollout_fn, config_dict, object_names) and

@@ -7,8 +7,8 @@ A stage is a module with a ``NAME`` and three functions of a ``Run``:
   and why; it asks the stage's own package (``relaff_jax.data``, ``learn``, ``report``),
   never reads another stage's files itself;
 - ``progress(run) -> float``: the fraction done, from what is on disk (for the progress line);
-- ``run(run, status) -> dict``: (re)make the output, resuming a partial one; returns what
-  the run log records.
+- ``run(run, forced) -> dict``: (re)make the output, resuming a partial one (``forced``: the
+  stage was asked for by ``--force``); returns what the run log records.
 
 ``relaff_jax.reproduce.run`` composes them: a complete stage is skipped unless forced.
 """
