@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import time
+from pathlib import Path
 from typing import Any
 
 from relaff_jax import data as D
@@ -38,6 +39,11 @@ def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, 
     config record. ``client``: chunks as tasks on that cluster (each worker builds the
     perception once). ``compute``: ``(compute_fn, config_dict)`` already built (``reproduce``
     builds it once for every action, or takes a test's factory); default: the perception's."""
+    if compute is None:  # the objects the dataset's pair indices refer to (the built-ins if it records none)
+        from relaff_jax.data.store import read_sidecar
+        from relaff_jax.sim.object_library import use_recorded
+
+        use_recorded(read_sidecar(Path(path)))
     if compute is None and client is None:
         compute = default_feature_factory(seed, tree.perception)
     elif compute is None:
