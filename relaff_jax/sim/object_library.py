@@ -97,8 +97,8 @@ def parse_spec(d: Any, where: str, colour_of: Mapping[str, tuple] = {}) -> lib.O
     for other, c in colour_of.items():
         dist = math.dist(colour, c)
         if dist < COLOUR_TOLERANCE:
-            _refuse(where, f"colour {list(colour)} is {dist:.3f} from {other!r}'s {list(c)}: the camera tells "
-                           f"objects apart by colour, keep at least {COLOUR_TOLERANCE} (RGB distance)")
+            _refuse(where, f"colour {list(colour)} is {dist:.3f} from the colour of {other!r} {list(c)}: keep "
+                           f"at least {COLOUR_TOLERANCE} (RGB distance) so that colour tells the objects apart")
     sphere = _number(where, "sphere_radius", d["sphere_radius"]) if "sphere_radius" in d else 0.0
     parts = d.get("parts", {})
     if not isinstance(parts, Mapping):
