@@ -21,6 +21,11 @@ cup-sized block: nothing is ever put into the toy.
 
 All sizes are full extents in metres, masses in kg, in the object's own frame
 (x forward, z up, origin at the centre of the footprint on the table, z = 0 at the bottom).
+
+A run's objects are an ``ObjectSet``: the built-ins (``BUILTIN_SET``) unless a library file
+adds objects or the config selects some (``object_library``, docs/objects.md). ``get``,
+``members`` and ``pairs`` read the *active* set (``activate``), which the config check or a
+dataset's record sets before any world is built.
 """
 from __future__ import annotations
 
