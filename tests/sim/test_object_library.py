@@ -340,3 +340,14 @@ def test_user_object_scenes_sample_and_settle():
     # dropped 4 mm onto the floor, both stay inside: their centres (4.5 and 3.5 cm up) below the 5 cm rim
     assert (rel == sc.INSIDE).all(), rel
     assert np.asarray(scenes.at_rest).all()
+
+
+@pytest.mark.parametrize("argv", [["generate", "lift", "--samples", "4", "--engine", "native"],
+                                  ["reproduce", "--preset", "tiny"]])
+def test_commands_that_simulate_refuse_a_bad_library_before_any_work(tmp_path, capsys, argv):
+    bad = write(tmp_path, [dish(groups=["base", "rake"])])
+    out = tmp_path / "out"
+    assert cli.main(argv + ["--out", str(out), "--objects", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "object 'dish': groups ['base', 'rake']: at most one of base, obstacle, rake" in err[0]
+    assert not out.exists()
