@@ -184,10 +184,14 @@ def resolve(base: RunConfig | None = None, overrides: Mapping[str, Any] | None =
 def check_tree(tree: RunConfig) -> RunConfig:
     """The whole tree's check, before any stage starts. Each node checked its own values when
     it was made (``__post_init__``: the forest's against scikit-learn's constraints too); this
-    adds the real node with the perception it shares and its real object capacity. Imports
+    adds the real node with the perception it shares and its real object capacity, and reads
+    and checks ``action.scene.library``/``objects`` (``sim.object_library``). Imports
     neither JAX nor scikit-learn. Returns ``tree``; raises ``UserError`` naming the setting."""
     from relaff_jax.real.config import validate_run_config
+    from relaff_jax.sim.object_library import use_scene
 
+    # the object library is read and checked, and its set made the active one, before any stage
+    use_scene(tree.action.scene, tree.action.grip_margin)
     return validate_run_config(tree)
 
 

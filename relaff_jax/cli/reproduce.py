@@ -36,6 +36,9 @@ def register(sub) -> None:
     p.add_argument("--engine", choices=SIM_ENGINES, default=None,
                    help="executor of the motor programs (same as --set dataset.engine=...): mjx (the default of "
                         "tiny, study and paper) or native (MuJoCo C batches, quick's default; docs/actions.md)")
+    p.add_argument("--objects", metavar="FILE", default=None,
+                   help="an object library (.toml or .json) whose objects join the 29 built-ins, the same as "
+                        "--set action.scene.library=FILE (docs/objects.md); recorded in every dataset")
     p.add_argument("--status", action="store_true", help="print each stage's status in OUT and exit")
     p.add_argument("--rebuild-log", action="store_true",
                    help="OUT's run.json is damaged: set it aside (run.json.damaged) and start a new log for the "
@@ -91,7 +94,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.out is None:
         raise UserError("the run folder is required: --out DIR")
     options.check_counts(args, seed="--seed", jobs="--jobs")
-    overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine)})
+    overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine),
+                                            "action.scene.library": ("--objects", args.objects)})
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     from relaff_jax import reproduce as R
@@ -116,6 +120,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     command += [x for s in args.set or () for x in ("--set", s)] + (["--no-progress"] if args.no_progress else [])
     command += ["--cluster", args.cluster] if args.cluster else []
     command += ["--engine", args.engine] if args.engine else []
+    command += ["--objects", args.objects] if args.objects else []
     command += ["--plugins", *args.plugins] if args.plugins else []
     with options.cluster(args, args.out) as client:
         log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,

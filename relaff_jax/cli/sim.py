@@ -20,9 +20,12 @@ def register(subparsers) -> None:
     from relaff_jax.data.config import DatasetConfig  # the tree's defaults, shown in --help (no JAX)
 
     d = DatasetConfig()
-    p = subparsers.add_parser("objects", help="list the 29 objects of the library",
-                              description="List the 29 objects of the library (sim.objects). No settings "
-                                          "(no --set): the library is fixed, not a part of the config tree.")
+    p = subparsers.add_parser("objects", help="list the 29 built-in objects, and a library file's",
+                              description="List the 29 built-in objects (sim.objects) and, with --library, "
+                                          "those of an object library file merged with them, checked as a run "
+                                          "checks them (docs/objects.md).")
+    p.add_argument("--library", metavar="FILE", default=None,
+                   help="an object library (.toml or .json) to check and list after the built-ins")
     p.add_argument("--json", action="store_true", help="one JSON array")
     p.set_defaults(func=cmd_objects)
 
@@ -31,6 +34,7 @@ def register(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the placements")
     p.add_argument("--batch", type=int, default=1024, help="scenes per compiled batch (memory bound)")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    _add_objects(p)
     options.add_set(p, "action.scene.p_stacked=0.8")
     p.set_defaults(func=cmd_scenes)
 
@@ -57,15 +61,24 @@ def register(subparsers) -> None:
                    help="executor of the motor programs: mjx (default) or native (MuJoCo C batches on a thread "
                         "pool, docs/actions.md); recorded in the dataset, a resume with another is refused")
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    _add_objects(p)
     options.add_cluster(p)
     options.add_set(p, "action.lift_height=0.3")
     p.set_defaults(func=cmd_generate)
 
 
+def _add_objects(p) -> None:
+    p.add_argument("--objects", metavar="FILE", default=None,
+                   help="an object library (.toml or .json) whose objects join the 29 built-ins, the same as "
+                        "--set action.scene.library=FILE (docs/objects.md); recorded in the dataset")
+
+
 def cmd_objects(args) -> int:
+    from relaff_jax.sim import object_library as ol
     from relaff_jax.sim import objects as lib
 
-    rows = [s.to_json() for s in lib.OBJECTS.values()]
+    specs = ol.select(ol.load_library(args.library), ()).specs if args.library else lib.OBJECTS.values()
+    rows = [s.to_json() for s in specs]
     if args.json:
         print(json.dumps(rows, indent=1))
         return 0
@@ -74,7 +87,7 @@ def cmd_objects(args) -> int:
         size = "x".join(f"{v:g}" for v in r["size_cm"])
         print(f"{r['name']:15s} {'+'.join(r['groups']):11s} {r['kind']:10s} {size:>18s} "
               f"{r['mass_kg']:6.2f}  {tuple(r['colour'])}")
-    counts = {g: len(lib.members(g)) for g in lib.GROUPS}
+    counts = {g: sum(g in s.groups for s in specs) for g in lib.GROUPS}
     print(f"{len(rows)} objects: " + ", ".join(f"{v} {k}s" for k, v in counts.items()))
     return 0
 
@@ -87,7 +100,7 @@ def cmd_scenes(args) -> int:
     from relaff_jax.sim import scenes as sc
     from relaff_jax.sim import world as wd
 
-    cfg = options.config(args)
+    cfg = options.config(args, flags={"action.scene.library": ("--objects", args.objects)})
     world = wd.build_world(cfg.action.phys)
     scenes, stats = sc.run_scenes(args.n, args.seed, args.batch, world=world, cfg=cfg.action.scene,
                                   progress=not args.json)
@@ -112,7 +125,8 @@ def cmd_generate(args) -> int:
     # the flags are aliases of tree keys: everything below reads the tree, which is what is recorded
     tree = options.config(args, flags={
         "dataset.n_samples": ("--samples", args.samples), "dataset.rollout_batch": ("--batch", args.batch),
-        "dataset.max_rollouts": ("--max-rollouts", args.max_rollouts), "dataset.engine": ("--engine", args.engine)})
+        "dataset.max_rollouts": ("--max-rollouts", args.max_rollouts), "dataset.engine": ("--engine", args.engine),
+        "action.scene.library": ("--objects", args.objects)})
     n, batch = tree.dataset.n_samples, tree.dataset.rollout_batch  # checked by DatasetConfig itself
 
     from relaff_jax import data as ds

@@ -59,6 +59,9 @@ def action_config(meta: Mapping[str, Any]):
     record = meta.get("config")
     if not isinstance(record, dict) or not isinstance(record.get("action_config"), dict):
         raise DatasetError(f"{meta.get('action')}: the sidecar records no action_config; cannot replay")
+    from relaff_jax.sim.object_library import use_recorded
+
+    use_recorded(meta)  # the objects its pair indices refer to (the built-ins if it records none)
     return from_dict(ActionConfig, record["action_config"])
 
 

@@ -124,6 +124,20 @@ def generate_dataset(
             raise
 
 
+def _check_objects(path: Path, meta: Mapping[str, Any], header: Mapping[str, Any]) -> None:
+    """Refuse to resume with other objects (``config.objects``: ``sim.object_library.record``,
+    absent for the built-ins): its sha256 covers every selected object's specs."""
+    rec = lambda m: (m.get("config") or {}).get("objects") or {} if isinstance(m.get("config"), dict) else {}
+    old, new = rec(meta), rec(header)
+    if old.get("sha256") != new.get("sha256"):
+        name = lambda r: (f"objects {r['sha256'][:12]} (library {r.get('library') or 'none'})" if r
+                          else "the 29 built-in objects")
+        raise DatasetMismatchError(
+            f"{path}: was generated with {name(old)}, this run resolves to {name(new)}; resuming would mix two "
+            f"object sets in one dataset. Restore the library file (or selection) it was made with, or write to a "
+            f"new folder")
+
+
 def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, client, window) -> dict[str, Any]:
     cdir = path / CHUNKS
     clean_tmp(path, cdir)
@@ -142,6 +156,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
                 f"them by {header['settle']}; resuming would mix two settles in one dataset. Write to a new "
                 f"folder (or finish it with the version that began it)")
         meta["settle"] = settled
+        _check_objects(path, meta, header)
         diff = mismatch(meta, header, ("action", "n_samples", "seed", "batch", "config", "object_names", "selection_scheme"))
         if diff:
             raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff))

@@ -29,7 +29,11 @@ def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.
     out = Path(out)
     if rollout and out.suffix.lower() != ".gif":
         raise UserError(f"--rollout writes a GIF; give --out a .gif name, not {out.name}")
+    from relaff_jax.data.store import read_sidecar
+    from relaff_jax.sim.object_library import use_recorded
+
     ds = load_dataset(folder, features=False)
+    use_recorded(read_sidecar(Path(folder)))  # its pair indices index the pairs of the objects it was made of
     n = len(ds["label"])
     if not 0 <= index < n:
         raise UserError(f"--index {index} out of range: the dataset has {n} samples")

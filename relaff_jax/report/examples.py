@@ -28,13 +28,16 @@ def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_ac
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import world as wd
 
-    world = None
+    from relaff_jax.data.store import read_sidecar
+    from relaff_jax.sim.object_library import use_recorded
+
     shown: list[tuple[str, str, str]] = []
     for action, d in data_dirs.items():
         ds = load_dataset(d, features=False)
         if not {"pair", "qpos_settled"} <= set(ds):
             continue
-        world = world or wd.build_world()
+        use_recorded(read_sidecar(Path(d)))  # its pair indices refer to the objects it records
+        world = wd.build_world()  # cached per object set
         label = np.asarray(ds["label"], bool)
         pos, neg = list(np.flatnonzero(label)), list(np.flatnonzero(~label))
         order = [x for pair in zip(pos, neg) for x in pair] + pos[len(neg):] + neg[len(pos):]

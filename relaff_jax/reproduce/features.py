@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import time
+from pathlib import Path
 from typing import Any
 
 from relaff_jax import data as D
@@ -13,12 +14,22 @@ from relaff_jax.reproduce.stage import Run, Status
 NAME = "features"
 
 
-def default_feature_factory(seed: int, config: Any = None):
-    """``(compute_fn, config_dict)`` of the perception stage, as ``relaff features`` uses it."""
+def default_feature_factory(seed: int, config: Any = None, objects: Any = None, action: Any = None):
+    """``(compute_fn, config_dict)`` of the perception stage, as ``relaff features`` uses it.
+    The object set the datasets' pairs come from is made active first (a cluster worker has
+    only the built-ins active): ``objects`` (a ``sim.objects.ObjectSet``, e.g. a dataset's
+    record) or the one ``action`` (an ``ActionConfig``) selects; neither: the active set."""
     from relaff_jax import perception as pc
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import build_world
+    from relaff_jax.sim import objects as lib
 
+    if objects is not None:
+        lib.activate(objects)
+    elif action is not None:
+        from relaff_jax.sim.object_library import use_scene
+
+        use_scene(action.scene, action.grip_margin)
     cfg = config if config is not None else pc.PerceptionConfig()
     return from_sim.make_feature_fn(build_world(), cfg, seed), feature_config(seed, cfg)
 
@@ -38,12 +49,18 @@ def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, 
     config record. ``client``: chunks as tasks on that cluster (each worker builds the
     perception once). ``compute``: ``(compute_fn, config_dict)`` already built (``reproduce``
     builds it once for every action, or takes a test's factory); default: the perception's."""
+    objects = None
+    if compute is None:  # the objects the dataset's pair indices refer to (the built-ins if it records none)
+        from relaff_jax.data.store import read_sidecar
+        from relaff_jax.sim.object_library import use_recorded
+
+        objects = use_recorded(read_sidecar(Path(path)))
     if compute is None and client is None:
         compute = default_feature_factory(seed, tree.perception)
     elif compute is None:
         from relaff_jax.cluster import Remote
 
-        compute = Remote(default_feature_factory, seed, config=tree.perception, pick=0), \
+        compute = Remote(default_feature_factory, seed, config=tree.perception, objects=objects, pick=0), \
             feature_config(seed, tree.perception)
     fn, config_dict = compute
     out = D.add_features(path, fn, tree.dataset.feature_batch, progress, config_dict, overwrite=overwrite,
@@ -54,7 +71,7 @@ def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, 
 
 def factories_for(cfg: Any):
     """``(feature_factory, feature_config)`` bound to a ``RunConfig``'s perception settings."""
-    return (functools.partial(default_feature_factory, config=cfg.perception),
+    return (functools.partial(default_feature_factory, config=cfg.perception, action=cfg.action),
             functools.partial(feature_config, config=cfg.perception))
 
 

@@ -4,7 +4,9 @@ the 6-DOF arm, the nine motor programs and their physics labels, and MuJoCo C re
 Modules, in pipeline order:
 
 - ``config``: ``PhysicsConfig``, ``SceneConfig``, ``ArmConfig``, ``ActionConfig`` (no JAX).
-- ``objects``: the 29-object library (``ObjectSpec`` per name) and the 124 scene pairs.
+- ``objects``: the 29-object library (``ObjectSpec`` per name), ``ObjectSet`` (the objects a
+  run uses, the built-ins' 124 scene pairs by default) and the active set.
+- ``object_library``: object library files (TOML/JSON), their checks, the dataset record.
 - ``world``: ``PhysicsConfig`` and ``build_world``: one batched MJX model for every pair.
 - ``contacts``: ``contacts(d)``, the one reader of MJX's contact list.
 - ``scenes``: ``SceneConfig``; placement sampling, settling, relation labels (``Scenes``).

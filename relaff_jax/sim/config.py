@@ -103,9 +103,17 @@ class SceneConfig:
     rest_speed: float = 0.02  # m/s: a body slower than this at the end is "at rest"
     contact_dist: float = 0.002  # m: a contact closer than this is touching
     candidates: int = 16  # rejection-sampling draws per placement (static shapes)
+    # The objects scenes are made of (docs/objects.md): names among the 29 built-ins and the
+    # library file's objects (empty: all of them), and a library file (.toml or .json, "" none)
+    # whose objects join the built-ins. Read and checked with the whole tree (runconfig.check_tree).
+    objects: tuple[str, ...] = ()
+    library: str = ""
 
     def __post_init__(self):  # refused when the config is made
         _check("action.scene", {
+            "objects": (isinstance(self.objects, tuple) and all(isinstance(n, str) for n in self.objects),
+                        f'a list of object names (--set \'action.scene.objects=["ball","dish"]\'), got {self.objects!r}'),
+            "library": (isinstance(self.library, str), f"a file path, got {self.library!r}"),
             "min_radius": (0.0 <= self.min_radius < self.workspace_radius,
                            f"in [0, workspace_radius = {self.workspace_radius}), got {self.min_radius}"),
             "p_stacked": (0.0 <= self.p_stacked <= 1.0, f"in [0, 1], got {self.p_stacked}"),

@@ -42,7 +42,7 @@ def relation_native(world: wd.World, pair: int, m: mujoco.MjModel, d: mujoco.MjD
         on_table |= bodies == {toy, 0}
     if not on_obj or on_table:
         return sc.BESIDE
-    spec = lib.get(world.pairs[pair][1])
+    spec = world.objects.get(world.pairs[pair][1])
     local = d.xmat[obj].reshape(3, 3).T @ (d.xipos[toy] - d.xpos[obj])
     if spec.inner is not None:
         ix, iy, rim = spec.inner

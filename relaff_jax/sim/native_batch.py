@@ -50,10 +50,15 @@ def sensor_xml() -> str:
     return "<sensor>\n    " + "\n    ".join(rows) + "\n  </sensor>\n"
 
 
-@functools.lru_cache(maxsize=None)
 def sensor_model(toy: str, other: str, phys: wd.PhysicsConfig = wd.PhysicsConfig()) -> mujoco.MjModel:
     """The action-world model of one pair (``world.pair_xml(..., arm=True)``, the physics of
-    ``World.mj_models``) plus the contact sensors of ``sensor_xml``; compiled once."""
+    ``World.mj_models``) plus the contact sensors of ``sensor_xml``; compiled once per pair of
+    specs (a library object of the same name but other sizes is another model)."""
+    return _sensor_model(toy, other, phys, lib.get(toy), lib.get(other))
+
+
+@functools.lru_cache(maxsize=None)
+def _sensor_model(toy: str, other: str, phys: wd.PhysicsConfig, _toy_spec, _other_spec) -> mujoco.MjModel:
     head, tag, tail = wd.pair_xml(toy, other, phys, arm=True).rpartition("</mujoco>")
     return mujoco.MjModel.from_xml_string(head + sensor_xml() + tag + tail)
 

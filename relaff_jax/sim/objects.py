@@ -21,10 +21,16 @@ cup-sized block: nothing is ever put into the toy.
 
 All sizes are full extents in metres, masses in kg, in the object's own frame
 (x forward, z up, origin at the centre of the footprint on the table, z = 0 at the bottom).
+
+A run's objects are an ``ObjectSet``: the built-ins (``BUILTIN_SET``) unless a library file
+adds objects or the config selects some (``object_library``, docs/objects.md). ``get``,
+``members`` and ``pairs`` read the *active* set (``activate``), which the config check or a
+dataset's record sets before any world is built.
 """
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 GROUPS = ("toy", "base", "obstacle", "rake")
 
@@ -219,37 +225,80 @@ def _build() -> dict[str, ObjectSpec]:
     return {s.name: s for s in specs}
 
 
-OBJECTS: dict[str, ObjectSpec] = _build()
+OBJECTS: dict[str, ObjectSpec] = _build()  # the built-ins (``object_library`` adds a file's)
 OBJECT_NAMES: tuple[str, ...] = tuple(OBJECTS)
-
-
-def get(name: str) -> ObjectSpec:
-    """Look up an object by name; an unknown name lists the valid ones."""
-    try:
-        return OBJECTS[name]
-    except KeyError:
-        raise KeyError(f"unknown object {name!r}; valid objects: {', '.join(OBJECT_NAMES)}") from None
-
-
-def members(group: str) -> tuple[str, ...]:
-    """Names of the objects in ``group`` (toy, base, obstacle, rake)."""
-    if group not in GROUPS:
-        raise KeyError(f"unknown group {group!r}; valid groups: {', '.join(GROUPS)}")
-    return tuple(n for n, s in OBJECTS.items() if group in s.groups)
-
 
 from relaff_jax.constants import PAIRINGS  # noqa: E402,F401 (re-exported)
 
 
-def pairs() -> tuple[tuple[str, str, str], ...]:
-    """All (toy, other, pairing) scene pairs: one toy plus one object of another group.
+@dataclasses.dataclass(frozen=True)
+class ObjectSet:
+    """The objects a run uses: ``specs`` in registry order (the built-ins first, then a library
+    file's), the ``library`` path they came from ("" none) and the ``selection`` as the config
+    gave it (empty: every object). Hashable: ``world.build_world`` is cached per set."""
 
-    The cup cannot be paired with itself, so there are 5*15 - 1 + 25 + 25 = 124 pairs.
-    """
-    out = []
-    for group in ("base", "obstacle", "rake"):
-        for toy in members("toy"):
-            for other in members(group):
-                if toy != other:
-                    out.append((toy, other, f"toy+{group}"))
-    return tuple(out)
+    specs: tuple[ObjectSpec, ...]
+    library: str = ""
+    selection: tuple[str, ...] = ()
+
+    @functools.cached_property
+    def by_name(self) -> dict[str, ObjectSpec]:
+        return {s.name: s for s in self.specs}
+
+    def get(self, name: str) -> ObjectSpec:
+        """Look up an object by name; an unknown name lists the valid ones."""
+        try:
+            return self.by_name[name]
+        except KeyError:
+            raise KeyError(f"unknown object {name!r}; valid objects: {', '.join(self.by_name)}") from None
+
+    def members(self, group: str) -> tuple[str, ...]:
+        """Names of the objects in ``group`` (toy, base, obstacle, rake)."""
+        if group not in GROUPS:
+            raise KeyError(f"unknown group {group!r}; valid groups: {', '.join(GROUPS)}")
+        return tuple(s.name for s in self.specs if group in s.groups)
+
+    def pairs(self) -> tuple[tuple[str, str, str], ...]:
+        """All (toy, other, pairing) scene pairs: one toy plus one object of another group.
+
+        An object that is a toy and a base (the cup) is never paired with itself: the
+        built-ins give 5*15 - 1 + 25 + 25 = 124 pairs.
+        """
+        out = []
+        for group in ("base", "obstacle", "rake"):
+            for toy in self.members("toy"):
+                for other in self.members(group):
+                    if toy != other:
+                        out.append((toy, other, f"toy+{group}"))
+        return tuple(out)
+
+
+BUILTIN_SET = ObjectSet(tuple(OBJECTS.values()))
+# The set every lookup below reads: the built-ins unless a run activates another
+# (``object_library.use_scene`` from the config, ``use_recorded`` from a dataset's sidecar).
+_ACTIVE = [BUILTIN_SET]
+
+
+def active() -> ObjectSet:
+    return _ACTIVE[0]
+
+
+def activate(objs: ObjectSet) -> ObjectSet:
+    """Make ``objs`` the active set; returns the one it replaces."""
+    prev, _ACTIVE[0] = _ACTIVE[0], objs
+    return prev
+
+
+def get(name: str) -> ObjectSpec:
+    """Look up an object of the active set by name; an unknown name lists the valid ones."""
+    return active().get(name)
+
+
+def members(group: str) -> tuple[str, ...]:
+    """Names of the active set's objects in ``group`` (toy, base, obstacle, rake)."""
+    return active().members(group)
+
+
+def pairs() -> tuple[tuple[str, str, str], ...]:
+    """All (toy, other, pairing) scene pairs of the active set (``ObjectSet.pairs``)."""
+    return active().pairs()

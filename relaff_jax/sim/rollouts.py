@@ -182,6 +182,9 @@ def make_batch_prepare_fn(action: str, cfg: ActionConfig, settle: str = "mjx",
     if settle not in ENGINES:
         raise UserError(f"unknown settle {settle!r}; valid: {', '.join(ENGINES)}")
     aid = action_id(action)
+    from .object_library import use_scene
+
+    use_scene(cfg.scene, cfg.grip_margin)  # the objects cfg selects (a Dask worker's first call reads them here)
     scene_world = wd.build_world(cfg.phys)
     place_fn, settle_fn, _ = sc.jitted_scene_fns(scene_world, cfg.scene)
     prepare_fn, _ = jitted_stage_fns(cfg)

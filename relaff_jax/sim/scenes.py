@@ -85,7 +85,7 @@ class PairTable:
 def pair_table(world: wd.World) -> PairTable:
     rows = []
     for toy, other, pairing in world.pairs:
-        t, o = lib.get(toy), lib.get(other)
+        t, o = world.objects.get(toy), world.objects.get(other)
         base = dict(o.parts)["base"]
         inner = o.inner if o.inner is not None else (0.0, 0.0, 0.0)
         rows.append((

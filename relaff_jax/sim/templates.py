@@ -142,7 +142,10 @@ def stored_config(cfg: ActionConfig) -> dict:
 
     The reach screen (``ArmConfig.reach_screen``, default on) is recorded only when off: it
     changes no stored field but ``ik_error`` (NaN where screened, ``reach_screen.py``), so a
-    dataset written before it existed stays valid and resumable (its later chunks screened)."""
+    dataset written before it existed stays valid and resumable (its later chunks screened).
+
+    ``scene.objects`` and ``scene.library`` are recorded only when set (the built-ins are
+    recorded by their absence); the objects they resolve to go beside, ``config.objects``."""
     from relaff_jax.config import to_dict
 
     from .config import V2_FIELDS
@@ -156,4 +159,7 @@ def stored_config(cfg: ActionConfig) -> dict:
         d["arm"].pop("ik_lm_steps")
     if cfg.arm.reach_screen:
         d["arm"].pop("reach_screen")
+    for k in ("objects", "library"):  # the built-ins: as every dataset written before libraries
+        if not d["scene"][k]:
+            d["scene"].pop(k)
     return d

@@ -160,6 +160,7 @@ class World:
       toy_qpos, obj_qpos: qpos addresses (7 each) of the two free joints.
       toy_dof, obj_dof: dof addresses (6 each).
       geom_seg: (G,) segment label per geom (SEG_*).
+      objects: the ``objects.ObjectSet`` the pairs come from.
     """
 
     phys: PhysicsConfig
@@ -177,6 +178,7 @@ class World:
     obj_body: int
     geom_seg: np.ndarray
     pair_index: dict
+    objects: lib.ObjectSet = lib.BUILTIN_SET  # the set its pairs are made of
 
     @property
     def n_pairs(self) -> int:
@@ -191,7 +193,7 @@ class World:
         try:
             return self.pair_index[(toy, other)]
         except KeyError:
-            lib.get(toy), lib.get(other)  # unknown names give the listing error
+            self.objects.get(toy), self.objects.get(other)  # unknown names give the listing error
             raise KeyError(f"({toy!r}, {other!r}) is not a valid pair") from None
 
 
@@ -199,10 +201,16 @@ def _leaves_with_paths(tree):
     return jax.tree_util.tree_flatten_with_path(tree)
 
 
-@functools.lru_cache(maxsize=4)
 def build_world(phys: PhysicsConfig = PhysicsConfig(), arm: bool = False) -> World:
-    """Compile every pair and stack the fields that differ between pairs."""
-    pairs = lib.pairs()
+    """Compile every pair of the active object set (``objects.active()``: the 29 built-ins
+    unless a run selected others) and stack the fields that differ between pairs. Cached per
+    (phys, arm, object set)."""
+    return _build_world(phys, arm, lib.active())
+
+
+@functools.lru_cache(maxsize=4)
+def _build_world(phys: PhysicsConfig, arm: bool, objs: lib.ObjectSet) -> World:
+    pairs = objs.pairs()
     mj_models = tuple(mujoco.MjModel.from_xml_string(pair_xml(t, o, phys, arm)) for t, o, _ in pairs)
     mx = [mjx.put_model(m) for m in mj_models]
     flat0, treedef = _leaves_with_paths(mx[0])
@@ -237,7 +245,7 @@ def build_world(phys: PhysicsConfig = PhysicsConfig(), arm: bool = False) -> Wor
         toy_qpos=int(m0.jnt_qposadr[jid("toy_free")]), obj_qpos=int(m0.jnt_qposadr[jid("obj_free")]),
         toy_dof=int(m0.jnt_dofadr[jid("toy_free")]), obj_dof=int(m0.jnt_dofadr[jid("obj_free")]),
         toy_body=bid("toy"), obj_body=bid("obj"), geom_seg=seg,
-        pair_index={(t, o): i for i, (t, o, _) in enumerate(pairs)},
+        pair_index={(t, o): i for i, (t, o, _) in enumerate(pairs)}, objects=objs,
     )
 
 
