@@ -64,6 +64,8 @@ def factories_for(cfg: Any):
 
 
 def action_status(run: Run, action: str) -> Status:
+    if not run.paths.dataset(action).exists():  # nothing generated yet: nothing to featurise, not an error
+        return Status("absent", "no dataset yet")
     want = run.feature_config(run.log["seeds"]["features"])
     return Status(*D.features_status(run.paths.dataset(action), run.cfg.dataset.feature_batch, want))
 
