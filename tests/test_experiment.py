@@ -435,8 +435,8 @@ def test_cli_out_paths_are_checked_before_any_work(tmp_path):
 
 
 def test_cli_space_is_the_tree_key_it_aliases(tmp_path):
-    """``--space`` is ``reproduce.spaces`` (what learn.run sweeps and records): a ``--set`` of the
-    key that disagrees is refused before any work."""
+    """``--space`` is ``reproduce.spaces`` (what ``stages.experiment.experiment_folder`` sweeps
+    and records): a ``--set`` of the key that disagrees is refused before any work."""
     from relaff_jax.errors import UserError
 
     parser = argparse.ArgumentParser()

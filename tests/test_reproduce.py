@@ -163,8 +163,9 @@ def _flat(d, prefix=""):
 
 
 def test_relaff_experiment_and_reproduce_record_the_same_config_and_results(base, tmp_path, capsys):
-    """Both routes call learn.run: the same record shape, the same experiment node, the
-    actions and spaces that ran, and the same bits from the same datasets, tree and seed."""
+    """Both routes call ``stages.experiment.experiment_folder``: the same record shape, the same
+    experiment node, the actions and spaces that ran, and the same bits from the same datasets,
+    tree and seed."""
     from relaff_jax import cli
     from relaff_jax.config import to_dict
     from relaff_jax.provenance import CONFIG_RECORD
@@ -219,7 +220,7 @@ def test_relaff_report_and_reproduce_write_the_same_report(base, tmp_path, capsy
     assert theirs_rec["command"] == "report"
     tree = runconfig.from_json(rec["config"])
     assert report_status(mine, stage_report.stamp(tree, out / "results")) == ("complete", "stamped with the current inputs")
-    # reproduce's stamp is the one it wrote before report.run existed: old run folders stay complete
+    # reproduce's stamp is the one it wrote before stages.report.report_folder existed: old run folders stay complete
     cfg = runconfig.from_json(log["config"])
     old = [LF.meta(out / "results")] + [LF.results(out / "results", s) for s in cfg.reproduce.spaces]
     old += [out / "data" / a / f for a in ACTS for f in (D.SIDECAR, D.FEATURES_SIDECAR)]
