@@ -75,13 +75,14 @@ def check_no_links(paths: Paths, force: Sequence[str], redo: Sequence[str]) -> N
 
 def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0, *,
               force: Sequence[str] = (), jobs: int = 0, progress: bool = True,
-              overrides: Mapping[str, Any] | None = None, cfg: RunConfig | None = None,
-              hooks: Hooks | None = None, argv: Sequence[str] | None = None, client: Any = None,
-              rebuild_log: bool = False, redo: Sequence[str] = ()) -> dict[str, Any]:
+              overrides: Mapping[str, Any] | None = None, hooks: Hooks | None = None,
+              argv: Sequence[str] | None = None, client: Any = None, rebuild_log: bool = False,
+              redo: Sequence[str] = ()) -> dict[str, Any]:
     """Run (or continue) the whole study in ``out``; return the run log.
 
-    preset_name: ``tiny``, ``quick`` or ``paper`` (``cfg`` replaces it); ``overrides``: dotted
-    keys of the config tree, e.g. ``{"dataset.n_samples": 400, "experiment.reps_pca": 5}``.
+    preset_name: ``tiny``, ``quick``, ``study`` or ``paper``; ``overrides``: dotted keys of the
+    config tree, e.g. ``{"dataset.n_samples": 400, "experiment.reps_pca": 5}``: every setting of
+    the run comes from this one tree (``runconfig.preset(preset_name)`` with the overrides).
     force: stages to redo. jobs: experiment worker processes (0: all cores).
     hooks: ``stages.protocol.Hooks``, stand-ins for the simulation, the perception and the
     progress line's stream (tests); None: the tree's own.
@@ -103,7 +104,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
         raise ReproduceError(f"--force takes a stage name ({', '.join(STAGES)}), got {', '.join(map(str, bad))}")
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 0:
         raise ReproduceError(f"jobs must be an integer >= 0, got {jobs!r}")
-    cfg = override(cfg or preset(preset_name), dict(overrides or {}))
+    cfg = override(preset(preset_name), dict(overrides or {}))
     check_config(cfg, seed)
     redo = tuple(redo)
     bad = [a for a in redo if a not in cfg.reproduce.actions]
