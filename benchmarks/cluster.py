@@ -94,8 +94,8 @@ def run_mode(mode, args, work: Path) -> dict:
     from relaff_jax.data.store import chunk_path, read_chunk
     from relaff_jax.data.tasks import feature_chunk, rollout_chunk
     from relaff_jax.learn import experiment_preset, run_experiment, synthetic_datasets
-    from relaff_jax.reproduce.features import default_feature_factory
-    from relaff_jax.reproduce.generate import default_rollout_factory
+    from relaff_jax.stages.features import default_feature_factory
+    from relaff_jax.stages.generate import default_rollout_factory
 
     tag = mode.replace(":", "")
     ctx = C.connect(mode, folder=work) if mode != "none" else None

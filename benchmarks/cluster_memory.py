@@ -40,7 +40,7 @@ def _status(what: str) -> dict:
     if what == "imports":
         import importlib
 
-        for name in ("jax", "mujoco", "sklearn", "relaff_jax.data.tasks", "relaff_jax.reproduce.generate",
+        for name in ("jax", "mujoco", "sklearn", "relaff_jax.data.tasks", "relaff_jax.stages.generate",
                      "relaff_jax.sim.rollouts"):
             importlib.import_module(name)
     return {**rss_mb(), "s": time.perf_counter() - t0}
@@ -76,8 +76,8 @@ def measure(engine: str, args, work: Path) -> list[dict]:
     from relaff_jax.config import override
     from relaff_jax.constants import ACTIONS
     from relaff_jax.learn import experiment_preset, run_experiment, synthetic_datasets
-    from relaff_jax.reproduce.features import default_feature_factory
-    from relaff_jax.reproduce.generate import default_rollout_factory
+    from relaff_jax.stages.features import default_feature_factory
+    from relaff_jax.stages.generate import default_rollout_factory
 
     rows = []
 

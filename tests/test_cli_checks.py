@@ -238,7 +238,7 @@ def test_generate_refuses_a_sample_count_beyond_the_rollout_cap_with_the_project
 
 
 def test_reproduce_refuses_a_sample_count_beyond_the_rollout_cap(monkeypatch, capsys, tmp_path):
-    from relaff_jax.reproduce import generate as stage_generate
+    from relaff_jax.stages import generate as stage_generate
 
     monkeypatch.setattr(stage_generate, "rollout_factory_for", lambda cfg: no_work)
     argv = ["reproduce", "--preset", "tiny", "--out", str(tmp_path / "r"), "--set", "dataset.n_samples=5000"]

@@ -76,8 +76,8 @@ def builds():
 
 
 def run(out, client=None, rollouts=rollout_factory):
-    return R.reproduce(out, "tiny", 3, overrides=SMALL, jobs=1, progress=False, rollout_factory=rollouts,
-                       feature_factory=feature_factory, feature_config_fn=feature_config, client=client)
+    hooks = R.Hooks(rollout_factory=rollouts, feature_factory=feature_factory, feature_config=feature_config)
+    return R.reproduce(out, "tiny", 3, overrides=SMALL, jobs=1, progress=False, hooks=hooks, client=client)
 
 
 def fingerprint(folder):

@@ -264,7 +264,7 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
 
     # interrupted run: the third block raises (like a kill), then a rerun finishes the rest
     calls = {"n": 0}
-    real = sweep.run_block_to_file
+    real = sweep.run_block_job
 
     def flaky(*args):
         calls["n"] += 1
@@ -272,13 +272,13 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
             raise KeyboardInterrupt
         return real(*args)
 
-    monkeypatch.setattr(sweep, "run_block_to_file", flaky)
+    monkeypatch.setattr(sweep, "run_block_job", flaky)
     with pytest.raises(KeyboardInterrupt):
         E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
     blocks = sorted((tmp_path / "b" / "pca" / "blocks").glob("*.npz"))
     assert len(blocks) == 2
     assert not (tmp_path / "b" / "pca" / "results.npz").exists()
-    monkeypatch.setattr(sweep, "run_block_to_file", real)
+    monkeypatch.setattr(sweep, "run_block_job", real)
     done = {p.name: p.stat().st_mtime_ns for p in blocks}
     b = np.load(E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
     np.testing.assert_array_equal(b["acc"], acc)
@@ -435,8 +435,8 @@ def test_cli_out_paths_are_checked_before_any_work(tmp_path):
 
 
 def test_cli_space_is_the_tree_key_it_aliases(tmp_path):
-    """``--space`` is ``reproduce.spaces`` (what learn.run sweeps and records): a ``--set`` of the
-    key that disagrees is refused before any work."""
+    """``--space`` is ``reproduce.spaces`` (what ``stages.experiment.experiment_folder`` sweeps
+    and records): a ``--set`` of the key that disagrees is refused before any work."""
     from relaff_jax.errors import UserError
 
     parser = argparse.ArgumentParser()
@@ -448,19 +448,20 @@ def test_cli_space_is_the_tree_key_it_aliases(tmp_path):
     assert not (tmp_path / "res").exists()
 
 
-def test_learn_run_checks_its_inputs_before_any_work(tmp_path):
+def test_experiment_stage_checks_its_inputs_before_any_work(tmp_path):
     import re
 
     from relaff_jax.errors import UserError
     from relaff_jax.runconfig import RunConfig
+    from relaff_jax.stages.experiment import experiment_folder
 
     tree = RunConfig(experiment=tiny_cfg())
     missing = tmp_path / "none"
     for data in ([missing], str(missing)):  # a folder given alone is one folder, not its name's characters
         with pytest.raises(UserError, match=f"^{re.escape(str(missing))}: no such dataset directory"):
-            E.run(tree, data, tmp_path / "res")
+            experiment_folder(tree, data, tmp_path / "res")
     blocker = tmp_path / "file"
     blocker.write_text("x")
     with pytest.raises(UserError, match="is a file"):
-        E.run(tree, 150, blocker)
+        experiment_folder(tree, 150, blocker)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]

@@ -230,7 +230,7 @@ def test_feature_folders_record_cloud_normals_and_keep_old_ray_folders_valid():
     import dataclasses
 
     from relaff_jax.perception import NormalsConfig, PerceptionConfig, stored_config
-    from relaff_jax.reproduce.features import feature_config
+    from relaff_jax.stages.features import feature_config
 
     ray = feature_config(0, PerceptionConfig())["perception"]
     assert "normals" not in ray

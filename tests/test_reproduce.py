@@ -6,6 +6,7 @@ stages in seconds; they check the driver, not any result. The end-to-end run wit
 actions is tests/test_reproduce_e2e.py.
 """
 import argparse
+import dataclasses
 import io
 import json
 import os
@@ -27,8 +28,9 @@ from relaff_jax.cli import reproduce as cli_reproduce
 from relaff_jax.config import override
 from relaff_jax.constants import ACTIONS, FAMILIES
 from relaff_jax.errors import UserError
-from relaff_jax.reproduce import features as stage_features
-from relaff_jax.reproduce import generate as stage_generate
+from relaff_jax.stages import features as stage_features
+from relaff_jax.stages import generate as stage_generate
+from relaff_jax.stages import report as stage_report
 
 # the tiny preset, smaller still: three actions, 4-tree forests, two sizes, no example scenes
 # (the stand-in rollouts have no scene to draw)
@@ -67,12 +69,12 @@ def feature_factory(seed):
     return compute, dict(FEATURE_CONFIG, seed=seed)
 
 
-HOOKS = dict(rollout_factory=rollout_factory, feature_factory=feature_factory,
-             feature_config_fn=lambda seed: dict(FEATURE_CONFIG, seed=seed))
+HOOKS = R.Hooks(rollout_factory=rollout_factory, feature_factory=feature_factory,
+                feature_config=lambda seed: dict(FEATURE_CONFIG, seed=seed))
 
 
 def run(out, seed=3, **kw):
-    args = dict(HOOKS, overrides=FAST, jobs=1, progress=False)
+    args = dict(hooks=HOOKS, overrides=FAST, jobs=1, progress=False)
     args.update(kw)
     return R.reproduce(out, "tiny", seed, **args)
 
@@ -92,7 +94,7 @@ def base(tmp_path_factory):
     out = tmp_path_factory.mktemp("run") / "quick"
     mp = pytest.MonkeyPatch()
     mp.setattr(stage_generate, "rollout_factory_for", lambda cfg: rollout_factory)
-    mp.setattr(stage_features, "factories_for", lambda cfg: (feature_factory, HOOKS["feature_config_fn"]))
+    mp.setattr(stage_features, "factories_for", lambda cfg: (feature_factory, HOOKS.feature_config))
     parser = argparse.ArgumentParser()
     cli_reproduce.register(parser.add_subparsers(dest="command"))
     sets = [x for k, v in FAST.items() for x in ("--set", f"{k}={json.dumps(v)}")]
@@ -161,8 +163,9 @@ def _flat(d, prefix=""):
 
 
 def test_relaff_experiment_and_reproduce_record_the_same_config_and_results(base, tmp_path, capsys):
-    """Both routes call learn.run: the same record shape, the same experiment node, the
-    actions and spaces that ran, and the same bits from the same datasets, tree and seed."""
+    """Both routes call ``stages.experiment.experiment_folder``: the same record shape, the same
+    experiment node, the actions and spaces that ran, and the same bits from the same datasets,
+    tree and seed."""
     from relaff_jax import cli
     from relaff_jax.config import to_dict
     from relaff_jax.provenance import CONFIG_RECORD
@@ -195,10 +198,10 @@ def test_relaff_experiment_and_reproduce_record_the_same_config_and_results(base
 
 
 def test_relaff_report_and_reproduce_write_the_same_report(base, tmp_path, capsys):
-    """Both routes call report.run: the same findings from the same results, the same record
+    """Both routes call stages.report.report_folder: the same findings from the same results, the same record
     shape, a stamp the report status accepts; every file either writes is one that
     report/folder.py names."""
-    from relaff_jax import cli, report
+    from relaff_jax import cli
     from relaff_jax.learn import folder as LF
     from relaff_jax.provenance import CONFIG_RECORD
     from relaff_jax.report import folder as RF
@@ -216,8 +219,8 @@ def test_relaff_report_and_reproduce_write_the_same_report(base, tmp_path, capsy
     assert rec["command"] == "report"
     assert theirs_rec["command"] == "report"
     tree = runconfig.from_json(rec["config"])
-    assert report_status(mine, report.stamp(tree, out / "results")) == ("complete", "stamped with the current inputs")
-    # reproduce's stamp is the one it wrote before report.run existed: old run folders stay complete
+    assert report_status(mine, stage_report.stamp(tree, out / "results")) == ("complete", "stamped with the current inputs")
+    # reproduce's stamp is the one it wrote before stages.report.report_folder existed: old run folders stay complete
     cfg = runconfig.from_json(log["config"])
     old = [LF.meta(out / "results")] + [LF.results(out / "results", s) for s in cfg.reproduce.spaces]
     old += [out / "data" / a / f for a in ACTS for f in (D.SIDECAR, D.FEATURES_SIDECAR)]
@@ -262,7 +265,7 @@ def test_interrupted_and_killed_run_continues_to_the_same_results(base, tmp_path
     out = tmp_path / "run"
     mid = lambda a, b: rollout_factory(a, b, stop_after=1 if a == "take" else None)
     with pytest.raises(KeyboardInterrupt):
-        run(out, rollout_factory=mid)
+        run(out, hooks=dataclasses.replace(HOOKS, rollout_factory=mid))
     log = json.loads((out / R.RUN_LOG).read_text())
     assert log["runs"][0]["status"] == "interrupted (in generate)"
     assert D.load_dataset(out / "data" / "lift")
@@ -427,7 +430,7 @@ def test_a_corrupt_feature_chunk_is_reported_and_recomputed(base, tmp_path, monk
     --force features recompute it (the forced rerun used to fail on the same error)."""
     out0, *_ = base
     # R.status rebuilds the run from run.json: give it the stand-in perception of this module
-    monkeypatch.setattr(stage_features, "factories_for", lambda cfg: (feature_factory, HOOKS["feature_config_fn"]))
+    monkeypatch.setattr(stage_features, "factories_for", lambda cfg: (feature_factory, HOOKS.feature_config))
     for force in ((), ("features",)):
         out = tmp_path / f"run{len(force)}"
         shutil.copytree(out0, out)
@@ -498,8 +501,8 @@ def test_bad_input(tmp_path):
     (foreign / "notes.txt").write_text("mine")
     with pytest.raises(R.ReproduceError, match="not a relaff reproduce folder"):
         run(foreign)
-    with pytest.raises(R.ReproduceError, match="needs feature_config_fn"):
-        R.reproduce(tmp_path / "b", "tiny", feature_factory=feature_factory)
+    with pytest.raises(R.ReproduceError, match="needs feature_config"):
+        R.Hooks(feature_factory=feature_factory)
 
 
 def test_other_seed_or_preset_in_the_same_folder_is_refused(base):
@@ -579,10 +582,10 @@ TERM_SCRIPT = textwrap.dedent("""
     sys.path.insert(0, {tests!r})
     import test_reproduce as T
     from relaff_jax import cli
-    from relaff_jax.reproduce import features, generate
+    from relaff_jax.stages import features, generate
     slow = lambda a, b: (lambda fn: (lambda k, n: (__import__("time").sleep(0.5), fn(k, n))[1]))(T.rollout_factory(a, b)[0])
     generate.rollout_factory_for = lambda cfg: (lambda a, b: (slow(a, b), {{"stand_in": a}}, None))
-    features.factories_for = lambda cfg: (T.feature_factory, T.HOOKS["feature_config_fn"])
+    features.factories_for = lambda cfg: (T.feature_factory, T.HOOKS.feature_config)
     sets = [x for k, v in T.FAST.items() for x in ("--set", f"{{k}}={{json.dumps(v)}}")]
     sys.exit(cli.main(["reproduce", "--preset", "tiny", "--out", sys.argv[1], "--seed", "3", "--jobs", "1",
                        "--no-progress"] + sets))

@@ -18,6 +18,7 @@ from relaff_jax import data as D
 from relaff_jax import learn as E
 from relaff_jax import reproduce as R
 from relaff_jax.cli import reproduce as cli_reproduce
+from relaff_jax.stages.generate import default_rollout_factory
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(5400)]
 
@@ -84,7 +85,7 @@ def test_tiny_end_to_end(tmp_path):
         shutil.rmtree(p)
 
     def stop_after_first_chunk(action, batch):
-        fn, config, names = R.default_rollout_factory(action, batch)
+        fn, config, names = default_rollout_factory(action, batch)
         calls = [0]
 
         def rollout(key, b):
@@ -96,7 +97,7 @@ def test_tiny_end_to_end(tmp_path):
         return rollout, config, names
 
     with pytest.raises(KeyboardInterrupt):
-        R.reproduce(out2, "tiny", SEED, progress=False, rollout_factory=stop_after_first_chunk)
+        R.reproduce(out2, "tiny", SEED, progress=False, hooks=R.Hooks(rollout_factory=stop_after_first_chunk))
     assert len(list((out2 / "data" / "take" / D.CHUNKS).iterdir())) == 1
     log = cli_run(out2)
     assert statuses(log) == {"generate": "ran", "features": "ran", "experiment": "ran", "report": "ran"}

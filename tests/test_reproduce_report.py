@@ -19,7 +19,7 @@ from relaff_jax import data as dataset
 from relaff_jax import learn as E
 from relaff_jax import report as R
 from relaff_jax import runconfig
-from relaff_jax.reproduce import features as stage_features
+from relaff_jax.stages import features as stage_features
 from relaff_jax.sim import scenes as sc
 
 B = 8

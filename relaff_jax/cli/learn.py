@@ -2,9 +2,9 @@
 their results, and several readings of one study side by side.
 
 Each command parses its arguments into the config tree (its flags are aliases of tree keys)
-and makes one call: ``experiment`` runs (or resumes) ``relaff_jax.learn.run`` on dataset
-folders or synthetic data and prints the results paths; ``report`` runs
-``relaff_jax.report.run`` (Table II, findings, figures, the document) on a results folder;
+and makes one call: ``experiment`` runs (or resumes) ``stages.experiment.experiment_folder``
+on dataset folders or synthetic data and prints the results paths; ``report`` runs
+``stages.report.report_folder`` (Table II, findings, figures, the document) on a results folder;
 ``compare`` prints ``report.readings.compare_readings``. The stages check their inputs and
 outputs before any work; problems a user can fix are ``relaff_jax.errors.UserError`` (one
 line, exit code 2).
@@ -40,9 +40,11 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     tree = options.config(args, base=RunConfig(experiment=learn.experiment_preset(args.preset)),
                           flags={"reproduce.spaces": ("--space", spaces)})
     options.check_out_dir(Path(args.out))  # before a --cluster client connects (seconds) and any work
+    from relaff_jax.stages.experiment import experiment_folder
+
     with options.cluster(args, args.out) as client:  # the same stage function reproduce runs
-        paths = learn.run(tree, args.data or args.synthetic, args.out, seed=args.seed, jobs=args.jobs,
-                          client=client, progress=not args.no_progress)
+        paths = experiment_folder(tree, args.data or args.synthetic, args.out, seed=args.seed, jobs=args.jobs,
+                                  client=client, progress=not args.no_progress)
     for space, p in paths.items():
         print(f"{space}: {p}")
     return 0
@@ -64,10 +66,10 @@ def cmd_report(args: argparse.Namespace) -> int:
                 raise UserError(f"--data: {data_dirs[action]} and {folder} are both {action} datasets; give one")
             data_dirs[action] = folder
         data_dirs = {a: data_dirs[a] for a in ACTIONS if a in data_dirs}  # the tables' canonical order
-    from relaff_jax import report
+    from relaff_jax.stages.report import report_folder
 
     # the same stage function reproduce runs
-    print(f"report: {report.run(tree, args.results, args.out, data_dirs=data_dirs)}")
+    print(f"report: {report_folder(tree, args.results, args.out, data_dirs=data_dirs)}")
     return 0
 
 

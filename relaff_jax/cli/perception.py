@@ -3,7 +3,7 @@
 ``register(subparsers)`` adds both subcommands; each sets ``func(args) -> int`` (exit code).
 
 * ``relaff features DIR [--batch B] [--seed S] [--overwrite]``: attach PCA and RHF features
-  to the dataset in DIR (resumable; ``reproduce.features.add_features``, what reproduce runs).
+  to the dataset in DIR (resumable; ``stages.features.add_features``, what reproduce runs).
 * ``relaff show DIR [--index I] [--out scene.png]``: draw what the robot saw in sample I
   (``perception.from_sim.show_scene``), with the noise key ``show_key(rollout_id)``.
 
@@ -58,7 +58,7 @@ def cmd_features(args) -> int:
     options.check_counts(args, seed="--seed")
     options.precheck(args)
     options.check_in_dir(args.dir)
-    from relaff_jax.reproduce.features import add_features
+    from relaff_jax.stages.features import add_features
 
     tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch)})
     with options.cluster(args, args.dir) as client:  # the same stage function reproduce runs

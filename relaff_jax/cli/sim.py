@@ -130,7 +130,7 @@ def cmd_generate(args) -> int:
     n, batch = tree.dataset.n_samples, tree.dataset.rollout_batch  # checked by DatasetConfig itself
 
     from relaff_jax import data as ds
-    from relaff_jax.reproduce.generate import generate_one
+    from relaff_jax.stages.generate import generate_one
 
     engine = tree.dataset.engine
     from relaff_jax.reproduce.progress import sample_bound

@@ -30,8 +30,6 @@ Files, in pipeline order:
   test scene, leave-one-out accuracy at ``select_size``), saved and re-read;
 - ``parallel.py``: forest jobs over worker processes with a progress bar;
 - ``sweep.py``: ``run_experiment``, the resumable sweep of one or both spaces;
-- ``stage.py``: ``run``, the experiment stage's one entry point over the whole config tree
-  (``relaff experiment`` and ``relaff reproduce`` call it; it writes the config record);
 - ``folder.py``: the experiment folder's file names (``experiment.json``, ``SPACE/results.npz``, ...);
 - ``results.py``: ``load_results`` (typed ``Results`` / ``SpaceResults``), ``is_complete``;
 - ``measures.py``: Table II rows (average bf with its defined sizes, accuracy gain), ties;
@@ -39,7 +37,9 @@ Files, in pipeline order:
 - ``intervals.py``: bootstrap resamples over repetitions and test scenes, percentile intervals;
 - ``analysis.py``: curves, bootstrap factors, Table II with intervals, the threshold study.
 
-Nothing here imports the report or the command line (``relaff_jax.cli.learn``).
+The stage over the whole config tree (what ``relaff experiment`` and ``relaff reproduce`` call,
+with the folder's config record) is ``relaff_jax.stages.experiment``. Nothing here imports the
+report, the stages or the command line.
 """
 from __future__ import annotations
 
@@ -137,7 +137,6 @@ _LAZY = {
     "SpaceResults": "results",
     "is_complete": "results",
     "load_results": "results",
-    "run": "stage",
     "run_experiment": "sweep",
     "run_space": "sweep",
     "synthetic_datasets": "synthetic",
@@ -154,7 +153,7 @@ __all__ = [
     "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep",
     "experiment_preset", "fingerprint", "fit_forest", "forests_per_space", "is_complete", "layout", "load_datasets",
     "load_results", "make_forest", "manipulated_first_order", "n_trees", "predict_class", "prepare", "read_block",
-    "run_block", "run_block_to_file", "run", "run_experiment", "run_space", "select_at", "select_best", "size_mask",
+    "run_block", "run_block_to_file", "run_experiment", "run_space", "select_at", "select_best", "size_mask",
     "split_pools", "state_features", "synthetic_datasets", "threshold_study",
     "block_outcomes", "draw_test", "draw_train", "extend", "online_weights", "paper_row", "percentile_interval",
     "resampled_means", "summarise", "register_condition", "registered_conditions", "load_plugin_file", "pool_sizes", "bc_interval", "half_sizes", "scene_halves", "whole", "chance_tolerance", "min_defined", "ORACLE", "table2_rows", "tie_weights", "window_mean",

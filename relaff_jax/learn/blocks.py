@@ -10,11 +10,14 @@ samples: the online "best after ten"). ``run_block`` is its accuracies alone.
 ``run_block_to_file`` saves a block atomically, with the accuracy on each test subset
 (``SUBSETS``: positives, feasible and infeasible negatives); ``read_block`` reads a finished block back
 (None if missing or corrupt, so a killed sweep resumes with the finished blocks).
+The sweep sends each block to a worker as ``run_block_job(Target, BlockJob)``: the target's
+pool, shared by all its blocks (sent to a cluster once), and the block's own named inputs.
 """
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
-from typing import Mapping, Sequence
+from typing import Any, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -174,6 +177,41 @@ def run_block_to_file(path: str, X, y, boot, plan, train_order, test_idx, sizes,
     rio.atomic_save_npz(path, acc=block["acc"], loo=block["loo"], sizes=np.asarray(sizes), acc_subset=acc_subset,
                         correct=block["bits"], n_test=np.asarray(block["n_test"]))
     return block
+
+
+class Target(NamedTuple):
+    """A target's pool, the same for every block of the target (one object: a cluster gets it once)."""
+
+    X: np.ndarray  # (M, D) the pool scenes' states in the space swept (manipulated object first)
+    y: np.ndarray  # (M,) bool labels
+    boot: np.ndarray  # (R, M) bootstrap inputs: the prep's source predictors and categories on the pool
+
+
+@dataclasses.dataclass(frozen=True)
+class BlockJob:
+    """One block of the sweep: a (target, repetition, chunk of sizes), what ``run_block_to_file``
+    takes besides the target's pool (``Target``)."""
+
+    path: str  # the block's file (``learn.folder.block``)
+    plan: Sequence[tuple[int, tuple[int, ...]]]  # [(condition, rows of boot)] (``protocol.condition_plan``)
+    train_order: np.ndarray  # (>= max(sizes),) int pool indices: size n trains on the first n
+    test_idx: np.ndarray  # (T,) int pool indices of the test set
+    sizes: Sequence[int]  # (S,) training sizes of this chunk
+    repeats: int | Mapping[int, int]  # how often each bootstrap input is repeated, per condition
+    n_conditions: int  # C, the condition axis (built-ins, then the user's)
+    learner: Any  # ``learners.learner_of(cfg)``: a ``ForestConfig`` or a ``SklearnLearner``
+    seed_keys: tuple[int, ...]  # (seed, 5, space code, target, repetition): forest seeds derive from them
+    loo_size: int | None  # the online selection size, when this chunk holds it
+    loo_conditions: Sequence[int]  # the candidates given a leave-one-out accuracy (every DB1, CB1)
+    keep_outcomes: bool  # keep every test scene's outcome (bit-packed)
+    subset: np.ndarray  # (T,) int codes into ``SUBSETS`` of the test scenes
+
+
+def run_block_job(target: Target, job: BlockJob) -> dict[str, np.ndarray]:
+    """``run_block_to_file`` of one block: what the sweep runs on a worker."""
+    return run_block_to_file(job.path, target.X, target.y, target.boot, job.plan, job.train_order, job.test_idx,
+                             job.sizes, job.repeats, job.n_conditions, job.learner, job.seed_keys, job.loo_size,
+                             job.loo_conditions, job.keep_outcomes, job.subset)
 
 
 def read_block(path: Path, n_conditions: int, sizes: Sequence[int], packed: bool = False) -> dict[str, np.ndarray] | None:

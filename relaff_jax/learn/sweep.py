@@ -41,7 +41,7 @@ from relaff_jax.constants import ACTIONS, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn import user_conditions
-from relaff_jax.learn.blocks import SUBSETS, read_block, run_block_to_file
+from relaff_jax.learn.blocks import SUBSETS, BlockJob, Target, read_block, run_block_job
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config, result_differences
 from relaff_jax.learn.datasets import check_datasets, fingerprint
 from relaff_jax.learn.draws import draw_rep
@@ -159,7 +159,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     acc_subset = np.full((a, n_cond, len(sizes), reps, len(SUBSETS)), np.nan)
     calls, weights, done_fits, total_fits = [], [], 0, 0
     keys = []
-    target_data: dict[str, tuple] = {}  # (X, y, boot) per target, built once, shared by all its blocks
+    target_data: dict[str, Target] = {}  # per target, built once, shared by all its blocks
     for r in range(reps):  # repetitions outermost: early blocks are representative for the ETA
         for ti, t in enumerate(actions):
             pool = prep[f"target:{t}"]
@@ -176,17 +176,17 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                     continue
                 if t not in target_data:
                     ds = datasets[t]
-                    target_data[t] = (_states(ds, pool, t, space, cfg), np.asarray(ds["label"]).astype(bool)[pool],
-                                      ext.boot(t, prep[f"boot:{t}"]))
+                    target_data[t] = Target(_states(ds, pool, t, space, cfg), np.asarray(ds["label"]).astype(bool)[pool],
+                                            ext.boot(t, prep[f"boot:{t}"]))
                 if draws is None:
                     draws = draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), r,
                                      cfg.balanced_test, cfg.balanced_train)
-                X, y, boot = target_data[t]
                 test_idx, train_order = draws
-                seed_keys = (seed, 5, SPACE_CODE[space], ACTIONS.index(t), r)
-                calls.append((run_block_to_file, (str(path), X, y, boot, plans[ti], train_order, test_idx, chunk,
-                                           reps_of[ti], n_cond, learner_of(cfg), seed_keys, loo_n or None, loo_conds,
-                                           cfg.keep_outcomes, subsets[t]), {}))
+                job = BlockJob(path=str(path), plan=plans[ti], train_order=train_order, test_idx=test_idx, sizes=chunk,
+                               repeats=reps_of[ti], n_conditions=n_cond, learner=learner_of(cfg),
+                               seed_keys=(seed, 5, SPACE_CODE[space], ACTIONS.index(t), r), loo_size=loo_n or None,
+                               loo_conditions=loo_conds, keep_outcomes=cfg.keep_outcomes, subset=subsets[t])
+                calls.append((run_block_job, (target_data[t], job), {}))
                 weights.append(fits)
                 keys.append((ti, s0, len(chunk), r))
     results = run_parallel(calls, jobs, progress, total=total_fits, desc=f"{space} sweep", unit="fit",
@@ -238,7 +238,7 @@ def subset_codes(ds: Mapping[str, Any], idx: np.ndarray) -> np.ndarray:
 
 
 def _store(acc, correct, loo, acc_subset, got, ti, s0, n, r) -> None:
-    """Put one block (``blocks.run_block_to_file``'s, or ``read_block(..., packed=True)``'s)
+    """Put one block (``blocks.run_block_job``'s, or ``read_block(..., packed=True)``'s)
     into the space's arrays; ``correct`` holds the outcomes bit-packed."""
     acc[ti, :, s0 : s0 + n, r] = got["acc"]
     acc_subset[ti, :, s0 : s0 + n, r] = got["acc_subset"]

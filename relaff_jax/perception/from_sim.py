@@ -8,7 +8,7 @@ The depth-noise key of a sample depends only on the seed and its ``rollout_id``
 (``rollout_keys``), so features do not depend on the batch size or on resuming.
 
 ``make_feature_fn`` is the compute function the features stage
-(``reproduce.features.add_features``, ``relaff features``) hands to ``data.add_features``;
+(``stages.features.add_features``, ``relaff features``) hands to ``data.add_features``;
 ``show_scene`` draws what the robot saw (``relaff show``). Nothing here imports ``data``.
 """
 from __future__ import annotations

@@ -1,14 +1,12 @@
 """Reports: Table II, findings, figures and the report document of an experiment folder.
 
-``run(tree, RESULTS, REPORT, data_dirs=None, info=None)`` is the stage (``relaff report``,
-``relaff reproduce``): ``write_report``, the one writer (one analysis, then every output from
-it), then the config record and the inputs' stamp.
+``write_report(RESULTS, REPORT, ...)`` is the one writer (one analysis, then every output from
+it); the stage over the whole config tree (``relaff report``, ``relaff reproduce``: the writer,
+then the config record and the inputs' stamp) is ``relaff_jax.stages.report``.
 
 Files:
 
 - ``folder.py``: the report folder's file names (``report.md``, ``summary.json``, ``fig*.png``, ...);
-- ``stage.py``: ``run``, the report stage's one entry point over the whole config tree
-  (``relaff report`` and ``relaff reproduce`` call it; it writes the config record and the stamp);
 - ``write.py``: ``write_report``;
 - ``tables.py``: Table II as CSV and Markdown, ``summary.json``;
 - ``findings.py``: which of the paper's findings a run reproduces; correlation clusters;
@@ -37,7 +35,6 @@ from relaff_jax.report.findings import (
     verdict,
 )
 from relaff_jax.report.formatting import finite, fmt
-from relaff_jax.report.stage import run, stamp
 from relaff_jax.report.tables import CSV_COLUMNS, summary, table2_csv, table2_markdown
 
 # The figures (matplotlib) and the writer (the learning stage's results, JAX) load on first use
@@ -49,5 +46,5 @@ __getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 __all__ = [
     "CSV_COLUMNS", "FindingRules", "correlation_clusters", "dataset_figure", "findings", "finite", "fmt",
     "render_html", "render_markdown", "summary", "table2_csv", "table2_markdown", "verdict", "write_figures", "VERDICTS", "combine", "judge",
-    "run", "stamp", "write_report",
+    "write_report",
 ]

@@ -1,4 +1,4 @@
-"""The run folder of ``relaff reproduce``: where each stage writes, and the run log.
+"""The run folder of ``relaff reproduce`` (its layout: ``stages.protocol.Paths``) and the run log.
 
 ::
 
@@ -13,7 +13,6 @@ A folder holds one study: opening it with another preset, config or seed is refu
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import time
@@ -25,38 +24,10 @@ from relaff_jax.config import differences, to_dict
 from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed, machine, versions
+from relaff_jax.stages.protocol import RUN_LOG, Paths, ReproduceError
 
 FORMAT = "relaff_jax.reproduce"
 FORMAT_VERSION = 2  # 2: the config is the whole RunConfig tree
-RUN_LOG = "run.json"
-
-
-class ReproduceError(UserError):
-    """Bad input, or a DIR that cannot be used for this run."""
-
-
-@dataclasses.dataclass(frozen=True)
-class Paths:
-    root: Path
-
-    @property
-    def log(self) -> Path:
-        return self.root / RUN_LOG
-
-    @property
-    def data(self) -> Path:
-        return self.root / "data"
-
-    @property
-    def results(self) -> Path:
-        return self.root / "results"
-
-    @property
-    def report(self) -> Path:
-        return self.root / "report"
-
-    def dataset(self, action: str) -> Path:
-        return self.data / action
 
 
 def seeds(seed: int) -> dict[str, Any]:

@@ -1,9 +1,9 @@
 """``relaff reproduce``: from nothing to the paper's results in one resumable command.
 
 Takes a preset (``tiny``, ``quick``, ``study``, ``paper``; ``relaff_jax.runconfig``), ``--set`` overrides,
-a seed and a run folder (``folder.py``), and runs the four stages in order: ``generate`` ->
+a seed and a run folder (``folder.py``), and runs the four stages of ``relaff_jax.stages`` in order: ``generate`` ->
 ``features`` -> ``experiment`` -> ``report`` (one module each, keeping the contract of
-``stage.py``). A stage whose status is ``complete`` is skipped; ``--force STAGE`` redoes one
+``stages.protocol``). A stage whose status is ``complete`` is skipped; ``--force STAGE`` redoes one
 stage (``--redo-dataset ACTION`` one action's dataset), and later stages follow only if their
 inputs changed. Every stage writes atomically and
 resumes, and every random quantity is seeded from the run seed, so a killed run, rerun, ends
@@ -23,15 +23,15 @@ from relaff_jax import io as rio
 from relaff_jax.cluster import nthreads
 from relaff_jax.config import override
 from relaff_jax.constants import ACTIONS, STAGES
-from relaff_jax.reproduce import experiment, features, generate, report
-from relaff_jax.reproduce.folder import Paths, ReproduceError, damaged_log_hint, now, open_log
-from relaff_jax.reproduce.progress import Progress, estimate_seconds, sample_bound
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import machine
-from relaff_jax.reproduce.stage import Run, Status
+from relaff_jax.reproduce.folder import ReproduceError, damaged_log_hint, now, open_log
+from relaff_jax.reproduce.progress import Progress, estimate_seconds, sample_bound
+from relaff_jax.stages import experiment, features, generate, report
+from relaff_jax.stages.protocol import Hooks, Paths, Run, Silent, Stage, Status
 from relaff_jax.runconfig import PRESETS, RunConfig, check_tree, from_json, preset
 
-STAGE_MODULES = {m.NAME: m for m in (generate, features, experiment, report)}
+STAGE_MODULES: dict[str, Stage] = {m.NAME: m for m in (generate, features, experiment, report)}
 assert tuple(STAGE_MODULES) == STAGES
 
 
@@ -75,19 +75,17 @@ def check_no_links(paths: Paths, force: Sequence[str], redo: Sequence[str]) -> N
 
 def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0, *,
               force: Sequence[str] = (), jobs: int = 0, progress: bool = True,
-              overrides: Mapping[str, Any] | None = None, cfg: RunConfig | None = None,
-              rollout_factory: Callable | None = None, feature_factory: Callable | None = None,
-              feature_config_fn: Callable | None = None, argv: Sequence[str] | None = None,
-              stream=None, client: Any = None, rebuild_log: bool = False,
+              overrides: Mapping[str, Any] | None = None, hooks: Hooks | None = None,
+              argv: Sequence[str] | None = None, client: Any = None, rebuild_log: bool = False,
               redo: Sequence[str] = ()) -> dict[str, Any]:
     """Run (or continue) the whole study in ``out``; return the run log.
 
-    preset_name: ``tiny``, ``quick``, ``study`` or ``paper`` (``cfg`` replaces it); ``overrides``: dotted
-    keys of the config tree, e.g. ``{"dataset.n_samples": 400, "experiment.reps_pca": 5}``.
+    preset_name: ``tiny``, ``quick``, ``study`` or ``paper``; ``overrides``: dotted keys of the
+    config tree, e.g. ``{"dataset.n_samples": 400, "experiment.reps_pca": 5}``: every setting of
+    the run comes from this one tree (``runconfig.preset(preset_name)`` with the overrides).
     force: stages to redo. jobs: experiment worker processes (0: all cores).
-    rollout_factory(action, batch) -> (rollout_fn, config_dict, object_names) and
-    feature_factory(seed) -> (compute_fn, config_dict) replace the simulation and the
-    perception (tests); ``feature_config_fn(seed)`` must then give the factory's config_dict.
+    hooks: ``stages.protocol.Hooks``, stand-ins for the simulation, the perception and the
+    progress line's stream (tests); None: the tree's own.
     client: a ``distributed.Client`` (``relaff_jax.cluster.connect``): dataset chunks, feature
     chunks and sweep blocks run as tasks on its cluster (the factories must be picklable);
     the results are those of the run without it, bit for bit.
@@ -106,7 +104,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
         raise ReproduceError(f"--force takes a stage name ({', '.join(STAGES)}), got {', '.join(map(str, bad))}")
     if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 0:
         raise ReproduceError(f"jobs must be an integer >= 0, got {jobs!r}")
-    cfg = override(cfg or preset(preset_name), dict(overrides or {}))
+    cfg = override(preset(preset_name), dict(overrides or {}))
     check_config(cfg, seed)
     redo = tuple(redo)
     bad = [a for a in redo if a not in cfg.reproduce.actions]
@@ -115,8 +113,6 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
                              f"got {', '.join(map(str, bad))}")
     if redo and "generate" in force:
         raise ReproduceError("--redo-dataset redoes some datasets, --force generate all of them: give one")
-    if feature_factory is not None and feature_config_fn is None:
-        raise ReproduceError("a custom feature_factory needs feature_config_fn (its config_dict per seed)")
     paths = Paths(Path(out))
     root = paths.root
     try:
@@ -129,12 +125,21 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
     os.makedirs(root, exist_ok=True)
     with rio.folder_lock(root, f"{root}: another relaff reproduce is running in this folder; wait for it "
                                "(or stop it) and rerun"):
-        return _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, rollout_factory,
-                                 feature_factory, feature_config_fn, argv, stream, client, rebuild_log, redo)
+        return _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, hooks or Hooks(), argv, client,
+                                 rebuild_log, redo)
 
 
-def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, rollout_factory, feature_factory,
-                      feature_config_fn, argv, stream, client, rebuild_log, redo) -> dict[str, Any]:
+def bound_hooks(cfg: RunConfig, hooks: Hooks) -> tuple[Callable, Callable, Callable]:
+    """``(rollout_factory, feature_factory, feature_config)``: ``hooks``' stand-ins, or the
+    simulation and perception bound to ``cfg`` (``generate.rollout_factory_for``,
+    ``features.factories_for``)."""
+    default_features, default_feature_config = features.factories_for(cfg)
+    return (hooks.rollout_factory or generate.rollout_factory_for(cfg), hooks.feature_factory or default_features,
+            hooks.feature_config or default_feature_config)
+
+
+def _reproduce_locked(paths: Paths, preset_name: str, cfg: RunConfig, seed: int, force: Sequence[str], jobs: int,
+                      progress: bool, hooks: Hooks, argv, client, rebuild_log: bool, redo: tuple) -> dict[str, Any]:
     cpus = os.cpu_count() or 1
     jobs = jobs or cpus
     log = open_log(paths, preset_name, cfg, seed, rebuild=rebuild_log)
@@ -152,11 +157,9 @@ def _reproduce_locked(paths, preset_name, cfg, seed, force, jobs, progress, roll
         # may differ from the first machine's (docs/reproduce.md), so the invocation says where
         entry["machine"] = here
     log["runs"].append(entry)
-    prog = Progress(estimate_seconds(cfg, jobs, cpus), enabled=progress, stream=stream)
-    default_features, default_feature_config = features.factories_for(cfg)
-    run = Run(paths, preset_name, cfg, int(seed), jobs, tuple(force), prog,
-              rollout_factory or generate.rollout_factory_for(cfg), feature_factory or default_features,
-              feature_config_fn or default_feature_config, log, entry, client)
+    prog = Progress(estimate_seconds(cfg, jobs, cpus), enabled=progress, stream=hooks.stream)
+    run = Run(paths, preset_name, cfg, int(seed), jobs, tuple(force), prog, *bound_hooks(cfg, hooks), log, entry,
+              client)
     run.save()
     prog.start()
     t_run = time.perf_counter()
@@ -272,8 +275,7 @@ def status(out: str | os.PathLike) -> dict[str, Any]:
     except (OSError, ValueError, KeyError, TypeError) as e:
         why = e if not isinstance(e, (KeyError, TypeError)) else f"no valid {e} entry"
         raise ReproduceError(f"{paths.log} is damaged ({why}); {damaged_log_hint(paths.root)}") from None
-    run = Run(paths, log["preset"], cfg, log["seed"], 1, (), Progress({}, enabled=False),
-              generate.rollout_factory_for(cfg), *features.factories_for(cfg), log, {})
+    run = Run(paths, log["preset"], cfg, log["seed"], 1, (), Silent(), *bound_hooks(cfg, Hooks()), log, {})
     out = {}
     upstream = None  # the first stage that is not complete: every later one depends on it
     for name, m in STAGE_MODULES.items():

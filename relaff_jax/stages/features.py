@@ -1,5 +1,10 @@
 """Stage 2, ``features``: PCA (18) and RHF (300) features of every sample
-(``relaff_jax.data.add_features`` with the perception of ``relaff_jax.perception``)."""
+(``relaff_jax.data.add_features`` with the perception of ``relaff_jax.perception``).
+
+``add_features(tree, path, seed)`` attaches them to one dataset folder: what ``relaff
+features`` calls, and what ``run(run, forced)`` calls for each dataset of the run folder with
+the features seed from the run log. The chunk size comes from ``tree.dataset.feature_batch``
+and the perception from ``tree.perception`` only."""
 from __future__ import annotations
 
 import functools
@@ -9,7 +14,7 @@ from typing import Any
 
 from relaff_jax import data as D
 from relaff_jax.provenance import record_config
-from relaff_jax.reproduce.stage import Run, Status
+from relaff_jax.stages.protocol import Run, Status
 
 NAME = "features"
 
@@ -76,6 +81,8 @@ def factories_for(cfg: Any):
 
 
 def action_status(run: Run, action: str) -> Status:
+    if not run.paths.dataset(action).exists():  # nothing generated yet: nothing to featurise, not an error
+        return Status("absent", "no dataset yet")
     want = run.feature_config(run.log["seeds"]["features"])
     return Status(*D.features_status(run.paths.dataset(action), run.cfg.dataset.feature_batch, want))
 

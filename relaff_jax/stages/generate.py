@@ -1,5 +1,10 @@
 """Stage 1, ``generate``: one balanced dataset per action (``relaff_jax.data.generate_dataset``
-with the simulation's ``make_rollout_fn``), in ``DIR/data/<action>/``."""
+with the simulation's ``make_rollout_fn``), in ``DIR/data/<action>/``.
+
+``generate_one(tree, action, out, seed)`` makes one dataset folder: what ``relaff generate``
+calls, and what ``run(run, forced)`` calls for each action of ``run.cfg.reproduce.actions``
+with the action's seed from the run log. The sample count, chunk size and engine come from
+``tree.dataset`` only."""
 from __future__ import annotations
 
 import functools
@@ -10,8 +15,7 @@ from typing import Any
 from relaff_jax import data as D
 from relaff_jax import io as rio
 from relaff_jax.provenance import record_config
-from relaff_jax.reproduce.folder import ReproduceError
-from relaff_jax.reproduce.stage import Run, Status
+from relaff_jax.stages.protocol import Run, ReproduceError, Status
 
 NAME = "generate"
 
