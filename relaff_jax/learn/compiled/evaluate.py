@@ -20,8 +20,8 @@ for float32 ``x``, t32 the largest float32 <= t (``round_down_f32``; as ``engine
 A forest whose leaves are all pure (values exactly (1, 0) or (0, 1), the usual fully grown
 tree) adds exactly 0.0 or 1.0 per tree, so its float64 sums are the integer vote counts c
 (<= T, exact in any order): ``forest_sums`` counts them in int32 (``add_votes``) and gives
-``(T - c, c)``, the same bits as the additions in tree order. Other forests add each tree's
-leaf values in tree order (``add_tree``).
+``(T - c, c)``, the same bits as the additions in tree order (a stump in one pass over the
+rows). Other forests add each tree's leaf values in tree order (``add_tree``).
 
 Arrays: ``ZT: (Dz, N)`` float32 test columns; ``colmap: (D,)`` int64 forest features to rows
 of ``ZT``; node arrays as ``forest.Forest`` (flat over a forest's trees, ``tree_start: (T +
@@ -169,6 +169,14 @@ def add_votes(feature, threshold, left, right, value, a, b, ZT, colmap, alive, a
         if value[a, 1] == 1.0:
             for r in range(n):
                 votes[r] += 1
+        return
+    if n_leaves == 2:  # a stump: one pass
+        row = ZT[colmap[feature[a]]]
+        t = round_down_f32(threshold[a])
+        vl = np.int32(value[a + left[a], 1] == 1.0)
+        vr = np.int32(value[a + right[a], 1] == 1.0)
+        for r in range(n):
+            votes[r] += vr if row[r] > t else vl
         return
     if n_leaves <= WIDTH32:
         exit_bits32(feature, threshold, left, right, a, b, ZT, colmap, rank, alive32)
