@@ -10,7 +10,9 @@ that one process does everything. Each code version runs in its own subprocess
 (``PYTHONPATH``): the numba kernels are wrapped by timers (``build_forests`` = fit,
 ``block_sums`` = evaluation: on the 4,000 test rows, or the leave-one-out forests' 10
 rows), ``prepare`` (source predictors, categories, correlation) is timed apart, "other" is
-the sweep's wall time minus the kernels.
+the sweep's time minus the kernels. Times are the worker's CPU seconds (``time.process_time``:
+the kernels are single-threaded, so a loaded machine stretches their wall time but hardly
+their CPU time); ``--wall`` times wall seconds, for an idle machine.
 
 Projection to the preset (9 actions, sizes 2..100, 50 PCA / 25 RHF repetitions): the sweep
 forests' fit time per forest is interpolated in n (measured at 2..26 and 77..100) and
@@ -41,8 +43,10 @@ SIZES = tuple(range(2, 27)) + tuple(range(77, 101))
 SKIP = {"seconds", "seconds_prep"}  # timings, not results
 
 
-def worker(out: str, spaces: list[str], samples: int, reps: int) -> None:
-    """Run the slice in this process; print one JSON line of timings."""
+def worker(out: str, spaces: list[str], samples: int, reps: int, wall: bool = False) -> None:
+    """Run the slice in this process; print one JSON line of timings (this process's CPU
+    seconds, or wall seconds with ``wall``)."""
+    clock = time.perf_counter if wall else time.process_time
     from relaff_jax.config import override
     from relaff_jax.learn import blocks, sweep
     from relaff_jax.learn.compiled import forest as cf
@@ -57,19 +61,19 @@ def worker(out: str, spaces: list[str], samples: int, reps: int) -> None:
     build, sums = k["build_forests"], k["block_sums"]
 
     def build_t(*a):
-        t = time.perf_counter()
+        t = clock()
         r = build(*a)
         if rec["on"]:
-            rec["pending"].append((int(a[2][0]), len(a[2]), time.perf_counter() - t))  # (n, forests, s)
+            rec["pending"].append((int(a[2][0]), len(a[2]), clock() - t))  # (n, forests, s)
         return r
 
     def sums_t(*a):
-        t = time.perf_counter()
+        t = clock()
         r = sums(*a)
         if rec["on"]:
             rows = int(a[-1].shape[1])
             kind = "sweep" if rows == cfg.test_size else "loo"
-            rec["eval"].append((kind, len(a[6]) - 1, time.perf_counter() - t))
+            rec["eval"].append((kind, len(a[6]) - 1, clock() - t))
             rec["fit"] += [(kind,) + p for p in rec["pending"]]
             rec["pending"].clear()
         return r
@@ -79,11 +83,11 @@ def worker(out: str, spaces: list[str], samples: int, reps: int) -> None:
 
     def prepare_t(*a, **kw):
         rec["on"] = False
-        t = time.perf_counter()
+        t = clock()
         try:
             return prepare(*a, **kw)
         finally:
-            rec["prep"] += time.perf_counter() - t
+            rec["prep"] += clock() - t
             rec["on"] = True
 
     sweep.prepare = prepare_t
@@ -91,19 +95,19 @@ def worker(out: str, spaces: list[str], samples: int, reps: int) -> None:
     res = {}
     for space in spaces:
         rec.update(fit=[], eval=[], prep=0.0)
-        t = time.perf_counter()
+        t = clock()
         sweep.run_experiment(ds, out, cfg, [space], seed=0, jobs=1, progress=False)
-        wall = time.perf_counter() - t
+        wall = clock() - t
         with np.load(Path(out) / space / "results.npz") as z:
             corr = z["corr"]
         res[space] = {"wall": wall, "prep": rec["prep"], "fit": rec["fit"], "eval": rec["eval"], "corr": corr.tolist()}
     print("RESULT " + json.dumps(res))
 
 
-def run_version(code: Path, out: Path, spaces, samples, reps) -> dict:
+def run_version(code: Path, out: Path, spaces, samples, reps, wall=False) -> dict:
     env = dict(os.environ, PYTHONPATH=str(code))
     cmd = [sys.executable, str(Path(__file__).resolve()), "--worker", "--out", str(out), "--spaces", *spaces,
-           "--samples", str(samples), "--reps", str(reps)]
+           "--samples", str(samples), "--reps", str(reps)] + (["--wall"] if wall else [])
     p = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=str(code))
     if p.returncode:
         sys.exit(f"{code}: worker failed\n{p.stderr[-4000:]}")
@@ -208,10 +212,11 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=1)
     ap.add_argument("--main-reps", type=int, default=5, help="repetitions of the main-process emulation (0: skip)")
     ap.add_argument("--render", action="store_true", help="print the tables of the runs saved in --out")
+    ap.add_argument("--wall", action="store_true", help="time wall seconds, not the worker's CPU seconds (an idle machine)")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.worker:
-        worker(str(a.out), a.spaces, a.samples, a.reps)
+        worker(str(a.out), a.spaces, a.samples, a.reps, a.wall)
         return
     import shutil
 
@@ -225,11 +230,11 @@ def main() -> None:
             continue
         shutil.rmtree(out, ignore_errors=True)
         t = time.perf_counter()
-        got[name] = run_version(code, out, a.spaces, a.samples, a.reps)
+        got[name] = run_version(code, out, a.spaces, a.samples, a.reps, a.wall)
         saved.write_text(json.dumps(got[name]))
         print(f"{name}: {code}, {time.perf_counter() - t:.0f} s", flush=True)
     cols = ("prep", "fit", "fit_loo", "eval", "eval_loo", "other")
-    print("\nslice, seconds (one process):")
+    print(f"\nslice, {'wall' if a.wall else 'CPU'} seconds (one process; load average now {os.getloadavg()[0]:.1f}):")
     print("| version | space | forests | " + " | ".join(cols) + " | sweep | other ms/forest |")
     print("|---|---|---:|" + "---:|" * (len(cols) + 2))
     for name in got:
