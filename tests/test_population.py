@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import data as ds
+from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.cli import main
 
 CFG = {"physics": {"dt": 0.002}}
@@ -41,7 +42,7 @@ def reach_rollout_fn(feasible_close_negatives: bool = True, with_feasible: bool 
 
 
 def gen(path, n=40, fn=None, **cfg):
-    dcfg = ds.DatasetConfig(**{"max_rollouts": 4000, "distance_bins": 4, "borrow_fraction": 0.0, **cfg})
+    dcfg = DatasetConfig(**{"max_rollouts": 4000, "distance_bins": 4, "borrow_fraction": 0.0, **cfg})
     return ds.generate_dataset(path, "lift", n, fn or reach_rollout_fn(), 5, 32, CFG, progress=False,
                                dataset_config=dcfg)
 

@@ -13,7 +13,7 @@ import pytest
 from relaff_jax import cli
 from relaff_jax.errors import UserError
 from relaff_jax.real import splits
-from relaff_jax.real.config import RealExperimentConfig, SensorTolerance, SimRelationConfig, SimSensor
+from relaff_jax.config.real import RealExperimentConfig, SensorTolerance, SimRelationConfig, SimSensor
 
 OSD = Path(__file__).parent / "data" / "osd"
 
@@ -319,7 +319,7 @@ def test_voxel_size_set_reaches_a_real_study(tmp_path, monkeypatch):
     from relaff_jax.real import labels as lab
     from relaff_jax.real import real_data
     from relaff_jax.real import sim_relations as sr
-    from relaff_jax.real.config import pipeline_config
+    from relaff_jax.config.real import pipeline_config
 
     a, _, labels = _label_files(tmp_path)
     calls, seen = [], []

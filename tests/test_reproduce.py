@@ -21,8 +21,10 @@ import pytest
 
 from relaff_jax import data as D
 from relaff_jax import learn as E
+from relaff_jax.config.experiment import experiment_preset
 from relaff_jax import reproduce as R
-from relaff_jax import runconfig
+from relaff_jax.config import PRESETS, preset
+from relaff_jax import config as runconfig
 from relaff_jax.cli import reproduce as cli_reproduce
 from relaff_jax.config import override
 from relaff_jax.constants import ACTIONS, FAMILIES
@@ -134,7 +136,7 @@ def test_run_log(base):
     assert log["seed"] == 3
     assert log["config"]["dataset"]["n_samples"] == 32
     assert log["config"]["experiment"]["forest"]["max_trees"] == 4
-    assert runconfig.from_json(log["config"]) == override(R.preset("tiny"), FAST)
+    assert runconfig.from_json(log["config"]) == override(preset("tiny"), FAST)
     assert log["versions"]["numpy"] == np.__version__
     assert log["versions"]["jax"]
     assert log["seeds"] == R.seeds(3)
@@ -169,7 +171,7 @@ def test_relaff_experiment_and_reproduce_record_the_same_config_and_results(base
 
     out, log, _, _ = base
     rec = json.loads((out / "results" / CONFIG_RECORD).read_text())
-    quick = dict(_flat(to_dict(E.experiment_preset("quick"))))
+    quick = dict(_flat(to_dict(experiment_preset("quick"))))
     sets = [x for k, v in _flat(log["config"]["experiment"]) if quick[k] != v
             for x in ("--set", f"experiment.{k}={json.dumps(v)}")]
     argv = ["experiment", "--data", *(str(out / "data" / a) for a in ACTS), "--out", str(tmp_path / "results"),
@@ -452,7 +454,7 @@ def test_stage_progress_comes_from_the_stage_packages(base, tmp_path):
     from relaff_jax.learn.status import sweep_progress
 
     out, *_ = base
-    cfg = override(R.preset("tiny"), FAST)
+    cfg = override(preset("tiny"), FAST)
     assert D.generation_progress(out / "data" / "lift", 32) == 1.0
     assert D.features_progress(out / "data" / "lift", 32, cfg.dataset.feature_batch) == 1.0
     assert sweep_progress(out / "results", cfg.experiment, len(ACTS), ("pca", "rhf")) == 1.0
@@ -524,11 +526,11 @@ def test_missing_actions_module_is_a_clear_error(tmp_path, monkeypatch):
 
 
 def test_presets():
-    tiny, quick, study, paper = (R.preset(p) for p in R.PRESETS)
+    tiny, quick, study, paper = (preset(p) for p in PRESETS)
     for p in (tiny, quick, study, paper):
         R.check_config(p, 0)
     assert paper.dataset.n_samples == 10_000
-    assert paper.experiment == E.experiment_preset("paper")
+    assert paper.experiment == experiment_preset("paper")
     assert (paper.experiment.reps_pca, paper.experiment.reps_rhf) == (50, 25)
     assert tiny.experiment.reps_pca == 2
     assert set(range(4, 11)) <= set(tiny.experiment.sizes)

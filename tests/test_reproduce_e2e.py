@@ -17,6 +17,7 @@ import pytest
 from relaff_jax import data as D
 from relaff_jax import learn as E
 from relaff_jax import reproduce as R
+from relaff_jax.config import preset
 from relaff_jax.cli import reproduce as cli_reproduce
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(5400)]
@@ -40,7 +41,7 @@ def statuses(log):
 def test_tiny_end_to_end(tmp_path):
     out = tmp_path / "tiny"
     log = cli_run(out)
-    cfg = R.preset("tiny")
+    cfg = preset("tiny")
     assert statuses(log) == dict.fromkeys(R.STAGES, "ran")
 
     # every expected file

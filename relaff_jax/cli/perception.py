@@ -20,7 +20,7 @@ from relaff_jax.cli.options import check_out_file
 
 def register(subparsers) -> None:
     """Add ``features`` and ``show`` to an ``argparse`` subparsers object."""
-    from relaff_jax.data.config import DatasetConfig  # the tree's default, shown in --help (no JAX)
+    from relaff_jax.config.dataset import DatasetConfig  # the tree's default, shown in --help (no JAX)
 
     p = subparsers.add_parser(
         "features", help="add PCA and RHF features to a dataset (resumable)",

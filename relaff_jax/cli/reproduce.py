@@ -7,7 +7,7 @@ from pathlib import Path
 from relaff_jax.cli import options
 from relaff_jax.constants import ACTIONS, SIM_ENGINES, STAGES
 from relaff_jax.errors import UserError
-from relaff_jax.runconfig import PRESETS
+from relaff_jax.config import PRESETS
 
 
 def register(sub) -> None:
@@ -82,7 +82,7 @@ def _print_log_summary(root: Path) -> dict:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from relaff_jax.runconfig import precheck
+    from relaff_jax.config import precheck
 
     if args.dir is not None and args.out is not None and args.dir != args.out:
         raise UserError(f"two run folders given: {args.dir} and --out {args.out}")

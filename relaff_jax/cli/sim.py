@@ -17,7 +17,7 @@ from relaff_jax.errors import UserError
 
 def register(subparsers) -> None:
     """Add ``objects``, ``scenes`` and ``generate`` to ``subparsers``."""
-    from relaff_jax.data.config import DatasetConfig  # the tree's defaults, shown in --help (no JAX)
+    from relaff_jax.config.dataset import DatasetConfig  # the tree's defaults, shown in --help (no JAX)
 
     d = DatasetConfig()
     p = subparsers.add_parser("objects", help="list the 29 objects of the library",

@@ -42,7 +42,8 @@ from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn import user_conditions
 from relaff_jax.learn.blocks import SUBSETS, read_block, run_block_to_file
-from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config, result_differences
+from relaff_jax.config.experiment import ExperimentConfig, result_differences
+from relaff_jax.learn.checks import check_config
 from relaff_jax.learn.datasets import check_datasets, fingerprint
 from relaff_jax.learn.draws import draw_rep
 from relaff_jax.learn.learners import learner_of
@@ -62,6 +63,7 @@ from relaff_jax.learn.protocol import (
 )
 from relaff_jax.learn.results import FORMAT_VERSION
 from relaff_jax.learn.states import state_features
+from relaff_jax.config import streams
 
 
 def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
@@ -183,7 +185,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                                      cfg.balanced_test, cfg.balanced_train)
                 X, y, boot = target_data[t]
                 test_idx, train_order = draws
-                seed_keys = (seed, 5, SPACE_CODE[space], ACTIONS.index(t), r)
+                seed_keys = (seed, streams.SWEEP_FOREST, streams.SPACE_CODE[space], ACTIONS.index(t), r)
                 calls.append((run_block_to_file, (str(path), X, y, boot, plans[ti], train_order, test_idx, chunk,
                                            reps_of[ti], n_cond, learner_of(cfg), seed_keys, loo_n or None, loo_conds,
                                            cfg.keep_outcomes, subsets[t]), {}))

@@ -39,7 +39,7 @@ from relaff_jax.errors import UserError
 
 from . import labels as lab
 from . import folder as layout
-from .config import pipeline_config, sensor_difference
+from relaff_jax.config.real import pipeline_config, sensor_difference
 
 
 SUMMARY_ONLY = ("bf_sizes", "n_boot")  # RealExperimentConfig keys only the summary reads: no refit
@@ -75,7 +75,6 @@ def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | P
     from relaff_jax.constants import RELATIONS, SPACES
 
     from . import splits
-    from .config import validate_run_config
     from .scene_source import object_ids
     from .sim_relations import _counts
 
@@ -85,7 +84,7 @@ def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | P
     bad = [s for s in spaces if s not in SPACES]
     if not spaces or bad:
         raise UserError(f"spaces must be values of {', '.join(SPACES)}, got {list(spaces)}")
-    cfg = validate_run_config(tree).real
+    cfg = tree.real  # checked with the perception it shares by config.check_tree
     exp_cfg, sim_cfg = cfg.experiment, cfg.sim
     full = 2 * (exp_cfg.n_full // 2)
     sim_dir = Path(sim_folder) if sim_folder else Path(out) / layout.SIM

@@ -21,7 +21,7 @@ COMMAND = "report"
 
 def inputs(tree: Any, results: str | os.PathLike, data_dirs: Mapping[str, str | os.PathLike] | None = None) -> list[Path]:
     """The files a report of ``results`` (and the datasets ``data_dirs``) is made from."""
-    from relaff_jax.data.config import FEATURES_SIDECAR, SIDECAR
+    from relaff_jax.data.layout import FEATURES_SIDECAR, SIDECAR
     from relaff_jax.learn import folder as L
 
     from relaff_jax.data.audit import AUDIT_FILE

@@ -14,9 +14,8 @@ from relaff_jax.reproduce.generate import default_rollout_factory
 from relaff_jax.reproduce.progress import COST, Progress, estimate_seconds, fmt_time
 from relaff_jax.reproduce.run import check_config, reproduce, status
 from relaff_jax.reproduce.stage import Run, Status
-from relaff_jax.runconfig import PRESETS, preset
 
-__all__ = ["ACTIONS", "SPACES", "STAGES", "REPORT_STAMP", "FORMAT", "FORMAT_VERSION", "RUN_LOG", "PRESETS",
+__all__ = ["ACTIONS", "SPACES", "STAGES", "REPORT_STAMP", "FORMAT", "FORMAT_VERSION", "RUN_LOG",
            "Paths", "ReproduceError", "Run", "Status", "COST", "Progress", "check_config", "default_feature_factory",
-           "default_rollout_factory", "estimate_seconds", "feature_config", "fmt_time", "preset", "reproduce",
+           "default_rollout_factory", "estimate_seconds", "feature_config", "fmt_time", "reproduce",
            "seeds", "status"]

@@ -7,6 +7,7 @@ import time
 from typing import Any
 
 from relaff_jax import data as D
+from relaff_jax.config.perception import PerceptionConfig, stored_config
 from relaff_jax.provenance import record_config
 from relaff_jax.reproduce.stage import Run, Status
 
@@ -15,19 +16,16 @@ NAME = "features"
 
 def default_feature_factory(seed: int, config: Any = None):
     """``(compute_fn, config_dict)`` of the perception stage, as ``relaff features`` uses it."""
-    from relaff_jax import perception as pc
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import build_world
 
-    cfg = config if config is not None else pc.PerceptionConfig()
+    cfg = config if config is not None else PerceptionConfig()
     return from_sim.make_feature_fn(build_world(), cfg, seed), feature_config(seed, cfg)
 
 
 def feature_config(seed: int, config: Any = None) -> dict:
     """The config dict ``default_feature_factory`` stores (without building the world)."""
-    from relaff_jax import perception as pc
-
-    return {"perception": pc.stored_config(config if config is not None else pc.PerceptionConfig()), "seed": seed}
+    return {"perception": stored_config(config if config is not None else PerceptionConfig()), "seed": seed}
 
 
 def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, overwrite: bool = False,

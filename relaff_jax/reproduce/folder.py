@@ -25,6 +25,7 @@ from relaff_jax.config import differences, to_dict
 from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed, machine, versions
+from relaff_jax.config import streams
 
 FORMAT = "relaff_jax.reproduce"
 FORMAT_VERSION = 2  # 2: the config is the whole RunConfig tree
@@ -63,8 +64,8 @@ def seeds(seed: int) -> dict[str, Any]:
     """The seeds of every stage, derived from the run seed (independent streams)."""
     return {
         "run": int(seed),
-        "datasets": {a: derive_seed(seed, 0x5EED, 1, i) for i, a in enumerate(ACTIONS)},
-        "features": derive_seed(seed, 0x5EED, 2),
+        "datasets": {a: derive_seed(seed, streams.RUN_FOLDER, 1, i) for i, a in enumerate(ACTIONS)},
+        "features": derive_seed(seed, streams.RUN_FOLDER, 2),
         "experiment": int(seed),
     }
 
@@ -77,7 +78,7 @@ def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
     """A config key absent from a stored run log and requested at the code's default."""
     if stored != "<absent>" or not key.startswith("config."):
         return False
-    from relaff_jax.runconfig import RunConfig
+    from relaff_jax.config import RunConfig
 
     node: Any = json.loads(json.dumps(to_dict(RunConfig()), default=rio.json_default))
     for part in key.split(".")[1:]:
@@ -89,7 +90,7 @@ def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
 
 def _speed_only(key: str) -> bool:
     """A run log key of a setting that changes no result (``learn.config.SPEED_ONLY``)."""
-    from relaff_jax.learn.config import SPEED_ONLY
+    from relaff_jax.config.experiment import SPEED_ONLY
 
     return key.startswith("config.experiment.") and key.removeprefix("config.experiment.") in SPEED_ONLY
 

@@ -29,7 +29,7 @@ from relaff_jax.reproduce.progress import Progress, estimate_seconds, sample_bou
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import machine
 from relaff_jax.reproduce.stage import Run, Status
-from relaff_jax.runconfig import PRESETS, RunConfig, check_tree, from_json, preset
+from relaff_jax.config import PRESETS, RunConfig, check_tree, from_json, preset
 
 STAGE_MODULES = {m.NAME: m for m in (generate, features, experiment, report)}
 assert tuple(STAGE_MODULES) == STAGES
@@ -39,7 +39,8 @@ def check_config(cfg: RunConfig, seed: int) -> None:
     """Fail before any simulation if the config cannot give a complete study: the whole tree's
     check (``runconfig.check_tree``; each node checked its own values when it was made), then
     what a study needs of several nodes at once."""
-    from relaff_jax.learn import check_config as check_experiment, split_pools
+    from relaff_jax.learn.checks import check_config as check_experiment
+    from relaff_jax.learn import split_pools
 
     try:
         check_tree(cfg)

@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 
 from .geometry import quat_to_mat
-from .config import ArmConfig  # noqa: F401 (re-exported)
+from relaff_jax.config.action import ArmConfig
 
 ARM_JOINTS = ("j1", "j2", "j3", "j4", "j5", "j6")
 FINGER_JOINTS = ("jf_l", "jf_r")
