@@ -24,6 +24,10 @@ class ConfigError(UserError):
     """A config key or value that the tree does not take (exit 2, one line)."""
 
 
+class RuleError(ConfigError):
+    """A cross-field rule a node's values break together (``Rule``)."""
+
+
 def _num(v: Any) -> str:
     return repr(v) if not isinstance(v, float) or v != int(v) or abs(v) > 1e15 else str(v)
 
@@ -217,7 +221,8 @@ def check_node(node: Any) -> None:
             except (TypeError, ValueError, ArithmeticError):
                 good = False
             if not good:
-                raise ConfigError(f"config key '{path}.{key[0]}' {c.must(node)}")
+                also = "".join(f" (with '{path}.{k}')" for k in key[1:])
+                raise RuleError(f"config key '{path}.{key[0]}'{also} {c.must(node)}")
 
 
 def unchecked_fields(cls: type) -> list[str]:

@@ -27,7 +27,7 @@ FOREST = "forest"  # ExperimentConfig.learner of the paper's random forest
 RHF_PARTS = ("dx", "dy", "dz", "dist", "angle_na_nb", "angle_na_d")  # config.perception.RHF_NAMES
 EXTRAS = {"relative": 4, "reach": 2}  # derived columns: how many each adds
 CONDITION_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")  # a user condition's name (learn.conditions)
-REAL_NOT_INT = Interval(float, 0.0, 1.0, closed="neither")
+MAX_SAMPLES_FRACTION = 10.0
 
 
 def _real_not_int(lo: float, hi: float | None, closed: str) -> Check:
@@ -60,7 +60,9 @@ SKLEARN_FOREST = {
     "min_samples_leaf": AnyOf(count(1), _real_not_int(0.0, 1.0, "neither")),
     "max_features": AnyOf(Options(("sqrt", "log2", None)), count(1), _real_not_int(0.0, 1.0, "right")),
     "bootstrap": Boolean(),
-    "max_samples": AnyOf(NULL, count(1), _real_not_int(0.0, None, "neither")),
+    # scikit-learn takes any float > 0; capped at 10 here (draws per tree = round(f N): a huge f
+    # would fail mid-sweep, out of memory)
+    "max_samples": AnyOf(NULL, count(1), _real_not_int(0.0, MAX_SAMPLES_FRACTION, "right")),
 }
 
 

@@ -26,7 +26,7 @@ import dataclasses
 from typing import Any, Mapping
 
 from relaff_jax.config.action import ActionConfig
-from relaff_jax.config.constraints import ConfigError
+from relaff_jax.config.constraints import ConfigError, RuleError
 from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.config.experiment import ExperimentConfig, experiment_preset
 from relaff_jax.config.node import Node
@@ -121,9 +121,8 @@ def precheck(overrides: Mapping[str, Any]) -> None:
             raise ConfigError(f"config key {key!r} is a group of settings; set one of its keys, e.g. {key}.<name>")
         try:
             override_under(NODES[head](), {rest: value}, f"{head}.")
-        except ConfigError as e:
-            if "' must be " in str(e) or not str(e).startswith("config key '"):  # a key's own constraint
-                raise
+        except RuleError:  # refused beside the defaults only: the preset's values may suit it
+            pass
 
 
 def resolve(base: RunConfig | None = None, overrides: Mapping[str, Any] | None = None) -> RunConfig:
