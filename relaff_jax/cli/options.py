@@ -36,8 +36,8 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
     from relaff_jax.config import check_tree, precheck, resolve
 
     overrides = {**parse_set(extra), **overrides_of(args, flags)}
-    precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     try:
+        precheck(overrides)  # a mistyped key or a bad value is reported before the preset is built
         return check_tree(resolve(base, overrides))  # the whole tree, before any stage starts
     except UserError as e:  # a value given by a flag: the message names the flag too
         msg = str(e)

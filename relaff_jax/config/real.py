@@ -223,7 +223,8 @@ SPLITS = ("scene", "pair")
 
 @dataclasses.dataclass(frozen=True)
 class RealExperimentConfig(Node):
-    """Section VI settings: 50 repetitions, forests of 100 trees, balanced sets. ``split``:
+    """Section VI settings, what the real experiments run with (``real_experiment(tree)``): 50
+    repetitions, forests of 100 trees, balanced sets. ``split``:
     how one folder's pairs are cut into train and test per repetition, "scene" (every pair of
     a scene on one side: pairs of a scene share objects, pose and lighting) or "pair" (pairs
     drawn one by one, the protocol before issue 28)."""
@@ -262,16 +263,51 @@ class RealExperimentConfig(Node):
 
 
 @dataclasses.dataclass(frozen=True)
+class RealExperimentSettings(Node):
+    """The real experiments' own settings, the tree's ``real.experiment`` node: what
+    ``RealExperimentConfig`` holds beyond the keys it takes from the tree's ``experiment`` node
+    (``SHADOWED``: the forest engine, the bootstrap input repetitions, the bf window);
+    ``real_experiment(tree)`` gives the whole."""
+
+    reps: int = 50
+    trees: int = 100
+    train_fraction: float = 0.625  # the paper's 100 of 160
+    n_full: int = 1000  # SIM_full training samples (paper: 6500), as many to test
+    n_boot: int = 2000  # resamples of the bootstrap interval
+    seed: int = 0
+    split: str = "scene"
+
+    _path = "real.experiment"
+    _constraints = {k: c for k, c in RealExperimentConfig._constraints.items()
+                    if k in ("reps", "trees", "train_fraction", "n_full", "n_boot", "seed", "split")}
+
+
+# keys of ``RealExperimentConfig`` taken from the tree's ``experiment`` node (a stored tree made
+# when ``real.experiment`` still had them: ``tree.from_json`` maps or refuses them)
+SHADOWED = {"engine": "experiment.forest.engine", "repeats_pca": "experiment.repeats_pca",
+            "repeats_rhf": "experiment.repeats_rhf", "bf_sizes": "experiment.bf_sizes"}
+
+
+def real_experiment(tree) -> RealExperimentConfig:
+    """What the real experiments run with: ``tree.real.experiment`` with the forest engine, the
+    bootstrap input repetitions and the bf window of ``tree.experiment``."""
+    e, x = tree.real.experiment, tree.experiment
+    return RealExperimentConfig(**dataclasses.asdict(e), engine=x.forest.engine, repeats_pca=x.repeats_pca,
+                                repeats_rhf=x.repeats_rhf, bf_sizes=tuple(x.bf_sizes))
+
+
+@dataclasses.dataclass(frozen=True)
 class RealRunConfig(Node):
     """Every real-only setting, the node ``RunConfig.real`` (``--set real.dotted.key=value``):
     ``pipeline`` the real scenes' segmentation and features, ``rule`` the relation proposal
     rule (``real propose``), ``sim`` the simulated relation data, ``experiment`` the four
-    experiments, ``tolerance`` the reuse of simulated data."""
+    experiments (their forest engine, input repetitions and bf window are the tree's
+    ``experiment``'s: ``real_experiment``), ``tolerance`` the reuse of simulated data."""
 
     pipeline: PipelineConfig = PipelineConfig()
     rule: RuleConfig = RuleConfig()
     sim: SimRelationConfig = SimRelationConfig()
-    experiment: RealExperimentConfig = RealExperimentConfig()
+    experiment: RealExperimentSettings = RealExperimentSettings()
     tolerance: SensorTolerance = SensorTolerance()
 
     _path = "real"

@@ -30,9 +30,9 @@ from relaff_jax.config.constraints import ConfigError, RuleError
 from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.config.experiment import ExperimentConfig, experiment_preset
 from relaff_jax.config.node import Node
-from relaff_jax.config.override import from_dict, override, override_under
+from relaff_jax.config.override import from_dict, override, override_under, to_dict
 from relaff_jax.config.perception import PerceptionConfig
-from relaff_jax.config.real import RealRunConfig, pipeline_config
+from relaff_jax.config.real import SHADOWED, RealRunConfig, pipeline_config, real_experiment
 from relaff_jax.config.reproduce import ReproduceConfig
 from relaff_jax.errors import UserError
 
@@ -133,13 +133,46 @@ def resolve(base: RunConfig | None = None, overrides: Mapping[str, Any] | None =
 def check_tree(tree: RunConfig) -> RunConfig:
     """The rules across nodes, before any stage starts (each node checked its own values when it
     was built): the real pipeline with the perception it shares and its real object pixel
-    capacity. Returns ``tree``; raises ``ConfigError`` naming the setting."""
+    capacity, and the real experiments with the keys they take from ``experiment``. Returns
+    ``tree``; raises ``ConfigError`` naming the setting."""
     pipeline_config(tree)
+    real_experiment(tree)
     return tree
 
 
+def _get(d: Any, dotted: str) -> Any:
+    for k in dotted.split("."):
+        d = d.get(k, "<absent>") if isinstance(d, Mapping) else "<absent>"
+    return d
+
+
+def shadow_matches(key: str, stored: Any, tree_json: Mapping[str, Any]) -> bool:
+    """Whether a stored tree's ``real.experiment.<key>`` (a key ``SHADOWED`` since) holds what the
+    tree ``tree_json`` (a JSON tree; absent keys at their defaults) now gives the real
+    experiments: the forest engine always does (every engine builds the same forests)."""
+    if key == "engine":
+        return True
+    now = _get(tree_json, SHADOWED[key])
+    if now == "<absent>":
+        now = _get(to_dict(RunConfig()), SHADOWED[key])
+    return list(stored) == list(now) if isinstance(stored, (list, tuple)) else stored == now
+
+
 def from_json(d: Mapping[str, Any]) -> RunConfig:
-    """Rebuild a tree from ``to_dict`` output (a run log's ``config``)."""
+    """Rebuild a tree from ``to_dict`` output (a run log's ``config``). A tree stored when
+    ``real.experiment`` had its own forest engine, repetitions and bf window (``SHADOWED``):
+    each is dropped where it equals what ``experiment`` gives now, else refused in one line."""
+    d = dict(d)
+    real = d.get("real")
+    if isinstance(real, Mapping) and isinstance(real.get("experiment"), Mapping):
+        exp = dict(real["experiment"])
+        for key in SHADOWED.keys() & exp.keys():
+            if not shadow_matches(key, exp[key], d):
+                raise ConfigError(f"config key 'real.experiment.{key}' of this stored tree ({exp[key]}) differs from "
+                                  f"'{SHADOWED[key]}', which the real experiments take now; rerun with "
+                                  f"--set {SHADOWED[key]}=...")
+            del exp[key]
+        d["real"] = {**real, "experiment": exp}
     try:
         return from_dict(RunConfig, d)
     except (TypeError, AttributeError) as e:

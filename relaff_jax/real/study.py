@@ -39,7 +39,7 @@ from relaff_jax.errors import UserError
 
 from . import labels as lab
 from . import folder as layout
-from relaff_jax.config.real import pipeline_config, sensor_difference
+from relaff_jax.config.real import pipeline_config, real_experiment, sensor_difference
 
 
 SUMMARY_ONLY = ("bf_sizes", "n_boot")  # RealExperimentConfig keys only the summary reads: no refit
@@ -85,7 +85,7 @@ def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | P
     if not spaces or bad:
         raise UserError(f"spaces must be values of {', '.join(SPACES)}, got {list(spaces)}")
     cfg = tree.real  # checked with the perception it shares by config.check_tree
-    exp_cfg, sim_cfg = cfg.experiment, cfg.sim
+    exp_cfg, sim_cfg = real_experiment(tree), cfg.sim
     full = 2 * (exp_cfg.n_full // 2)
     sim_dir = Path(sim_folder) if sim_folder else Path(out) / layout.SIM
     have = _counts(sim_dir)[1] if sim_dir.is_dir() else np.zeros(len(RELATIONS), np.int64)
@@ -151,7 +151,7 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
     out = Path(out)
     rows = check_inputs(tree, scenes, labels_path, out, spaces, sim_folder, test, test_labels, only_present)
     cfg, pipeline = tree.real, pipeline_config(tree)
-    exp_cfg, sim_cfg = cfg.experiment, cfg.sim
+    exp_cfg, sim_cfg = real_experiment(tree), cfg.sim
     poses = real_data.scene_poses(scenes, rows["train"], progress)
     sensor = real_data.sensor(poses)  # the simulated sensor: the training folder's mean pose
     sim_dir = Path(sim_folder) if sim_folder else out / layout.SIM
@@ -187,7 +187,7 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
             craw[space] = _experiments(out / layout.raw(space, cross=True), ckey,
                                        lambda space=space: ex.run_space(real, sim, space, exp_cfg, progress, test=real_t))
             cross[space] = ex.summarise(craw[space], exp_cfg)
-    context = _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test)
+    context = _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test, exp_cfg)
     report.write_report(out, raw, summary, context, craw or None, cross or None)
     for line in report.terminal_lines(summary, cross or None):
         say(line)
@@ -197,7 +197,7 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
     return dict(within=summary, cross=cross or None)
 
 
-def _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test) -> dict:
+def _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test, exp_cfg) -> dict:
     """The ``results.md`` header: the data, the sensor (where it came from), the costs."""
     from . import sim_relations as sr
 
@@ -216,7 +216,7 @@ def _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg
         ctx["real pairs, test folder"] = pairs(rows["test"], real_t, rows["skipped_test"], test)
         ctx["test folder's camera"] = (f"mean height {np.mean(test_poses['height']):.4f} m, tilt "
                                        f"{np.mean(test_poses['tilt_deg']):.2f} deg over {len(test_poses['height'])} scenes")
-    sim_cfg, exp_cfg = cfg.sim, cfg.experiment
+    sim_cfg = cfg.sim
     ctx.update({
         "simulated sensor": f"from the training folder's mean pose: height {sensor.height:.4f} m, tilt "
                             f"{sensor.tilt_deg:.2f} deg from straight down, vertical fov {sensor.vfov_deg:.2f} deg, "

@@ -88,6 +88,17 @@ def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
     return node == wanted
 
 
+def _shadow_removed(key: str, stored: Any, wanted: Any, want: dict) -> bool:
+    """A ``real.experiment`` key a stored run log has and the tree no longer has (it is taken
+    from ``experiment`` now, ``config.real.SHADOWED``), stored at the value the tree gives."""
+    from relaff_jax.config.real import SHADOWED
+    from relaff_jax.config.tree import shadow_matches
+
+    name = key.removeprefix("config.real.experiment.")
+    return wanted == "<absent>" and name in SHADOWED and key == f"config.real.experiment.{name}" \
+        and shadow_matches(name, stored, want.get("config", {}))
+
+
 def _speed_only(key: str) -> bool:
     """A run log key of a setting that changes no result (``learn.config.SPEED_ONLY``)."""
     from relaff_jax.config.experiment import SPEED_ONLY
@@ -147,14 +158,17 @@ def _check_log(log: dict, want: dict, root: Path) -> dict:
     stored = {k: log.get(k, "<absent>") for k in want}
     diff = differences(stored, want)
     added = [d for d in diff if _added_at_default(*d)]
+    removed = [d for d in diff if _shadow_removed(*d, want)]  # now taken from another node
     speed = [d for d in diff if _speed_only(d[0])]
-    diff = [d for d in diff if d not in added and d not in speed]
-    if (added or speed) and not diff:
+    diff = [d for d in diff if d not in added and d not in speed and d not in removed]
+    if (added or speed or removed) and not diff:
         # settings that did not exist when the run began, requested at their defaults (which
         # keep the old behaviour), and settings that change no result (the forest engine): the
         # same run; the log records the requested values from now on, and when a speed setting changed
         log["config"] = want["config"]
         log.setdefault("added_settings", []).extend(k.removeprefix("config.") for k, _, _ in added)
+        if removed:
+            log.setdefault("removed_settings", []).extend(k.removeprefix("config.") for k, _, _ in removed)
         log.setdefault("speed_settings_changed", []).extend(
             {"at": now(), "key": k.removeprefix("config."), "was": a, "now": b} for k, a, b in speed)
         if not log["speed_settings_changed"]:

@@ -17,7 +17,7 @@ def test_each_node_checked_once_per_build(monkeypatch):
     real_check = constraints.check_node
     monkeypatch.setattr(constraints, "check_node", lambda node: (checked.update([type(node).__name__]),
                                                                  real_check(node))[1])
-    for cls in {type(n) for n in _nodes(base)} | {C.RealConfig}:
+    for cls in {type(n) for n in _nodes(base)} | {C.RealConfig, C.RealExperimentConfig}:
 
         def counted(self, *a, __init=cls.__init__, **k):
             built.update([type(self).__name__])
@@ -30,7 +30,7 @@ def test_each_node_checked_once_per_build(monkeypatch):
     # precheck builds the default perception node and its copy with the new voxel; resolve the
     # voxel, perception and root nodes; check_tree the real capacity's voxel and perception
     assert checked["VoxelConfig"] == 3 and checked["PerceptionConfig"] == 4 and checked["RunConfig"] == 1
-    assert checked["RealConfig"] == 1 and checked["ExperimentConfig"] == 0 and checked["ActionConfig"] == 0
+    assert checked["RealConfig"] == 1 and checked["RealExperimentConfig"] == 1 and checked["ExperimentConfig"] == 0 and checked["ActionConfig"] == 0
 
 
 def _nodes(node):
@@ -43,7 +43,7 @@ def _nodes(node):
 
 def test_every_field_is_declared():
     """Each node class declares a constraint for every field that is not a nested node."""
-    classes = {type(n) for n in _nodes(C.RunConfig())} | {C.RealConfig}
+    classes = {type(n) for n in _nodes(C.RunConfig())} | {C.RealConfig, C.RealExperimentConfig}
     assert len(classes) >= 26
     for cls in classes:
         assert constraints.unchecked_fields(cls) == [], cls.__name__

@@ -73,7 +73,7 @@ def test_every_key_refuses_bad_values(key, probe):
     ("perception.camera.position", (), "a list of 3 values"),
     ("experiment.bf_sizes", (), "a list of 2 values"),
     ("experiment.sizes", ("x",), "strictly increasing"),
-    ("real.experiment.engine", "foo", "one of fast, sklearn, compiled"),
+    ("experiment.forest.engine", "foo", "one of fast, sklearn, compiled"),  # real.experiment's engine
     ("real.experiment.n_boot", 0, "an integer in [10, 10000000]"),
     ("real.sim.noise", "foo", "one of robwork"),
     ("perception.voxel.size", NAN, "a finite number in (0.0, 1.0]"),
