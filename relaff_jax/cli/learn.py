@@ -39,10 +39,10 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
     spaces = {None: None, "both": tuple(SPACES)}.get(args.space, (args.space,))
     tree = options.config(args, base=RunConfig(experiment=experiment_preset(args.preset)),
-                          flags={"reproduce.spaces": ("--space", spaces)})
+                          flags={"reproduce.spaces": ("--space", spaces), "seed": ("--seed", args.seed)})
     options.check_out_dir(Path(args.out))  # before a --cluster client connects (seconds) and any work
     with options.cluster(args, args.out) as client:  # the same stage function reproduce runs
-        paths = learn.run(tree, args.data or args.synthetic, args.out, seed=args.seed, jobs=args.jobs,
+        paths = learn.run(tree, args.data or args.synthetic, args.out, seed=tree.seed, jobs=args.jobs,
                           client=client, progress=not args.no_progress)
     for space, p in paths.items():
         print(f"{space}: {p}")
@@ -108,7 +108,8 @@ def register(subparsers) -> None:
                    help="the protocol's sizes, repetitions and forests (relaff_jax.experiment_preset)")
     p.add_argument("--space", choices=("pca", "rhf", "both"), default=None,
                    help="state space(s) to sweep, the same as --set reproduce.spaces=[...] (default: both)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the test draws, training orders and forests")
+    p.add_argument("--seed", type=int, default=None, help="seed of the test draws, training orders and forests "
+                   "(the tree's seed; default 0)")
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
     options.add_cluster(p)
     options.add_set(p, "experiment.reps_pca=5 --set 'experiment.sizes=[2,10,25]'")

@@ -25,7 +25,8 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
     p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",
                    help="the run folder, as a positional argument for --status (same as --out DIR)")
-    p.add_argument("--seed", type=int, default=0, help="run seed: every dataset, feature and forest seed derives from it")
+    p.add_argument("--seed", type=int, default=None, help="run seed (the tree's seed): every dataset, feature and "
+                   "forest seed derives from it; default 0")
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
                    help=f"redo a stage ({', '.join(STAGES)}); may be repeated")
     p.add_argument("--redo-dataset", action="append", choices=ACTIONS, metavar="ACTION",
@@ -92,7 +93,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.out is None:
         raise UserError("the run folder is required: --out DIR")
     options.check_counts(args, seed="--seed", jobs="--jobs")
-    overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine)})
+    overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine), "seed": ("--seed", args.seed)})
+    seed = overrides.get("seed", 0)
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     from relaff_jax import reproduce as R
@@ -111,7 +113,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
         for path in args.plugins:
             load_plugin_file(path)
-    command = ["relaff", "reproduce", "--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
+    command = ["relaff", "reproduce", "--preset", args.preset, "--out", str(args.out), "--seed", str(seed)]
     command += [x for f in args.force or () for x in ("--force", f)]
     command += [x for a in args.redo_dataset or () for x in ("--redo-dataset", a)] + (["--jobs", str(args.jobs)] if args.jobs else [])
     command += [x for s in args.set or () for x in ("--set", s)] + (["--no-progress"] if args.no_progress else [])
@@ -119,7 +121,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     command += ["--engine", args.engine] if args.engine else []
     command += ["--plugins", *args.plugins] if args.plugins else []
     with options.cluster(args, args.out) as client:
-        log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
+        log = R.reproduce(args.out, args.preset, seed, force=tuple(args.force or ()), jobs=args.jobs,
                           progress=not args.no_progress, overrides=overrides, argv=command,
                           client=client, rebuild_log=args.rebuild_log,
                           redo=tuple(args.redo_dataset or ()))

@@ -213,7 +213,7 @@ def check_node(node: Any) -> None:
             v = getattr(node, key)
             p = c.problem(v)
             if p is not None:
-                raise ConfigError(f"config key '{path}.{key}' must be {p}, got {_shown(v)}")
+                raise ConfigError(f"config key '{path + '.' if path else ''}{key}' must be {p}, got {_shown(v)}")
     for key, c in cons.items():
         if not isinstance(key, str):
             try:
@@ -221,8 +221,9 @@ def check_node(node: Any) -> None:
             except (TypeError, ValueError, ArithmeticError):
                 good = False
             if not good:
-                also = "".join(f" (with '{path}.{k}')" for k in key[1:])
-                raise RuleError(f"config key '{path}.{key[0]}'{also} {c.must(node)}")
+                at = path + "." if path else ""
+                also = "".join(f" (with '{at}{k}')" for k in key[1:])
+                raise RuleError(f"config key '{at}{key[0]}'{also} {c.must(node)}")
 
 
 def unchecked_fields(cls: type) -> list[str]:

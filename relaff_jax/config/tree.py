@@ -32,7 +32,7 @@ from relaff_jax.config.experiment import ExperimentConfig, experiment_preset
 from relaff_jax.config.node import Node
 from relaff_jax.config.override import from_dict, override, override_under, to_dict
 from relaff_jax.config.perception import PerceptionConfig
-from relaff_jax.config.real import SHADOWED, RealRunConfig, pipeline_config, real_experiment
+from relaff_jax.config.real import SEED, SHADOWED, RealRunConfig, pipeline_config, real_experiment
 from relaff_jax.config.reproduce import ReproduceConfig
 from relaff_jax.errors import UserError
 
@@ -41,8 +41,10 @@ PRESETS = ("tiny", "quick", "study", "paper")
 
 @dataclasses.dataclass(frozen=True)
 class RunConfig(Node):
-    """The whole tree; defaults are the paper's (the ``paper`` preset)."""
+    """The whole tree; defaults are the paper's (the ``paper`` preset). ``seed``: the run's seed
+    (``--seed``): every dataset, feature and forest seed derives from it (``streams``)."""
 
+    seed: int = 0
     action: ActionConfig = ActionConfig()
     perception: PerceptionConfig = PerceptionConfig()
     dataset: DatasetConfig = DatasetConfig()
@@ -50,7 +52,8 @@ class RunConfig(Node):
     reproduce: ReproduceConfig = ReproduceConfig()
     real: RealRunConfig = RealRunConfig()
 
-    _path = "tree"
+    _path = ""
+    _constraints = {"seed": SEED}
 
 
 def preset(name: str) -> RunConfig:
@@ -102,6 +105,7 @@ def preset(name: str) -> RunConfig:
     raise UserError(f"unknown preset {name!r}; expected one of {', '.join(PRESETS)}")
 
 
+ROOT_KEYS = ("seed",)  # the root's own keys (not nodes)
 NODES = {"action": ActionConfig, "perception": PerceptionConfig, "dataset": DatasetConfig,
          "experiment": ExperimentConfig, "reproduce": ReproduceConfig, "real": RealRunConfig}
 
@@ -117,6 +121,9 @@ def precheck(overrides: Mapping[str, Any]) -> None:
         head, _, rest = key.partition(".")
         if head not in names:
             raise ConfigError(f"unknown config key {key!r}: RunConfig has no {head!r}; valid keys: {sorted(names)}")
+        if head in ROOT_KEYS:
+            override_under(RunConfig(), {key: value}, "")
+            continue
         if not rest:
             raise ConfigError(f"config key {key!r} is a group of settings; set one of its keys, e.g. {key}.<name>")
         try:

@@ -157,7 +157,9 @@ def _check_log(log: dict, want: dict, root: Path) -> dict:
                              f"{log.get('format_version')}, this one writes {FORMAT_VERSION}); use a new --out")
     stored = {k: log.get(k, "<absent>") for k in want}
     diff = differences(stored, want)
-    added = [d for d in diff if _added_at_default(*d)]
+    # a log written before the tree had a seed: its seed is the log's own
+    added = [d for d in diff if _added_at_default(*d) or (d[0] == "config.seed" and d[1] == "<absent>"
+                                                          and d[2] == log.get("seed"))]
     removed = [d for d in diff if _shadow_removed(*d, want)]  # now taken from another node
     speed = [d for d in diff if _speed_only(d[0])]
     diff = [d for d in diff if d not in added and d not in speed and d not in removed]

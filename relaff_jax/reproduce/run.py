@@ -109,6 +109,10 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
         raise ReproduceError(f"jobs must be an integer >= 0, got {jobs!r}")
     cfg = override(cfg or preset(preset_name), dict(overrides or {}))
     check_config(cfg, seed)
+    if cfg.seed != seed:  # the tree records the run's seed (``--seed`` is its alias)
+        if "seed" in dict(overrides or {}):
+            raise ReproduceError(f"seed {seed} and --set seed={cfg.seed} disagree; give one of them")
+        cfg = override(cfg, {"seed": int(seed)})
     redo = tuple(redo)
     bad = [a for a in redo if a not in cfg.reproduce.actions]
     if bad:

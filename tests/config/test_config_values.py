@@ -108,3 +108,20 @@ def test_cli_refuses_nan_in_one_line(argv, tmp_path):
     lines = r.stderr.strip().splitlines()
     key = argv[argv.index("--set") + 1].split("=")[0]
     assert len(lines) == 1 and lines[0].startswith(f"relaff {argv[0]}") and f"config key '{key}'" in lines[0], lines
+
+
+@pytest.mark.parametrize("argv", [
+    ["generate", "lift", "--samples", "8", "--out", "OUT", "--seed", "3", "--set", "seed=4"],
+    ["features", "OUT", "--seed", "3", "--set", "seed=4"],
+    ["reproduce", "--preset", "tiny", "--out", "OUT", "--seed", "3", "--set", "seed=4"],
+])
+def test_seed_flag_is_the_tree_key(argv, tmp_path, capsys):
+    from relaff_jax import cli
+
+    argv = [str(tmp_path / a) if a == "OUT" else a for a in argv]
+    if argv[0] == "features":
+        (tmp_path / "OUT").mkdir()
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("--seed 3 and --set seed=4 disagree; give one of them") and "\n" not in err, err
+    assert C.resolve(None, {"seed": 4}).seed == 4 and C.RunConfig().seed == 0
