@@ -22,7 +22,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .arm_model import Arm, ArmConfig
+from relaff_jax.config.action import ArmConfig
+
+from .arm_model import Arm
 from .geometry import axis_rotation
 from .ik_lm import descend_lm
 
