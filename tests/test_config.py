@@ -19,8 +19,8 @@ def test_parse_set_reads_json_values_and_keeps_strings():
 
 def test_tree_has_every_stage_and_sets_nested_keys():
     cfg = runconfig.RunConfig()
-    assert [f.name for f in dataclasses.fields(cfg)] == ["action", "perception", "dataset", "experiment", "reproduce",
-                                                       "real"]
+    assert [f.name for f in dataclasses.fields(cfg)] == ["seed", "action", "perception", "dataset", "experiment",
+                                                       "reproduce", "real"]
     new = runconfig.resolve(cfg, {"perception.voxel.size": 0.02, "action.scene.settle_steps": 300,
                                   "dataset.n_samples": 50, "experiment.forest.max_trees": 7})
     assert new.perception.voxel.size == 0.02

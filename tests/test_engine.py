@@ -248,7 +248,7 @@ def test_engine_setting():
     cfg = runconfig.resolve(None, {"experiment.forest.engine": "compiled"}).experiment.forest
     L.check_forest_config(cfg)
     assert isinstance(engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, cfg), compiled.Forest)
-    with pytest.raises(UserError, match="experiment.forest.engine 'turbo'"):  # refused when the node is made
+    with pytest.raises(UserError, match="config key 'experiment.forest.engine' must be one of fast, sklearn, compiled, got 'turbo'"):  # refused when the node is made
         ForestConfig(engine="turbo")
     turbo = ForestConfig()
     object.__setattr__(turbo, "engine", "turbo")  # past the node's check: the engine refuses it too

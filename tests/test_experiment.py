@@ -365,7 +365,7 @@ def test_bad_inputs_are_clear_errors(data3, tmp_path):
     nofeat = {a: {k: v for k, v in data3[a].items() if k != "rhf"} for a in ACTS3}
     with pytest.raises(ValueError, match="no 'rhf' array"):
         E.run_experiment(nofeat, tmp_path / "x", tiny_cfg(), ["rhf"])
-    with pytest.raises(ValueError, match="select_size 10"):
+    with pytest.raises(ValueError, match=r"'experiment.select_size' \(with 'experiment.sizes'\) \(10, 'best after ten'\) must be one of sizes"):
         check_config(tiny_cfg(sizes=(2, 4, 25)))
     with pytest.raises(ValueError, match="unknown preset"):
         experiment_preset("huge")

@@ -58,13 +58,13 @@ def test_rhf_parts_and_bins_only():
         StateConfig(rhf_parts=("dist", "height"))
     with pytest.raises(UserError, match="extra' must be a list of at least 0 values, distinct"):
         StateConfig(extra=("relative", "relative"))
-    with pytest.raises(UserError, match="extra must be distinct"):
+    with pytest.raises(UserError, match="'experiment.state.extra' must be a list of at least 0 values, distinct"):
         check_config(override(ExperimentConfig(), {"state.extra": ("reach", "colour")}))
 
 
 def test_max_features_strings():
     assert [max_features_value(v) for v in ("sqrt", "log2", None, "6", "0.5")] == ["sqrt", "log2", None, 6, 0.5]
-    with pytest.raises(UserError, match="experiment.forest.max_features must be sqrt, log2"):
+    with pytest.raises(UserError, match="'experiment.forest.max_features' must be one of sqrt, log2"):
         override(ExperimentConfig(), {"forest.max_features": "most"})  # refused when the node is made
 
 

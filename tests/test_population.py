@@ -14,6 +14,7 @@ import pytest
 
 from relaff_jax import data as ds
 from relaff_jax.config.dataset import DatasetConfig
+from relaff_jax.errors import UserError
 from relaff_jax.cli import main
 
 CFG = {"physics": {"dt": 0.002}}
@@ -147,7 +148,7 @@ def test_unmet_matching_is_warned_recorded_and_shown(tmp_path):
 def test_population_needs_the_feasible_field(tmp_path):
     with pytest.raises(ds.DatasetError, match="no 'feasible' field"):
         gen(tmp_path / "m", fn=reach_rollout_fn(with_feasible=False), population="feasible")
-    with pytest.raises(ds.DatasetError, match="population must be one of all, feasible"):
+    with pytest.raises(UserError, match="'dataset.population' must be one of all, feasible"):
         gen(tmp_path / "m2", population="reachable")
 
 

@@ -226,7 +226,7 @@ def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
     assert err.startswith("relaff real study: error: unknown config key 'real.experiment.splt'")
     assert "split" in err
     assert cli.main(argv + ["--set", "real.experiment.split=scenes"]) == 2
-    assert "unknown real.experiment.split 'scenes'" in capsys.readouterr().err
+    assert "config key 'real.experiment.split' must be one of scene, pair, got 'scenes'" in capsys.readouterr().err
     # a flag is an alias of its tree key: a --set of the same key that disagrees is refused
     assert cli.main(argv + ["--reps", "5", "--set", "real.experiment.reps=7"]) == 2
     assert "--reps 5 and --set real.experiment.reps=7 disagree" in capsys.readouterr().err

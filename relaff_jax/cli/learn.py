@@ -109,7 +109,7 @@ def register(subparsers) -> None:
     p.add_argument("--space", choices=("pca", "rhf", "both"), default=None,
                    help="state space(s) to sweep, the same as --set reproduce.spaces=[...] (default: both)")
     p.add_argument("--seed", type=int, default=None, help="seed of the test draws, training orders and forests "
-                   "(the tree's seed; default 0)")
+                   "(the tree's seed key) (default: 0)")
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
     options.add_cluster(p)
     options.add_set(p, "experiment.reps_pca=5 --set 'experiment.sizes=[2,10,25]'")

@@ -32,7 +32,7 @@ def register(subparsers) -> None:
     p.add_argument("--batch", type=int, default=None,
                    help="scenes per compiled chunk, the same as --set dataset.feature_batch=B (default: "
                         f"{DatasetConfig().feature_batch})")
-    p.add_argument("--seed", type=int, default=None, help="depth-noise seed (the tree's seed; default 0)")
+    p.add_argument("--seed", type=int, default=None, help="depth-noise seed (the tree's seed key) (default: 0)")
     p.add_argument("--overwrite", action="store_true", help="recompute features of another config")
     options.add_cluster(p)
     options.add_set(p, "perception.voxel.size=0.02")

@@ -25,8 +25,8 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
     p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",
                    help="the run folder, as a positional argument for --status (same as --out DIR)")
-    p.add_argument("--seed", type=int, default=None, help="run seed (the tree's seed): every dataset, feature and "
-                   "forest seed derives from it; default 0")
+    p.add_argument("--seed", type=int, default=None, help="run seed: every dataset, feature and forest seed "
+                   "derives from it (the tree's seed key) (default: 0)")
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
                    help=f"redo a stage ({', '.join(STAGES)}); may be repeated")
     p.add_argument("--redo-dataset", action="append", choices=ACTIONS, metavar="ACTION",

@@ -45,8 +45,8 @@ def register(subparsers) -> None:
     p.add_argument("action", help=f"one of: {', '.join(ACTIONS)}")
     p.add_argument("--samples", type=int, required=True, help="balanced samples to keep (N >= 2)")
     p.add_argument("--out", required=True, help="dataset directory (new, empty or resumable)")
-    p.add_argument("--seed", type=int, default=None, help="seed of the dataset (the tree's seed; every chunk's key "
-                   "derives from it; default 0)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the dataset, every chunk's key derives from it "
+                   "(the tree's seed key) (default: 0)")
     p.add_argument("--batch", type=int, default=None,
                    help=f"scenes per simulated chunk, the same as --set dataset.rollout_batch=B (default: "
                         f"{d.rollout_batch}; the presets of relaff reproduce use 8 to 1024); part of the "

@@ -56,8 +56,8 @@ class DatasetConfig(Node):
 
     _path = "dataset"
     _constraints = {
-        "max_rollouts": count(1, 1_000_000_000), "distance_bins": count(1, 100_000),
-        "borrow_fraction": FRACTION, "n_samples": count(2, 100_000_000),
+        "max_rollouts": count(1, 10**15), "distance_bins": count(1, 100_000),
+        "borrow_fraction": FRACTION, "n_samples": count(2, 10**15),  # past the rollout cap: sample_bound says so, with the time
         "rollout_batch": count(1, 1 << 20), "feature_batch": count(1, 1 << 16),
         "engine": Options(SIM_ENGINES), "population": Options(POPULATIONS), "negatives": Options(NEGATIVES),
         "match_patience": Interval(float, 1.0, 1e6),
