@@ -18,6 +18,7 @@ from relaff_jax import data as ds
 from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.cli import data as cli_data
 from relaff_jax.data import generate, store
+from relaff_jax.errors import UserError
 
 TOYS = ("ball", "cube")
 OTHERS = ("plate", "cup", "box")
@@ -366,7 +367,7 @@ def test_engine_recorded_and_resume_with_another_refused(built, tmp_path):
     assert gen(p)["new_chunks"] == 0  # still resumable (complete) as MJX
     with pytest.raises(ds.DatasetMismatchError, match="mjx engine"):
         gen(p, dataset_config=native)
-    with pytest.raises(ds.DatasetError, match="unknown simulation engine 'gpu'; valid engines: mjx, native"):
+    with pytest.raises(UserError, match="'dataset.engine' must be one of mjx, native, got 'gpu'"):  # the node
         gen(tmp_path / "x", dataset_config=dataclasses.replace(EXACT, engine="gpu"))
     assert not (tmp_path / "x").exists()
 
