@@ -20,6 +20,7 @@ import numpy as np
 from mujoco import mjx
 
 from relaff_jax.sim import arm as A
+from relaff_jax.config.action import ArmConfig
 
 SEG = (200, 50, 150, 75, 200, 50)  # home->above, dwell, ->down, close, ->lift, dwell
 
@@ -33,7 +34,7 @@ def c_tcp(m, arm, q):
 
 def ik_table(m, arm, n, seed=0):
     rng = np.random.default_rng(seed)
-    cfg = A.ArmConfig()
+    cfg = ArmConfig()
     r, th = rng.uniform(0.25, 1.15, n), rng.uniform(-np.pi / 2, np.pi / 2, n)
     pos = np.stack([r * np.cos(th), r * np.sin(th), rng.uniform(0.03, 0.5, n)], 1)
     tilt, az = rng.uniform(0, np.radians(60), n), rng.uniform(-np.pi, np.pi, n)
@@ -64,7 +65,7 @@ def ik_table(m, arm, n, seed=0):
 
 
 def program_table(m, arm, batches):
-    cfg = A.ArmConfig()
+    cfg = ArmConfig()
     d = mujoco.MjData(m)
     mujoco.mj_resetDataKeyframe(m, d, 0)
     mujoco.mj_forward(m, d)

@@ -93,7 +93,8 @@ def run_mode(mode, args, work: Path) -> dict:
     from relaff_jax.config import override
     from relaff_jax.data.store import chunk_path, read_chunk
     from relaff_jax.data.tasks import feature_chunk, rollout_chunk
-    from relaff_jax.learn import experiment_preset, run_experiment, synthetic_datasets
+    from relaff_jax.config.experiment import experiment_preset
+    from relaff_jax.learn import run_experiment, synthetic_datasets
     from relaff_jax.stages.features import default_feature_factory
     from relaff_jax.stages.generate import default_rollout_factory
 
@@ -166,7 +167,8 @@ def project(row: dict, nine: tuple | None = None) -> str:
     time on one core is its CPU time (XLA may spread a task over both cores here, and the
     machine's other load stretches its wall time); the wall-time basis is given beside it.
     ``nine``: (CPU s, wall s) per rollout to use instead of the one action's (``--nine-actions``)."""
-    from relaff_jax.learn import experiment_preset, forests_per_space
+    from relaff_jax.config.experiment import experiment_preset
+    from relaff_jax.learn import forests_per_space
 
     p = PAPER
     cfg = experiment_preset("paper")

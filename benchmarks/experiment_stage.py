@@ -50,7 +50,7 @@ def worker(out: str, spaces: list[str], samples: int, reps: int, wall: bool = Fa
     from relaff_jax.config import override
     from relaff_jax.learn import blocks, sweep
     from relaff_jax.learn.compiled import forest as cf
-    from relaff_jax.learn.config import experiment_preset
+    from relaff_jax.config.experiment import experiment_preset
     from relaff_jax.learn.synthetic import synthetic_datasets
 
     cfg = override(experiment_preset("paper"), {"sizes": SIZES, "reps_pca": reps, "reps_rhf": reps,
@@ -131,9 +131,10 @@ def parts(r: dict) -> dict:
 def project(r: dict, space: str) -> dict:
     """The paper preset's CPU seconds of one space from the slice (module docstring)."""
     from relaff_jax import learn as L
+    from relaff_jax.config.experiment import experiment_preset
 
     p = parts(r)
-    cfg = L.experiment_preset("paper")
+    cfg = experiment_preset("paper")
     plans = [L.condition_plan(list(L.ACTIONS), t, np.asarray(r["corr"]), cfg, space) for t in range(len(L.ACTIONS))]
     per_size = sum(len({rows for _, rows in pl}) for pl in plans) * cfg.reps(space)  # sweep forests per n
     full_s = per_size * len(cfg.sizes)

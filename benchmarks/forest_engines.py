@@ -25,6 +25,7 @@ import time
 import numpy as np
 
 from relaff_jax import learn as L
+from relaff_jax.config.experiment import ExperimentConfig, ForestConfig
 from relaff_jax.learn import compiled
 from relaff_jax.learn import engine as G
 
@@ -36,7 +37,7 @@ def inputs(space: str, n: int, k: int, seed: int = 0, learner: str = "db1"):
     """k learners at size n: (fits [(X, y, seed)], ZT (D0 + k, 4000), colmaps); ``nb``: the
     state alone (18 or 318 columns)."""
     rng = np.random.default_rng(seed)
-    cfg = L.ExperimentConfig()
+    cfg = ExperimentConfig()
     rep = cfg.repeats(space) if learner == "db1" else 0
     m = 4000 + n
     X = rng.normal(size=(m, DIMS[space])).astype(np.float32)
@@ -52,7 +53,7 @@ def inputs(space: str, n: int, k: int, seed: int = 0, learner: str = "db1"):
 
 def time_engine(engine: str, fits, ZT, maps, chunk: int = 256) -> tuple[float, float, np.ndarray]:
     """(fit s, evaluation s, predictions (k, 4000)) for the k forests."""
-    cfg = L.ForestConfig(engine=engine)
+    cfg = ForestConfig(engine=engine)
     t_fit = t_eval = 0.0
     preds = []
     step = 1 if engine == "sklearn" else chunk
@@ -112,7 +113,7 @@ def main() -> None:
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     res = {}
     for s in args.spaces:
-        cols = DIMS[s] + (L.ExperimentConfig().repeats(s) if args.learner == "db1" else 0)
+        cols = DIMS[s] + (ExperimentConfig().repeats(s) if args.learner == "db1" else 0)
         for n in args.sizes:
             r = res[(s, n)] = measure(s, n, args.forests, args.sklearn_forests, args.rounds, args.learner)
             (cf, ce), (ff, fe), (sf, se) = r["compiled"], r["fast"], r["sklearn"]

@@ -32,6 +32,7 @@ def worker(cells: list[tuple[str, int]], k: int, reps: int) -> None:
     from forest_engines import inputs
 
     from relaff_jax import learn as L
+    from relaff_jax.config.experiment import ForestConfig
     from relaff_jax.learn.compiled import forest as cf
 
     kern = cf.kernels()
@@ -46,7 +47,7 @@ def worker(cells: list[tuple[str, int]], k: int, reps: int) -> None:
         return r
 
     kern["build_forests"] = timed
-    cfg = L.ForestConfig(engine="compiled")
+    cfg = ForestConfig(engine="compiled")
     out = {}
     for space, n in cells:
         fits, _, _ = inputs(space, n, k)

@@ -184,9 +184,10 @@ def _forest_times(space: str, n: int, k: int, engine: str) -> tuple[float, float
     import sweep
 
     from relaff_jax import learn as E
+    from relaff_jax.config.experiment import ExperimentConfig
     from relaff_jax.learn import engine as G
 
-    cfg = E.ExperimentConfig()
+    cfg = ExperimentConfig()
     rep = cfg.repeats(space)
     X, y, boot, test_idx, order = sweep._block_inputs(space)
     tr, d0 = order[:n], X.shape[1]
@@ -223,6 +224,7 @@ def features_stage(n: int) -> dict:
     of 32 (the paper preset's feature_batch), after an untimed pass over every chunk (compiles),
     chunks alternating which goes first; checks every output equal."""
     from relaff_jax import perception as pc
+    from relaff_jax.config.perception import PerceptionConfig
     from relaff_jax.perception import from_sim
 
     cfg = templates.ActionConfig()
@@ -234,7 +236,7 @@ def features_stage(n: int) -> dict:
     ids = np.arange(n, dtype=np.int64) + 2**33
     chunks = [{"pair": pair[lo:lo + 32], "qpos_settled": np.asarray(s.qpos)[lo:lo + 32], "rollout_id": ids[lo:lo + 32]}
               for lo in range(0, n, 32)]
-    pcfg = pc.PerceptionConfig()
+    pcfg = PerceptionConfig()
     fns = {"today": from_sim.make_feature_fn(sw, pcfg, 0, culled=False), "new": from_sim.make_feature_fn(sw, pcfg, 0)}
     for f in fns.values():
         for c in chunks:

@@ -32,6 +32,7 @@ import numpy as np
 
 from relaff_jax.sim import objects as lib
 from relaff_jax import perception as P
+from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.sim import world as wd
 
 
@@ -82,7 +83,7 @@ NUMPY_SIGMA = {  # the docs/facts.md "Sensor" formulas again, in numpy (metres)
 }
 
 
-def native_features(m, d, seg, cfg: P.PerceptionConfig, rng, timers: dict | None = None):
+def native_features(m, d, seg, cfg: PerceptionConfig, rng, timers: dict | None = None):
     """The same stages with native tools: mj_multiRay, numpy, Open3D, numpy."""
     import open3d as o3d
 
@@ -180,7 +181,7 @@ def _peak_rss_mb() -> float:
 
 def run_jax(n: int, batch: int, seed: int) -> dict:
     gt, gs, size, xpos, xmat, _ = make_scenes(n, seed)
-    cfg = P.PerceptionConfig()
+    cfg = PerceptionConfig()
     nb = n // batch
     keys = jax.random.split(jax.random.key(seed), n)
     res = {"stages": {}, "compile": {}}
@@ -245,7 +246,7 @@ def override_noise(cfg):
 def run_native(n: int, batch: int, seed: int) -> dict:
     gt, gs, size, xpos, xmat, native = make_scenes(n, seed)
     n = (n // batch) * batch
-    cfg = P.PerceptionConfig()
+    cfg = PerceptionConfig()
     rng = np.random.default_rng(seed)
     native_features(*native[0], gs, cfg, rng)  # warm-up (imports, allocations)
     timers: dict = {}

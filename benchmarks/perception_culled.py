@@ -26,6 +26,7 @@ import numpy as np
 
 import relaff_jax  # noqa: F401  (XLA flags before JAX work)
 from relaff_jax import perception as pc
+from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.perception import from_sim
 from relaff_jax.sim import native_settle, rollouts, templates
 from relaff_jax.sim import scenes as sc
@@ -60,7 +61,7 @@ def main() -> None:
     for i, a in enumerate(args.actions):
         chunks += settled_chunks(sw, a, args.scenes, args.seed + 10 * i, 2**33 + i * args.scenes)
     n = sum(len(c["pair"]) for c in chunks)
-    cfg = pc.PerceptionConfig()
+    cfg = PerceptionConfig()
     fns = {"full": from_sim.make_feature_fn(sw, cfg, args.seed, culled=False),
            "sized": from_sim.make_feature_fn(sw, cfg, args.seed)}
     first = {}

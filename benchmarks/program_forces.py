@@ -20,7 +20,7 @@ import numpy as np
 from relaff_jax.constants import ACTIONS
 from relaff_jax.sim import native_forces
 from relaff_jax.sim import rollouts as R
-from relaff_jax.sim.config import ActionConfig
+from relaff_jax.config.action import ActionConfig
 
 
 def measure(action: str, cfg: ActionConfig, n: int, seed: int) -> dict:

@@ -19,7 +19,7 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS
 from relaff_jax.sim import rollouts as R
-from relaff_jax.sim.config import ActionConfig
+from relaff_jax.config.action import ActionConfig
 from relaff_jax.sim.scenes import RELATIONS
 
 

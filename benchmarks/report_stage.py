@@ -75,7 +75,7 @@ PARTS = [
 def build(root: Path, sizes: int, resamples: int) -> Path:
     """The synthetic experiment folder ``root/results`` (reused when its config matches)."""
     from relaff_jax.config import to_dict
-    from relaff_jax.learn.config import ExperimentConfig
+    from relaff_jax.config.experiment import ExperimentConfig
     from relaff_jax.learn.synthetic_results import write_synthetic_results
 
     cfg = ExperimentConfig(keep_outcomes=True, sizes=tuple(range(2, 2 + sizes)), ci_resamples=resamples)

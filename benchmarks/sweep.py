@@ -29,6 +29,8 @@ import time
 import numpy as np
 
 from relaff_jax import learn as E
+from relaff_jax.config.experiment import ExperimentConfig, experiment_preset
+from relaff_jax.learn.checks import check_config
 from relaff_jax import learn as L
 from relaff_jax.learn import engine as G
 
@@ -49,7 +51,7 @@ def _one_call(space: str, n: int, k: int, seed: int, engine: str = "fast") -> tu
     """k DB1-style learners (one bootstrap input each) at size n; returns (fits, CPU seconds)."""
     from relaff_jax.config import override
 
-    cfg = override(E.ExperimentConfig(), {"forest.engine": engine})  # the engine travels in the config
+    cfg = override(ExperimentConfig(), {"forest.engine": engine})  # the engine travels in the config
     X, y, boot, test_idx, order = _block_inputs(space, seed=seed)
     plan = [(1 + s, (s,)) for s in range(k)]
     c = time.process_time()
@@ -106,13 +108,13 @@ def paper_like_corr() -> np.ndarray:
     return corr
 
 
-def learners_per_target(cfg: E.ExperimentConfig, space: str) -> int:
+def learners_per_target(cfg: ExperimentConfig, space: str) -> int:
     """Distinct forests per (target, rep, size), for target 'move' with the paper-like
     correlations: NB + 8 DB1 + DBn + 28 CB1 + 3 distinct CBn sets = 41 in PCA."""
-    return len({rows for _, rows in E.condition_plan(L.ACTIONS, 1, paper_like_corr(), E.check_config(cfg) or cfg, space)})
+    return len({rows for _, rows in E.condition_plan(L.ACTIONS, 1, paper_like_corr(), check_config(cfg) or cfg, space)})
 
 
-def project(cfg: E.ExperimentConfig, rates: dict, spaces=("pca", "rhf")) -> dict[str, float]:
+def project(cfg: ExperimentConfig, rates: dict, spaces=("pca", "rhf")) -> dict[str, float]:
     """Seconds of sweep per space from measured fits/s at SIZES (piecewise linear in n)."""
     out = {}
     for s in spaces:
@@ -124,7 +126,7 @@ def project(cfg: E.ExperimentConfig, rates: dict, spaces=("pca", "rhf")) -> dict
 def engine_times(space: str, n: int, k_old: int, k_new: int, seed: int = 0) -> dict[str, tuple[float, float]]:
     """Seconds per forest ``{engine: (fit, evaluation on 4000 rows)}`` in this process, for the
     sweep's DB1 learners (one bootstrap input) at size n; checks both predict the same."""
-    cfg = E.ExperimentConfig()
+    cfg = ExperimentConfig()
     rep = cfg.repeats(space)
     X, y, boot, test_idx, order = _block_inputs(space, seed=seed)
     tr, d0 = order[:n], X.shape[1]
@@ -167,7 +169,7 @@ def engine_table(spaces, k_old: int, k_new: int) -> dict:
     print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
     res = {}
     for s in spaces:
-        dims = DIMS[s] + E.ExperimentConfig().repeats(s)
+        dims = DIMS[s] + ExperimentConfig().repeats(s)
         for n in SIZES:
             r = res[(s, n)] = engine_times(s, n, k_old, k_new)
             (of, oe), (nf, ne) = r["sklearn"], r["fast"]
@@ -179,7 +181,7 @@ def engine_table(spaces, k_old: int, k_new: int) -> dict:
 def project_engines(res: dict, spaces, cores: int = 2, measured: dict | None = None) -> None:
     """The paper protocol's sweep on ``cores`` cores: forests_per_space x seconds per forest
     (piecewise linear in n, averaged over the sizes) / cores (one process per core)."""
-    cfg = E.experiment_preset("paper")
+    cfg = experiment_preset("paper")
     print(f"| space | forests (forests_per_space) | sklearn, {cores} cores | fast, {cores} cores"
           + (" | fast, measured on all cores |" if measured else " |"))
     print("|---|---:|---:|---:|" + ("---:|" if measured else ""))
@@ -225,7 +227,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|")
     rates, idle = {}, {}
     for s in ("pca", "rhf"):
-        dims = DIMS[s] + E.ExperimentConfig().repeats(s)
+        dims = DIMS[s] + ExperimentConfig().repeats(s)
         for n in SIZES:
             one, cpu1 = measure(s, n, 1, args.calls)
             many, cpun = measure(s, n, allj, args.calls)
@@ -237,12 +239,12 @@ def main() -> None:
     print("Projections: 'measured' uses the all-core wall rates above (as loaded as the machine was); "
           "'idle' uses CPU time per fit spread over all cores (an unshared machine).")
     print()
-    cfg0 = E.ExperimentConfig()
+    cfg0 = ExperimentConfig()
     prep = {s: prep_seconds(s, bool({"CB1", "CBn"} & set(cfg0.conditions(s)))) for s in ("pca", "rhf")}
     print("| preset | space | learners per (target, rep, n) | sizes | reps | forests | sweep, measured | sweep, idle | + sources & categories (one core) |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name in ("quick", "paper"):
-        cfg = E.experiment_preset(name)
+        cfg = experiment_preset(name)
         proj, pidle = project(cfg, rates), project(cfg, idle)
         for s in ("pca", "rhf"):
             nf = 9 * learners_per_target(cfg, s) * len(cfg.sizes) * cfg.reps(s)
@@ -250,12 +252,12 @@ def main() -> None:
                   f"{_hms(proj[s])} | {_hms(pidle[s])} | {_hms(prep[s])} |")
         print(f"| {name} | total | | | | | **{_hms(sum(proj.values()) + sum(prep.values()))}** | "
               f"**{_hms(sum(pidle.values()) + sum(prep.values()))}** | |")
-    cfg = E.experiment_preset("paper")
-    both = E.ExperimentConfig(conditions_rhf=E.FAMILIES)
+    cfg = experiment_preset("paper")
+    both = ExperimentConfig(conditions_rhf=E.FAMILIES)
     print()
     print(f"Paper protocol (idle projection) with every condition also in RHF: {_hms(sum(project(both, idle).values()) + sum(prep.values()))}; "
           f"with the 36 categories including the target's own (categories_with_target): "
-          f"{_hms(sum(project(E.ExperimentConfig(categories_with_target=True), idle).values()) + sum(prep.values()))}.")
+          f"{_hms(sum(project(ExperimentConfig(categories_with_target=True), idle).values()) + sum(prep.values()))}.")
     print(f"Paper: ~1.5 weeks of random forest learning on a 32-process cluster. "
           f"Load average after: {os.getloadavg()[0]:.2f}")
     print()

@@ -11,8 +11,9 @@ Affordances of Object Pairs using Transfer". One subpackage per stage, in pipeli
 - ``report``: Table II, findings, figures, the report document;
 - ``reproduce``: the whole study as one resumable command; ``cli``: the ``relaff`` command.
 
-Shared by all: ``constants`` (actions, relations, segment codes), ``runconfig`` (the one
-config tree), ``config`` (overrides), ``errors`` (``UserError``), ``io`` (atomic writes),
+Shared by all: ``constants`` (actions, relations, segment codes), ``config`` (the one config
+tree: every node, its checks, the presets and the random streams), ``stages`` (the four stages'
+one contract), ``errors`` (``UserError``), ``io`` (atomic writes),
 ``provenance`` (versions, seeds).
 """
 from __future__ import annotations

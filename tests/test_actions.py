@@ -226,9 +226,9 @@ def test_cli_generate_bad_input(tmp_path):
     cli_sim.register(parser.add_subparsers())
     (tmp_path / "file").write_text("x")
     for argv, msg in ((["generate", "fly", "--samples", "10", "--out", str(tmp_path / "a")], "unknown action 'fly'"),
-                      (["generate", "lift", "--samples", "1", "--out", str(tmp_path / "b")], "--samples (dataset.n_samples) must be >= 2"),
+                      (["generate", "lift", "--samples", "1", "--out", str(tmp_path / "b")], "config key '--samples (dataset.n_samples)' must be an integer in [2, "),
                       (["generate", "lift", "--samples", "8", "--batch", "0", "--out", str(tmp_path / "c")],
-                       "--batch (dataset.rollout_batch) must be >= 1"),
+                       "config key '--batch (dataset.rollout_batch)' must be an integer in [1, "),
                       # checked before any simulation: a file, or a folder below a file
                       (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file")], "is a file, not a folder"),
                       (["generate", "take", "--samples", "8", "--out", str(tmp_path / "file" / "d")],
@@ -268,7 +268,7 @@ def test_move_and_take_rules_hand_worked():
     assert not label("move", [0.05, 0, 0], [0, 0, 0])  # below the 8 cm threshold
     assert label("take", [0, 0, 0.2], [0, 0, 0])
     assert not label("take", [0, 0, 0.2], [0, 0, 0.2])  # lifted with its container: not taken
-    with pytest.raises(ValueError, match="action.move_rule must be apart or both, got 'sideways'"):  # the node refuses it
+    with pytest.raises(ValueError, match="config key 'action.move_rule' must be one of apart, both, got 'sideways'"):  # the node refuses it
         label("move", [0.2, 0, 0], [0, 0, 0], move_rule="sideways")
 
 

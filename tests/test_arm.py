@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from relaff_jax.sim import arm as A
+from relaff_jax.config.action import ArmConfig
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +26,7 @@ def arm(model):
 
 @pytest.fixture(scope="module")
 def ik(arm):
-    cfg = A.ArmConfig()
+    cfg = ArmConfig()
     return jax.jit(jax.vmap(lambda t, q: A.solve_ik(arm, cfg, t, q)))
 
 
@@ -131,7 +132,7 @@ def test_far_target_is_unreachable_and_limits_hold(arm, ik):
 
 @pytest.mark.slow  # another IK path compile
 def test_ik_path_is_continuous(arm):
-    cfg = A.ArmConfig()
+    cfg = ArmConfig()
     pts = jnp.array([[0.7, 0.2, 0.3], [0.7, 0.2, 0.05], [0.7, 0.2, 0.4], [0.5, -0.2, 0.4]])
     targets = jax.vmap(A.top_down_target)(pts, jnp.full(4, 0.3))
     res = jax.jit(lambda t: A.solve_ik_path(arm, cfg, t, jnp.zeros(6)))(targets)
@@ -179,7 +180,7 @@ def test_ik_path_solves_only_the_used_targets(arm):
     """``solve_ik_path(..., n_used)`` (the plan solves only the targets its template uses):
     the solved rows equal a full solve bit for bit, the skipped ones hold the last solution
     and are never reachable. n_used is a traced argument, one value for the batch (vmap)."""
-    cfg = A.ArmConfig()
+    cfg = ArmConfig()
     rng = np.random.default_rng(0)
     pos = np.stack([rng.uniform([0.35, -0.3, 0.05], [0.6, 0.3, 0.3], (6, 3)) for _ in range(3)]).astype(np.float32)
     targets = jax.vmap(jax.vmap(A.top_down_target))(jnp.asarray(pos))  # (3 scenes, 6 targets)
@@ -204,7 +205,7 @@ def test_lm_solver_reaches_the_same_targets(model, arm):
 
     from relaff_jax.sim import templates
 
-    cfg = dataclasses.replace(A.ArmConfig(), ik_solver="lm")
+    cfg = dataclasses.replace(ArmConfig(), ik_solver="lm")
     ik_lm = jax.jit(jax.vmap(lambda t, q: A.solve_ik(arm, cfg, t, q)))
     targets = random_workspace_targets(np.random.default_rng(1), 8)
     res = ik_lm(targets, jnp.zeros((8, 6)))

@@ -12,6 +12,7 @@ import pytest
 from mujoco import mjx
 
 from relaff_jax.sim import arm as A
+from relaff_jax.config.action import ArmConfig
 
 # home->above, dwell, ->down, close, ->lift, ->tilt, dwell (control steps of 4 ms)
 SEG = (200, 50, 150, 75, 200, 200, 50)
@@ -38,7 +39,7 @@ def waypoint_targets(x, y, off):
 @pytest.fixture(scope="module")
 def sim():
     m = mujoco.MjModel.from_xml_path(str(A.arm_test_xml_path()))
-    arm, cfg = A.arm_from_model(m), A.ArmConfig()
+    arm, cfg = A.arm_from_model(m), ArmConfig()
     d = mujoco.MjData(m)
     mujoco.mj_resetDataKeyframe(m, d, 0)
     mujoco.mj_forward(m, d)

@@ -25,7 +25,7 @@ def no_work(*args, **kwargs):
 
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
-    from relaff_jax.learn.config import ExperimentConfig
+    from relaff_jax.config.experiment import ExperimentConfig
     from relaff_jax.learn.synthetic_results import write_synthetic_results
 
     cfg = ExperimentConfig(sizes=(2, 4, 10), reps_pca=2, reps_rhf=2, test_size=24, ci_resamples=10)
@@ -45,7 +45,7 @@ def _report(root: Path, name: str, **override) -> Path:
 
 
 def _sidecar(root: Path, name: str, **fields) -> Path:
-    from relaff_jax.data.config import FORMAT, FORMAT_VERSION, SIDECAR
+    from relaff_jax.data.layout import FORMAT, FORMAT_VERSION, SIDECAR
 
     d = root / name
     d.mkdir()
@@ -377,7 +377,7 @@ def test_a_full_disk_anywhere_is_one_line_from_the_cli(tmp_path, capsys, monkeyp
 
 def test_the_dataset_writer_lock_never_follows_a_symlink(tmp_path):
     from relaff_jax.data import DatasetError
-    from relaff_jax.data.config import LOCK
+    from relaff_jax.data.layout import LOCK
     from relaff_jax.data.store import writer_lock
 
     target = tmp_path / "victim"

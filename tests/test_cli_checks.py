@@ -122,7 +122,7 @@ def test_export_uses_the_one_writability_check(monkeypatch, capsys, tmp_path):
 def _run_folder(tmp_path):
     """A run folder holding only the run log of the tiny preset, seed 0 (no stage ran)."""
     from relaff_jax.reproduce.folder import Paths, open_log
-    from relaff_jax.runconfig import preset
+    from relaff_jax.config import preset
 
     out = tmp_path / "run"
     open_log(Paths(out), "tiny", preset("tiny"), 0)
@@ -283,7 +283,7 @@ def test_a_run_begun_before_a_setting_existed_resumes_at_its_default(tmp_path):
 
     from relaff_jax.config import override
     from relaff_jax.reproduce.folder import Paths, ReproduceError, open_log
-    from relaff_jax.runconfig import preset
+    from relaff_jax.config import preset
 
     out = _run_folder(tmp_path)
     log = _json.loads((out / "run.json").read_text())

@@ -4,7 +4,7 @@ import dataclasses
 
 import pytest
 
-from relaff_jax import runconfig
+from relaff_jax import config as runconfig
 from relaff_jax.config import ConfigError, override, parse_set, to_dict
 from relaff_jax.errors import UserError
 
@@ -19,8 +19,8 @@ def test_parse_set_reads_json_values_and_keeps_strings():
 
 def test_tree_has_every_stage_and_sets_nested_keys():
     cfg = runconfig.RunConfig()
-    assert [f.name for f in dataclasses.fields(cfg)] == ["action", "perception", "dataset", "experiment", "reproduce",
-                                                       "real"]
+    assert [f.name for f in dataclasses.fields(cfg)] == ["seed", "action", "perception", "dataset", "experiment",
+                                                       "reproduce", "real"]
     new = runconfig.resolve(cfg, {"perception.voxel.size": 0.02, "action.scene.settle_steps": 300,
                                   "dataset.n_samples": 50, "experiment.forest.max_trees": 7})
     assert new.perception.voxel.size == 0.02
@@ -79,8 +79,8 @@ def test_result_differences_ignore_the_forest_engine_and_analysis_keys_a_folder_
     never a difference; an analysis-only key is one only when the stored config has it; any
     other key, nested or not, is."""
     from relaff_jax.io import jsonable
-    from relaff_jax.learn import ExperimentConfig
-    from relaff_jax.learn.config import result_differences
+    from relaff_jax.config.experiment import ExperimentConfig
+    from relaff_jax.config.experiment import result_differences
 
     cfg = ExperimentConfig()
     stored = jsonable(to_dict(cfg))
@@ -102,7 +102,8 @@ def test_a_criterion_the_engine_cannot_build_is_refused_when_the_config_is_built
     scikit-learn's own validation in the whole tree's check)."""
     from relaff_jax import cli
     from relaff_jax.errors import UserError
-    from relaff_jax.learn import ExperimentConfig, ForestConfig, check_config
+    from relaff_jax.config.experiment import ExperimentConfig, ForestConfig
+    from relaff_jax.learn.checks import check_config
 
     with pytest.raises(UserError, match="fast engine builds gini trees only"):
         override(ExperimentConfig(), {"forest.criterion": "entropy"})
@@ -127,7 +128,8 @@ def test_the_forest_node_refuses_what_scikit_learn_refuses(key):
     """ForestConfig checks itself when it is made, without importing scikit-learn; on this grid
     it accepts exactly the values RandomForestClassifier's own parameter validation accepts
     (the tree counts reach scikit-learn as n_estimators = min(max_trees, base_trees + ...))."""
-    from relaff_jax.learn.forests import ForestConfig, make_forest
+    from relaff_jax.config.experiment import ForestConfig
+    from relaff_jax.learn.forests import make_forest
 
     for value in FOREST_GRID[key]:
         base = ForestConfig(engine="sklearn")  # the only engine that builds every criterion

@@ -10,6 +10,7 @@ import sklearn
 from sklearn.ensemble import RandomForestClassifier
 
 from relaff_jax import learn as L
+from relaff_jax.config.experiment import ForestConfig
 from relaff_jax.config import override
 from relaff_jax.errors import UserError
 from relaff_jax.learn import blocks, compiled, engine
@@ -120,7 +121,7 @@ def _same_trees(forest, estimators):
             np.testing.assert_array_equal(mine[k], getattr(tree, k), err_msg=f"tree {t}: {k}")
 
 
-def _check(X, y, seed, cfg=L.ForestConfig(), m=300):
+def _check(X, y, seed, cfg=ForestConfig(), m=300):
     ref = L.fit_forest(X, y, seed, cfg)
     fast = fit_trees(X, y, seed, cfg)
     comp = compiled.fit(X, y, seed, cfg)
@@ -169,7 +170,7 @@ def test_large_n_nodes_between_the_sort_paths():
     """N = 1000 (16 bitmap words, kept in memory): nodes of m <= 12 samples (insertion sort),
     12 < m < 16 (insertion sort: the bitmap would be longer than the node) and m >= 16
     (bitmap) in the same trees, with ties."""
-    _check(*_data(1000, 3, 0, "ties"), seed=5, cfg=override(L.ForestConfig(), {"base_trees": 4, "max_trees": 4}), m=100)
+    _check(*_data(1000, 3, 0, "ties"), seed=5, cfg=override(ForestConfig(), {"base_trees": 4, "max_trees": 4}), m=100)
 
 
 @pytest.mark.parametrize("cfg", [
@@ -181,13 +182,13 @@ def test_large_n_nodes_between_the_sort_paths():
 def test_parameters_match_sklearn(cfg):
     # 0.05 x 40 = 2 draws per tree: scikit-learn warns, and so does the engine
     with pytest.warns(UserWarning) if cfg.get("max_samples") == 0.05 else contextlib.nullcontext():
-        _check(*_data(40, 24, 2), seed=3, cfg=override(L.ForestConfig(), cfg))
+        _check(*_data(40, 24, 2), seed=3, cfg=override(ForestConfig(), cfg))
 
 
 @pytest.mark.parametrize("kind, n", [("plain", 2), ("plain", 3), ("ties", 25), ("plain", 100), ("one_class", 10)])
 def test_subsample_reading_matches_sklearn(kind, n):
     """The 2/3 subsample without replacement: the same trees in every engine."""
-    _check(*_data(n, 24, 4, kind), seed=11, cfg=override(L.ForestConfig(), {"per_tree": "subsample"}))
+    _check(*_data(n, 24, 4, kind), seed=11, cfg=override(ForestConfig(), {"per_tree": "subsample"}))
 
 
 @pytest.mark.slow
@@ -225,31 +226,31 @@ def test_run_block_same_accuracies_with_both_engines(monkeypatch):
     boot[3] = np.nan  # a row this space did not compute: unused, so harmless
     plan = [(0, ()), (1, (0,)), (2, (1,)), (3, (0, 1, 2)), (4, (0,))]
     args = (X, y, boot, plan, np.arange(400, 430), np.arange(400), [2, 4, 25], 6, 6)
-    ref = blocks.run_block(*args, L.ForestConfig(engine="sklearn"), (1, 2))
-    got = blocks.run_block(*args, L.ForestConfig(engine="fast"), (1, 2))
+    ref = blocks.run_block(*args, ForestConfig(engine="sklearn"), (1, 2))
+    got = blocks.run_block(*args, ForestConfig(engine="fast"), (1, 2))
     assert np.array_equal(ref, got, equal_nan=True)
     assert np.isnan(got[5]).all()
     assert np.array_equal(got[4], got[1])
     kw = dict(loo_size=25, loo_conditions=(1, 2, 3))  # the leave-one-out forests too
-    fast = blocks.block_outcomes(*args, L.ForestConfig(engine="fast"), (1, 2), **kw)
-    comp = blocks.block_outcomes(*args, L.ForestConfig(engine="compiled"), (1, 2), **kw)
+    fast = blocks.block_outcomes(*args, ForestConfig(engine="fast"), (1, 2), **kw)
+    comp = blocks.block_outcomes(*args, ForestConfig(engine="compiled"), (1, 2), **kw)
     assert np.array_equal(comp["acc"], ref, equal_nan=True)
     for k in fast:
         assert np.array_equal(fast[k], comp[k], equal_nan=True), k
 
 
 def test_engine_setting():
-    from relaff_jax import runconfig
+    from relaff_jax import config as runconfig
 
-    assert L.ForestConfig().engine == "fast"
+    assert ForestConfig().engine == "fast"
     cfg = runconfig.resolve(None, {"experiment.forest.engine": "sklearn"}).experiment.forest
     assert isinstance(engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, cfg), RandomForestClassifier)
     cfg = runconfig.resolve(None, {"experiment.forest.engine": "compiled"}).experiment.forest
     L.check_forest_config(cfg)
     assert isinstance(engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, cfg), compiled.Forest)
-    with pytest.raises(UserError, match="experiment.forest.engine 'turbo'"):  # refused when the node is made
-        L.ForestConfig(engine="turbo")
-    turbo = L.ForestConfig()
+    with pytest.raises(UserError, match="config key 'experiment.forest.engine' must be one of fast, sklearn, compiled, got 'turbo'"):  # refused when the node is made
+        ForestConfig(engine="turbo")
+    turbo = ForestConfig()
     object.__setattr__(turbo, "engine", "turbo")  # past the node's check: the engine refuses it too
     with pytest.raises(UserError, match="forest engine 'turbo'"):
         engine.fit(np.eye(3, dtype=np.float32), np.array([0, 1, 1]), 0, turbo)
@@ -262,9 +263,9 @@ def test_engine_setting():
     with pytest.raises(ValueError, match="3 classes"):
         compiled.fit(X, np.array([0, 1, 2]), 0)
     with pytest.raises(ValueError, match="max_features"):
-        compiled.fit(X, np.array([0, 1, 1]), 0, L.ForestConfig(max_features="5"))
+        compiled.fit(X, np.array([0, 1, 1]), 0, ForestConfig(max_features="5"))
     with pytest.raises(ValueError, match="gini"):
-        compiled.fit(X, np.array([0, 1, 1]), 0, L.ForestConfig(criterion="entropy"))
+        compiled.fit(X, np.array([0, 1, 1]), 0, ForestConfig(criterion="entropy"))
     with pytest.raises(ValueError, match=r"\(N, 3\)"):
         compiled.predict_proba(compiled.fit(X, np.array([0, 1, 1]), 0), np.eye(2, dtype=np.float32))
 

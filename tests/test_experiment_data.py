@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import data as ds
+from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax import learn as E
 from relaff_jax.cli import learn as cli_learn
 
@@ -39,7 +40,7 @@ def test_experiment_reads_dataset_folders(tmp_path):
     for i, action in enumerate(("lift", "take", "pour")):
         p = tmp_path / action
         ds.generate_dataset(p, action, 120, _rollout_fn, seed=i, batch=64, progress=False,
-                            dataset_config=ds.DatasetConfig(max_rollouts=4000, distance_bins=4, borrow_fraction=0.5))
+                            dataset_config=DatasetConfig(max_rollouts=4000, distance_bins=4, borrow_fraction=0.5))
         ds.add_features(p, _features, batch=64, progress=False)
         dirs.append(str(p))
     loaded = E.load_datasets(dirs)

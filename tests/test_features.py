@@ -8,6 +8,7 @@ import pytest
 
 from relaff_jax import cli, load_dataset
 from relaff_jax import data as dataset
+from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.errors import UserError
 from relaff_jax.perception import from_sim as features
 from relaff_jax.sim import scenes as sc
@@ -54,7 +55,7 @@ def small_dataset(tmp_path_factory, scene_world, settle):
     path = tmp_path_factory.mktemp("ds") / "lift"
     dataset.generate_dataset(path, "lift", 8, scene_rollout_fn(scene_world, settle), seed=1,
                              batch=B, progress=False,
-                             dataset_config=dataset.DatasetConfig(borrow_fraction=1.0))
+                             dataset_config=DatasetConfig(borrow_fraction=1.0))
     return path
 
 

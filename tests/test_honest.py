@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import learn as E
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.config import override
 from relaff_jax.report import table2_csv
 
@@ -21,7 +22,7 @@ SIZES = [2, 4, 10, 25]
 
 
 def _cfg(**kw):
-    return override(E.ExperimentConfig(), dict({"sizes": tuple(SIZES)}, **kw))
+    return override(ExperimentConfig(), dict({"sizes": tuple(SIZES)}, **kw))
 
 
 def _res(acc, loo=None):
@@ -141,7 +142,8 @@ def test_online_choice_differs_from_the_offline_one_in_the_known_way():
 
 
 def test_leave_one_out_accuracy_matches_sklearn_forests_on_nine_samples():
-    from relaff_jax.learn.forests import ForestConfig, fit_forest, predict_class
+    from relaff_jax.config.experiment import ForestConfig
+    from relaff_jax.learn.forests import fit_forest, predict_class
     from relaff_jax.provenance import derive_seed
 
     rng = np.random.default_rng(0)

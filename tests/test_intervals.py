@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import learn as E
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.config import override
 
 ACTS = ["lift", "pull", "take"]
@@ -13,7 +14,7 @@ SIZES = [2, 4, 10, 25]
 
 
 def _cfg(**kw):
-    return override(E.ExperimentConfig(), dict({"sizes": tuple(SIZES)}, **kw))
+    return override(ExperimentConfig(), dict({"sizes": tuple(SIZES)}, **kw))
 
 
 def _res(correct, n_test, n_pos):

@@ -7,14 +7,17 @@ import numpy as np
 import pytest
 
 from relaff_jax import learn as L
+from relaff_jax.config.experiment import ExperimentConfig, ForestConfig
+from relaff_jax.learn.checks import check_config
 from relaff_jax.config import override
 from relaff_jax.errors import UserError
 from relaff_jax.learn import blocks
 from relaff_jax.learn.correlation import correlation_with
-from relaff_jax.learn.forests import max_features_value
-from relaff_jax.learn.states import RHF_PARTS, StateConfig, check_state_config, state_features, state_width
+from relaff_jax.config.experiment import max_features_value
+from relaff_jax.config.experiment import RHF_PARTS, StateConfig
+from relaff_jax.learn.states import state_features, state_width
 from relaff_jax.learn.sweep import subset_codes as subsets_of
-from relaff_jax.perception.config import RHF_NAMES
+from relaff_jax.config.perception import RHF_NAMES
 
 
 def _pca():
@@ -51,18 +54,18 @@ def test_rhf_parts_and_bins_only():
     part = state_features(pca, rhf, "lift", "rhf", StateConfig(rhf_pca=False, rhf_parts=("dist", "dx")))
     np.testing.assert_array_equal(part, np.concatenate([rhf[:, 150:200], rhf[:, 0:50]], axis=1))
     assert state_width("rhf", StateConfig(rhf_pca=False, rhf_parts=("dist", "dx"))) == 100
-    with pytest.raises(UserError, match="rhf_parts must be distinct values"):
-        check_state_config(StateConfig(rhf_parts=("dist", "height")))
-    with pytest.raises(UserError, match="extra must be distinct values"):
-        check_state_config(StateConfig(extra=("relative", "relative")))
-    with pytest.raises(UserError, match="extra must be distinct"):
-        L.check_config(override(L.ExperimentConfig(), {"state.extra": ("reach", "colour")}))
+    with pytest.raises(UserError, match="rhf_parts' must be a list of at least 1 values, distinct"):
+        StateConfig(rhf_parts=("dist", "height"))
+    with pytest.raises(UserError, match="extra' must be a list of at least 0 values, distinct"):
+        StateConfig(extra=("relative", "relative"))
+    with pytest.raises(UserError, match="'experiment.state.extra' must be a list of at least 0 values, distinct"):
+        check_config(override(ExperimentConfig(), {"state.extra": ("reach", "colour")}))
 
 
 def test_max_features_strings():
     assert [max_features_value(v) for v in ("sqrt", "log2", None, "6", "0.5")] == ["sqrt", "log2", None, 6, 0.5]
-    with pytest.raises(UserError, match="experiment.forest.max_features must be sqrt, log2"):
-        override(L.ExperimentConfig(), {"forest.max_features": "most"})  # refused when the node is made
+    with pytest.raises(UserError, match="'experiment.forest.max_features' must be one of sqrt, log2"):
+        override(ExperimentConfig(), {"forest.max_features": "most"})  # refused when the node is made
 
 
 def test_correlation_with_matches_numpy():
@@ -97,7 +100,7 @@ def test_block_file_holds_subset_accuracies(tmp_path):
     boot = np.zeros((1, 60), np.float32)
     test_idx, order = np.arange(40, 60), np.arange(40)
     subset = np.where(y[test_idx], 0, np.where(np.arange(20) % 2, 1, 2))
-    cfg = override(L.ForestConfig(), {"base_trees": 5, "max_trees": 5})
+    cfg = override(ForestConfig(), {"base_trees": 5, "max_trees": 5})
     out = blocks.run_block_to_file(str(tmp_path / "b.npz"), X, y, boot, [(0, ())], order, test_idx, [10, 20], 1, 2,
                                    cfg, (0, 1), keep_outcomes=False, subset=subset)
     back = blocks.read_block(tmp_path / "b.npz", 2, [10, 20])

@@ -6,6 +6,7 @@ import pytest
 from sklearn.ensemble import RandomForestClassifier
 
 from relaff_jax import learn as L
+from relaff_jax.config.experiment import ForestConfig
 from relaff_jax.config import override
 
 
@@ -43,7 +44,7 @@ def test_fitted_forest_matches_plain_sklearn_and_tries_sqrt_m_features():
 
 
 def test_max_samples_reading_is_a_parameter():
-    cfg = override(L.ForestConfig(), {"max_samples": 2 / 3})
+    cfg = override(ForestConfig(), {"max_samples": 2 / 3})
     assert L.make_forest(30, 0, cfg).max_samples == pytest.approx(2 / 3)
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import perception as P
+from relaff_jax.config.perception import CameraConfig, PerceptionConfig
 from relaff_jax.config import override
 from relaff_jax.errors import UserError
 
@@ -49,7 +50,7 @@ def test_smallest_eigenvector_matches_numpy():
 
 def _plane_image(width, height, normal, d, vfov_deg=43.0):
     """Organized cloud (H*W, 3) of the camera's rays hitting the plane n . x = d (robot frame)."""
-    cam = P.CameraConfig(width=width, height=height, vfov_deg=vfov_deg)
+    cam = CameraConfig(width=width, height=height, vfov_deg=vfov_deg)
     origin, dirs = P.camera_rays(cam)
     n = np.asarray(normal, np.float64) / np.linalg.norm(normal)
     t = (d - n @ origin) / (dirs @ n)
@@ -107,11 +108,11 @@ def test_normals_config_errors_name_the_setting(tmp_path):
     for bad, word in (({"normals.source": "mesh"}, "normals.source"), ({"normals.window": 4}, "normals.window"),
                       ({"normals.radius": 0.0}, "normals.radius")):
         with pytest.raises(UserError, match=word):
-            P.validate_config(override(P.PerceptionConfig(), bad))
-    from relaff_jax.real.config import NormalConfig, RealConfig, validate_real_config
+            override(PerceptionConfig(), bad)
+    from relaff_jax.config.real import NormalConfig, RealConfig
 
     with pytest.raises(UserError, match="normals.method"):
-        validate_real_config(RealConfig(normals=NormalConfig(method="grid")))
+        RealConfig(normals=NormalConfig(method="grid"))
     from relaff_jax.real.sim_relations import SimRelationConfig, SimSensor, build_sim_relations
 
     with pytest.raises(UserError, match="normals"):
@@ -119,7 +120,7 @@ def test_normals_config_errors_name_the_setting(tmp_path):
 
 
 def test_study_states_which_normals_each_side_used():
-    from relaff_jax.real.config import NormalConfig, RealConfig
+    from relaff_jax.config.real import NormalConfig, RealConfig
     from relaff_jax.real.sim_relations import SimRelationConfig, normals_note
 
     assert normals_note(SimRelationConfig(), RealConfig()) == \
@@ -152,7 +153,7 @@ def test_sim_cloud_normals_agree_with_ray_knn_and_open3d():
                                [1.0, -0.1, 0.0, np.cos(0.3), 0, 0, np.sin(0.3)])
     scene = P.make_scene(m.geom_type, seg, m.geom_size, d.geom_xpos, d.geom_xmat)
     res = {}
-    cfg = override(P.PerceptionConfig(), {"noise.model": "none", "normals.source": "cloud"})
+    cfg = override(PerceptionConfig(), {"noise.model": "none", "normals.source": "cloud"})
     clean = jax.jit(lambda s, k: P.point_cloud(s, k, cfg)["pixels"])(scene, jax.random.key(3))
     ok = np.asarray(clean["pixel"]) >= 0
     ray = np.asarray(P.surface_normals(scene, clean["points"], clean["geom"]))[ok]  # the "ray" source
@@ -211,7 +212,7 @@ def test_batched_features_with_cloud_normals_keep_pca_and_change_rhf():
     from test_perception import _library_scene
 
     s = _library_scene("ball", "bowl", [1.0, 0.35, 0.0, 1, 0, 0, 0], [1.0, -0.1, 0.0, np.cos(0.3), 0, 0, np.sin(0.3)])
-    base = override(P.PerceptionConfig(), {"camera.width": 320, "camera.height": 240})
+    base = override(PerceptionConfig(), {"camera.width": 320, "camera.height": 240})
     out = {}
     for src in ("ray", "cloud"):
         f = P.make_batched_features(s[0].geom_type, s[2], override(base, {"normals.source": src}))
@@ -229,7 +230,7 @@ def test_feature_folders_record_cloud_normals_and_keep_old_ray_folders_valid():
     option existed; cloud normals are recorded, so the two never share a feature folder."""
     import dataclasses
 
-    from relaff_jax.perception import NormalsConfig, PerceptionConfig, stored_config
+    from relaff_jax.config.perception import NormalsConfig, PerceptionConfig, stored_config
     from relaff_jax.stages.features import feature_config
 
     ray = feature_config(0, PerceptionConfig())["perception"]

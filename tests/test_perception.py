@@ -13,13 +13,14 @@ import numpy as np
 import pytest
 
 from relaff_jax import perception as P
+from relaff_jax.config.perception import CameraConfig, CullConfig, PerceptionConfig, RHFConfig, VoxelConfig
 from relaff_jax.config import ConfigError, override
 
-SMALL = P.PerceptionConfig(
-    camera=P.CameraConfig(width=160, height=120),
-    voxel=P.VoxelConfig(max_object_pixels=8192, max_voxels=2048),
-    rhf=P.RHFConfig(chunk=128),
-    cull=P.CullConfig(tile=8, max_tiles=300),
+SMALL = PerceptionConfig(
+    camera=CameraConfig(width=160, height=120),
+    voxel=VoxelConfig(max_object_pixels=8192, max_voxels=2048),
+    rhf=RHFConfig(chunk=128),
+    cull=CullConfig(tile=8, max_tiles=300),
 )
 
 # ----------------------------------------------------------------------------- scenes
@@ -105,7 +106,7 @@ def chain(random_scenes):
     return dict(f=f, batch=batch, keys=keys, feats=f(batch.size, batch.xpos, batch.xmat, keys))
 
 
-def mj_reference(m, d, cam: P.CameraConfig):
+def mj_reference(m, d, cam: CameraConfig):
     """Native MuJoCo: geom id (P,), depth (P,) (dist along rays whose camera-z is 1), normal."""
     origin, dirs = P.camera_rays(cam)
     n = dirs.shape[0]
@@ -121,7 +122,7 @@ def mj_reference(m, d, cam: P.CameraConfig):
 
 
 def test_intrinsics_and_pose_follow_robwork():
-    cam = P.CameraConfig()
+    cam = CameraConfig()
     fx, fy, cx, cy = P.intrinsics(cam)
     assert fx == pytest.approx(240 / np.tan(np.deg2rad(21.5)))
     assert fx == pytest.approx(609.3, abs=0.05)
@@ -142,7 +143,7 @@ def test_intrinsics_and_pose_follow_robwork():
 
 def test_default_camera_sees_the_workspace():
     """Workspace half-disc x > 0, r <= 1.8 m on the table: most of it is in view."""
-    cam = P.CameraConfig()
+    cam = CameraConfig()
     fx, fy, cx, cy = P.intrinsics(cam)
     pos, rot = P.camera_frame(cam)
     r, th = np.meshgrid(np.linspace(0.2, 1.8, 30), np.linspace(-np.pi / 2, np.pi / 2, 60))
@@ -215,7 +216,7 @@ def test_render_objects_equals_full_render(random_scenes, rendered):
 
 
 def test_robwork_sigma_hand_worked():
-    cam = P.CameraConfig()
+    cam = CameraConfig()
     # Pixel (row 239, col 319) has r = sqrt(0.5^2 + 0.5^2) px; d = 3000 mm.
     r = np.hypot(0.5, 0.5)
     d = 3000.0
@@ -226,7 +227,7 @@ def test_robwork_sigma_hand_worked():
     assert float(P.depth_noise_sigma(jnp.float32(1.4), jnp.int32(0), cam, "nguyen")) == pytest.approx(0.0012 + 0.0019)
     # r is measured in 640-wide pixels at any resolution: a 160x120 pixel centre at
     # (u + 0.5, v + 0.5) is 4x farther out in 640-pixel units.
-    small = P.CameraConfig(width=160, height=120)
+    small = CameraConfig(width=160, height=120)
     u, v = 20, 10
     r_small = float(P.pixel_radius(jnp.int32(v * 160 + u), small))
     assert r_small == pytest.approx(np.hypot(4 * (u + 0.5) - 320, 4 * (v + 0.5) - 240), rel=1e-6)
@@ -508,7 +509,7 @@ def test_rhf_matches_numpy_double_loop(na_pts, nb_pts, chunk):
     rng = np.random.default_rng(na_pts * 1000 + nb_pts)
     pa, qa = _random_cloud(rng, na_pts, [1.0, 0.1, 0.05], 0.08)
     pb, qb = _random_cloud(rng, nb_pts, [1.1, 0.0, 0.1], 0.2)  # some values beyond the ranges
-    rcfg = P.RHFConfig(chunk=chunk)
+    rcfg = RHFConfig(chunk=chunk)
     V = 256
     pad = lambda x: np.concatenate([x, np.full((V - len(x), 3), 7.0, np.float32)])  # junk past count
     got = jax.jit(lambda *a: P.rhf_histograms(*a, rcfg))(pad(pa), pad(qa), na_pts, pad(pb), pad(qb), nb_pts)
@@ -528,7 +529,7 @@ def test_rhf_hand_worked_pair():
     |d| = 0.128429 in [0, 0.75]: 8.56 -> 8;
     angles in [-pi/300, 299 pi/300]: angle(n_a, n_b) = 60 deg: (1/3 + 1/300) * 50 = 16.83 -> 16;
     angle(n_a, d) = acos(0.065 / 0.128429) = 59.60 deg: (0.33108 + 1/300) * 50 = 16.72 -> 16."""
-    rcfg = P.RHFConfig(chunk=8)
+    rcfg = RHFConfig(chunk=8)
     pa = np.zeros((8, 3), np.float32)
     na = np.zeros((8, 3), np.float32)
     na[0] = [0, 0, 1]
@@ -546,7 +547,7 @@ def test_rhf_hand_worked_pair():
 def test_rhf_exact_common_angles_are_off_bin_edges():
     """Top face (+z) against side faces (+x, -y), another top face and a box-edge voxel's mean
     normal (45 deg): 90, 90, 0, 45 deg exactly, each 1/6 bin or more from an edge."""
-    rcfg = P.RHFConfig(chunk=8)
+    rcfg = RHFConfig(chunk=8)
     pa = np.zeros((8, 3), np.float32)
     na = np.tile(np.float32([0, 0, 1]), (8, 1))
     pb = np.zeros((8, 3), np.float32)
@@ -618,7 +619,7 @@ def library_features():
     s0 = _library_scene("ball", "bowl", [1.0, 0.35, 0.0, 1, 0, 0, 0],
                         [1.0, -0.1, 0.0, np.cos(0.3), 0, 0, np.sin(0.3)])
     s1 = _library_scene("block", "tray", [-4.0, 0.0, 0.0, 1, 0, 0, 0], [1.0, 0.0, 0.0, 1, 0, 0, 0])
-    cfg = override(P.PerceptionConfig(), {"camera.width": 320, "camera.height": 240})
+    cfg = override(PerceptionConfig(), {"camera.width": 320, "camera.height": 240})
     f = P.make_batched_features(s0[0].geom_type, s0[2], cfg)
     size = np.stack([m.geom_size for m, _, _ in (s0, s1)])
     xpos = np.stack([d.geom_xpos for _, d, _ in (s0, s1)])
@@ -655,11 +656,11 @@ def test_unseen_object_gets_flag_and_zero_features(library_features):
 
 def test_bad_inputs_raise_clear_errors():
     with pytest.raises(ValueError, match="noise.model"):
-        P.validate_config(override(SMALL, {"noise.model": "perlin"}))
+        override(SMALL, {"noise.model": "perlin"})
     with pytest.raises(ValueError, match="multiple of rhf.chunk"):
-        P.validate_config(override(SMALL, {"rhf.chunk": 100}))
+        override(SMALL, {"rhf.chunk": 100})
     with pytest.raises(ValueError, match="cull.tile"):
-        P.validate_config(override(SMALL, {"cull.tile": 7}))
+        override(SMALL, {"cull.tile": 7})
     with pytest.raises(ConfigError):
         override(SMALL, {"camera.fov": 50})
     with pytest.raises(ValueError, match="geom 1: mjtGeom 5"):
@@ -673,8 +674,7 @@ def test_bad_inputs_raise_clear_errors():
         f(np.zeros((2, 2, 3)), np.zeros((2, 3, 3)), np.zeros((2, 2, 9)), jax.random.split(jax.random.key(0), 2))
     with pytest.raises(ValueError, match="one PRNG key per scene"):
         f(np.zeros((2, 2, 3)), np.zeros((2, 2, 3)), np.zeros((2, 2, 9)), jax.random.split(jax.random.key(0), 3))
-    P.validate_config(SMALL)
-    P.validate_config(P.PerceptionConfig())
+    assert override(SMALL, {}) == SMALL  # built, so checked
 
 
 def test_render_scene_png_writes_a_picture(tmp_path, random_scenes):

@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from relaff_jax import data as ds
+from relaff_jax.config.dataset import DatasetConfig
+from relaff_jax.errors import UserError
 from relaff_jax.cli import main
 
 CFG = {"physics": {"dt": 0.002}}
@@ -41,7 +43,7 @@ def reach_rollout_fn(feasible_close_negatives: bool = True, with_feasible: bool 
 
 
 def gen(path, n=40, fn=None, **cfg):
-    dcfg = ds.DatasetConfig(**{"max_rollouts": 4000, "distance_bins": 4, "borrow_fraction": 0.0, **cfg})
+    dcfg = DatasetConfig(**{"max_rollouts": 4000, "distance_bins": 4, "borrow_fraction": 0.0, **cfg})
     return ds.generate_dataset(path, "lift", n, fn or reach_rollout_fn(), 5, 32, CFG, progress=False,
                                dataset_config=dcfg)
 
@@ -146,7 +148,7 @@ def test_unmet_matching_is_warned_recorded_and_shown(tmp_path):
 def test_population_needs_the_feasible_field(tmp_path):
     with pytest.raises(ds.DatasetError, match="no 'feasible' field"):
         gen(tmp_path / "m", fn=reach_rollout_fn(with_feasible=False), population="feasible")
-    with pytest.raises(ds.DatasetError, match="population must be one of all, feasible"):
+    with pytest.raises(UserError, match="'dataset.population' must be one of all, feasible"):
         gen(tmp_path / "m2", population="reachable")
 
 

@@ -12,7 +12,7 @@ from relaff_jax.errors import UserError
 from relaff_jax.sim import bodies, labels, native, planning, programs, templates
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import world as wd
-from relaff_jax.sim.config import ActionConfig
+from relaff_jax.config.action import ActionConfig
 
 V2 = ActionConfig()
 V1 = dataclasses.replace(V2, programs="v1")

@@ -70,7 +70,7 @@ def test_line_and_messages():
 def test_generation_estimate_follows_the_engine():
     """The cost model's generate stage scales with the engine's rollouts/s; nothing else moves."""
     from relaff_jax.reproduce.progress import COST, estimate_seconds
-    from relaff_jax.runconfig import preset, resolve
+    from relaff_jax.config import preset, resolve
 
     mjx = estimate_seconds(resolve(preset("quick"), {"dataset.engine": "mjx"}), 2, 2)
     native = estimate_seconds(preset("quick"), 2, 2)  # the quick preset's default engine
@@ -93,7 +93,7 @@ def test_the_paper_presets_estimate_by_hand_and_against_its_measured_run():
     hours, as the model before that run was (5 h 35 min)."""
     from relaff_jax.learn import forests_per_space
     from relaff_jax.reproduce.progress import COST, estimate_seconds
-    from relaff_jax.runconfig import preset, resolve
+    from relaff_jax.config import preset, resolve
 
     cfg = resolve(preset("paper"), {"dataset.engine": "native"})
     est = estimate_seconds(cfg, 2, 2)
@@ -113,7 +113,7 @@ def test_the_paper_presets_estimate_by_hand_and_against_its_measured_run():
 def test_sweep_progress_weighs_blocks_by_their_forests_cost(tmp_path):
     """Blocks of large n and of the wide RHF state count for more of the fraction, so the ETA
     does not rise when they come after the cheap ones; every block and prep written is 1."""
-    from relaff_jax.learn import ExperimentConfig
+    from relaff_jax.config.experiment import ExperimentConfig
     from relaff_jax.learn.status import forest_cost_ms, sweep_progress
 
     cfg = ExperimentConfig(sizes=(2, 10, 50, 100), sizes_per_block=2, reps_pca=2, reps_rhf=2)

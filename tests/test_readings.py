@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import learn as L
+from relaff_jax.config.experiment import ForestConfig, experiment_preset
 from relaff_jax.config import override
 
 TINY = {
@@ -15,7 +16,7 @@ ACTS3 = ("lift", "pull", "take")
 
 
 def tiny_cfg(**kw):
-    return override(L.experiment_preset("quick"), dict(TINY, **kw))
+    return override(experiment_preset("quick"), dict(TINY, **kw))
 
 
 @pytest.fixture(scope="module")
@@ -154,7 +155,7 @@ def test_subsample_trees_are_sklearns_on_the_subsample_alone(n):
     X = rng.normal(size=(n, 18)).astype(np.float32)
     y = rng.random(n) < 0.5
     y[:2] = [True, False]
-    cfg = L.ForestConfig(per_tree="subsample", engine="sklearn")
+    cfg = ForestConfig(per_tree="subsample", engine="sklearn")
     forest = L.fit_forest(X, y, 5, cfg)
     checked = 0
     for est in forest.estimators_:

@@ -13,7 +13,7 @@ import pytest
 from relaff_jax import cli
 from relaff_jax.errors import UserError
 from relaff_jax.real import splits
-from relaff_jax.real.config import RealExperimentConfig, SensorTolerance, SimRelationConfig, SimSensor
+from relaff_jax.config.real import RealExperimentConfig, SensorTolerance, SimRelationConfig, SimSensor
 
 OSD = Path(__file__).parent / "data" / "osd"
 
@@ -226,7 +226,7 @@ def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
     assert err.startswith("relaff real study: error: unknown config key 'real.experiment.splt'")
     assert "split" in err
     assert cli.main(argv + ["--set", "real.experiment.split=scenes"]) == 2
-    assert "unknown real.experiment.split 'scenes'" in capsys.readouterr().err
+    assert "config key 'real.experiment.split' must be one of scene, pair, got 'scenes'" in capsys.readouterr().err
     # a flag is an alias of its tree key: a --set of the same key that disagrees is refused
     assert cli.main(argv + ["--reps", "5", "--set", "real.experiment.reps=7"]) == 2
     assert "--reps 5 and --set real.experiment.reps=7 disagree" in capsys.readouterr().err
@@ -319,7 +319,7 @@ def test_voxel_size_set_reaches_a_real_study(tmp_path, monkeypatch):
     from relaff_jax.real import labels as lab
     from relaff_jax.real import real_data
     from relaff_jax.real import sim_relations as sr
-    from relaff_jax.real.config import pipeline_config
+    from relaff_jax.config.real import pipeline_config
 
     a, _, labels = _label_files(tmp_path)
     calls, seen = [], []

@@ -212,5 +212,5 @@ def test_sim_relations_build_resume_and_guard(tmp_path, monkeypatch):
         sr.build_sim_relations(tmp_path / "sim", sensor, dataclasses.replace(cfg, seed=1), progress=False)
     with pytest.raises(UserError, match="no simulated relation chunks"):
         sr.load_sim_relations(tmp_path / "empty")
-    with pytest.raises(UserError, match="multiple of feature_batch"):
+    with pytest.raises(UserError, match="must be a multiple of real.sim.feature_batch"):
         sr.build_sim_relations(tmp_path / "sim2", sensor, dataclasses.replace(cfg, feature_batch=3), progress=False)

@@ -10,7 +10,8 @@ import pytest
 
 from relaff_jax.errors import UserError
 from relaff_jax.real import labels as lab
-from relaff_jax.real.propose import RuleConfig, overlap_fraction, propose_scene
+from relaff_jax.config.real import RuleConfig
+from relaff_jax.real.propose import overlap_fraction, propose_scene
 
 OSD = Path(__file__).parent / "data" / "osd"
 SHA = "ab" * 32

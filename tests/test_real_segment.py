@@ -8,10 +8,8 @@ import numpy as np
 import pytest
 
 from relaff_jax.errors import UserError
-from relaff_jax.real import (RealConfig, camera_pose, camera_pose_stats, cloud_normals, fit_table_plane,
-                             hand_segmentation, make_cloud, object_ious, pair_features, read_cloud,
-                             render_real_scene_png, score_scene, segment_scene, sim_camera, table_frame,
-                             to_table, vectors_to_table)
+from relaff_jax.config.real import RealConfig
+from relaff_jax.real import (camera_pose, camera_pose_stats, cloud_normals, fit_table_plane, hand_segmentation, make_cloud, object_ious, pair_features, read_cloud, render_real_scene_png, score_scene, segment_scene, sim_camera, table_frame, to_table, vectors_to_table)
 from relaff_jax.real.ransac import kmeans_from, kmeans_pp_init
 
 DATA = Path(__file__).parent / "data" / "osd"

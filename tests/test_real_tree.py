@@ -11,9 +11,8 @@ import pytest
 
 from relaff_jax.cli import real as cli_real
 from relaff_jax.errors import UserError
-from relaff_jax.real import (cloud_normals, fit_table_plane, hand_segmentation, pair_features, read_cloud,
-                             table_frame, to_table, vectors_to_table)
-from relaff_jax.real.config import REAL_MAX_OBJECT_PIXELS, RealConfig, pipeline_config
+from relaff_jax.real import (cloud_normals, fit_table_plane, hand_segmentation, pair_features, read_cloud, table_frame, to_table, vectors_to_table)
+from relaff_jax.config.real import REAL_MAX_OBJECT_PIXELS, RealConfig, pipeline_config
 
 DATA = Path(__file__).parent / "data" / "osd"
 
@@ -74,8 +73,7 @@ def test_unknown_real_key_lists_the_valid_ones():
 
 
 def test_simulated_relations_see_the_tree_perception_and_guard_it(tmp_path):
-    from relaff_jax.perception.config import (CameraConfig, CullConfig, NoiseConfig, NormalsConfig,
-                                              PerceptionConfig, VoxelConfig)
+    from relaff_jax.config.perception import (CameraConfig, CullConfig, NoiseConfig, NormalsConfig, PerceptionConfig, VoxelConfig)
     from relaff_jax.real import frame as rframe
     from relaff_jax.real import sim_relations as sr
     from relaff_jax.real.scene_source import TARGET

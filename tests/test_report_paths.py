@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from relaff_jax.learn import analyse, load_results
-from relaff_jax.learn.config import ExperimentConfig
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.synthetic_results import write_synthetic_results
 from relaff_jax.report.write import write_report
 

@@ -22,8 +22,10 @@ import pytest
 
 from relaff_jax import data as D
 from relaff_jax import learn as E
+from relaff_jax.config.experiment import experiment_preset
 from relaff_jax import reproduce as R
-from relaff_jax import runconfig
+from relaff_jax.config import PRESETS, preset
+from relaff_jax import config as runconfig
 from relaff_jax.cli import reproduce as cli_reproduce
 from relaff_jax.config import override
 from relaff_jax.constants import ACTIONS, FAMILIES
@@ -136,7 +138,7 @@ def test_run_log(base):
     assert log["seed"] == 3
     assert log["config"]["dataset"]["n_samples"] == 32
     assert log["config"]["experiment"]["forest"]["max_trees"] == 4
-    assert runconfig.from_json(log["config"]) == override(R.preset("tiny"), FAST)
+    assert runconfig.from_json(log["config"]) == override(preset("tiny"), {**FAST, "seed": 3})  # the tree records it
     assert log["versions"]["numpy"] == np.__version__
     assert log["versions"]["jax"]
     assert log["seeds"] == R.seeds(3)
@@ -172,7 +174,7 @@ def test_relaff_experiment_and_reproduce_record_the_same_config_and_results(base
 
     out, log, _, _ = base
     rec = json.loads((out / "results" / CONFIG_RECORD).read_text())
-    quick = dict(_flat(to_dict(E.experiment_preset("quick"))))
+    quick = dict(_flat(to_dict(experiment_preset("quick"))))
     sets = [x for k, v in _flat(log["config"]["experiment"]) if quick[k] != v
             for x in ("--set", f"experiment.{k}={json.dumps(v)}")]
     argv = ["experiment", "--data", *(str(out / "data" / a) for a in ACTS), "--out", str(tmp_path / "results"),
@@ -455,7 +457,7 @@ def test_stage_progress_comes_from_the_stage_packages(base, tmp_path):
     from relaff_jax.learn.status import sweep_progress
 
     out, *_ = base
-    cfg = override(R.preset("tiny"), FAST)
+    cfg = override(preset("tiny"), FAST)
     assert D.generation_progress(out / "data" / "lift", 32) == 1.0
     assert D.features_progress(out / "data" / "lift", 32, cfg.dataset.feature_batch) == 1.0
     assert sweep_progress(out / "results", cfg.experiment, len(ACTS), ("pca", "rhf")) == 1.0
@@ -486,14 +488,14 @@ def test_bad_input(tmp_path):
     with pytest.raises(R.ReproduceError, match="cannot run on 20 samples"):
         run(tmp_path / "a", overrides=dict(FAST, **{"dataset.n_samples": 20}))
     # a bad value is refused by its config node when the tree is built, before any work
-    with pytest.raises(UserError, match="reproduce.actions must be in the canonical order"):
+    with pytest.raises(UserError, match="'reproduce.actions' must be in the canonical order"):
         run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("take", "lift")}))
-    with pytest.raises(UserError, match="at least two"):
+    with pytest.raises(UserError, match="'reproduce.actions' must be a list of at least 2 values"):
         run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("lift",)}))
-    with pytest.raises(UserError, match="dataset.rollout_batch must be >= 1"):
+    with pytest.raises(UserError, match="'dataset.rollout_batch' must be an integer in \\[1, "):
         run(tmp_path / "a", overrides=dict(FAST, **{"dataset.rollout_batch": 0}))
     # a perception value is refused before generation, not when the features stage reaches it
-    with pytest.raises(UserError, match="perception.voxel.size must be positive"):
+    with pytest.raises(UserError, match=r"'perception.voxel.size' must be a finite number in \(0.0, 1.0\]"):
         run(tmp_path / "a", overrides=dict(FAST, **{"perception.voxel.size": -1.0}))
     assert not (tmp_path / "a").exists()
     foreign = tmp_path / "foreign"
@@ -527,11 +529,11 @@ def test_missing_actions_module_is_a_clear_error(tmp_path, monkeypatch):
 
 
 def test_presets():
-    tiny, quick, study, paper = (R.preset(p) for p in R.PRESETS)
+    tiny, quick, study, paper = (preset(p) for p in PRESETS)
     for p in (tiny, quick, study, paper):
         R.check_config(p, 0)
     assert paper.dataset.n_samples == 10_000
-    assert paper.experiment == E.experiment_preset("paper")
+    assert paper.experiment == experiment_preset("paper")
     assert (paper.experiment.reps_pca, paper.experiment.reps_rhf) == (50, 25)
     assert tiny.experiment.reps_pca == 2
     assert set(range(4, 11)) <= set(tiny.experiment.sizes)

@@ -17,6 +17,7 @@ import pytest
 from relaff_jax import data as D
 from relaff_jax import learn as E
 from relaff_jax import reproduce as R
+from relaff_jax.config import preset
 from relaff_jax.cli import reproduce as cli_reproduce
 from relaff_jax.stages.generate import default_rollout_factory
 
@@ -41,7 +42,7 @@ def statuses(log):
 def test_tiny_end_to_end(tmp_path):
     out = tmp_path / "tiny"
     log = cli_run(out)
-    cfg = R.preset("tiny")
+    cfg = preset("tiny")
     assert statuses(log) == dict.fromkeys(R.STAGES, "ran")
 
     # every expected file

@@ -16,9 +16,11 @@ import pytest
 from relaff_jax import cli
 from relaff_jax.config import override
 from relaff_jax import data as dataset
+from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax import learn as E
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax import report as R
-from relaff_jax import runconfig
+from relaff_jax import config as runconfig
 from relaff_jax.stages import features as stage_features
 from relaff_jax.sim import scenes as sc
 
@@ -52,7 +54,7 @@ def scene_run(tmp_path_factory, scene_world, settle):
         for seed, action in enumerate(("lift", "take")):
             path = root / "data" / action
             dataset.generate_dataset(path, action, 16, scene_rollout_fn(scene_world, settle), seed=seed, batch=B,
-                                     progress=False, dataset_config=dataset.DatasetConfig(borrow_fraction=1.0))
+                                     progress=False, dataset_config=DatasetConfig(borrow_fraction=1.0))
             stage_features.add_features(override(runconfig.RunConfig(), {"dataset.feature_batch": B}), path,
                                         progress=False)
         argv = ["experiment", "--synthetic", "150", "--out", str(root / "results"), "--jobs", "2", "--no-progress",
@@ -90,7 +92,7 @@ def _analysis(nb_pca, nb_rhf, rows, best_curves, counts=(36, 5, 2), spread=0.01)
     return {"pca": space(nb_pca, rows), "rhf": space(nb_rhf, {})}
 
 
-CFG = E.ExperimentConfig(sizes=(2, 4, 10, 25))
+CFG = ExperimentConfig(sizes=(2, 4, 10, 25))
 GOOD = {"DB1 best": 2.0, "CBn": 1.6, "DBn": 1.5, "DB1 best after ten": 1.9, "CB1 best": 2.2, "CB1 best after ten": 2.1}
 
 

@@ -84,7 +84,7 @@ def test_palm_modes_pairs():
     groups = _groups(m)
     assert groups[((6, 6), 1)] == 6
     assert groups[((6, 6), 3)] == 5
-    with pytest.raises(UserError, match="arm_palm_objects='off': one of contact, frictionless"):
+    with pytest.raises(UserError, match="'action.phys.arm_palm_objects' must be one of contact, frictionless, exclude_other, got 'off'"):
         dataclasses.replace(CFG.phys, arm_palm_objects="off")
 
 

@@ -31,19 +31,20 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     options.check_counts(args, seed="--seed", jobs="--jobs")
     options.precheck(args)
     from relaff_jax import learn
+    from relaff_jax.config.experiment import experiment_preset
 
     for path in args.plugins or ():  # the user's conditions, registered before the config names them
         learn.load_plugin_file(path)
-    from relaff_jax.runconfig import RunConfig
+    from relaff_jax.config import RunConfig
 
     spaces = {None: None, "both": tuple(SPACES)}.get(args.space, (args.space,))
-    tree = options.config(args, base=RunConfig(experiment=learn.experiment_preset(args.preset)),
-                          flags={"reproduce.spaces": ("--space", spaces)})
+    tree = options.config(args, base=RunConfig(experiment=experiment_preset(args.preset)),
+                          flags={"reproduce.spaces": ("--space", spaces), "seed": ("--seed", args.seed)})
     options.check_out_dir(Path(args.out))  # before a --cluster client connects (seconds) and any work
     from relaff_jax.stages.experiment import experiment_folder
 
     with options.cluster(args, args.out) as client:  # the same stage function reproduce runs
-        paths = experiment_folder(tree, args.data or args.synthetic, args.out, seed=args.seed, jobs=args.jobs,
+        paths = experiment_folder(tree, args.data or args.synthetic, args.out, seed=tree.seed, jobs=args.jobs,
                                   client=client, progress=not args.no_progress)
     for space, p in paths.items():
         print(f"{space}: {p}")
@@ -106,10 +107,11 @@ def register(subparsers) -> None:
                    help="use N synthetic samples per action instead of --data (a dry run of the stage)")
     p.add_argument("--out", required=True, metavar="RESULTS", help="results folder (resumed if it exists)")
     p.add_argument("--preset", choices=("quick", "study", "paper"), default="quick",
-                   help="the protocol's sizes, repetitions and forests (relaff_jax.learn.experiment_preset)")
+                   help="the protocol's sizes, repetitions and forests (relaff_jax.experiment_preset)")
     p.add_argument("--space", choices=("pca", "rhf", "both"), default=None,
                    help="state space(s) to sweep, the same as --set reproduce.spaces=[...] (default: both)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the test draws, training orders and forests")
+    p.add_argument("--seed", type=int, default=None, help="seed of the test draws, training orders and forests "
+                   "(the tree's seed key) (default: 0)")
     p.add_argument("--jobs", type=int, default=0, help="worker processes (default: all cores)")
     options.add_cluster(p)
     options.add_set(p, "experiment.reps_pca=5 --set 'experiment.sizes=[2,10,25]'")

@@ -18,9 +18,9 @@ def add_set(p: argparse.ArgumentParser, example: str = "perception.voxel.size=0.
 
 
 def precheck(args: argparse.Namespace, extra: list[str] = ()) -> None:
-    """The ``--set`` keys that can be checked without importing JAX (``runconfig.precheck``):
+    """The ``--set`` keys that can be checked without importing JAX (``config.precheck``):
     called first by the commands that import their stage before resolving the config."""
-    from relaff_jax.runconfig import precheck as check
+    from relaff_jax.config import precheck as check
 
     check({**parse_set(extra), **parse_set(args.set or [])})
 
@@ -33,11 +33,11 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
     ``flags``: the command's options that are aliases of tree keys, ``{key: (flag, value)}``
     (``{"dataset.n_samples": ("--samples", 100)}``; a value of None: not given). A flag and a
     ``--set`` of its key that disagree are an error, so what runs is what is recorded."""
-    from relaff_jax.runconfig import check_tree, precheck, resolve
+    from relaff_jax.config import check_tree, precheck, resolve
 
     overrides = {**parse_set(extra), **overrides_of(args, flags)}
-    precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     try:
+        precheck(overrides)  # a mistyped key or a bad value is reported before the preset is built
         return check_tree(resolve(base, overrides))  # the whole tree, before any stage starts
     except UserError as e:  # a value given by a flag: the message names the flag too
         msg = str(e)

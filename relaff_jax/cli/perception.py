@@ -20,7 +20,7 @@ from relaff_jax.cli.options import check_out_file
 
 def register(subparsers) -> None:
     """Add ``features`` and ``show`` to an ``argparse`` subparsers object."""
-    from relaff_jax.data.config import DatasetConfig  # the tree's default, shown in --help (no JAX)
+    from relaff_jax.config.dataset import DatasetConfig  # the tree's default, shown in --help (no JAX)
 
     p = subparsers.add_parser(
         "features", help="add PCA and RHF features to a dataset (resumable)",
@@ -32,7 +32,7 @@ def register(subparsers) -> None:
     p.add_argument("--batch", type=int, default=None,
                    help="scenes per compiled chunk, the same as --set dataset.feature_batch=B (default: "
                         f"{DatasetConfig().feature_batch})")
-    p.add_argument("--seed", type=int, default=0, help="depth-noise seed")
+    p.add_argument("--seed", type=int, default=None, help="depth-noise seed (the tree's seed key) (default: 0)")
     p.add_argument("--overwrite", action="store_true", help="recompute features of another config")
     options.add_cluster(p)
     options.add_set(p, "perception.voxel.size=0.02")
@@ -60,9 +60,9 @@ def cmd_features(args) -> int:
     options.check_in_dir(args.dir)
     from relaff_jax.stages.features import add_features
 
-    tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch)})
+    tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch), "seed": ("--seed", args.seed)})
     with options.cluster(args, args.dir) as client:  # the same stage function reproduce runs
-        out = add_features(tree, args.dir, args.seed, overwrite=args.overwrite, client=client)
+        out = add_features(tree, args.dir, tree.seed, overwrite=args.overwrite, client=client)
     print(f"{args.dir}: features for {out['n']} samples: "
           + ", ".join(f"{k} {tuple(v)}" for k, v in out["features"].items()))
     return 0

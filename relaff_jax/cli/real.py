@@ -17,7 +17,7 @@
   with a test folder, trained on one folder and tested on the other; the report
   (``real.study``; resumable).
 
-Every setting of the real stages is one key of the config tree (``runconfig.RunConfig``): the
+Every setting of the real stages is one key of the config tree (``config.RunConfig``): the
 real-only ones under ``real.`` (``--set real.pipeline.kmeans.background=false``, ``--set
 real.experiment.split=pair``, ``--set real.sim.per_relation=500``), the voxel grid and RHF shared
 with simulation under ``perception.`` (``--set perception.voxel.size=0.02``); the flags are

@@ -7,7 +7,7 @@ from pathlib import Path
 from relaff_jax.cli import options
 from relaff_jax.constants import ACTIONS, SIM_ENGINES, STAGES
 from relaff_jax.errors import UserError
-from relaff_jax.runconfig import PRESETS
+from relaff_jax.config import PRESETS
 
 
 def register(sub) -> None:
@@ -16,7 +16,7 @@ def register(sub) -> None:
         description="Generate one balanced dataset per action, their features, the learning and bootstrapping "
                     "experiment and the report in OUT. Rerunning continues where a killed run stopped; finished "
                     "stages are skipped. Settings: a preset plus --set overrides of the config tree "
-                    "(relaff_jax.runconfig); the run log records the whole resolved tree.")
+                    "(relaff_jax.config); the run log records the whole resolved tree.")
     p.add_argument("--preset", choices=PRESETS, default="quick",
                    help="quick: a small complete study, its motor programs in MuJoCo C; study: the smallest whose "
                         "Table II reads beside the paper's; paper: the full protocol; tiny: for tests "
@@ -24,7 +24,8 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, metavar="DIR", default=None, help="run folder (created, or continued)")
     p.add_argument("dir", type=Path, nargs="?", default=None, metavar="DIR",
                    help="the run folder, as a positional argument for --status (same as --out DIR)")
-    p.add_argument("--seed", type=int, default=0, help="run seed: every dataset, feature and forest seed derives from it")
+    p.add_argument("--seed", type=int, default=None, help="run seed: every dataset, feature and forest seed "
+                   "derives from it (the tree's seed key) (default: 0)")
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
                    help=f"redo a stage ({', '.join(STAGES)}); may be repeated")
     p.add_argument("--redo-dataset", action="append", choices=ACTIONS, metavar="ACTION",
@@ -84,7 +85,7 @@ def _print_log_summary(root: Path) -> dict:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from relaff_jax.runconfig import precheck
+    from relaff_jax.config import precheck
 
     if args.dir is not None and args.out is not None and args.dir != args.out:
         raise UserError(f"two run folders given: {args.dir} and --out {args.out}")
@@ -94,8 +95,9 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     if args.out is None:
         raise UserError("the run folder is required: --out DIR")
     options.check_counts(args, seed="--seed", jobs="--jobs")
-    overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine),
+    overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine), "seed": ("--seed", args.seed),
                                             "action.scene.library": ("--objects", args.objects)})
+    seed = overrides.get("seed", 0)
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     from relaff_jax import reproduce as R
@@ -114,7 +116,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
 
         for path in args.plugins:
             load_plugin_file(path)
-    command = ["relaff", "reproduce", "--preset", args.preset, "--out", str(args.out), "--seed", str(args.seed)]
+    command = ["relaff", "reproduce", "--preset", args.preset, "--out", str(args.out), "--seed", str(seed)]
     command += [x for f in args.force or () for x in ("--force", f)]
     command += [x for a in args.redo_dataset or () for x in ("--redo-dataset", a)] + (["--jobs", str(args.jobs)] if args.jobs else [])
     command += [x for s in args.set or () for x in ("--set", s)] + (["--no-progress"] if args.no_progress else [])
@@ -123,7 +125,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     command += ["--objects", args.objects] if args.objects else []
     command += ["--plugins", *args.plugins] if args.plugins else []
     with options.cluster(args, args.out) as client:
-        log = R.reproduce(args.out, args.preset, args.seed, force=tuple(args.force or ()), jobs=args.jobs,
+        log = R.reproduce(args.out, args.preset, seed, force=tuple(args.force or ()), jobs=args.jobs,
                           progress=not args.no_progress, overrides=overrides, argv=command,
                           client=client, rebuild_log=args.rebuild_log,
                           redo=tuple(args.redo_dataset or ()))

@@ -17,7 +17,7 @@ from relaff_jax.errors import UserError
 
 def register(subparsers) -> None:
     """Add ``objects``, ``scenes`` and ``generate`` to ``subparsers``."""
-    from relaff_jax.data.config import DatasetConfig  # the tree's defaults, shown in --help (no JAX)
+    from relaff_jax.config.dataset import DatasetConfig  # the tree's defaults, shown in --help (no JAX)
 
     d = DatasetConfig()
     p = subparsers.add_parser("objects", help="list the 29 built-in objects, and a library file's",
@@ -49,7 +49,8 @@ def register(subparsers) -> None:
     p.add_argument("action", help=f"one of: {', '.join(ACTIONS)}")
     p.add_argument("--samples", type=int, required=True, help="balanced samples to keep (N >= 2)")
     p.add_argument("--out", required=True, help="dataset directory (new, empty or resumable)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the dataset (every chunk's key derives from it)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the dataset, every chunk's key derives from it "
+                   "(the tree's seed key) (default: 0)")
     p.add_argument("--batch", type=int, default=None,
                    help=f"scenes per simulated chunk, the same as --set dataset.rollout_batch=B (default: "
                         f"{d.rollout_batch}; the presets of relaff reproduce use 8 to 1024); part of the "
@@ -126,7 +127,7 @@ def cmd_generate(args) -> int:
     tree = options.config(args, flags={
         "dataset.n_samples": ("--samples", args.samples), "dataset.rollout_batch": ("--batch", args.batch),
         "dataset.max_rollouts": ("--max-rollouts", args.max_rollouts), "dataset.engine": ("--engine", args.engine),
-        "action.scene.library": ("--objects", args.objects)})
+        "action.scene.library": ("--objects", args.objects), "seed": ("--seed", args.seed)})
     n, batch = tree.dataset.n_samples, tree.dataset.rollout_batch  # checked by DatasetConfig itself
 
     from relaff_jax import data as ds
@@ -142,11 +143,11 @@ def cmd_generate(args) -> int:
     from relaff_jax.data.validate import check_dataset_dir
 
     # a foreign folder, or a dataset of other settings, refused before the motor programs compile
-    check_dataset_dir(Path(args.out), {"action": args.action, "n_samples": n, "seed": args.seed, "batch": batch,
+    check_dataset_dir(Path(args.out), {"action": args.action, "n_samples": n, "seed": tree.seed, "batch": batch,
                                        "engine": engine})
     with options.cluster(args, Path(args.out)) as client:
         try:  # the same stage function reproduce runs for each action
-            summary = generate_one(tree, args.action, args.out, args.seed, client=client, progress=not args.json)
+            summary = generate_one(tree, args.action, args.out, tree.seed, client=client, progress=not args.json)
         except ds.DatasetError as e:
             if isinstance(e, UserError):
                 raise

@@ -14,7 +14,7 @@ Public API::
 Files (one job each):
 
 * ``errors.py``    ``DatasetError`` (a ``relaff_jax.errors.UserError``) and its subclasses;
-* ``config.py``    ``DatasetConfig``, folder layout names, argument checks;
+* ``layout.py``    folder layout names, argument checks (settings: ``relaff_jax.config.dataset``);
 * ``selection.py`` ``select_balanced``: N/2 positives, COG-distance-matched (or uniform)
   negatives, from every rollout or the feasible ones (``POPULATIONS``, ``NEGATIVES``);
 * ``validate.py``  rollout/feature outputs to storage types, per-field schemas;
@@ -33,8 +33,7 @@ The ``relaff info``, ``relaff anatomy`` and ``relaff export`` commands are in ``
 Layout, selection scheme and error cases: ``docs/datasets.md``.
 """
 from relaff_jax.constants import ACTIONS, RELATIONS
-from relaff_jax.data.config import (CHUNKS, FEATURES, FEATURES_SIDECAR, FORMAT, FORMAT_VERSION, LOCK,
-                                    REQUIRED_FIELDS, RESERVED_FIELDS, SELECTION, SIDECAR, DatasetConfig)
+from relaff_jax.data.layout import (CHUNKS, FEATURES, FEATURES_SIDECAR, FORMAT, FORMAT_VERSION, LOCK, REQUIRED_FIELDS, RESERVED_FIELDS, SELECTION, SIDECAR)
 from relaff_jax.data.errors import (CorruptDatasetError, DatasetError, DatasetMismatchError,
                                     ForeignDirectoryError, RolloutCapError)
 from relaff_jax.data.anatomy import anatomy, anatomy_of, format_anatomy
@@ -43,12 +42,13 @@ from relaff_jax.data.features import add_features
 from relaff_jax.data.generate import generate_dataset
 from relaff_jax.data.info import format_info, info
 from relaff_jax.data.load import load_dataset, load_rollouts
-from relaff_jax.data.selection import NEGATIVES, POPULATIONS, Selection, select_balanced
+from relaff_jax.config.dataset import NEGATIVES, POPULATIONS
+from relaff_jax.data.selection import Selection, select_balanced
 from relaff_jax.data.status import dataset_status, features_progress, features_status, generation_progress
 
 __all__ = [
     "ACTIONS", "RELATIONS", "CHUNKS", "FEATURES", "FEATURES_SIDECAR", "FORMAT", "FORMAT_VERSION", "LOCK",
-    "REQUIRED_FIELDS", "RESERVED_FIELDS", "SELECTION", "SIDECAR", "DatasetConfig",
+    "REQUIRED_FIELDS", "RESERVED_FIELDS", "SELECTION", "SIDECAR",
     "DatasetError", "ForeignDirectoryError", "DatasetMismatchError", "CorruptDatasetError", "RolloutCapError",
     "export_dataset", "add_features", "generate_dataset", "format_info", "info", "load_dataset",
     "load_rollouts", "Selection", "select_balanced", "dataset_status", "features_status",

@@ -266,7 +266,7 @@ def dataset_folders(path: str | os.PathLike) -> list[Path]:
     ``data/<action>/`` datasets of a run folder, in ``ACTIONS`` order. One-line errors for a
     missing folder, a file, or a folder that is neither."""
     from relaff_jax.constants import ACTIONS
-    from relaff_jax.data.config import SIDECAR
+    from relaff_jax.data.layout import SIDECAR
 
     p = Path(path)
     if not p.exists():

@@ -24,7 +24,7 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax import provenance
 from relaff_jax.cluster.tasks import Ordered
-from relaff_jax.data.config import FEATURES, FEATURES_SIDECAR, check_int, jsonable_config
+from relaff_jax.data.layout import FEATURES, FEATURES_SIDECAR, check_int, jsonable_config
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError
 from relaff_jax.data.load import load_dataset, load_feature_chunks, read_features_sidecar
 from relaff_jax.data.progress import progress_bar

@@ -41,9 +41,8 @@ from relaff_jax import io as rio
 from relaff_jax import provenance
 from relaff_jax.cluster.tasks import Ordered
 from relaff_jax.config import to_dict
-from relaff_jax.data.config import (CHUNKS, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, DatasetConfig,
-                                    check_action, check_dataset_config, check_int, jsonable_config,
-                                    selection_scheme, stored_scheme)
+from relaff_jax.data.layout import (CHUNKS, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, check_action, check_int, jsonable_config, selection_scheme, stored_scheme)
+from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, RolloutCapError
 from relaff_jax.data.load import load_dataset
 from relaff_jax.data.progress import progress_bar
@@ -95,7 +94,6 @@ def generate_dataset(
     if not callable(rollout_fn):
         raise DatasetError("rollout_fn must be callable")
     dcfg = dataset_config or DatasetConfig()
-    check_dataset_config(dcfg)
     config = jsonable_config(config_dict)
     header = {
         "format": FORMAT,

@@ -15,7 +15,7 @@ import numpy as np
 
 from relaff_jax.constants import RELATIONS
 from relaff_jax.data.load import load_dataset, load_rollouts, read_features_sidecar
-from relaff_jax.data.config import stored_scheme
+from relaff_jax.data.layout import stored_scheme
 from relaff_jax.data.store import read_sidecar
 
 

@@ -15,7 +15,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.data.config import CHUNKS, FEATURES, FEATURES_SIDECAR, SELECTION
+from relaff_jax.data.layout import CHUNKS, FEATURES, FEATURES_SIDECAR, SELECTION
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError
 from relaff_jax.data.store import (check_rollout_ids, chunk_indices, chunk_path, concat, read_chunk, read_sidecar,
                                    sha256)

@@ -19,10 +19,9 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from relaff_jax.config import streams
+from relaff_jax.config.dataset import NEGATIVES
 
-SELECT_SALT = 0x5E1EC7  # separates the selection's RNG stream from anything else seeded by `seed`
-POPULATIONS = ("all", "feasible")  # which rollouts may be selected
-NEGATIVES = ("cog", "uniform")  # how negatives are drawn
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,7 +88,7 @@ def select_balanced(
     pos, neg = np.flatnonzero(label & ok), np.flatnonzero(~label & ok)
     if len(pos) < n_pos or len(neg) < n_neg:
         return None
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), SELECT_SALT]))
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), streams.SELECT_SALT]))
     sel_pos = np.sort(rng.choice(pos, n_pos, replace=False))
     d_pos = dist[sel_pos]
     edges = np.linspace(d_pos.min(), d_pos.max(), bins + 1)

@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import Any, Mapping
 
-from relaff_jax.data.config import FEATURES, FEATURES_SIDECAR, LOCK, SIDECAR, jsonable_config
+from relaff_jax.data.layout import FEATURES, FEATURES_SIDECAR, LOCK, SIDECAR, jsonable_config
 from relaff_jax.data.errors import CorruptDatasetError
 from relaff_jax.data.load import load_dataset, load_feature_chunks, load_rollouts, read_features_sidecar
 from relaff_jax.data.store import chunk_indices, chunk_path, mismatch, read_chunk, read_sidecar

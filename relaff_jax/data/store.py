@@ -28,7 +28,7 @@ from typing import Any, Iterator, Mapping, Sequence
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.data.config import CHUNKS, FORMAT, FORMAT_VERSION, LOCK, SELECTION, SIDECAR
+from relaff_jax.data.layout import CHUNKS, FORMAT, FORMAT_VERSION, LOCK, SELECTION, SIDECAR
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, ForeignDirectoryError
 
 CHUNK_RE = re.compile(r"^chunk_(\d{6})$")

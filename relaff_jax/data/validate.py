@@ -16,7 +16,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from relaff_jax.constants import RELATIONS
-from relaff_jax.data.config import CHUNKS, LOCK, REQUIRED_FIELDS, RESERVED_FIELDS, SELECTION, SIDECAR
+from relaff_jax.data.layout import CHUNKS, LOCK, REQUIRED_FIELDS, RESERVED_FIELDS, SELECTION, SIDECAR
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, ForeignDirectoryError
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")

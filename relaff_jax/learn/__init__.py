@@ -21,7 +21,8 @@ Files, in pipeline order:
 - ``synthetic.py``: synthetic datasets in ``load_dataset``'s layout (``--synthetic``, tests);
 - ``synthetic_results.py``: a synthetic experiment folder in the sweep's layout (report tests,
   ``benchmarks/report_stage.py``);
-- ``config.py``: ``ExperimentConfig``, ``experiment_preset``, ``check_config``, Table II rows;
+- ``table2.py``: Table II's rows and the paper's numbers; ``checks.py``: ``check_config`` (the
+  checks that need scikit-learn or plugins); the settings are ``relaff_jax.config.experiment``;
 - ``protocol.py``: condition axis and plans, pools, ``forests_per_space``;
 - ``draws.py``: each target's (balanced) test set and each repetition's training order;
 - ``datasets.py``: loading, checking and fingerprinting the input datasets;
@@ -50,37 +51,11 @@ from relaff_jax.constants import (
     FAMILIES,
     SPACES,
 )
-from relaff_jax.learn.config import (
-    PAPER_TABLE2,
-    SPACE_CODE,
-    TABLE2_ROWS,
-    ORACLE,
-    ExperimentConfig,
-    check_config,
-    experiment_preset,
-    paper_row,
-)
-from relaff_jax.learn.conditions import (
-    Knowledge,
-    load_plugin_file,
-    register_condition,
-    registered as registered_conditions,
-)
-from relaff_jax.learn.forests import (
-    ForestConfig,
-    check_forest_config,
-    fit_forest,
-    make_forest,
-    n_trees,
-    predict_class,
-)
-from relaff_jax.learn.states import (
-    TOY_MANIPULATED,
-    augment,
-    check_action,
-    manipulated_first_order,
-    state_features,
-)
+from relaff_jax.learn.table2 import PAPER_TABLE2, TABLE2_ROWS, ORACLE, paper_row
+from relaff_jax.learn.checks import check_config
+from relaff_jax.learn.conditions import (Knowledge, load_plugin_file, register_condition, registered as registered_conditions)
+from relaff_jax.learn.forests import check_forest_config, fit_forest, make_forest, n_trees, predict_class
+from relaff_jax.learn.states import TOY_MANIPULATED, augment, check_action, manipulated_first_order, state_features
 
 # Everything else loads on first use (PEP 562), so that the command line checks
 # --set experiment.* without scikit-learn and JAX: name -> submodule.
@@ -146,12 +121,10 @@ _LAZY = {
 __getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
 __all__ = [
-    "ACTIONS", "FAMILIES", "SPACES", "FORMAT_VERSION", "PAPER_TABLE2", "SPACE_CODE", "TABLE2_ROWS", "TOY_MANIPULATED",
-    "ExperimentConfig", "ForestConfig", "Knowledge", "Results", "ResultsNotFound", "SpaceResults",
+    "ACTIONS", "FAMILIES", "SPACES", "FORMAT_VERSION", "PAPER_TABLE2", "TABLE2_ROWS", "TOY_MANIPULATED", "Knowledge", "Results", "ResultsNotFound", "SpaceResults",
     "analyse", "augment", "average_bf", "block_fits", "bootstrap_factor", "categories_above", "categories_per_threshold",
     "category_allowed", "category_masks", "category_pairs", "check_action", "check_config", "check_datasets",
-    "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep",
-    "experiment_preset", "fingerprint", "fit_forest", "forests_per_space", "is_complete", "layout", "load_datasets",
+    "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep", "fingerprint", "fit_forest", "forests_per_space", "is_complete", "layout", "load_datasets",
     "load_results", "make_forest", "manipulated_first_order", "n_trees", "predict_class", "prepare", "read_block",
     "run_block", "run_block_to_file", "run_experiment", "run_space", "select_at", "select_best", "size_mask",
     "split_pools", "state_features", "synthetic_datasets", "threshold_study",

@@ -17,7 +17,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from relaff_jax.learn.config import ORACLE, TABLE2_ROWS, ExperimentConfig
+from relaff_jax.learn.table2 import ORACLE, TABLE2_ROWS
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.user_conditions import builtin_results
 from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn import gains as G
@@ -38,6 +39,7 @@ from relaff_jax.learn.measures import (
 from relaff_jax.learn.online import extend
 from relaff_jax.learn.protocol import layout
 from relaff_jax.provenance import derive_seed
+from relaff_jax.config import streams
 
 CI_CHUNK = 100  # resamples analysed at once (bounds memory)
 
@@ -189,7 +191,7 @@ def against_nb(acc_x: np.ndarray, mean: np.ndarray, sizes: Sequence[int], cfg: E
     w = G.method_weights(mean, lay, cfg, sizes, cbn_ok)
     st = G.curve_stats(mean, w, lay, sizes, cfg)
     x, y = G.rep_scores(acc_x, w, lay, sizes, cfg)
-    rng = np.random.default_rng(derive_seed(seed, 23))
+    rng = np.random.default_rng(derive_seed(seed, streams.IMPROVEMENT))
     poi, ci, p = [], [], []
     for k in range(len(G.METHODS)):
         keep = np.isfinite(x[k]).any(-1) & np.isfinite(y).any(-1)  # the tasks the method ran for
@@ -241,7 +243,7 @@ def _fused(acc_x, corr_x, n_test, halves, cfg, seed) -> tuple[np.ndarray, np.nda
     """``half_curves`` and ``_intervals``' resampled means from one read of the outcomes (the
     same bits as the two apart: each block's halves unpacked and mixed once, not twice)."""
     means = np.full((2,) + corr_x.shape[:3], np.nan)
-    hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, 7), halves, means=means)
+    hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, streams.INTERVALS), halves, means=means)
     return np.where(np.isfinite(acc_x).any(-1)[None], means, np.nan), hm
 
 
@@ -253,7 +255,7 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
     (``*_boot``, for the findings' paired differences) and the share of resamples in which
     each row's set of targets kept a value (``table2_set_held (rows,)``)."""
     if hm is None:
-        hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, 7), halves, reference=reference)
+        hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, streams.INTERVALS), halves, reference=reference)
     hs = half_sizes(n_test, halves)
     outcomes = bool(corr_x.shape[-1])
     fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]), np.isfinite(pt["gain_per_target"])

@@ -24,7 +24,7 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.learn.engine import predict_many
 from relaff_jax.learn.learners import fit_many
-from relaff_jax.learn.forests import ForestConfig
+from relaff_jax.config.experiment import ForestConfig
 from relaff_jax.learn.states import augment
 from relaff_jax.provenance import derive_seed
 

@@ -181,15 +181,6 @@ def custom_names(cfg: Any, space: str) -> list[str]:
     return [c for c in cfg.conditions(space) if c not in FAMILIES]
 
 
-def check_condition_names(names: tuple[str, ...], key: str) -> None:
-    """What the config node checks without loading plugins: NB present, no repeats, names valid."""
-    if "NB" not in names or len(set(names)) != len(names):
-        raise UserError(f"{key} must include NB and name each condition once, got {names}")
-    bad = [n for n in names if n not in FAMILIES and not (isinstance(n, str) and _NAME.match(n))]
-    if bad:
-        raise UserError(f"{key}: {bad} are neither built-in conditions {FAMILIES} nor condition names")
-
-
 def check_conditions(cfg: Any) -> None:
     """Every user condition ``cfg`` names is registered and gives valid columns on a small
     synthetic knowledge (shape, finite, row by row): one ``UserError`` before any work."""

@@ -26,12 +26,13 @@ import numpy as np
 
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed
+from relaff_jax.config import streams
 
 
 def draw_test(labels: np.ndarray, test_size: int, seed: int, target_index: int, balanced: bool = True) -> np.ndarray:
     """Test indices ``(T,)`` into the target pool; the same for every repetition."""
     labels = np.asarray(labels).astype(bool)
-    perm = np.random.default_rng(derive_seed(seed, 4, target_index)).permutation(len(labels))
+    perm = np.random.default_rng(derive_seed(seed, streams.TEST_DRAW, target_index)).permutation(len(labels))
     if not balanced:
         return perm[: int(test_size)]
     pos, neg = perm[labels[perm]], perm[~labels[perm]]
@@ -49,7 +50,7 @@ def draw_train(labels: np.ndarray, test_idx: np.ndarray, max_size: int, seed: in
     rest = np.setdiff1d(np.arange(len(labels)), test_idx)
     if len(rest) < max_size:
         raise UserError(f"target pool: {len(rest)} scenes left after the test set, but training needs {max_size}")
-    rng = np.random.default_rng(derive_seed(seed, 6, target_index, rep))
+    rng = np.random.default_rng(derive_seed(seed, streams.TRAIN_DRAW, target_index, rep))
     order = rest[rng.permutation(len(rest))]
     if balanced:
         pos, neg = order[labels[order]], order[~labels[order]]

@@ -23,7 +23,8 @@ from relaff_jax.errors import UserError
 from relaff_jax.learn import compiled
 from relaff_jax.learn.engine_eval import predict_block
 from relaff_jax.learn.engine_fit import Trees, fit_trees
-from relaff_jax.learn.forests import ENGINES, ForestConfig, checked_inputs, checked_states, fit_checked, predict_checked
+from relaff_jax.config.experiment import ENGINES, ForestConfig
+from relaff_jax.learn.forests import checked_inputs, checked_states, fit_checked, predict_checked
 
 __all__ = ["ENGINES", "Trees", "fit", "fit_many", "predict", "predict_many"]
 

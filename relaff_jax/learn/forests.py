@@ -17,14 +17,8 @@ import numpy as np
 if TYPE_CHECKING:
     from sklearn.ensemble import RandomForestClassifier
 
-from relaff_jax.config import is_int
+from relaff_jax.config.experiment import ForestConfig, max_features_value
 from relaff_jax.errors import UserError
-
-
-# the forest builders (ForestConfig.engine)
-ENGINES = ("fast", "sklearn", "compiled")
-# readings of "each tree uses 2/3 of the samples" (ForestConfig.per_tree; docs/learning.md)
-PER_TREE = ("bootstrap", "subsample")
 
 
 def subsample_size(n: int) -> int:
@@ -47,97 +41,6 @@ def subsample_weights(rs: np.random.RandomState, seed: int, n: int) -> np.ndarra
     w = np.zeros(n, np.float64)
     w[idx[:m]] = 1.0
     return w
-
-
-def max_features_value(mf: str | None) -> str | int | float | None:
-    """``ForestConfig.max_features`` as scikit-learn takes it: "sqrt" / "log2" / None as they
-    are, a numeric string as an int (features per split) or a float (a fraction of them), so
-    ``--set experiment.forest.max_features=0.5`` is the fraction 0.5."""
-    if mf is None or mf in ("sqrt", "log2"):
-        return mf
-    try:
-        return int(mf)
-    except (TypeError, ValueError):
-        pass
-    try:
-        return float(mf)
-    except (TypeError, ValueError):
-        return mf  # scikit-learn's validation names the problem (check_forest_config)
-
-
-def check_forest_node(cfg: ForestConfig) -> None:
-    """What a ``ForestConfig`` can check without scikit-learn (run when one is made): the
-    engine, the gini-only rule of the fast and compiled engines (refused here rather than in a
-    worker mid-sweep), and scikit-learn's constraints on each parameter."""
-    if cfg.engine not in ENGINES:
-        raise UserError(f"experiment.forest.engine {cfg.engine!r}: expected one of {', '.join(ENGINES)}")
-    if cfg.engine != "sklearn" and cfg.criterion != "gini":
-        raise UserError(f"experiment.forest.criterion {cfg.criterion!r}: the {cfg.engine} engine builds gini trees "
-                        "only (the paper's); set experiment.forest.engine=sklearn for another criterion")
-    if not cfg.bootstrap and cfg.max_samples is not None:
-        raise UserError("experiment.forest.max_samples needs experiment.forest.bootstrap=true")
-    if cfg.per_tree not in PER_TREE:
-        raise UserError(f"experiment.forest.per_tree must be one of {PER_TREE}, got {cfg.per_tree!r}")
-    if cfg.per_tree == "subsample" and (not cfg.bootstrap or cfg.max_samples is not None):
-        raise UserError("experiment.forest.per_tree=subsample draws each tree's 2/3 itself: it needs "
-                        "experiment.forest.bootstrap=true and max_samples=null")
-    # scikit-learn's parameter constraints, without importing it (check_forest_config runs its own)
-    for name in ("base_trees", "samples_per_extra_tree", "max_trees"):
-        if not is_int(getattr(cfg, name), 1):
-            raise UserError(f"experiment.forest.{name} must be an integer >= 1, got {getattr(cfg, name)!r}")
-    if cfg.criterion not in ("gini", "entropy", "log_loss"):
-        raise UserError(f"experiment.forest.criterion must be gini, entropy or log_loss, got {cfg.criterion!r}")
-    if cfg.max_depth is not None and not is_int(cfg.max_depth, 1):
-        raise UserError(f"experiment.forest.max_depth must be an integer >= 1 or null, got {cfg.max_depth!r}")
-    leaf = cfg.min_samples_leaf
-    if not (is_int(leaf, 1) or (_real(leaf) and 0.0 < leaf < 1.0)):
-        raise UserError(f"experiment.forest.min_samples_leaf must be an integer >= 1 or a fraction in (0, 1), got {leaf!r}")
-    mf = max_features_value(cfg.max_features)
-    if not (mf in ("sqrt", "log2", None) or is_int(mf, 1) or (_real(mf) and 0.0 < mf <= 1.0)):
-        raise UserError(f"experiment.forest.max_features must be sqrt, log2, null, an integer >= 1 or a fraction "
-                        f"in (0, 1], got {cfg.max_features!r}")
-    ms = cfg.max_samples
-    if not (ms is None or is_int(ms, 1) or (_real(ms) and ms > 0.0)):
-        raise UserError(f"experiment.forest.max_samples must be null, an integer >= 1 or a float > 0, got {ms!r}")
-    if not isinstance(cfg.bootstrap, bool):
-        raise UserError(f"experiment.forest.bootstrap must be true or false, got {cfg.bootstrap!r}")
-
-
-def _real(v) -> bool:  # a float, not an int (scikit-learn's RealNotInt)
-    return isinstance(v, (float, np.floating))
-
-
-@dataclasses.dataclass(frozen=True)
-class ForestConfig:
-    """Random forest settings of paper section III-B (defaults are the paper's).
-
-    ``max_samples`` is the reading of "each tree uses 2/3 of the samples": ``None`` (default)
-    is Breiman's bootstrap of N draws with replacement, which leaves ~63 % distinct samples
-    per tree ("about two thirds"); a float f draws max(1, floor(f N)) with replacement instead
-    (f = 2/3 leaves only ~49 % distinct).
-    """
-
-    base_trees: int = 95
-    samples_per_extra_tree: int = 20
-    max_trees: int = 115
-    criterion: str = "gini"
-    max_depth: int = 200
-    min_samples_leaf: int = 1
-    max_features: str = "sqrt"
-    bootstrap: bool = True
-    max_samples: float | None = None
-    # "bootstrap": N draws with replacement (Breiman's, ~63 % distinct: "2/3"); "subsample": 2/3
-    # of the samples without replacement (``subsample_weights``), the other reading of III-B
-    per_tree: str = "bootstrap"
-    # "fast": the same trees built by scikit-learn's Cython builder without the estimator and
-    # evaluated in one jitted program (learn/engine.py), bit-identical to "sklearn", the
-    # RandomForestClassifier reference (tests/test_engine.py); "compiled": the same trees and
-    # predictions from scikit-learn's builder re-expressed in numba, many forests per call
-    # (learn/compiled/, docs/learning.md)
-    engine: str = "fast"
-
-    def __post_init__(self):  # refused when the config is made; scikit-learn's own check: check_forest_config
-        check_forest_node(self)
 
 
 def n_trees(n_samples: int, cfg: ForestConfig = ForestConfig()) -> int:
@@ -223,9 +126,9 @@ def predict_class(forest: RandomForestClassifier, X: np.ndarray) -> np.ndarray:
 
 
 def check_forest_config(cfg: ForestConfig = ForestConfig()) -> None:
-    """``check_forest_node``, then scikit-learn's own validation of the forest parameters as the
-    reference, once per sweep (fits then skip re-validation)."""
-    check_forest_node(cfg)
+    """scikit-learn's own validation of the forest parameters, the reference of the node's
+    declared constraints (``config.experiment.SKLEARN_FOREST``), once per sweep (fits then skip
+    re-validation)."""
     try:
         make_forest(2, 0, cfg)._validate_params()
     except ValueError as e:

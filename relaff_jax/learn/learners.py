@@ -23,9 +23,9 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from relaff_jax.errors import UserError
-from relaff_jax.learn.forests import ForestConfig, _fast, checked_inputs
+from relaff_jax.config.experiment import FOREST, ForestConfig
+from relaff_jax.learn.forests import _fast, checked_inputs
 
-FOREST = "forest"  # ExperimentConfig.learner of the paper's random forest
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -126,27 +126,12 @@ def import_learner(path: str) -> type:
     return cls
 
 
-def check_learner_node(learner: str, params: Any) -> None:
-    """What can be checked without importing anything (when the config is made)."""
-    if not isinstance(learner, str) or not learner:
-        raise UserError(f"experiment.learner must be 'forest' or an import path, got {learner!r}")
-    if not isinstance(params, Mapping) or not all(isinstance(k, str) for k in params):
-        raise UserError(f"experiment.learner_params must be a JSON object of keyword arguments, got {params!r}")
-    if learner == FOREST and params:
-        raise UserError("experiment.learner_params are for a scikit-learn learner; the paper's forest takes its "
-                        "settings from experiment.forest.*")
-    if "random_state" in params:
-        raise UserError("experiment.learner_params.random_state: each fit's random_state is derived from the "
-                        "run's seed (--seed); leave it out")
-
-
 def check_learner(learner: str, params: Mapping[str, Any], min_size: int = 2) -> None:
     """Import the learner, construct it with ``params``, and fit and predict once on
     ``min_size`` rows of both classes (the smallest training size of the protocol), so a bad
     import path, a class that is not a classifier, bad parameters or one that cannot learn from
     the protocol's smallest training sets is one ``UserError`` before any work."""
-    check_learner_node(learner, params)
-    if learner == FOREST:
+    if learner == FOREST:  # the node checked its values when it was built
         return
     from sklearn.base import is_classifier
 

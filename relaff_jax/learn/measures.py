@@ -33,7 +33,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from relaff_jax.learn.config import CAUSAL, ONLINE, ORACLE, TABLE2_ROWS, ExperimentConfig
+from relaff_jax.learn.table2 import CAUSAL, ONLINE, ORACLE, TABLE2_ROWS
+from relaff_jax.config.experiment import ExperimentConfig
 
 TIE_TOL = 1e-12  # scores closer than this are tied (accuracies are multiples of 1/T)
 ROUND = 1e-12  # float64 round-off of a mean of k/T: far below one scene (1/T)

@@ -15,15 +15,17 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax.constants import ACTIONS
-from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.correlation import category_pairs, correlation_matrix, correlation_with
 from relaff_jax.learn.datasets import check_datasets
-from relaff_jax.learn.forests import ForestConfig
+from relaff_jax.config.experiment import ForestConfig
 from relaff_jax.learn.learners import SklearnLearner, fit, learner_of, predict
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.protocol import split_pools
-from relaff_jax.learn.states import StateConfig, state_features
+from relaff_jax.config.experiment import StateConfig
+from relaff_jax.learn.states import state_features
 from relaff_jax.provenance import derive_seed
+from relaff_jax.config import streams
 
 
 def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, actions: list[str],
@@ -33,7 +35,7 @@ def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, a
     def states(b: str, idx: np.ndarray) -> np.ndarray:  # scenes of action b in this source's order
         return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space, scfg)
 
-    forest = fit(states(action, src), labels[src], derive_seed(seed, 2, SPACE_CODE[space], ACTIONS.index(action)), fcfg)
+    forest = fit(states(action, src), labels[src], derive_seed(seed, streams.SOURCE_FOREST, streams.SPACE_CODE[space], ACTIONS.index(action)), fcfg)
 
     def on(b: str, idx: np.ndarray) -> np.ndarray:
         return predict(forest, states(b, idx))
@@ -50,7 +52,7 @@ def _source_on_sources(feats: dict, action: str, labels: np.ndarray, src: dict, 
         return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space, scfg)
 
     forest = fit(states(action, src[action]), labels[src[action]],
-                 derive_seed(seed, 2, SPACE_CODE[space], ACTIONS.index(action)), fcfg)
+                 derive_seed(seed, streams.SOURCE_FOREST, streams.SPACE_CODE[space], ACTIONS.index(action)), fcfg)
     return {b: predict(forest, states(b, src[b])) for b in src if b != action}
 
 
@@ -79,7 +81,7 @@ def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, a
     x = np.concatenate([canon(a, src[a]), canon(b, src[b])])
     y = np.concatenate([labels[a][src[a]], labels[b][src[b]]]) if y is None else np.asarray(y, bool)
     k = category_pairs(ACTIONS).index((ACTIONS.index(a), ACTIONS.index(b)))
-    forest = fit(x, y, derive_seed(seed, 3, SPACE_CODE[space], k), fcfg)
+    forest = fit(x, y, derive_seed(seed, streams.CATEGORY_FOREST, streams.SPACE_CODE[space], k), fcfg)
     return [predict(forest, canon(t, targets[t])) for t in actions]
 
 

@@ -20,9 +20,10 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
-from relaff_jax.learn.config import ExperimentConfig
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.provenance import derive_seed
+from relaff_jax.config import streams
 
 
 def condition_names(actions: Sequence[str], thresholds: Sequence[float]) -> list[str]:
@@ -112,7 +113,7 @@ def split_pools(n: int, action_index: int, cfg: ExperimentConfig, seed: int) -> 
             f"(source {s} + correlation scenes {q} + training {max_size} + test {test}); "
             "use more data, smaller sizes (--set test_size=..., source_size=...), or the quick preset"
         )
-    perm = np.random.default_rng(derive_seed(seed, 1, action_index)).permutation(n)
+    perm = np.random.default_rng(derive_seed(seed, streams.POOL_SPLIT, action_index)).permutation(n)
     return {"source": perm[:s], "corr": perm[s : s + q], "target": perm[s + q :], "test_size": np.asarray(test)}
 
 

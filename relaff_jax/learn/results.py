@@ -20,7 +20,7 @@ from relaff_jax.config import from_dict
 from relaff_jax.constants import SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
-from relaff_jax.learn.config import ExperimentConfig
+from relaff_jax.config.experiment import ExperimentConfig
 
 FORMAT_VERSION = 2  # of experiment.json and results.npz (2: balanced test sets, outcomes, leave-one-out)
 

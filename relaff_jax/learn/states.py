@@ -12,47 +12,12 @@ with the toy's nine values first, RHF ``(N, 300)`` with toy = A, other = B) and 
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
 from relaff_jax.constants import ACTIONS, PCA_PER_OBJECT, RHF_BINS, SPACES
+from relaff_jax.config.experiment import EXTRAS, RHF_PARTS, StateConfig
 from relaff_jax.errors import UserError
 
-RHF_PARTS = ("dx", "dy", "dz", "dist", "angle_na_nb", "angle_na_d")  # perception.config.RHF_NAMES
-EXTRAS = {"relative": 4, "reach": 2}  # derived columns: how many each adds
-
-
-@dataclasses.dataclass(frozen=True)
-class StateConfig:
-    """What a state holds beyond (or instead of) the paper's; the defaults are the paper's.
-
-    extra: derived columns appended in both spaces, from the canonical PCA centroids (robot
-        frame, robot at the origin): ``"relative"`` = toy minus other object dx, dy, dz and
-        their planar distance (4); ``"reach"`` = each object's planar distance from the robot,
-        toy then other (2). A forest that needs these as oblique functions of x, y gets them
-        as one column.
-    rhf_pca: RHF space keeps the 18 PCA values (the paper's 318) or holds the bins alone.
-    rhf_parts: the RHF sub-histograms kept (``RHF_PARTS``, 50 bins each), in their order.
-    """
-
-    extra: tuple[str, ...] = ()
-    rhf_pca: bool = True
-    rhf_parts: tuple[str, ...] = RHF_PARTS
-
-    def __post_init__(self):  # refused when the config is made
-        check_state_config(self)
-
-
-def check_state_config(cfg: StateConfig) -> None:
-    bad = [e for e in cfg.extra if e not in EXTRAS]
-    if bad or len(set(cfg.extra)) != len(cfg.extra):
-        raise UserError(f"experiment.state.extra must be distinct values of {tuple(EXTRAS)}, got {cfg.extra}")
-    bad = [p for p in cfg.rhf_parts if p not in RHF_PARTS]
-    if bad or not cfg.rhf_parts or len(set(cfg.rhf_parts)) != len(cfg.rhf_parts):
-        raise UserError(f"experiment.state.rhf_parts must be distinct values of {RHF_PARTS}, got {cfg.rhf_parts}")
-    if not isinstance(cfg.rhf_pca, bool):
-        raise UserError(f"experiment.state.rhf_pca must be true or false, got {cfg.rhf_pca!r}")
 
 
 def derived_columns(pca: np.ndarray, extra: tuple[str, ...]) -> np.ndarray:

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from relaff_jax import io as rio
-from relaff_jax.learn.config import result_differences
+from relaff_jax.config.experiment import result_differences
 
 from relaff_jax.learn import folder as L
 from relaff_jax.learn.folder import META  # noqa: F401 (re-exported)

@@ -42,7 +42,8 @@ from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn import user_conditions
 from relaff_jax.learn.blocks import SUBSETS, BlockJob, Target, read_block, run_block_job
-from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig, check_config, result_differences
+from relaff_jax.config.experiment import ExperimentConfig, result_differences
+from relaff_jax.learn.checks import check_config
 from relaff_jax.learn.datasets import check_datasets, fingerprint
 from relaff_jax.learn.draws import draw_rep
 from relaff_jax.learn.learners import learner_of
@@ -62,6 +63,7 @@ from relaff_jax.learn.protocol import (
 )
 from relaff_jax.learn.results import FORMAT_VERSION
 from relaff_jax.learn.states import state_features
+from relaff_jax.config import streams
 
 
 def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
@@ -184,7 +186,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                 test_idx, train_order = draws
                 job = BlockJob(path=str(path), plan=plans[ti], train_order=train_order, test_idx=test_idx, sizes=chunk,
                                repeats=reps_of[ti], n_conditions=n_cond, learner=learner_of(cfg),
-                               seed_keys=(seed, 5, SPACE_CODE[space], ACTIONS.index(t), r), loo_size=loo_n or None,
+                               seed_keys=(seed, streams.SWEEP_FOREST, streams.SPACE_CODE[space], ACTIONS.index(t), r), loo_size=loo_n or None,
                                loo_conditions=loo_conds, keep_outcomes=cfg.keep_outcomes, subset=subsets[t])
                 calls.append((run_block_job, (target_data[t], job), {}))
                 weights.append(fits)

@@ -12,6 +12,7 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS, PCA_PER_OBJECT, RHF_BINS
 from relaff_jax.learn.states import check_action
+from relaff_jax.config import streams
 
 
 def synthetic_datasets(
@@ -31,7 +32,7 @@ def synthetic_datasets(
     balanced to 50 % positive. RHF carries a noisy histogram of the toy-other distance.
     Returns ``{action: {label, relation, cog_distance, toy, other, pca, rhf, unseen, action}}``.
     """
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 7]))
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), streams.SYNTHETIC]))
     out: dict[str, dict] = {}
     for action in actions:
         check_action(action)

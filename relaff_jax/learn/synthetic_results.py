@@ -21,7 +21,7 @@ from relaff_jax.config import to_dict
 from relaff_jax.constants import ACTIONS
 from relaff_jax.learn import folder as L
 from relaff_jax.learn.blocks import SUBSETS
-from relaff_jax.learn.config import ExperimentConfig
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.correlation import category_pairs
 from relaff_jax.learn.protocol import category_masks, condition_names, layout
 from relaff_jax.learn.results import FORMAT_VERSION

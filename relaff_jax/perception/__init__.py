@@ -34,7 +34,7 @@ docs/perception.md.
 
 Files, in dependency order (this module re-exports their public names):
 
-- ``config.py``: ``PerceptionConfig`` and its parts, ``validate_config``, feature names;
+- the settings and feature names: ``relaff_jax.config.perception``;
 - ``ops.py``: scatter and prefix-sum primitives with fast XLA CPU batching;
 - ``scene.py``: ``SceneGeoms`` (the geoms of one scene), ``make_scene``, bounding spheres;
 - ``camera.py``: camera pose, intrinsics, per-pixel and per-tile rays (static numpy);
@@ -57,21 +57,6 @@ import types
 
 from relaff_jax.constants import OBJECT_SEGMENTS, SEG_BACKGROUND, SEG_NONE, SEG_OTHER, SEG_TOY
 
-from .config import (
-    NOISE_MODEL_NAMES,
-    NORMAL_SOURCES,
-    PCA_NAMES,
-    RHF_NAMES,
-    CameraConfig,
-    CullConfig,
-    NoiseConfig,
-    NormalsConfig,
-    PerceptionConfig,
-    RHFConfig,
-    VoxelConfig,
-    stored_config,
-    validate_config,
-)
 
 # Everything else loads on first use (PEP 562), so that the config, which the CLI reads to
 # check --set before any work, comes without JAX: name -> submodule.
@@ -161,8 +146,6 @@ sys.modules[__name__].__class__ = _Package
 __all__ = [
     "OBJECT_SEGMENTS", "SEG_BACKGROUND", "SEG_NONE", "SEG_OTHER", "SEG_TOY",
     "camera_frame", "camera_rays", "intrinsics", "tile_rays",
-    "NOISE_MODEL_NAMES", "NORMAL_SOURCES", "PCA_NAMES", "RHF_NAMES", "CameraConfig", "CullConfig",
-    "NoiseConfig", "NormalsConfig", "PerceptionConfig", "RHFConfig", "VoxelConfig", "stored_config", "validate_config",
     "fast_arccos", "pca_frame", "pca_object", "rhf_bin", "rhf_histograms", "rhf_pair_values",
     "rotation_to_rpy",
     "NOISE_MODELS", "add_depth_noise", "depth_noise_sigma", "pixel_radius",

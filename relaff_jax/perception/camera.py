@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .config import CameraConfig
+from relaff_jax.config.perception import CameraConfig
 
 
 def camera_frame(cam: CameraConfig) -> tuple[np.ndarray, np.ndarray]:

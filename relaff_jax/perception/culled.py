@@ -27,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .config import PerceptionConfig, validate_config
+from relaff_jax.config.perception import PerceptionConfig
 from .pipeline import make_batched_features
 from .render import active_tiles
 from .scene import SceneGeoms, make_scene
@@ -81,7 +81,6 @@ def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = Perception
     and perceived in calls of ``sub_batch`` (the last padded by repeating its last scene), each
     at ``tile_capacity`` of its largest count. ``f.capacities`` lists the capacities used so far.
     """
-    validate_config(cfg)
     count = make_tile_counter(geom_type, geom_seg, cfg)
     fns: dict[int, object] = {}
 

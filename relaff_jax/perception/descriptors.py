@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .config import RHF_NAMES, RHFConfig
+from relaff_jax.config.perception import RHF_NAMES, RHFConfig
 from .ops import scatter_add
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from mujoco import mjx
 
 from relaff_jax import perception as pc
+from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.errors import UserError
 from relaff_jax.sim import world as wd
 
@@ -96,7 +97,7 @@ def jitted_geoms(world: wd.World):
 SUB_BATCH = 4
 
 
-def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionConfig(), seed: int = 0,
+def make_feature_fn(world: wd.World, cfg: PerceptionConfig = PerceptionConfig(), seed: int = 0,
                     sub_batch: int = SUB_BATCH, culled: bool = True):
     """``compute(samples) -> dict of numpy arrays`` for ``relaff_jax.data.add_features``.
 
@@ -148,7 +149,7 @@ def make_feature_fn(world: wd.World, cfg: pc.PerceptionConfig = pc.PerceptionCon
 
 
 def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, key=None,
-               cfg: pc.PerceptionConfig = pc.PerceptionConfig(), title: str = "") -> Path:
+               cfg: PerceptionConfig = PerceptionConfig(), title: str = "") -> Path:
     """Draw what the robot saw in one settled scene (``perception.render_scene_png``: noisy
     depth image, the objects' depth and segments, voxel clouds with PCA frames); writes
     ``out`` atomically.

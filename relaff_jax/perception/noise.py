@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 
 from .camera import camera_frame, intrinsics
-from .config import NOISE_MODEL_NAMES, CameraConfig, PerceptionConfig
+from relaff_jax.config.perception import NOISE_MODEL_NAMES, CameraConfig, PerceptionConfig
 
 
 def _sigma_robwork(depth, r):

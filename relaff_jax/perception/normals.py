@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .config import PerceptionConfig
+from relaff_jax.config.perception import PerceptionConfig
 from .ops import scatter_set
 
 

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .config import PerceptionConfig, validate_config
+from relaff_jax.config.perception import PerceptionConfig
 from .descriptors import pca_object, rhf_histograms
 from .noise import add_depth_noise
 from .normals import pixel_normals
@@ -103,7 +103,6 @@ def features(scene: SceneGeoms, key, cfg: PerceptionConfig = PerceptionConfig())
           (each also returned); features of an overflowing scene are computed from the data that
           fit and must not be used silently.
     """
-    validate_config(cfg)  # static: runs once per trace
     return features_from_voxels(point_cloud(scene, key, cfg)["voxels"], cfg)
 
 
@@ -115,7 +114,6 @@ def make_batched_features(geom_type, geom_seg, cfg: PerceptionConfig = Perceptio
     the underlying jitted function. ``wrap`` (optional) decorates the single-scene function
     before vmap, e.g. ``chex.assert_max_traces(n=1)`` in tests.
     """
-    validate_config(cfg)
     g = len(np.asarray(geom_type).ravel())
     static = make_scene(geom_type, geom_seg, np.zeros((g, 3)), np.zeros((g, 3)), np.tile(np.eye(3), (g, 1, 1)))
 

@@ -18,7 +18,7 @@ import numpy as np
 from relaff_jax.constants import OBJECT_SEGMENTS
 from relaff_jax.io import atomic_write_bytes
 
-from .config import PerceptionConfig, validate_config
+from relaff_jax.config.perception import PerceptionConfig
 from .cloud_plot import draw_clouds
 from .descriptors import pca_frame
 from .noise import add_depth_noise
@@ -54,7 +54,6 @@ def scene_view(scene: SceneGeoms, key, cfg: PerceptionConfig = PerceptionConfig(
     0 = no return), seg (H, W), pixels (noisy ``compact_objects`` result), voxels
     (``voxel_downsample`` result), frames (per object: centroid, frame, eigenvalues) and
     feats (the ``features`` outputs). ``key`` is split: image noise, feature noise."""
-    validate_config(cfg)
     fn = _scene_view_fn(scene.geom_type, scene.geom_seg, cfg)
     return jax.tree.map(np.asarray, fn(scene.size, scene.xpos, scene.xmat, key))
 

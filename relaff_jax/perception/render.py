@@ -13,7 +13,7 @@ import numpy as np
 from relaff_jax.constants import OBJECT_SEGMENTS, SEG_NONE, SEG_OTHER, SEG_TOY
 
 from .camera import camera_frame, camera_rays, intrinsics, tile_rays
-from .config import PerceptionConfig
+from relaff_jax.config.perception import PerceptionConfig
 from .ops import cumsum, scatter_set
 from .raycast import cast_rays, surface_normals
 from .scene import GEOM_BOX, GEOM_SPHERE, SceneGeoms

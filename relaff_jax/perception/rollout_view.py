@@ -20,7 +20,7 @@ import numpy as np
 from relaff_jax.constants import SEG_BACKGROUND, SEG_NONE
 
 from .camera import camera_rays
-from .config import CameraConfig
+from relaff_jax.config.perception import CameraConfig
 from .raycast import cast_rays, surface_normals
 from .scene import SUPPORTED_GEOMS, SceneGeoms
 

@@ -9,7 +9,7 @@ import jax.numpy as jnp
 
 from relaff_jax.constants import OBJECT_SEGMENTS, SEG_OTHER, SEG_TOY
 
-from .config import PerceptionConfig
+from relaff_jax.config.perception import PerceptionConfig
 from .ops import cumsum, scatter_add
 
 _BITS = 9  # voxel index bits per axis in the sort key: 512 voxels = 6.4 m per object

@@ -7,7 +7,7 @@ Stages, in order (each file's docstring gives its inputs and outputs):
 - ``lzf.py``: LZF (de)compression for PCD binary_compressed;
 - ``pcd.py`` / ``ply.py`` / ``readers.py``: ``read_pcd``, ``read_ply``, ``read_npz``,
   ``read_cloud`` (by extension) and their writers;
-- ``config.py``: ``RealRunConfig`` (the tree's ``real`` node), ``RealConfig`` and ``pipeline_config``
+- the settings (``RealRunConfig``, ``RealConfig``, ``pipeline_config``) are ``relaff_jax.config.real``
   (its pipeline settings with the tree's shared perception);
 - ``ransac.py``: RANSAC plane and k-means in JAX (pure, keyed; the caller jits);
 - ``segment.py``: ``segment_scene`` (table plane, crop, k-means), ``hand_segmentation``;
@@ -35,7 +35,7 @@ from __future__ import annotations
 
 from relaff_jax.lazy import lazy_attributes
 
-# Names are loaded on first use (PEP 562), so that ``relaff_jax.real.config`` and the labels
+# Names are loaded on first use (PEP 562), so that the labels
 # file can be read without importing JAX (a ``--set`` mistake is reported at once).
 _WHERE = {
     "FIRST_OBJECT": "cloud",
@@ -48,12 +48,6 @@ _WHERE = {
     "object_pair_features": "cloud_features",
     "object_points": "cloud_features",
     "pair_features": "cloud_features",
-    "CropConfig": "config",
-    "KMeansConfig": "config",
-    "NormalConfig": "config",
-    "PlaneConfig": "config",
-    "RealConfig": "config",
-    "validate_real_config": "config",
     "camera_pose": "frame",
     "camera_pose_stats": "frame",
     "sim_camera": "frame",
@@ -79,7 +73,6 @@ _WHERE = {
     "render_real_scene_png": "show",
     "camera_poses": "survey",
     "read_speed": "survey",
-    "RealExperimentConfig": "config",
     "run_sim_only": "experiments",
     "run_space": "experiments",
     "summarise": "experiments",
@@ -88,10 +81,7 @@ _WHERE = {
     "relation_counts": "labels",
     "validate": "labels",
     "write_labels": "labels",
-    "RuleConfig": "propose",
     "propose_scene": "propose",
-    "SimRelationConfig": "config",
-    "SimSensor": "config",
     "build_sim_relations": "sim_relations",
     "load_sim_relations": "sim_relations",
     "run_study": "study",
@@ -100,8 +90,6 @@ _WHERE = {
     "run_propose": "stages",
     "run_check": "stages",
     "read_corrections": "stages",
-    "RealRunConfig": "config",
-    "pipeline_config": "config",
 }
 
 

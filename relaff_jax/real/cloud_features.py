@@ -29,12 +29,12 @@ from scipy.spatial import cKDTree
 
 from relaff_jax.constants import SEG_OTHER, SEG_TOY
 from relaff_jax.errors import UserError
-from relaff_jax.perception.config import PerceptionConfig
+from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.perception.normals import window_normals
 from relaff_jax.perception.pipeline import features_from_voxels
 from relaff_jax.perception.voxels import voxel_downsample
 
-from .config import RealConfig, validate_real_config
+from relaff_jax.config.real import RealConfig
 from .frame import to_table, vectors_to_table
 
 
@@ -100,7 +100,6 @@ def _pair_fn(pcfg: PerceptionConfig):
 def pair_features(points_a, normals_a, points_b, normals_b, cfg: RealConfig = RealConfig()) -> dict:
     """PCA (18,) and RHF (300,) of an object pair, object a first (see the module docstring).
     Points in the table frame (metres), normals unit length; both objects need >= 1 point."""
-    validate_real_config(cfg)
     arrs = [np.asarray(a, np.float32) for a in (points_a, normals_a, points_b, normals_b)]
     for name, a in zip(("points_a", "normals_a", "points_b", "normals_b"), arrs):
         if a.ndim != 2 or a.shape[1] != 3 or not np.all(np.isfinite(a)):

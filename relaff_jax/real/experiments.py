@@ -47,8 +47,9 @@ from relaff_jax.provenance import derive_seed
 
 from . import paired, splits
 from .paired import HITS, _balanced, interval, scene_resamples  # noqa: F401  (the protocol's helpers, re-exported)
-from .config import RealExperimentConfig
+from relaff_jax.config.real import RealExperimentConfig
 from .splits import balanced_take, split_sizes  # noqa: F401  (re-exported: the experiments' protocol)
+from relaff_jax.config import streams
 
 
 def states(data: dict, space: str) -> np.ndarray:
@@ -107,12 +108,12 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
         out["hits_curve_bl"] = np.zeros((len(sizes), cfg.reps, len(yt)), bool)
     bar = progress_bar(progress, cfg.reps, f"{space} experiments ({kind})", unit="rep")
     for r in range(cfg.reps):
-        rng = np.random.default_rng(derive_seed(cfg.seed, 17, code, r))
+        rng = np.random.default_rng(derive_seed(cfg.seed, streams.REAL_EXPERIMENT, code, r))
         # 1 + 3: simulation forests, tested in simulation and on every real test pair
         for name, n_half, e in (("fair", n_tr, 0), ("full", half_full, 1)):
             idx = balanced_take(rng, sim0, sim1, 2 * n_half)
             tr, te = idx[: 2 * n_half], idx[2 * n_half:]
-            forest = fit(Xs[tr], ys[tr], derive_seed(cfg.seed, 17, code, r, e), fcfg)
+            forest = fit(Xs[tr], ys[tr], derive_seed(cfg.seed, streams.REAL_EXPERIMENT, code, r, e), fcfg)
             out[f"sim_{name}"][r] = float(np.mean(predict(forest, Xs[te]) == ys[te]))
             pred_t = predict(forest, Xt)
             out[f"{name}_to_real"][r] = balanced_accuracy(pred_t, yt)
@@ -129,7 +130,7 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
         else:
             tr, te = splits.train_pool(rng, yr), None
         Xte, yte = (Xr[te], yr[te]) if te is not None else (Xt, yt)
-        forest = fit(Xr[tr], yr[tr], derive_seed(cfg.seed, 17, code, r, 2), fcfg)
+        forest = fit(Xr[tr], yr[tr], derive_seed(cfg.seed, streams.REAL_EXPERIMENT, code, r, 2), fcfg)
         pred = predict(forest, Xte)
         out["real"][r] = balanced_accuracy(pred, yte)
         out["pairs_real"][r, slice(None) if te is None else te] = (np.asarray(pred) > 0.5) == yte
@@ -140,8 +141,8 @@ def run_space(real: dict, sim: dict, space: str, cfg: RealExperimentConfig = Rea
         Xbt = Xb[te] if te is not None else augment(Xt, boot_t[None], rep)
         for s, n in enumerate(sizes):
             sub = tr[:n]
-            f_sl = fit(Xr[sub], yr[sub], derive_seed(cfg.seed, 17, code, r, 3, n), fcfg)
-            f_bl = fit(Xb[sub], yr[sub], derive_seed(cfg.seed, 17, code, r, 4, n), fcfg)
+            f_sl = fit(Xr[sub], yr[sub], derive_seed(cfg.seed, streams.REAL_EXPERIMENT, code, r, 3, n), fcfg)
+            f_bl = fit(Xb[sub], yr[sub], derive_seed(cfg.seed, streams.REAL_EXPERIMENT, code, r, 4, n), fcfg)
             p_sl, p_bl = predict(f_sl, Xte), predict(f_bl, Xbt)
             out["curve_sl"][s, r] = balanced_accuracy(p_sl, yte)
             out["curve_bl"][s, r] = balanced_accuracy(p_bl, yte)
@@ -220,11 +221,11 @@ def run_sim_only(sim: dict, space: str, cfg: RealExperimentConfig = RealExperime
             raise UserError(f"SIM -> SIM {a} vs {b} needs >= 2 simulated scenes of each, have {len(ia)}, {len(ib)}")
         acc = np.zeros(cfg.reps)
         for r in range(cfg.reps):
-            rng = np.random.default_rng(derive_seed(cfg.seed, 18, code, p, r))
+            rng = np.random.default_rng(derive_seed(cfg.seed, streams.SIM_TO_SIM, code, p, r))
             idx = balanced_take(rng, ia, ib, 2 * k)  # class 1 = b
             tr, te = idx[: 2 * k], idx[2 * k:]
             yb = rel == RELATIONS.index(b)
-            forest = fit(X[tr], yb[tr], derive_seed(cfg.seed, 18, code, p, r, 1), cfg.forest())
+            forest = fit(X[tr], yb[tr], derive_seed(cfg.seed, streams.SIM_TO_SIM, code, p, r, 1), cfg.forest())
             acc[r] = float(np.mean(predict(forest, X[te]) == yb[te]))
         out[f"{a}_vs_{b}"] = acc
         out[f"{a}_vs_{b}_n"] = np.asarray(2 * k)
@@ -248,7 +249,7 @@ def _bf_interval(sl: np.ndarray, bl: np.ndarray, early: np.ndarray, rng: np.rand
 def summarise(res: dict, cfg: RealExperimentConfig = RealExperimentConfig()) -> dict:
     """Mean, std (ddof=1) and 95 % bootstrap interval of each accuracy; curves, bootstrap
     factors per size and the sizes where bf is undefined (P_sl <= 0.5)."""
-    rng = np.random.default_rng(derive_seed(cfg.seed, 17, 9))
+    rng = np.random.default_rng(derive_seed(cfg.seed, streams.REAL_EXPERIMENT, 9))
     acc = {}
     for k in ("sim_fair", "sim_full", "real", "fair_to_real", "full_to_real"):
         x = np.asarray(res[k])

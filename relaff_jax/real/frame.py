@@ -25,7 +25,7 @@ import dataclasses
 import numpy as np
 
 from relaff_jax.errors import UserError
-from relaff_jax.perception.config import CameraConfig
+from relaff_jax.config.perception import CameraConfig
 
 _MIN_COS = 1e-3  # optical axis within 0.06 degrees of parallel to the table: no hit point
 

@@ -15,7 +15,8 @@ from pathlib import Path
 from relaff_jax.errors import UserError
 
 from .labels import REAL_RELATIONS, Label, file_sha256
-from .propose import RuleConfig, propose_scene
+from relaff_jax.config.real import RuleConfig
+from .propose import propose_scene
 from .scene_source import load, scene_files
 
 

@@ -28,19 +28,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from relaff_jax.config.real import RuleConfig
 from relaff_jax.errors import UserError
-
-
-@dataclasses.dataclass(frozen=True)
-class RuleConfig:
-    """Tolerances of the rule, metres and fractions."""
-
-    lo_q: float = 0.02
-    hi_q: float = 0.98
-    table_tol: float = 0.02
-    contact_tol: float = 0.03
-    min_overlap: float = 0.25
-    grow: float = 0.01
 
 
 @dataclasses.dataclass(frozen=True)

@@ -17,7 +17,7 @@ from scipy.optimize import linear_sum_assignment
 from relaff_jax.errors import UserError
 
 from .cloud import SEG_TABLE
-from .config import RealConfig
+from relaff_jax.config.real import RealConfig
 from .readers import read_cloud
 from .segment import hand_segmentation, object_ids, segment_scene
 

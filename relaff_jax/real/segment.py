@@ -25,7 +25,7 @@ import numpy as np
 from relaff_jax.errors import UserError
 
 from .cloud import FIRST_OBJECT, SEG_NONE, SEG_TABLE, RealCloud
-from .config import RealConfig, validate_real_config
+from relaff_jax.config.real import RealConfig
 from .ransac import kmeans, ransac_plane
 
 MIN_TABLE_POINTS = 500  # fewer plane inliers than this: "no table"
@@ -110,7 +110,6 @@ def segment_scene(cloud: RealCloud, key, cfg: RealConfig = RealConfig(), n_objec
     Returns dict(seg (H, W) / (N,) int32 segment map, plane (4,) camera-frame table plane with
     its normal towards the camera, n_objects (int), k (clusters), crop (``crop_above_table`` result over the
     valid points), valid (H, W) / (N,) bool). ``key`` is split for RANSAC and k-means."""
-    validate_real_config(cfg)
     bg = int(cfg.kmeans.background)
     if n_objects is not None and int(n_objects) < 1:
         raise UserError(f"n_objects must be >= 1, got {n_objects}")

@@ -18,7 +18,7 @@ from relaff_jax.perception.cloud_plot import draw_clouds
 from relaff_jax.perception.descriptors import pca_frame
 
 from .cloud_features import object_pair_features
-from .config import RealConfig
+from relaff_jax.config.real import RealConfig
 from .frame import table_frame
 from .segment import hand_segmentation, object_ids, segment_scene
 

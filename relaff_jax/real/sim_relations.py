@@ -42,8 +42,9 @@ from relaff_jax.data.progress import progress_bar
 
 from . import folder as layout
 from . import frame as rframe
-from .config import SensorTolerance, SimRelationConfig, SimSensor, sensor_mismatch
+from relaff_jax.config.real import SensorTolerance, SimRelationConfig, SimSensor, sensor_mismatch
 from .scene_source import TARGET
+from relaff_jax.config import streams
 
 # Settings that change what a chunk holds: a folder's chunks must share them (the others, e.g.
 # per_relation or feature_batch, only say how many chunks or how they are computed).
@@ -55,7 +56,7 @@ def perception_config(sensor: SimSensor, cfg: SimRelationConfig, perception=None
     """The tree's ``perception`` settings (default: the default tree's; voxel grid, RHF,
     ``min_points``) seen by the simulated sensor: its camera pose and fov, and the simulated
     relation data's noise model, normals source and capacities (``real.sim.*``)."""
-    from relaff_jax.perception.config import CameraConfig, NoiseConfig, PerceptionConfig
+    from relaff_jax.config.perception import CameraConfig, NoiseConfig, PerceptionConfig
 
     p = PerceptionConfig() if perception is None else perception
     cam = rframe.sim_camera(sensor.height, sensor.tilt_deg, TARGET, CameraConfig(vfov_deg=sensor.vfov_deg))
@@ -67,7 +68,7 @@ def perception_config(sensor: SimSensor, cfg: SimRelationConfig, perception=None
 
 def features_record(perception) -> dict:
     """What of the tree's perception decides a chunk's features (voxel grid, RHF): the guard holds it."""
-    from relaff_jax.perception.config import PerceptionConfig
+    from relaff_jax.config.perception import PerceptionConfig
 
     p = PerceptionConfig() if perception is None else perception
     return rio.jsonable(dict(voxel_size=p.voxel.size, max_voxels=p.voxel.max_voxels, rhf=dataclasses.asdict(p.rhf)))
@@ -84,10 +85,10 @@ def _chunk_fn(world, sensor: SimSensor, cfg: SimRelationConfig, perception=None)
     geoms = jitted_geoms(world)
     scfg = sc.SceneConfig(workspace_radius=cfg.workspace_radius)
     allowed = np.asarray([i for i, p in enumerate(world.pairs) if p[2] == "toy+base"])
-    root = jax.random.PRNGKey(derive_seed(cfg.seed, 16, 1))
+    root = jax.random.PRNGKey(derive_seed(cfg.seed, streams.SIM_RELATIONS, 1))
 
     def run(c: int) -> dict:
-        scenes, _ = sc.run_scenes(cfg.chunk, seed=derive_seed(cfg.seed, 16, 0, c), batch=cfg.chunk,
+        scenes, _ = sc.run_scenes(cfg.chunk, seed=derive_seed(cfg.seed, streams.SIM_RELATIONS, 0, c), batch=cfg.chunk,
                                   allowed=allowed, world=world, cfg=scfg, progress=False)
         ids = c * cfg.chunk + np.arange(cfg.chunk, dtype=np.int64)
         size, xpos, xmat = geoms(jnp.asarray(scenes.pair, jnp.int32), jnp.asarray(scenes.qpos, jnp.float32))
@@ -162,13 +163,6 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
     kept scenes (resumable; ``guard`` first: the same config, a sensor within ``tol``; chunks
     are made with the folder's own sensor). Returns a summary dict, ``sensor`` the one simulated."""
     folder = Path(folder)
-    if cfg.normals not in ("ray", "cloud"):
-        raise UserError(f"unknown normals {cfg.normals!r}; valid: ['ray', 'cloud']")
-    if cfg.chunk % cfg.feature_batch:
-        raise UserError(f"chunk ({cfg.chunk}) must be a multiple of feature_batch ({cfg.feature_batch})")
-    bad = [r for r in cfg.need if r not in RELATIONS]
-    if bad:
-        raise UserError(f"unknown relations {bad}; valid: {', '.join(RELATIONS)}")
     sensor = guard(folder, sensor, cfg, tol, perception=perception)
     meta_path = folder / GUARD
     meta = dict(sensor=dataclasses.asdict(sensor), config=dataclasses.asdict(cfg),
@@ -214,7 +208,7 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
 
 def normals_note(cfg: SimRelationConfig, real_cfg) -> str:
     """Which RHF normals each side of a study used (one line for ``results.md``)."""
-    from relaff_jax.perception.config import NormalsConfig
+    from relaff_jax.config.perception import NormalsConfig
 
     w = NormalsConfig()
     sim = ("the renderer's ray-hit normals" if cfg.normals == "ray" else

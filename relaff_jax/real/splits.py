@@ -20,6 +20,7 @@ import numpy as np
 
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed
+from relaff_jax.config import streams
 
 
 def split_sizes(y: np.ndarray, train_fraction: float) -> dict:
@@ -71,7 +72,7 @@ def scene_splits(y: np.ndarray, scene: np.ndarray, sz: dict, seed: int, reps: in
     y, scene = np.asarray(y).astype(int), np.asarray(scene).astype(str)
     sides = []
     for r in range(reps):
-        rng = np.random.default_rng(derive_seed(seed, 19, code, r))
+        rng = np.random.default_rng(derive_seed(seed, streams.REAL_SPLIT, code, r))
         test = _group(rng, y, scene, sz["test"])
         sides.append((rng, test))
     left = [min(int(((~t) & (y == c)).sum()) for c in (0, 1)) for _, t in sides]

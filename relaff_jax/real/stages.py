@@ -21,7 +21,7 @@ from pathlib import Path
 
 from relaff_jax.errors import UserError
 
-from .config import pipeline_config
+from relaff_jax.config.real import pipeline_config
 from .study import run_study
 
 

@@ -2,7 +2,7 @@
 test folder and its labels), resumable.
 
 Takes a training folder and its labels CSV, optionally a test folder and its labels, an output
-folder and the one ``runconfig.RunConfig`` tree (its ``real`` node and ``perception``);
+folder and the one ``config.RunConfig`` tree (its ``real`` node and ``perception``);
 ``run_study`` does, each step stored in the output folder and skipped when already there:
 
 1. the camera poses of the training folder's labelled scenes: their mean is the simulated
@@ -39,7 +39,7 @@ from relaff_jax.errors import UserError
 
 from . import labels as lab
 from . import folder as layout
-from .config import pipeline_config, sensor_difference
+from relaff_jax.config.real import pipeline_config, real_experiment, sensor_difference
 
 
 SUMMARY_ONLY = ("bf_sizes", "n_boot")  # RealExperimentConfig keys only the summary reads: no refit
@@ -75,7 +75,6 @@ def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | P
     from relaff_jax.constants import RELATIONS, SPACES
 
     from . import splits
-    from .config import validate_run_config
     from .scene_source import object_ids
     from .sim_relations import _counts
 
@@ -85,8 +84,8 @@ def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | P
     bad = [s for s in spaces if s not in SPACES]
     if not spaces or bad:
         raise UserError(f"spaces must be values of {', '.join(SPACES)}, got {list(spaces)}")
-    cfg = validate_run_config(tree).real
-    exp_cfg, sim_cfg = cfg.experiment, cfg.sim
+    cfg = tree.real  # checked with the perception it shares by config.check_tree
+    exp_cfg, sim_cfg = real_experiment(tree), cfg.sim
     full = 2 * (exp_cfg.n_full // 2)
     sim_dir = Path(sim_folder) if sim_folder else Path(out) / layout.SIM
     have = _counts(sim_dir)[1] if sim_dir.is_dir() else np.zeros(len(RELATIONS), np.int64)
@@ -152,7 +151,7 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
     out = Path(out)
     rows = check_inputs(tree, scenes, labels_path, out, spaces, sim_folder, test, test_labels, only_present)
     cfg, pipeline = tree.real, pipeline_config(tree)
-    exp_cfg, sim_cfg = cfg.experiment, cfg.sim
+    exp_cfg, sim_cfg = real_experiment(tree), cfg.sim
     poses = real_data.scene_poses(scenes, rows["train"], progress)
     sensor = real_data.sensor(poses)  # the simulated sensor: the training folder's mean pose
     sim_dir = Path(sim_folder) if sim_folder else out / layout.SIM
@@ -188,7 +187,7 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
             craw[space] = _experiments(out / layout.raw(space, cross=True), ckey,
                                        lambda space=space: ex.run_space(real, sim, space, exp_cfg, progress, test=real_t))
             cross[space] = ex.summarise(craw[space], exp_cfg)
-    context = _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test)
+    context = _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test, exp_cfg)
     report.write_report(out, raw, summary, context, craw or None, cross or None)
     for line in report.terminal_lines(summary, cross or None):
         say(line)
@@ -198,7 +197,7 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
     return dict(within=summary, cross=cross or None)
 
 
-def _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test) -> dict:
+def _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test, exp_cfg) -> dict:
     """The ``results.md`` header: the data, the sensor (where it came from), the costs."""
     from . import sim_relations as sr
 
@@ -217,7 +216,7 @@ def _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg
         ctx["real pairs, test folder"] = pairs(rows["test"], real_t, rows["skipped_test"], test)
         ctx["test folder's camera"] = (f"mean height {np.mean(test_poses['height']):.4f} m, tilt "
                                        f"{np.mean(test_poses['tilt_deg']):.2f} deg over {len(test_poses['height'])} scenes")
-    sim_cfg, exp_cfg = cfg.sim, cfg.experiment
+    sim_cfg = cfg.sim
     ctx.update({
         "simulated sensor": f"from the training folder's mean pose: height {sensor.height:.4f} m, tilt "
                             f"{sensor.tilt_deg:.2f} deg from straight down, vertical fov {sensor.vfov_deg:.2f} deg, "

@@ -16,7 +16,7 @@ import numpy as np
 
 from relaff_jax.errors import UserError
 
-from .config import RealConfig
+from relaff_jax.config.real import RealConfig
 from .frame import camera_pose, camera_pose_stats
 from .readers import read_cloud
 from .segment import fit_table_plane

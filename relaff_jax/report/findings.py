@@ -15,7 +15,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax.learn import ORACLE, PAPER_TABLE2, TABLE2_ROWS, bc_interval
-from relaff_jax.learn.config import after_ten_row
+from relaff_jax.learn.table2 import after_ten_row
 
 AFTER_TEN_TEXT = {"whole": "the whole curve of the learner kept at n = {n}",
                   "causal": "nothing chosen before n = {n}: there an equal share of every candidate"}

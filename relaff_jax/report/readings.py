@@ -25,7 +25,7 @@ from relaff_jax.errors import UserError
 from relaff_jax.learn import TABLE2_ROWS
 from relaff_jax.report import folder as F
 from relaff_jax.report.findings import correlation_clusters
-from relaff_jax.learn.config import AFTER_TEN
+from relaff_jax.config.experiment import AFTER_TEN
 from relaff_jax.report.robustness import robustness_table
 
 FILES = F.JSON_FILES

@@ -16,12 +16,7 @@ import numpy as np
 
 from relaff_jax.constants import RELATIONS
 from relaff_jax.report import folder as F
-from relaff_jax.learn import (
-    TABLE2_ROWS,
-    categories_per_threshold,
-    layout,
-    paper_row,
-)
+from relaff_jax.learn import TABLE2_ROWS, categories_per_threshold, layout, paper_row
 from relaff_jax.report.findings import VERDICTS, correlation_clusters
 from relaff_jax.report.formatting import (
     SHORT,

@@ -17,13 +17,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from relaff_jax.learn import (
-    PAPER_TABLE2,
-    TABLE2_ROWS,
-    categories_per_threshold,
-    layout,
-    paper_row,
-)
+from relaff_jax.learn import PAPER_TABLE2, TABLE2_ROWS, categories_per_threshold, layout, paper_row
 from relaff_jax.report.formatting import (
     SHORT,
     ci_text,

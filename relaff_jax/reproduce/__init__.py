@@ -11,7 +11,7 @@ from relaff_jax.report.status import STAMP as REPORT_STAMP
 from relaff_jax.reproduce.folder import FORMAT, FORMAT_VERSION, RUN_LOG, Paths, ReproduceError, seeds
 from relaff_jax.reproduce.progress import COST, Progress, estimate_seconds, fmt_time
 from relaff_jax.reproduce.run import check_config, reproduce, status
-from relaff_jax.runconfig import PRESETS, preset
+from relaff_jax.config import PRESETS, preset
 from relaff_jax.stages.protocol import Hooks
 
 __all__ = ["ACTIONS", "SPACES", "STAGES", "REPORT_STAMP", "FORMAT", "FORMAT_VERSION", "RUN_LOG", "PRESETS",

@@ -24,6 +24,7 @@ from relaff_jax.config import differences, to_dict
 from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed, machine, versions
+from relaff_jax.config import streams
 from relaff_jax.stages.protocol import RUN_LOG, Paths, ReproduceError
 
 FORMAT = "relaff_jax.reproduce"
@@ -34,8 +35,8 @@ def seeds(seed: int) -> dict[str, Any]:
     """The seeds of every stage, derived from the run seed (independent streams)."""
     return {
         "run": int(seed),
-        "datasets": {a: derive_seed(seed, 0x5EED, 1, i) for i, a in enumerate(ACTIONS)},
-        "features": derive_seed(seed, 0x5EED, 2),
+        "datasets": {a: derive_seed(seed, streams.RUN_FOLDER, 1, i) for i, a in enumerate(ACTIONS)},
+        "features": derive_seed(seed, streams.RUN_FOLDER, 2),
         "experiment": int(seed),
     }
 
@@ -48,7 +49,7 @@ def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
     """A config key absent from a stored run log and requested at the code's default."""
     if stored != "<absent>" or not key.startswith("config."):
         return False
-    from relaff_jax.runconfig import RunConfig
+    from relaff_jax.config import RunConfig
 
     node: Any = json.loads(json.dumps(to_dict(RunConfig()), default=rio.json_default))
     for part in key.split(".")[1:]:
@@ -58,9 +59,20 @@ def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
     return node == wanted
 
 
+def _shadow_removed(key: str, stored: Any, wanted: Any, want: dict) -> bool:
+    """A ``real.experiment`` key a stored run log has and the tree no longer has (it is taken
+    from ``experiment`` now, ``config.real.SHADOWED``), stored at the value the tree gives."""
+    from relaff_jax.config.real import SHADOWED
+    from relaff_jax.config.tree import shadow_matches
+
+    name = key.removeprefix("config.real.experiment.")
+    return wanted == "<absent>" and name in SHADOWED and key == f"config.real.experiment.{name}" \
+        and shadow_matches(name, stored, want.get("config", {}))
+
+
 def _speed_only(key: str) -> bool:
     """A run log key of a setting that changes no result (``learn.config.SPEED_ONLY``)."""
-    from relaff_jax.learn.config import SPEED_ONLY
+    from relaff_jax.config.experiment import SPEED_ONLY
 
     return key.startswith("config.experiment.") and key.removeprefix("config.experiment.") in SPEED_ONLY
 
@@ -116,15 +128,22 @@ def _check_log(log: dict, want: dict, root: Path) -> dict:
                              f"{log.get('format_version')}, this one writes {FORMAT_VERSION}); use a new --out")
     stored = {k: log.get(k, "<absent>") for k in want}
     diff = differences(stored, want)
-    added = [d for d in diff if _added_at_default(*d)]
+    # a log written before the tree had a seed: its seed is the log's own
+    added = [d for d in diff if _added_at_default(*d) or (d[0] == "config.seed" and d[1] == "<absent>"
+                                                          and d[2] == log.get("seed"))]
+    removed = [d for d in diff if _shadow_removed(*d, want)]  # now taken from another node
     speed = [d for d in diff if _speed_only(d[0])]
-    diff = [d for d in diff if d not in added and d not in speed]
-    if (added or speed) and not diff:
+    # the tree's seed is the log's own seed, compared as such
+    diff = [d for d in diff if d not in added and d not in speed and d not in removed
+            and not (d[0] == "config.seed" and "seed" in want)]
+    if (added or speed or removed) and not diff:
         # settings that did not exist when the run began, requested at their defaults (which
         # keep the old behaviour), and settings that change no result (the forest engine): the
         # same run; the log records the requested values from now on, and when a speed setting changed
         log["config"] = want["config"]
         log.setdefault("added_settings", []).extend(k.removeprefix("config.") for k, _, _ in added)
+        if removed:
+            log.setdefault("removed_settings", []).extend(k.removeprefix("config.") for k, _, _ in removed)
         log.setdefault("speed_settings_changed", []).extend(
             {"at": now(), "key": k.removeprefix("config."), "was": a, "now": b} for k, a, b in speed)
         if not log["speed_settings_changed"]:

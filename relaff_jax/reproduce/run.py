@@ -1,6 +1,6 @@
 """``relaff reproduce``: from nothing to the paper's results in one resumable command.
 
-Takes a preset (``tiny``, ``quick``, ``study``, ``paper``; ``relaff_jax.runconfig``), ``--set`` overrides,
+Takes a preset (``tiny``, ``quick``, ``study``, ``paper``; ``relaff_jax.config``), ``--set`` overrides,
 a seed and a run folder (``folder.py``), and runs the four stages of ``relaff_jax.stages`` in order: ``generate`` ->
 ``features`` -> ``experiment`` -> ``report`` (one module each, keeping the contract of
 ``stages.protocol``). A stage whose status is ``complete`` is skipped; ``--force STAGE`` redoes one
@@ -29,7 +29,7 @@ from relaff_jax.reproduce.folder import ReproduceError, damaged_log_hint, now, o
 from relaff_jax.reproduce.progress import Progress, estimate_seconds, sample_bound
 from relaff_jax.stages import experiment, features, generate, report
 from relaff_jax.stages.protocol import Hooks, Paths, Run, Silent, Stage, Status
-from relaff_jax.runconfig import PRESETS, RunConfig, check_tree, from_json, preset
+from relaff_jax.config import PRESETS, RunConfig, check_tree, from_json, preset
 
 STAGE_MODULES: dict[str, Stage] = {m.NAME: m for m in (generate, features, experiment, report)}
 assert tuple(STAGE_MODULES) == STAGES
@@ -37,9 +37,10 @@ assert tuple(STAGE_MODULES) == STAGES
 
 def check_config(cfg: RunConfig, seed: int) -> None:
     """Fail before any simulation if the config cannot give a complete study: the whole tree's
-    check (``runconfig.check_tree``; each node checked its own values when it was made), then
+    check (``config.check_tree``; each node checked its own values when it was made), then
     what a study needs of several nodes at once."""
-    from relaff_jax.learn import check_config as check_experiment, split_pools
+    from relaff_jax.learn.checks import check_config as check_experiment
+    from relaff_jax.learn import split_pools
 
     try:
         check_tree(cfg)
@@ -82,7 +83,7 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
 
     preset_name: ``tiny``, ``quick``, ``study`` or ``paper``; ``overrides``: dotted keys of the
     config tree, e.g. ``{"dataset.n_samples": 400, "experiment.reps_pca": 5}``: every setting of
-    the run comes from this one tree (``runconfig.preset(preset_name)`` with the overrides).
+    the run comes from this one tree (``config.preset(preset_name)`` with the overrides).
     force: stages to redo. jobs: experiment worker processes (0: all cores).
     hooks: ``stages.protocol.Hooks``, stand-ins for the simulation, the perception and the
     progress line's stream (tests); None: the tree's own.
@@ -106,6 +107,10 @@ def reproduce(out: str | os.PathLike, preset_name: str = "quick", seed: int = 0,
         raise ReproduceError(f"jobs must be an integer >= 0, got {jobs!r}")
     cfg = override(preset(preset_name), dict(overrides or {}))
     check_config(cfg, seed)
+    if cfg.seed != seed:  # the tree records the run's seed (``--seed`` is its alias)
+        if "seed" in dict(overrides or {}):
+            raise ReproduceError(f"seed {seed} and --set seed={cfg.seed} disagree; give one of them")
+        cfg = override(cfg, {"seed": int(seed)})
     redo = tuple(redo)
     bad = [a for a in redo if a not in cfg.reproduce.actions]
     if bad:

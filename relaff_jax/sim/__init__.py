@@ -3,19 +3,18 @@ the 6-DOF arm, the nine motor programs and their physics labels, and MuJoCo C re
 
 Modules, in pipeline order:
 
-- ``config``: ``PhysicsConfig``, ``SceneConfig``, ``ArmConfig``, ``ActionConfig`` (no JAX).
 - ``objects``: the 29-object library (``ObjectSpec`` per name), ``ObjectSet`` (the objects a
   run uses, the built-ins' 124 scene pairs by default) and the active set.
 - ``object_library``: object library files (TOML/JSON), their checks, the dataset record.
-- ``world``: ``PhysicsConfig`` and ``build_world``: one batched MJX model for every pair.
+- ``world``: ``build_world``: one batched MJX model for every pair.
 - ``contacts``: ``contacts(d)``, the one reader of MJX's contact list.
-- ``scenes``: ``SceneConfig``; placement sampling, settling, relation labels (``Scenes``).
+- ``scenes``: placement sampling, settling, relation labels (``Scenes``).
 - ``geometry``: rotations (``quat_to_mat``, ``axis_rotation``).
-- ``arm_model``: the arm's names, ``ArmConfig`` and ``Arm`` tables from a compiled model.
+- ``arm_model``: the arm's names and ``Arm`` tables from a compiled model.
 - ``kinematics``: forward kinematics and the IK (``solve_ik``, ``solve_ik_path``).
 - ``arm``: the arm in one import (re-exports the two above), held tools, gripper commands,
   motor-program control, finger contacts.
-- ``templates``: ``ActionConfig`` and the timing templates of the nine motor programs.
+- ``templates``: the timing templates of the nine motor programs.
 - ``bodies``: the settled objects as the programs see them (boxes, grasps).
 - ``programs``: the nine motor programs (tcp targets) and unobstruct's reachability.
 - ``planning``: ``setup`` (action world, home pose) and ``make_plan_fn`` (batched IK).
@@ -24,14 +23,12 @@ Modules, in pipeline order:
 - ``rollouts``: ``make_action_fn`` / ``jitted_action_fn`` and ``make_rollout_fn`` (datasets).
 - ``native``: MuJoCo C references (``settle_native``, ``replay_native``) for cross-checks.
 
-The config and entry-point names other stages use are re-exported here; the configs load
-without JAX, the rest on first use.
+The entry-point names other stages use are re-exported here and load on first use; the
+settings are ``relaff_jax.config.action``.
 """
 from __future__ import annotations
 
 from relaff_jax.lazy import lazy_attributes
-
-from relaff_jax.sim.config import ActionConfig, ArmConfig, PhysicsConfig, SceneConfig
 
 # Everything else loads on first use (PEP 562), so that the command line checks --set action.*
 # before JAX and MJX are imported: name -> submodule.
@@ -44,7 +41,6 @@ _LAZY = {
 
 __getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
 
-__all__ = [
-    "ActionConfig", "ArmConfig", "PhysicsConfig", "SceneConfig", "allowed_pairs", "build_world",
+__all__ = [ "allowed_pairs", "build_world",
     "jitted_action_fn", "make_action_fn", "make_rollout_fn", "replay_native", "settle_native",
 ]

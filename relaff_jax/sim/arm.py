@@ -3,7 +3,7 @@ motor-program control.
 
 Takes a compiled ``mujoco.MjModel`` of any world that includes ``scenes/arm.xml``; the pieces:
 
-- ``arm_model``: names, ``ArmConfig``, the ``Arm`` tables (``arm_from_model``), MJCF paths;
+- ``arm_model``: names, the ``Arm`` tables (``arm_from_model``), MJCF paths;
 - ``kinematics``: ``fk_chain``/``fk_tcp`` and the IK (``IKTarget``, ``solve_ik``,
   ``solve_ik_path``); both re-exported here, so ``arm.solve_ik`` etc. keep working;
 - here: held tools (``tool_relpose``, ``tool_tcp_target``), the arm's MJCF sections for a
@@ -29,10 +29,11 @@ import numpy as np
 
 from .arm_model import (  # noqa: F401 (re-exported)
     ARM_ACTUATORS, ARM_BODIES, ARM_JOINTS, BASE_BODY, FINGER_ACTUATORS, FINGER_BODIES,
-    FINGER_JOINTS, PAD_GEOMS, PALM_GEOM, TCP_SITE, Arm, ArmConfig, arm_from_model, arm_test_xml_path,
+    FINGER_JOINTS, PAD_GEOMS, PALM_GEOM, TCP_SITE, Arm, arm_from_model, arm_test_xml_path,
     arm_xml_path, scenes_dir,
 )
 from .contacts import contacts
+from relaff_jax.config.action import ArmConfig
 from .kinematics import (  # noqa: F401 (re-exported)
     IKResult, IKTarget, analytic_seed, fk_chain, fk_tcp, solve_ik, solve_ik_path, task_sigma,
     top_down_target,
@@ -241,7 +242,7 @@ def set_arm_qpos(arm: Arm, qpos: jax.Array, q_arm: jax.Array, grip: jax.Array) -
 
 __all__ = [
     "ARM_JOINTS", "FINGER_JOINTS", "ARM_ACTUATORS", "FINGER_ACTUATORS", "TCP_SITE", "PAD_GEOMS",
-    "PALM_GEOM", "Arm", "ArmConfig", "IKTarget", "IKResult", "arm_from_model", "arm_xml_path",
+    "PALM_GEOM", "Arm", "IKTarget", "IKResult", "arm_from_model", "arm_xml_path",
     "arm_test_xml_path", "fk_chain", "fk_tcp", "top_down_target", "solve_ik", "solve_ik_path",
     "task_sigma", "analytic_seed", "grip_command", "make_ctrl", "program_ctrl", "run_program",
     "finger_contacts", "set_arm_qpos", "weld_relpose", "segment_index", "world_mjcf",

@@ -1,9 +1,9 @@
-"""The arm inside a compiled MuJoCo model: names, settings and static index/chain tables.
+"""The arm inside a compiled MuJoCo model: names and static index/chain tables.
 
 Takes a compiled ``mujoco.MjModel`` of any world that includes ``scenes/arm.xml`` (the arm's
 MJCF: 6-DOF arm, spherical wrist, two-finger parallel gripper, site ``tcp``); gives ``Arm``,
-plain numpy tables built once by ``arm_from_model``, and ``ArmConfig``, the static settings of
-the IK and the gripper. Also the paths of the arm's MJCF files.
+plain numpy tables built once by ``arm_from_model`` (the IK's and gripper's settings are
+``config.action.ArmConfig``). Also the paths of the arm's MJCF files.
 
 Frames: world z up, table plane z = 0, robot at the origin facing +x. The tcp frame has
 z = approach direction (out of the palm, between the fingers) and y = finger closing axis.
@@ -18,7 +18,6 @@ import mujoco
 import numpy as np
 
 from .geometry import quat_to_mat
-from .config import ArmConfig  # noqa: F401 (re-exported)
 
 ARM_JOINTS = ("j1", "j2", "j3", "j4", "j5", "j6")
 FINGER_JOINTS = ("jf_l", "jf_r")

@@ -15,7 +15,9 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from .arm_model import Arm, ArmConfig
+from relaff_jax.config.action import ArmConfig
+
+from .arm_model import Arm
 
 
 def descend_lm(arm: Arm, cfg: ArmConfig, q0: jax.Array, target, residual) -> jax.Array:

@@ -22,11 +22,11 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .arm_model import Arm, ArmConfig
+from relaff_jax.config.action import ArmConfig
+
+from .arm_model import Arm
 from .geometry import axis_rotation
 from .ik_lm import descend_lm
-
-IK_SOLVERS = ("lbfgs", "lm")  # ArmConfig.ik_solver
 
 
 def fk_chain(arm: Arm, q: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -197,8 +197,6 @@ def solve_ik(arm: Arm, cfg: ArmConfig, target: IKTarget, q_init: jax.Array) -> I
     a motor program), the other at ``analytic_seed``. Among the seeds that meet the
     tolerances the one nearest ``q_init`` wins, else the one with the smallest error.
     """
-    if cfg.ik_solver not in IK_SOLVERS:
-        raise ValueError(f"unknown ik_solver {cfg.ik_solver!r}; valid: {', '.join(IK_SOLVERS)}")
     q_init = jnp.clip(jnp.asarray(q_init, jnp.float32), arm.q_lo, arm.q_hi)
     seeds = jnp.stack([analytic_seed(arm, target, q_init[5]), q_init])
     if cfg.ik_solver == "lm":

@@ -15,7 +15,6 @@ import jax.numpy as jnp
 from .templates import ActionConfig
 
 from relaff_jax.constants import ACTIONS
-from relaff_jax.errors import UserError
 
 
 class Outcome(NamedTuple):
@@ -41,10 +40,8 @@ def goals(cfg: ActionConfig, o: Outcome) -> jax.Array:
     toy_moved = jnp.linalg.norm(o.com_m[0] - o.com0[0]) >= cfg.moved
     if cfg.move_rule == "apart":  # the toy moved aside from the base (the base left behind)
         move = along[0] - along[1] >= cfg.aside
-    elif cfg.move_rule == "both":  # Table I read literally: both moved aside
+    else:  # "both" (config.action declares the two): Table I read literally, both moved aside
         move = jnp.all(along >= cfg.aside)
-    else:
-        raise UserError(f"unknown move_rule {cfg.move_rule!r}; valid: 'apart', 'both'")
     rules = {
         "lift": lifted[0] & lifted[1],  # base and toy lifted
         "move": move,  # toy and base moved aside (from each other, by default)

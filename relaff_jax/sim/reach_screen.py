@@ -39,6 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import arm as A
+from relaff_jax.config.action import ArmConfig
 from .planning import Plan, home_grip, make_plan_fn, setup
 from .programs import program, toy_grasp_target, toy_reachable
 from .templates import N_TARGETS, UNOBSTRUCT_ID, ActionConfig, tables
@@ -76,7 +77,7 @@ def _anchors(arm: A.Arm) -> tuple[np.ndarray, np.ndarray]:
     return np.stack(out), axis1 / np.linalg.norm(axis1)
 
 
-def reach_bound(arm: A.Arm, cfg: A.ArmConfig) -> ReachBound:
+def reach_bound(arm: A.Arm, cfg: ArmConfig) -> ReachBound:
     """The screen's constants for this arm and these tolerances (the module's proof)."""
     J, axis1 = _anchors(arm)
     # joint 2's anchor is fixed if it lies on joint 1's axis; else start from joint 1's anchor

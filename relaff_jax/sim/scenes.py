@@ -40,7 +40,7 @@ from .contacts import contacts
 
 from relaff_jax.constants import BESIDE, INSIDE, ON_TOP, RELATIONS  # noqa: F401 (re-exported)
 from relaff_jax.errors import UserError
-from relaff_jax.sim.config import SceneConfig  # noqa: F401 (re-exported)
+from relaff_jax.config.action import SceneConfig
 
 
 @chex.dataclass

@@ -18,7 +18,7 @@ from . import scenes as sc
 from . import world as wd
 
 from relaff_jax.constants import ACTIONS
-from relaff_jax.sim.config import ActionConfig  # noqa: F401 (re-exported)
+from relaff_jax.config.action import ActionConfig
 
 
 class Template(NamedTuple):
@@ -148,7 +148,7 @@ def stored_config(cfg: ActionConfig) -> dict:
     recorded by their absence); the objects they resolve to go beside, ``config.objects``."""
     from relaff_jax.config import to_dict
 
-    from .config import V2_FIELDS
+    from relaff_jax.config.action import V2_FIELDS
 
     d = to_dict(cfg)
     if cfg.programs == "v1":  # as every dataset written before the option existed

@@ -31,7 +31,7 @@ from . import objects as lib
 # Segment labels the camera reports per geom (colour segmentation stand-in).
 from relaff_jax.constants import SEG_BACKGROUND, SEG_HIDDEN, SEG_OTHER, SEG_TOY  # noqa: F401
 from relaff_jax.errors import UserError
-from relaff_jax.sim.config import PALM_MODES, PhysicsConfig  # noqa: F401 (re-exported)
+from relaff_jax.config.action import PALM_MODES, PhysicsConfig
 
 
 def _box_geom(name: str, size, pos, mass: float, rgba, extra: str = "") -> str:

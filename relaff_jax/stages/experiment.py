@@ -54,7 +54,7 @@ def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str
             raise UserError(f"{d}: no such dataset directory")
     check_writable_dir(Path(out), "--out")
     from relaff_jax.config import override
-    from relaff_jax.learn.config import check_config
+    from relaff_jax.learn.checks import check_config
     from relaff_jax.learn.datasets import load_datasets
     from relaff_jax.learn.sweep import run_experiment
     from relaff_jax.learn.synthetic import synthetic_datasets

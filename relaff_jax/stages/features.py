@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from relaff_jax import data as D
+from relaff_jax.config.perception import PerceptionConfig, stored_config
 from relaff_jax.provenance import record_config
 from relaff_jax.stages.protocol import Run, Status
 
@@ -24,7 +25,6 @@ def default_feature_factory(seed: int, config: Any = None, objects: Any = None, 
     The object set the datasets' pairs come from is made active first (a cluster worker has
     only the built-ins active): ``objects`` (a ``sim.objects.ObjectSet``, e.g. a dataset's
     record) or the one ``action`` (an ``ActionConfig``) selects; neither: the active set."""
-    from relaff_jax import perception as pc
     from relaff_jax.perception import from_sim
     from relaff_jax.sim import build_world
     from relaff_jax.sim import objects as lib
@@ -35,15 +35,13 @@ def default_feature_factory(seed: int, config: Any = None, objects: Any = None, 
         from relaff_jax.sim.object_library import use_scene
 
         use_scene(action.scene, action.grip_margin)
-    cfg = config if config is not None else pc.PerceptionConfig()
+    cfg = config if config is not None else PerceptionConfig()
     return from_sim.make_feature_fn(build_world(), cfg, seed), feature_config(seed, cfg)
 
 
 def feature_config(seed: int, config: Any = None) -> dict:
     """The config dict ``default_feature_factory`` stores (without building the world)."""
-    from relaff_jax import perception as pc
-
-    return {"perception": pc.stored_config(config if config is not None else pc.PerceptionConfig()), "seed": seed}
+    return {"perception": stored_config(config if config is not None else PerceptionConfig()), "seed": seed}
 
 
 def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, overwrite: bool = False,

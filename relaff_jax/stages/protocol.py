@@ -131,7 +131,7 @@ class Run:
 
     paths: Paths
     preset: str
-    cfg: Any  # runconfig.RunConfig
+    cfg: Any  # config.RunConfig
     seed: int
     jobs: int
     force: tuple[str, ...]

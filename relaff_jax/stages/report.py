@@ -26,7 +26,7 @@ COMMAND = "report"  # the command the folder's config record names
 def inputs(tree: Any, results: str | os.PathLike, data_dirs: Mapping[str, str | os.PathLike] | None = None) -> list[Path]:
     """The files a report of ``results`` (and the datasets ``data_dirs``) is made from."""
     from relaff_jax.data.audit import AUDIT_FILE
-    from relaff_jax.data.config import FEATURES_SIDECAR, SIDECAR
+    from relaff_jax.data.layout import FEATURES_SIDECAR, SIDECAR
     from relaff_jax.learn import folder as L
 
     files = [L.meta(results)] + [L.results(results, s) for s in tree.reproduce.spaces]

@@ -12,7 +12,7 @@ from relaff_jax.config import override, to_dict
 from relaff_jax.constants import STAGES
 from relaff_jax.reproduce.folder import open_log
 from relaff_jax.reproduce.run import STAGE_MODULES, bound_hooks
-from relaff_jax.runconfig import RunConfig
+from relaff_jax.config import RunConfig
 from relaff_jax.stages import experiment, features, generate, report
 from relaff_jax.stages.protocol import Hooks, Paths, Run, Silent, Stage, Status
 

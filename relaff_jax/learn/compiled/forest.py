@@ -17,7 +17,8 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax.learn.engine_fit import check_engine_config, max_features_of, n_bootstrap
-from relaff_jax.learn.forests import ForestConfig, checked_states, n_trees, subsample_size
+from relaff_jax.config.experiment import ForestConfig
+from relaff_jax.learn.forests import checked_states, n_trees, subsample_size
 
 MAX_DEPTH = np.iinfo(np.int32).max  # max_depth=None, as BaseDecisionTree._fit
 SEED_LIMIT = 2**32  # RandomState seeds are in [0, 2**32)

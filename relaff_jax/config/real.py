@@ -1,25 +1,26 @@
-"""Settings of the real-scene pipeline: frozen dataclasses and their validation.
-
-Takes nothing; gives ``RealRunConfig``, the node ``RunConfig.real`` of the one config tree
-(``relaff_jax.runconfig``): the real-only settings (plane RANSAC, crop, k-means, cloud normals,
-the proposal rule, the simulated relation data, the experiments, the sensor tolerance). The voxel
-grid and the RHF are not here: they are the tree's ``perception.voxel`` and ``perception.rhf``,
-shared with simulation, so ``--set perception.voxel.size=...`` reaches both. ``pipeline_config(tree)``
-gives the ``RealConfig`` the stages run with (the real-only settings plus the tree's perception);
-``validate_real_config(cfg) -> cfg`` (UserError naming the bad setting).
-"""
+"""The real scenes' settings (the tree's ``real`` node, ``RealRunConfig``): plane RANSAC, crop,
+k-means, cloud normals, the proposal rule, the simulated relation data, the experiments, the
+sensor tolerance. The voxel grid and the RHF are not here: they are the tree's
+``perception.voxel`` and ``perception.rhf``, shared with simulation, so ``--set
+perception.voxel.size=...`` reaches both. ``pipeline_config(tree)`` gives the ``RealConfig`` the
+stages run with (the real-only settings plus the tree's perception)."""
 from __future__ import annotations
 
 import dataclasses
 
-from relaff_jax.errors import UserError
-from relaff_jax.perception.config import PerceptionConfig
+from relaff_jax.config.constraints import (FRACTION, Boolean, Interval, Options, Rule, Seq, count, length)
+from relaff_jax.config.experiment import ENGINES
+from relaff_jax.config.node import Node
+from relaff_jax.config.perception import (MAX_IMAGE, NOISE_MODEL_NAMES, NORMAL_SOURCES, ODD_WINDOW,
+                                          PerceptionConfig, odd)
+from relaff_jax.constants import RELATIONS
 
-from .propose import RuleConfig
+SEED = count(0, 2**32 - 1)  # numpy's seeds
+PIXELS = count(1, MAX_IMAGE * MAX_IMAGE)
 
 
 @dataclasses.dataclass(frozen=True)
-class PlaneConfig:
+class PlaneConfig(Node):
     """RANSAC plane fit (Open3D ``segment_plane`` semantics): a point is an inlier when its
     distance to the plane is below ``threshold`` (m); ``iterations`` hypotheses of 3 points,
     evaluated ``batch`` at a time; the best plane is refitted by least squares to its inliers."""
@@ -28,9 +29,13 @@ class PlaneConfig:
     iterations: int = 1000
     batch: int = 50
 
+    _path = "real.pipeline.plane"
+    _constraints = {"threshold": Interval(float, 0.0, 1.0, closed="right"), "iterations": count(1, 10_000_000),
+                    "batch": count(1, 1_000_000)}
+
 
 @dataclasses.dataclass(frozen=True)
-class CropConfig:
+class CropConfig(Node):
     """Which non-table points k-means sees: at least ``min_height`` and at most ``max_height``
     (m) above the table plane, and (projected on the plane) at most ``radius_scale`` x the
     largest distance of a table inlier from the inliers' centroid (the table's extent)."""
@@ -39,9 +44,14 @@ class CropConfig:
     max_height: float = 0.5
     radius_scale: float = 1.0
 
+    _path = "real.pipeline.crop"
+    _constraints = {"min_height": length(), "max_height": length(), "radius_scale": Interval(float, 0.0, 100.0, closed="right"),
+                    ("min_height", "max_height"): Rule(lambda c: c.min_height < c.max_height,
+                                                       lambda c: f"must be below crop.max_height, got {c.min_height}, {c.max_height}")}
+
 
 @dataclasses.dataclass(frozen=True)
-class KMeansConfig:
+class KMeansConfig(Node):
     """k-means on the cropped points (camera-frame xyz, metres): ``k`` clusters, the k - 1
     largest being the objects and the smallest the background (the paper's rule); when the
     object count n is given, k = n + 1. ``background=False`` drops the background cluster
@@ -54,9 +64,15 @@ class KMeansConfig:
     iterations: int = 100
     n_init: int = 4
 
+    _path = "real.pipeline.kmeans"
+    _constraints = {"k": count(1, 1000), "background": Boolean(), "iterations": count(1, 1_000_000),
+                    "n_init": count(1, 10_000),
+                    ("k", "background"): Rule(lambda c: c.k >= 1 + int(c.background),
+                                              lambda c: f"must leave an object cluster (>= 2 with the background), got {c.k}")}
+
 
 @dataclasses.dataclass(frozen=True)
-class NormalConfig:
+class NormalConfig(Node):
     """Normals from the cloud, oriented towards the camera. ``method`` "knn" (default): PCA of
     each point's ``knn`` nearest neighbours among the object's points (smallest-eigenvalue
     eigenvector); "window" (organized clouds only): PCA of the object's points in a ``window`` x
@@ -68,6 +84,10 @@ class NormalConfig:
     window: int = 5
     radius: float = 0.025
 
+    _path = "real.pipeline.normals"
+    _constraints = {"knn": count(3, 10_000), "method": Options(("knn", "window")), "window": ODD_WINDOW,
+                    "radius": Interval(float, 0.0, 1.0, closed="right"), ("window",): odd("window")}
+
 
 # Object pixels (both objects) kept per real pair before voxelisation: a capacity, not a
 # setting of the features (points beyond it set the overflow flag, they are never dropped
@@ -78,7 +98,7 @@ REAL_MAX_OBJECT_PIXELS = 65536
 
 
 @dataclasses.dataclass(frozen=True)
-class PipelineConfig:
+class PipelineConfig(Node):
     """The real-only settings of segmentation and features (``RunConfig.real.pipeline``); the
     voxel grid and RHF are the tree's ``perception`` node (``pipeline_config``)."""
 
@@ -87,6 +107,9 @@ class PipelineConfig:
     kmeans: KMeansConfig = KMeansConfig()
     normals: NormalConfig = NormalConfig()
     max_object_pixels: int = REAL_MAX_OBJECT_PIXELS
+
+    _path = "real.pipeline"
+    _constraints = {"max_object_pixels": PIXELS}
 
 
 def real_perception(perception: PerceptionConfig, max_object_pixels: int = REAL_MAX_OBJECT_PIXELS) -> PerceptionConfig:
@@ -97,10 +120,10 @@ def real_perception(perception: PerceptionConfig, max_object_pixels: int = REAL_
 
 
 @dataclasses.dataclass(frozen=True)
-class RealConfig:
+class RealConfig(Node):
     """What the real stages run with: ``PipelineConfig``'s settings and ``perception``, the
     tree's perception node with the real capacity (``pipeline_config(tree)``; the default is
-    the default tree's)."""
+    the default tree's). Every part checked itself when it was built."""
 
     plane: PlaneConfig = PlaneConfig()
     crop: CropConfig = CropConfig()
@@ -108,46 +131,33 @@ class RealConfig:
     normals: NormalConfig = NormalConfig()
     perception: PerceptionConfig = real_perception(PerceptionConfig())
 
-
-def validate_real_config(cfg: RealConfig) -> RealConfig:
-    """Raise ``UserError`` naming the bad setting; return ``cfg`` unchanged otherwise."""
-    from relaff_jax.perception.config import validate_config
-
-    check_pipeline_parts(cfg)
-    validate_config(cfg.perception)
-    return cfg
-
-
-def check_pipeline_parts(cfg) -> None:
-    """The plane, crop, k-means and normal settings of a ``RealConfig`` or ``PipelineConfig``."""
-    p = cfg.plane
-    if p.threshold <= 0 or p.iterations <= 0 or p.batch <= 0:
-        raise UserError(f"real.pipeline.plane.threshold, .iterations and .batch must be positive, got {p}")
-    c = cfg.crop
-    if not 0 <= c.min_height < c.max_height or c.radius_scale <= 0:
-        raise UserError(f"need 0 <= real.pipeline.crop.min_height < crop.max_height and crop.radius_scale > 0, got {c}")
-    k = cfg.kmeans
-    if k.k < 1 + int(k.background) or k.iterations <= 0 or k.n_init <= 0:
-        raise UserError(f"real.pipeline.kmeans.k must leave an object cluster and kmeans.iterations, .n_init "
-                        f"positive, got {k}")
-    nc = cfg.normals
-    if nc.knn < 3:
-        raise UserError(f"real.pipeline.normals.knn must be >= 3 for a plane fit, got {nc.knn}")
-    if nc.method not in ("knn", "window"):
-        raise UserError(f"unknown real.pipeline.normals.method {nc.method!r}; valid: ['knn', 'window']")
-    if nc.window < 3 or nc.window % 2 == 0 or nc.radius <= 0:
-        raise UserError(f"real.pipeline.normals.window must be odd and >= 3 and normals.radius positive, got {nc}")
+    _path = "real.pipeline"
 
 
 def pipeline_config(tree) -> RealConfig:
     """The ``RealConfig`` of a ``RunConfig`` tree: ``tree.real.pipeline`` with ``tree.perception``
-    (voxel grid, RHF) and the real object pixel capacity; validated."""
+    (voxel grid, RHF) and the real object pixel capacity."""
     p = tree.real.pipeline
-    return validate_real_config(RealConfig(plane=p.plane, crop=p.crop, kmeans=p.kmeans, normals=p.normals,
-                                           perception=real_perception(tree.perception, p.max_object_pixels)))
+    return RealConfig(plane=p.plane, crop=p.crop, kmeans=p.kmeans, normals=p.normals,
+                      perception=real_perception(tree.perception, p.max_object_pixels))
 
 
-# ---- the sim-to-real study's settings (JAX-free, so that ``--set`` mistakes are reported at once) ----
+@dataclasses.dataclass(frozen=True)
+class RuleConfig(Node):
+    """Tolerances of the relation proposal rule (``real.propose``), metres and fractions."""
+
+    lo_q: float = 0.02
+    hi_q: float = 0.98
+    table_tol: float = 0.02
+    contact_tol: float = 0.03
+    min_overlap: float = 0.25
+    grow: float = 0.01
+
+    _path = "real.rule"
+    _constraints = {"lo_q": FRACTION, "hi_q": FRACTION, "table_tol": length(1.0), "contact_tol": length(1.0),
+                    "min_overlap": FRACTION, "grow": length(1.0),
+                    ("lo_q", "hi_q"): Rule(lambda c: c.lo_q < c.hi_q, lambda c: f"must be below rule.hi_q, got {c.lo_q}, {c.hi_q}")}
+
 
 @dataclasses.dataclass(frozen=True)
 class SimSensor:
@@ -159,7 +169,7 @@ class SimSensor:
 
 
 @dataclasses.dataclass(frozen=True)
-class SimRelationConfig:
+class SimRelationConfig(Node):
     """Simulated relation data: scenes per chunk, workspace radius (m, around the robot),
     the least scenes of each relation in ``need`` to stop at, a cap on chunks, the seed;
     ``normals``: the RHF normals, "ray" (exact ray-hit geometry) or "cloud" (window PCA of the
@@ -181,9 +191,19 @@ class SimRelationConfig:
     # ``--sim-normals`` flag sets them apart from the simulated datasets' choice
     normals: str = "ray"
 
+    _path = "real.sim"
+    _constraints = {
+        "per_relation": count(1, 10_000_000), "need": Seq(Options(RELATIONS), distinct=True),
+        "chunk": count(1, 1 << 16), "workspace_radius": Interval(float, 0.0, 10.0, closed="right"),
+        "max_chunks": count(1, 1_000_000), "noise": Options(NOISE_MODEL_NAMES), "feature_batch": count(1, 1 << 16),
+        "max_tiles": PIXELS, "max_object_pixels": PIXELS, "seed": SEED, "normals": Options(NORMAL_SOURCES),
+        ("chunk", "feature_batch"): Rule(lambda c: c.chunk % c.feature_batch == 0,
+                                         lambda c: f"({c.chunk}) must be a multiple of real.sim.feature_batch ({c.feature_batch})"),
+    }
+
 
 @dataclasses.dataclass(frozen=True)
-class SensorTolerance:
+class SensorTolerance(Node):
     """How far a simulated folder's sensor may be from the one a study asks for and still be
     reused (its data are then used as they are, and the study says so). The defaults lie
     below the spread of the real scenes' own poses about their mean (45 learn scenes: height
@@ -194,13 +214,17 @@ class SensorTolerance:
     tilt_deg: float = 2.5
     vfov_deg: float = 0.5
 
+    _path = "real.tolerance"
+    _constraints = {"height": length(), "tilt_deg": Interval(float, 0.0, 180.0), "vfov_deg": Interval(float, 0.0, 180.0)}
+
 
 SPLITS = ("scene", "pair")
 
 
 @dataclasses.dataclass(frozen=True)
-class RealExperimentConfig:
-    """Section VI settings: 50 repetitions, forests of 100 trees, balanced sets. ``split``:
+class RealExperimentConfig(Node):
+    """Section VI settings, what the real experiments run with (``real_experiment(tree)``): 50
+    repetitions, forests of 100 trees, balanced sets. ``split``:
     how one folder's pairs are cut into train and test per repetition, "scene" (every pair of
     a scene on one side: pairs of a scene share objects, pose and lighting) or "pair" (pairs
     drawn one by one, the protocol before issue 28)."""
@@ -219,8 +243,18 @@ class RealExperimentConfig:
     # from samples 4 to 25"; VI gives none of its own); only the summary reads it
     bf_sizes: tuple[int, int] = (4, 25)
 
+    _path = "real.experiment"
+    _constraints = {
+        "reps": count(1, 100_000), "trees": count(1, 100_000), "train_fraction": Interval(float, 0.0, 1.0, closed="neither"),
+        "n_full": count(2, 100_000_000), "repeats_pca": count(1, 10_000), "repeats_rhf": count(1, 10_000),
+        "n_boot": count(10, 10_000_000), "seed": SEED, "engine": Options(ENGINES), "split": Options(SPLITS),
+        "bf_sizes": Seq(count(2, 1_000_000), length=2),
+        ("bf_sizes",): Rule(lambda c: c.bf_sizes[0] <= c.bf_sizes[1],
+                            lambda c: f"must be [lo, hi] training sizes with lo <= hi, got {list(c.bf_sizes)}"),
+    }
+
     def forest(self):
-        from relaff_jax.learn.forests import ForestConfig
+        from relaff_jax.config.experiment import ForestConfig
 
         return ForestConfig(base_trees=self.trees, max_trees=self.trees, engine=self.engine)
 
@@ -229,53 +263,54 @@ class RealExperimentConfig:
 
 
 @dataclasses.dataclass(frozen=True)
-class RealRunConfig:
+class RealExperimentSettings(Node):
+    """The real experiments' own settings, the tree's ``real.experiment`` node: what
+    ``RealExperimentConfig`` holds beyond the keys it takes from the tree's ``experiment`` node
+    (``SHADOWED``: the forest engine, the bootstrap input repetitions, the bf window);
+    ``real_experiment(tree)`` gives the whole."""
+
+    reps: int = 50
+    trees: int = 100
+    train_fraction: float = 0.625  # the paper's 100 of 160
+    n_full: int = 1000  # SIM_full training samples (paper: 6500), as many to test
+    n_boot: int = 2000  # resamples of the bootstrap interval
+    seed: int = 0
+    split: str = "scene"
+
+    _path = "real.experiment"
+    _constraints = {k: c for k, c in RealExperimentConfig._constraints.items()
+                    if k in ("reps", "trees", "train_fraction", "n_full", "n_boot", "seed", "split")}
+
+
+# keys of ``RealExperimentConfig`` taken from the tree's ``experiment`` node (a stored tree made
+# when ``real.experiment`` still had them: ``tree.from_json`` maps or refuses them)
+SHADOWED = {"engine": "experiment.forest.engine", "repeats_pca": "experiment.repeats_pca",
+            "repeats_rhf": "experiment.repeats_rhf", "bf_sizes": "experiment.bf_sizes"}
+
+
+def real_experiment(tree) -> RealExperimentConfig:
+    """What the real experiments run with: ``tree.real.experiment`` with the forest engine, the
+    bootstrap input repetitions and the bf window of ``tree.experiment``."""
+    e, x = tree.real.experiment, tree.experiment
+    return RealExperimentConfig(**dataclasses.asdict(e), engine=x.forest.engine, repeats_pca=x.repeats_pca,
+                                repeats_rhf=x.repeats_rhf, bf_sizes=tuple(x.bf_sizes))
+
+
+@dataclasses.dataclass(frozen=True)
+class RealRunConfig(Node):
     """Every real-only setting, the node ``RunConfig.real`` (``--set real.dotted.key=value``):
     ``pipeline`` the real scenes' segmentation and features, ``rule`` the relation proposal
     rule (``real propose``), ``sim`` the simulated relation data, ``experiment`` the four
-    experiments, ``tolerance`` the reuse of simulated data."""
+    experiments (their forest engine, input repetitions and bf window are the tree's
+    ``experiment``'s: ``real_experiment``), ``tolerance`` the reuse of simulated data."""
 
     pipeline: PipelineConfig = PipelineConfig()
     rule: RuleConfig = RuleConfig()
     sim: SimRelationConfig = SimRelationConfig()
-    experiment: RealExperimentConfig = RealExperimentConfig()
+    experiment: RealExperimentSettings = RealExperimentSettings()
     tolerance: SensorTolerance = SensorTolerance()
 
-    def __post_init__(self):  # refused when the config is made (the perception it shares: check_tree)
-        check_real_node(self)
-
-
-def validate_run_config(tree):
-    """Raise ``UserError`` naming the bad real setting of a ``RunConfig`` tree: its ``real`` node
-    checked itself when it was made (``check_real_node``); this checks the pipeline with the
-    perception it shares. Return ``tree`` unchanged otherwise."""
-    pipeline_config(tree)
-    return tree
-
-
-def check_real_node(cfg: RealRunConfig) -> None:
-    """The real node's own settings (run when a ``RealRunConfig`` is made)."""
-    check_pipeline_parts(cfg.pipeline)
-    if cfg.pipeline.max_object_pixels < 1:
-        raise UserError(f"real.pipeline.max_object_pixels must be >= 1, got {cfg.pipeline.max_object_pixels}")
-    e, s, t = cfg.experiment, cfg.sim, cfg.tolerance
-    if e.split not in SPLITS:
-        raise UserError(f"unknown real.experiment.split {e.split!r}; valid: {list(SPLITS)}")
-    if not 0 < e.train_fraction < 1:
-        raise UserError(f"real.experiment.train_fraction must lie in (0, 1), got {e.train_fraction}")
-    if len(e.bf_sizes) != 2 or not 2 <= e.bf_sizes[0] <= e.bf_sizes[1]:
-        raise UserError(f"real.experiment.bf_sizes must be [lo, hi] training sizes with 2 <= lo <= hi, got {list(e.bf_sizes)}")
-    for name, v, lo in (("real.experiment.reps", e.reps, 1), ("real.experiment.trees", e.trees, 1),
-                        ("real.experiment.n_full", e.n_full, 2), ("real.sim.per_relation", s.per_relation, 1),
-                        ("real.sim.chunk", s.chunk, 1), ("real.sim.feature_batch", s.feature_batch, 1)):
-        if v < lo:
-            raise UserError(f"{name} must be >= {lo}, got {v}")
-    if s.normals not in ("ray", "cloud"):
-        raise UserError(f"unknown real.sim.normals {s.normals!r}; valid: ['ray', 'cloud']")
-    if s.chunk % s.feature_batch:
-        raise UserError(f"real.sim.chunk ({s.chunk}) must be a multiple of real.sim.feature_batch ({s.feature_batch})")
-    if min(t.height, t.tilt_deg, t.vfov_deg) < 0:
-        raise UserError(f"real.tolerance values must be >= 0, got {t}")
+    _path = "real"
 
 
 def sensor_difference(a: SimSensor, b: SimSensor) -> dict:

@@ -1,28 +1,32 @@
-"""Perception settings: frozen dataclasses (static under jit) and their validation.
-
-Takes nothing; gives ``PerceptionConfig`` (camera, noise, normals, voxel, RHF, culling settings),
-``validate_config(cfg) -> cfg`` (raises ``UserError`` naming the bad setting) and the feature
-names ``PCA_NAMES`` (9 per object) and ``RHF_NAMES`` (6 histograms).
-"""
+"""Perception settings (the tree's ``perception`` node): camera, noise, normals, voxel grid,
+RHF and culling, frozen (static under jit), and the feature names ``PCA_NAMES`` (9 per object)
+and ``RHF_NAMES`` (6 histograms)."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
-import numpy as np
-
-from relaff_jax.errors import UserError
+from relaff_jax.config.constraints import Interval, Options, Rule, Seq, count
+from relaff_jax.config.node import Node
 
 PCA_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "eig_major", "eig_middle", "eig_minor")
 RHF_NAMES = ("dx", "dy", "dz", "dist", "angle_na_nb", "angle_na_d")
 
-# Depth noise models ``noise.NOISE_MODELS`` implements (validated here, before any tracing).
+# Depth noise models ``noise.NOISE_MODELS`` implements (checked here, before any tracing).
 NOISE_MODEL_NAMES = ("robwork", "khoshelham", "nguyen", "none")
 # Where the RHF normals come from (``NormalsConfig.source``).
 NORMAL_SOURCES = ("ray", "cloud")
+MAX_IMAGE = 8192  # pixels per image side: the feature path holds whole images in memory
+COORD = Interval(float, -100.0, 100.0)  # a point of the scene, metres
+ODD_WINDOW = count(3, 101)
+
+
+def odd(key: str) -> Rule:
+    return Rule(lambda c: getattr(c, key) % 2 == 1, lambda c: f"must be odd, got {getattr(c, key)}")
 
 
 @dataclasses.dataclass(frozen=True)
-class CameraConfig:
+class CameraConfig(Node):
     """Pinhole depth camera (RobWork's simulated Kinect intrinsics, docs/facts.md, "Sensor").
 
     fy = fx = (height / 2) / tan(vfov / 2), cx = width / 2, cy = height / 2; the pose looks from
@@ -37,31 +41,49 @@ class CameraConfig:
     near: float = 0.01
     far: float = 6.0
 
+    _path = "perception.camera"
+    _constraints = {
+        "width": count(1, MAX_IMAGE), "height": count(1, MAX_IMAGE),
+        "vfov_deg": Interval(float, 0.0, 180.0, closed="neither"),
+        "position": Seq(COORD, length=3), "target": Seq(COORD, length=3),
+        "near": Interval(float, 0.0, 1000.0), "far": Interval(float, 0.0, 1000.0, closed="right"),
+        ("near", "far"): Rule(lambda c: c.near < c.far, lambda c: f"must be below camera.far, got {c.near}, {c.far}"),
+        ("target", "position"): Rule(lambda c: tuple(c.target) != tuple(c.position),
+                                     lambda c: "must differ from camera.position"),
+    }
+
 
 @dataclasses.dataclass(frozen=True)
-class NoiseConfig:
+class NoiseConfig(Node):
     """Depth noise: ``model`` in {"robwork", "khoshelham", "nguyen", "none"}."""
 
     model: str = "robwork"
 
+    _path = "perception.noise"
+    _constraints = {"model": Options(NOISE_MODEL_NAMES)}
+
 
 @dataclasses.dataclass(frozen=True)
-class NormalsConfig:
+class NormalsConfig(Node):
     """Where the per-pixel normals (averaged per voxel, used by the RHF) come from.
 
     ``source``: "ray" (default) the exact surface normal of the hit primitive, noise-free;
     "cloud" PCA of the (noisy) object points in a ``window`` x ``window`` pixel neighbourhood
     of the same object within ``radius`` metres, turned towards the camera
-    (``normals.window_normals``; the same rule as ``real.config.NormalConfig(method="window")``).
+    (``normals.window_normals``; the same rule as ``config.real.NormalConfig(method="window")``).
     """
 
     source: str = "ray"
     window: int = 5
     radius: float = 0.025
 
+    _path = "perception.normals"
+    _constraints = {"source": Options(NORMAL_SOURCES), "window": ODD_WINDOW,
+                    "radius": Interval(float, 0.0, 1.0, closed="right"), ("window",): odd("window")}
+
 
 @dataclasses.dataclass(frozen=True)
-class VoxelConfig:
+class VoxelConfig(Node):
     """Voxel grid subsampling (paper: 0.0125 m) with fixed capacities.
 
     ``max_object_pixels``: object pixels (both objects) kept per scene before voxelisation;
@@ -72,9 +94,13 @@ class VoxelConfig:
     max_object_pixels: int = 32768
     max_voxels: int = 4096
 
+    _path = "perception.voxel"
+    _constraints = {"size": Interval(float, 0.0, 1.0, closed="right"),
+                    "max_object_pixels": count(1, MAX_IMAGE * MAX_IMAGE), "max_voxels": count(1, 1 << 20)}
+
 
 @dataclasses.dataclass(frozen=True)
-class RHFConfig:
+class RHFConfig(Node):
     """Relational histogram features: one (lo, hi) range per feature, ``bins`` bins each.
 
     Features in order: dx, dy, dz (of b - a, metres, robot frame), |b - a| (m),
@@ -94,14 +120,18 @@ class RHFConfig:
         (-0.5 - 0.02 / 3, 0.5 - 0.02 / 3),
         (-0.25 - 0.01 / 3, 0.25 - 0.01 / 3),
         (0.0, 0.75),
-        (-float(np.pi) / 300, float(np.pi) * 299 / 300),
-        (-float(np.pi) / 300, float(np.pi) * 299 / 300),
+        (-math.pi / 300, math.pi * 299 / 300),
+        (-math.pi / 300, math.pi * 299 / 300),
     )
     chunk: int = 256
 
+    _path = "perception.rhf"
+    _constraints = {"bins": count(1, 10_000), "chunk": count(1, 1 << 16),
+                    "ranges": Seq(Seq(COORD, length=2, increasing=True), length=len(RHF_NAMES))}
+
 
 @dataclasses.dataclass(frozen=True)
-class CullConfig:
+class CullConfig(Node):
     """Which pixels the feature path ray-casts: image tiles of ``tile`` x ``tile`` pixels that a
     conservative projection of an object geom's bounding sphere touches, at most ``max_tiles``
     (more sets ``tile_overflow``). Pixels outside these tiles cannot show an object. The
@@ -110,9 +140,12 @@ class CullConfig:
     tile: int = 16
     max_tiles: int = 256
 
+    _path = "perception.cull"
+    _constraints = {"tile": count(1, MAX_IMAGE), "max_tiles": count(1, MAX_IMAGE * MAX_IMAGE)}
+
 
 @dataclasses.dataclass(frozen=True)
-class PerceptionConfig:
+class PerceptionConfig(Node):
     """All perception settings; ``min_points``: voxels below which an object is ``unseen``."""
 
     camera: CameraConfig = CameraConfig()
@@ -123,51 +156,14 @@ class PerceptionConfig:
     cull: CullConfig = CullConfig()
     min_points: int = 10
 
-    def __post_init__(self):  # refused when the config is made: the parts' checks cross (tile vs image)
-        validate_config(self)
-
-
-def validate_config(cfg: PerceptionConfig) -> PerceptionConfig:
-    """Raise ``UserError`` (a ValueError) naming the bad setting; return ``cfg`` unchanged otherwise."""
-    cam = cfg.camera
-    if cam.width <= 0 or cam.height <= 0:
-        raise UserError(f"perception.camera size must be positive, got {cam.width}x{cam.height}")
-    if not 0.0 < cam.vfov_deg < 180.0:
-        raise UserError(f"perception.camera.vfov_deg must be in (0, 180), got {cam.vfov_deg}")
-    if not 0.0 <= cam.near < cam.far:
-        raise UserError(f"perception: need 0 <= camera.near < camera.far, got {cam.near}, {cam.far}")
-    if np.linalg.norm(np.subtract(cam.target, cam.position)) == 0.0:
-        raise UserError("perception.camera.target equals camera.position")
-    if cfg.noise.model not in NOISE_MODEL_NAMES:
-        raise UserError(f"unknown perception.noise.model {cfg.noise.model!r}; valid: {sorted(NOISE_MODEL_NAMES)}")
-    nc = cfg.normals
-    if nc.source not in NORMAL_SOURCES:
-        raise UserError(f"unknown perception.normals.source {nc.source!r}; valid: {list(NORMAL_SOURCES)}")
-    if nc.window < 3 or nc.window % 2 == 0:
-        raise UserError(f"perception.normals.window must be odd and >= 3, got {nc.window}")
-    if nc.radius <= 0:
-        raise UserError(f"perception.normals.radius must be positive, got {nc.radius}")
-    if cfg.voxel.size <= 0:
-        raise UserError(f"perception.voxel.size must be positive, got {cfg.voxel.size}")
-    if cfg.voxel.max_object_pixels <= 0 or cfg.voxel.max_voxels <= 0:
-        raise UserError("perception.voxel capacities must be positive")
-    r = cfg.rhf
-    if r.bins <= 0 or r.chunk <= 0:
-        raise UserError(f"perception.rhf.bins and rhf.chunk must be positive, got {r.bins}, {r.chunk}")
-    if cfg.voxel.max_voxels % r.chunk:
-        raise UserError(
-            f"perception.voxel.max_voxels ({cfg.voxel.max_voxels}) must be a multiple of rhf.chunk ({r.chunk})"
-        )
-    if len(r.ranges) != len(RHF_NAMES) or any(hi <= lo for lo, hi in r.ranges):
-        raise UserError(f"perception.rhf.ranges needs {len(RHF_NAMES)} (lo, hi) pairs with hi > lo, got {r.ranges}")
-    t = cfg.cull.tile
-    if t <= 0 or cam.width % t or cam.height % t:
-        raise UserError(f"perception.cull.tile ({t}) must divide the image size {cam.width}x{cam.height}")
-    if cfg.cull.max_tiles <= 0:
-        raise UserError(f"perception.cull.max_tiles must be positive, got {cfg.cull.max_tiles}")
-    if cfg.min_points < 3:
-        raise UserError(f"perception.min_points must be >= 3 for a PCA frame, got {cfg.min_points}")
-    return cfg
+    _path = "perception"
+    _constraints = {
+        "min_points": count(3, 1 << 20),  # >= 3 for a PCA frame
+        ("voxel.max_voxels",): Rule(lambda c: c.voxel.max_voxels % c.rhf.chunk == 0,
+                                    lambda c: f"({c.voxel.max_voxels}) must be a multiple of rhf.chunk ({c.rhf.chunk})"),
+        ("cull.tile",): Rule(lambda c: c.camera.width % c.cull.tile == 0 and c.camera.height % c.cull.tile == 0,
+                             lambda c: f"({c.cull.tile}) must divide the image size {c.camera.width}x{c.camera.height}"),
+    }
 
 
 def stored_config(cfg: PerceptionConfig) -> dict:
@@ -177,7 +173,7 @@ def stored_config(cfg: PerceptionConfig) -> dict:
     every feature folder written before the option existed, so that those stay valid and
     resumable: a folder whose config has no ``normals`` used ``source="ray"``.
     """
-    from relaff_jax.config import to_dict
+    from relaff_jax.config.override import to_dict
 
     d = to_dict(cfg)
     if cfg.normals == NormalsConfig():

@@ -1,18 +1,14 @@
-"""The simulation's settings, without JAX or MuJoCo: ``PhysicsConfig`` (the MJX world),
-``SceneConfig`` (scene sampling and settling), ``ArmConfig`` (IK and gripper) and
-``ActionConfig`` (motor programs and outcome rules, the three others nested inside).
-
-They live apart from the code that uses them (``world``, ``scenes``, ``arm_model``,
-``templates`` re-export them) so that the command line checks ``--set action.*`` in well
-under a second, before the stages are imported.
-"""
+"""The simulation's settings: ``PhysicsConfig`` (the MJX world), ``SceneConfig`` (scene sampling
+and settling), ``ArmConfig`` (IK and gripper) and ``ActionConfig`` (motor programs and outcome
+rules, the three others nested inside): the tree's ``action`` node. Lengths in metres."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
-from relaff_jax.config import is_int
-from relaff_jax.errors import UserError
-
+from relaff_jax.config.constraints import (FRACTION, AnyOf, Boolean, Check, Interval, Options, Rule, Seq,
+                                           count, length)
+from relaff_jax.config.node import Node
 
 # ActionConfig.programs: the motor programs' versions (v1: before issue 43)
 PROGRAMS = ("v1", "v2")
@@ -21,22 +17,14 @@ V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_s
 
 # PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
 PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
-
-
-def _check(where: str, rules: dict) -> None:
-    """``rules``: ``{field: (ok, what it must be)}``; the first failed rule is a ``UserError``
-    naming the key from the tree's root (``action.scene.settle_steps``)."""
-    for name, (ok, must) in rules.items():
-        if not ok:
-            raise UserError(f"{where}.{name} must be {must}")
-
-
-def _gap(g) -> bool:
-    return len(g) == 2 and 0.0 <= g[0] < g[1]
+IK_SOLVERS = ("lbfgs", "lm")  # kinematics.IK_SOLVERS
+MAX_GRIP = 0.21  # m: the finger joint's range
+MAX_SQUEEZE = 60.0  # N: the finger actuator's limit
+STEPS = count(1, 1_000_000)  # control/solver steps: a bound far past any run's
 
 
 @dataclasses.dataclass(frozen=True)
-class PhysicsConfig:
+class PhysicsConfig(Node):
     """Static physics settings shared by settle and action rollouts.
 
     ``iterations``/``ls_iterations`` cap the constraint solver: uncapped defaults cost ~3x
@@ -74,21 +62,28 @@ class PhysicsConfig:
     # (docs/actions.md, "Tuning").
     arm_palm_objects: str = "contact"
 
-    def __post_init__(self):  # refused when the config is made
-        if self.arm_palm_objects not in PALM_MODES:
-            raise UserError(f"action.phys.arm_palm_objects={self.arm_palm_objects!r}: "
-                            f"one of {', '.join(PALM_MODES)}")
-        _check("action.phys", {
-            "timestep": (self.timestep > 0, f"> 0, got {self.timestep}"),
-            "iterations": (is_int(self.iterations, 1), f"an integer >= 1, got {self.iterations!r}"),
-            "ls_iterations": (is_int(self.ls_iterations, 1), f"an integer >= 1, got {self.ls_iterations!r}"),
-            "solver": (self.solver in ("Newton", "CG"), f"Newton or CG (the solvers MJX has), got {self.solver!r}"),
-            "arm_max_geom_pairs": (self.arm_max_geom_pairs == -1 or is_int(self.arm_max_geom_pairs, 1),
-                                   f"-1 (all pairs) or an integer >= 1, got {self.arm_max_geom_pairs!r}")})
+    _path = "action.phys"
+    _constraints = {
+        "timestep": Interval(float, 0.0, 0.1, closed="right"),
+        "iterations": count(1, 10_000),
+        "ls_iterations": count(1, 10_000),
+        "solver": Options(("Newton", "CG")),  # the solvers MJX has
+        "table_friction": Interval(float, 0.0, 10.0),
+        "rolling_friction": Interval(float, 0.0, 1.0),
+        "held_rake_pos": Seq(Interval(float, -10.0, 10.0), length=3),
+        "wall_table_contacts": Boolean(),
+        "arm_max_geom_pairs": AnyOf(Interval(int, -1, -1), count(1, 10_000)),  # -1: all pairs
+        "arm_pedestal_contacts": Boolean(),
+        "arm_palm_objects": Options(PALM_MODES),
+    }
+
+
+def _gap() -> Seq:
+    return Seq(length(), length=2, increasing=True)  # (lo, hi) with 0 <= lo < hi
 
 
 @dataclasses.dataclass(frozen=True)
-class SceneConfig:
+class SceneConfig(Node):
     """Static scene-distribution and settling settings (paper defaults where it gives them)."""
 
     workspace_radius: float = 1.8
@@ -105,31 +100,32 @@ class SceneConfig:
     candidates: int = 16  # rejection-sampling draws per placement (static shapes)
     # The objects scenes are made of (docs/objects.md): names among the 29 built-ins and the
     # library file's objects (empty: all of them), and a library file (.toml or .json, "" none)
-    # whose objects join the built-ins. Read and checked with the whole tree (runconfig.check_tree).
+    # whose objects join the built-ins. Read and checked with the whole tree (config.tree.check_tree).
     objects: tuple[str, ...] = ()
     library: str = ""
 
-    def __post_init__(self):  # refused when the config is made
-        _check("action.scene", {
-            "objects": (isinstance(self.objects, tuple) and all(isinstance(n, str) for n in self.objects),
-                        f'a list of object names (--set \'action.scene.objects=["ball","dish"]\'), got {self.objects!r}'),
-            "library": (isinstance(self.library, str), f"a file path, got {self.library!r}"),
-            "min_radius": (0.0 <= self.min_radius < self.workspace_radius,
-                           f"in [0, workspace_radius = {self.workspace_radius}), got {self.min_radius}"),
-            "p_stacked": (0.0 <= self.p_stacked <= 1.0, f"in [0, 1], got {self.p_stacked}"),
-            "p_near": (0.0 <= self.p_near <= 1.0, f"in [0, 1], got {self.p_near}"),
-            "p_between": (0.0 <= self.p_between <= 1.0, f"in [0, 1], got {self.p_between}"),
-            "near_gap": (_gap(self.near_gap), f"(lo, hi) with 0 <= lo < hi, got {self.near_gap}"),
-            "between_gap": (_gap(self.between_gap), f"(lo, hi) with 0 <= lo < hi, got {self.between_gap}"),
-            "drop_height": (self.drop_height >= 0, f">= 0, got {self.drop_height}"),
-            "settle_steps": (is_int(self.settle_steps, 1), f"an integer >= 1, got {self.settle_steps!r}"),
-            "rest_speed": (self.rest_speed > 0, f"> 0, got {self.rest_speed}"),
-            "contact_dist": (self.contact_dist > 0, f"> 0, got {self.contact_dist}"),
-            "candidates": (is_int(self.candidates, 1), f"an integer >= 1, got {self.candidates!r}")})
+    _path = "action.scene"
+    _constraints = {
+        "workspace_radius": Interval(float, 0.0, 10.0, closed="right"),
+        "min_radius": length(),
+        "p_stacked": FRACTION, "p_near": FRACTION, "p_between": FRACTION,
+        "near_gap": _gap(), "between_gap": _gap(),
+        "drop_height": length(1.0),
+        "settle_steps": STEPS,
+        "rest_speed": Interval(float, 0.0, 10.0, closed="right"),
+        "contact_dist": Interval(float, 0.0, 1.0, closed="right"),
+        "candidates": count(1, 4096),
+        # names (docs/objects.md); the library file itself is read and checked with the whole tree
+        "objects": Seq(Check(lambda v: isinstance(v, str) and v != "", "an object name"), min_len=0, distinct=True),
+        "library": Check(lambda v: isinstance(v, str), "a file path (.toml or .json), or \"\" for none"),
+        ("min_radius", "workspace_radius"): Rule(
+            lambda c: c.min_radius < c.workspace_radius,
+            lambda c: f"must be below workspace_radius = {c.workspace_radius}, got {c.min_radius}"),
+    }
 
 
 @dataclasses.dataclass(frozen=True)
-class ArmConfig:
+class ArmConfig(Node):
     """Static settings of the IK and the gripper (closed over, never traced)."""
 
     ik_steps: int = 20  # L-BFGS steps per seed
@@ -152,22 +148,35 @@ class ArmConfig:
     # (a pad resting on top of an object, or an edge of it on a rim, is no grip)
     contact_face_cos: float = 0.7
 
-    def __post_init__(self):  # refused when the config is made
-        if self.ik_solver not in ("lbfgs", "lm"):  # kinematics.IK_SOLVERS
-            raise UserError(f"action.arm.ik_solver={self.ik_solver!r}: one of lbfgs, lm")
-        _check("action.arm", {
-            "reach_screen": (isinstance(self.reach_screen, bool), f"true or false, got {self.reach_screen!r}"),
-            "ik_steps": (is_int(self.ik_steps, 1), f"an integer >= 1, got {self.ik_steps!r}"),
-            "ik_lm_steps": (is_int(self.ik_lm_steps, 1), f"an integer >= 1, got {self.ik_lm_steps!r}"),
-            "ik_pos_tol": (self.ik_pos_tol > 0, f"> 0, got {self.ik_pos_tol}"),
-            "ik_ang_tol": (self.ik_ang_tol > 0, f"> 0, got {self.ik_ang_tol}"),
-            "grip_open": (self.grip_closed <= self.grip_open <= 0.21,
-                          f"in [grip_closed, 0.21] (the finger joint's range), got {self.grip_open}"),
-            "contact_face_cos": (-1.0 <= self.contact_face_cos <= 1.0, f"in [-1, 1], got {self.contact_face_cos}")})
+    _path = "action.arm"
+    _constraints = {
+        "ik_steps": count(1, 100_000),
+        "ik_solver": Options(IK_SOLVERS),
+        "ik_lm_steps": count(1, 100_000),
+        "ik_orient_length": Interval(float, 0.0, 10.0, closed="right"),
+        "ik_pos_tol": Interval(float, 0.0, 1.0, closed="right"),
+        "ik_ang_tol": Interval(float, 0.0, math.pi, closed="right"),
+        "ik_min_sigma": Interval(float, 0.0, 10.0),
+        "ik_continuity": Interval(float, 0.0, 1e6),
+        "reach_screen": Boolean(),
+        "grip_open": Interval(float, 0.0, MAX_GRIP),
+        "grip_closed": Interval(float, 0.0, MAX_GRIP),
+        "contact_dist": Interval(float, 0.0, 1.0, closed="right"),
+        "contact_face_cos": Interval(float, -1.0, 1.0),
+        ("grip_open", "grip_closed"): Rule(
+            lambda c: c.grip_closed <= c.grip_open,
+            lambda c: f"must be in [grip_closed = {c.grip_closed}, {MAX_GRIP}] (the finger joint's range), "
+                      f"got {c.grip_open}"),
+    }
+
+
+_LENGTHS = ("lift_height", "drag_raise", "pull_distance", "push_distance", "unobstruct_distance",
+            "move_distance", "rake_pull", "clearance", "grip_margin", "tip_clearance", "rake_gap",
+            "lifted", "moved", "closer", "farther", "aside", "take_opening", "corridor", "palm_margin", "min_grip")
 
 
 @dataclasses.dataclass(frozen=True)
-class ActionConfig:
+class ActionConfig(Node):
     """Static settings of the motor programs and of the outcome rules (lengths in metres)."""
 
     lift_height: float = 0.25  # lift/take/pour/slide raise the tcp this much
@@ -214,20 +223,20 @@ class ActionConfig:
     phys: PhysicsConfig = PhysicsConfig()
     scene: SceneConfig = SceneConfig()
 
-    def __post_init__(self):  # refused when the config is made (arm, phys and scene check themselves)
-        lengths = ("lift_height", "drag_raise", "pull_distance", "push_distance", "unobstruct_distance",
-                   "move_distance", "rake_pull", "clearance", "grip_margin", "tip_clearance", "rake_gap",
-                   "lifted", "moved", "closer", "farther", "aside", "take_opening", "corridor")
-        rules = {k: (getattr(self, k) >= 0, f">= 0 m, got {getattr(self, k)}") for k in lengths}
-        rules["programs"] = (self.programs in PROGRAMS, f"one of {', '.join(PROGRAMS)}, got {self.programs!r}")
-        rules["palm_margin"] = (self.palm_margin >= 0, f">= 0 m, got {self.palm_margin}")
-        rules["min_grip"] = (self.min_grip >= 0, f">= 0 m, got {self.min_grip}")
-        rules["squeeze_min"] = (0 < self.squeeze_min <= self.squeeze_max,
-                                f"in (0, squeeze_max = {self.squeeze_max}] N, got {self.squeeze_min}")
-        rules["squeeze_max"] = (self.squeeze_max <= 60.0, f"<= 60 N (the finger actuator's limit), got {self.squeeze_max}")
-        rules["squeeze_safety"] = (self.squeeze_safety > 0, f"> 0, got {self.squeeze_safety}")
-        rules["rest_hold"] = (is_int(self.rest_hold, 0), f"an integer >= 0, got {self.rest_hold!r}")
-        rules["rest_window"] = (is_int(self.rest_window, 1), f"an integer >= 1, got {self.rest_window!r}")
-        rules["tilt_deg"] = (0.0 < self.tilt_deg < 180.0, f"in (0, 180), got {self.tilt_deg}")
-        rules["move_rule"] = (self.move_rule in ("apart", "both"), f"apart or both, got {self.move_rule!r}")
-        _check("action", rules)
+    _path = "action"
+    _constraints = {
+        **{k: length(5.0) for k in _LENGTHS},
+        "tilt_deg": Interval(float, 0.0, 180.0, closed="neither"),
+        "move_rule": Options(("apart", "both")),
+        "take_align": Boolean(),
+        "stop_at_program_end": Boolean(),
+        "programs": Options(PROGRAMS),
+        "squeeze_min": Interval(float, 0.0, MAX_SQUEEZE, closed="right"),
+        "squeeze_max": Interval(float, 0.0, MAX_SQUEEZE, closed="right"),
+        "squeeze_safety": Interval(float, 0.0, 1000.0, closed="right"),
+        "rest_hold": count(0, 1_000_000),
+        "rest_window": STEPS,
+        ("squeeze_min", "squeeze_max"): Rule(
+            lambda c: c.squeeze_min <= c.squeeze_max,
+            lambda c: f"must be in (0, squeeze_max = {c.squeeze_max}] N, got {c.squeeze_min}"),
+    }

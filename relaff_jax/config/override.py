@@ -1,7 +1,7 @@
 """The one path for overriding frozen config dataclasses.
 
-Every stage owns a frozen dataclass of its static settings (defaults are the paper's);
-``relaff_jax.runconfig.RunConfig`` nests them into one tree. ``override(cfg, {"key": value})``
+Every node of the tree is a frozen dataclass (defaults are the paper's) in this package;
+``relaff_jax.config.tree.RunConfig`` nests them into one tree. ``override(cfg, {"key": value})``
 returns a copy with checked overrides: an unknown key is an error that lists the valid ones,
 never silently ignored. ``parse_set`` turns the CLI's ``--set dotted.key=value`` into such a
 mapping.
@@ -12,13 +12,9 @@ import dataclasses
 import json
 from typing import Any, Iterable, Mapping, TypeVar
 
-from relaff_jax.errors import UserError
+from relaff_jax.config.constraints import ConfigError
 
 T = TypeVar("T")
-
-
-class ConfigError(UserError):
-    """A config key or value that the stage does not know."""
 
 
 def parse_set(items: Iterable[str]) -> dict[str, Any]:
@@ -38,13 +34,6 @@ def parse_set(items: Iterable[str]) -> dict[str, Any]:
             v = value
         out[key.strip()] = _freeze(v)
     return out
-
-
-def is_int(v: Any, lo: int) -> bool:
-    """``v`` is an integer (not a bool) >= ``lo``: the config nodes' checks of counts."""
-    import numbers
-
-    return isinstance(v, numbers.Integral) and not isinstance(v, bool) and v >= lo
 
 
 def _freeze(v: Any) -> Any:
