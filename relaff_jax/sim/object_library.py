@@ -193,7 +193,7 @@ def read_file(path: str | Path) -> list[Any]:
 def load_library(path: str | Path, scene: Any = None, grip_margin: float = 0.02) -> tuple[lib.ObjectSpec, ...]:
     """The checked objects of a library file (every refusal a ``UserError`` naming the object and
     field). A name of a built-in is refused: a library adds objects, it never redefines one."""
-    from .config import SceneConfig
+    from relaff_jax.config.action import SceneConfig
 
     where = f"object library {path}"
     colours = {s.name: s.colour for s in lib.OBJECTS.values()}

@@ -18,7 +18,7 @@ from relaff_jax import data as ds
 from relaff_jax.errors import UserError
 from relaff_jax.sim import object_library as ol
 from relaff_jax.sim import objects as lib
-from relaff_jax.sim.config import ActionConfig, SceneConfig
+from relaff_jax.config.action import ActionConfig, SceneConfig
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "my_objects.toml"
 
@@ -192,7 +192,7 @@ def test_cli_lists_merged_set_and_refuses_in_one_line(tmp_path, capsys):
 
 
 def test_config_tree_checks_the_library_before_any_work(tmp_path):
-    from relaff_jax.runconfig import check_tree, resolve
+    from relaff_jax.config import check_tree, resolve
 
     bad = write(tmp_path, [dish(mass=-1.0)])
     with pytest.raises(UserError, match=r"object 'dish': mass must be a finite number > 0"):
