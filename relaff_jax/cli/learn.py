@@ -107,7 +107,7 @@ def register(subparsers) -> None:
                    help="use N synthetic samples per action instead of --data (a dry run of the stage)")
     p.add_argument("--out", required=True, metavar="RESULTS", help="results folder (resumed if it exists)")
     p.add_argument("--preset", choices=("quick", "study", "paper"), default="quick",
-                   help="the protocol's sizes, repetitions and forests (relaff_jax.experiment_preset)")
+                   help="the protocol's sizes, repetitions and forests (relaff_jax.config.experiment.experiment_preset)")
     p.add_argument("--space", choices=("pca", "rhf", "both"), default=None,
                    help="state space(s) to sweep, the same as --set reproduce.spaces=[...] (default: both)")
     p.add_argument("--seed", type=int, default=None, help="seed of the test draws, training orders and forests "

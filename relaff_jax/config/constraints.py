@@ -121,9 +121,9 @@ class Seq(Constraint):
     increasing: bool = False
 
     def describe(self) -> str:
-        n = f"{self.length}" if self.length is not None else f"at least {self.min_len}"
+        n = f"{self.length} " if self.length is not None else f"at least {self.min_len} " if self.min_len else ""
         extra = ", distinct" * self.distinct + ", strictly increasing" * self.increasing
-        return f"a list of {n} values{extra}, each {self.item.describe()}"
+        return f"a list of {n}values{extra}, each {self.item.describe()}"
 
     def problem(self, v: Any) -> str | None:
         if not isinstance(v, (tuple, list)):

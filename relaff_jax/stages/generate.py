@@ -32,9 +32,10 @@ def default_rollout_factory(action: str, batch: int, config: Any = None, engine:
                 "the generate stage needs relaff_jax.sim.rollouts (the arm's nine motor programs that label the "
                 "rollouts), which this installation does not have; the datasets cannot be generated") from e
         raise
+    from relaff_jax.config.action import ActionConfig
     from relaff_jax.sim import object_library as ol
 
-    cfg = config if config is not None else sim.ActionConfig()
+    cfg = config if config is not None else ActionConfig()
     record = {"action": action, "action_config": sim.stored_config(cfg)}
     objs = ol.use_scene(cfg.scene, cfg.grip_margin)
     if cfg.scene.library or cfg.scene.objects:  # the resolved objects, so the folder never depends on the file

@@ -19,6 +19,7 @@ from relaff_jax.errors import UserError
 from relaff_jax.sim import object_library as ol
 from relaff_jax.sim import objects as lib
 from relaff_jax.config.action import ActionConfig, SceneConfig
+from relaff_jax.config.dataset import DatasetConfig
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "my_objects.toml"
 
@@ -204,7 +205,7 @@ def test_config_tree_checks_the_library_before_any_work(tmp_path):
     assert lib.active() is lib.BUILTIN_SET
     with pytest.raises(UserError, match=r"'action.scene.objects' .*expects a list"):
         resolve(None, {"action.scene.objects": "ball"})
-    with pytest.raises(UserError, match=r"action.scene.objects must be a list of object names"):
+    with pytest.raises(UserError, match=r"'action.scene.objects' must be a list of values, distinct, each an object name"):
         resolve(None, {"action.scene.objects": (1, 2)})
     assert tree.action.scene.library == str(EXAMPLE)
 
@@ -231,7 +232,7 @@ def test_recorded_objects_and_resume_with_a_changed_file_refused(tmp_path):
     assert rec["names"] == ["ball", "dish"] and [d["name"] for d in rec["specs"]] == ["dish"]
     config = {"action": "lift", "action_config": stored_config(cfg), "objects": rec}
     out = tmp_path / "ds"
-    dcfg = ds.DatasetConfig(max_rollouts=64, distance_bins=2, borrow_fraction=1.0)
+    dcfg = DatasetConfig(max_rollouts=64, distance_bins=2, borrow_fraction=1.0)
     ds.generate_dataset(out, "lift", 4, _synthetic, 0, 16, config, progress=False, dataset_config=dcfg)
     meta = read_json(out / ds.SIDECAR)
     assert meta["config"]["objects"]["sha256"] == ol.digest(lib.active().specs) == rec["sha256"]
