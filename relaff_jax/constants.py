@@ -40,9 +40,8 @@ STAGES = ("generate", "features", "experiment", "report")
 
 
 def action_id(action: str) -> int:
-    """Index of ``action`` in ``ACTIONS``; an unknown name is a ``UserError`` listing the valid ones."""
-    from relaff_jax.errors import UserError
+    """Index of ``action`` in the run's action list (``sim.actions.names()``: ``ACTIONS``, then
+    the user's registered actions); an unknown name is a ``UserError`` listing the valid ones."""
+    from relaff_jax.sim.actions.registry import action_id as registered_id
 
-    if action not in ACTIONS:
-        raise UserError(f"unknown action {action!r}; valid actions: {', '.join(ACTIONS)}")
-    return ACTIONS.index(action)
+    return registered_id(action)
