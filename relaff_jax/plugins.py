@@ -31,9 +31,11 @@ def source_hash(f: Callable) -> str:
 
 
 def _registered() -> set[str]:
-    from relaff_jax.learn import conditions
-    from relaff_jax.sim.actions import registry
+    import importlib
 
+    conditions = importlib.import_module("relaff_jax.learn.conditions")
+    registry = importlib.import_module("relaff_jax.sim.actions.registry")  # the module (the package's
+    # attribute of that name is its registry() function)
     return {f"condition {n}" for n in conditions._REGISTRY} | {f"action {n}" for n in registry.user_names()}
 
 

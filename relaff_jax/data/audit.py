@@ -59,6 +59,9 @@ def action_config(meta: Mapping[str, Any]):
     record = meta.get("config")
     if not isinstance(record, dict) or not isinstance(record.get("action_config"), dict):
         raise DatasetError(f"{meta.get('action')}: the sidecar records no action_config; cannot replay")
+    from relaff_jax.sim.actions.registry import check_recorded
+
+    check_recorded(str(meta.get("action")), record.get("action_spec"))  # a user action: the spec that made it
     return from_dict(ActionConfig, record["action_config"])
 
 
@@ -262,7 +265,7 @@ def dataset_folders(path: str | os.PathLike) -> list[Path]:
     """The dataset folders of ``path``: itself if it is a dataset (has a sidecar), else the
     ``data/<action>/`` datasets of a run folder, in ``ACTIONS`` order. One-line errors for a
     missing folder, a file, or a folder that is neither."""
-    from relaff_jax.constants import ACTIONS
+    from relaff_jax.sim.actions.registry import names
     from relaff_jax.data.config import SIDECAR
 
     p = Path(path)
@@ -272,7 +275,7 @@ def dataset_folders(path: str | os.PathLike) -> list[Path]:
         raise DatasetError(f"{p}: not a folder")
     if (p / SIDECAR).is_file():
         return [p]
-    found = [p / "data" / a for a in ACTIONS if (p / "data" / a / SIDECAR).is_file()]
+    found = [p / "data" / a for a in names() if (p / "data" / a / SIDECAR).is_file()]
     if not found:
         raise DatasetError(f"{p}: not a relaff dataset (no {SIDECAR}) nor a run folder with data/<action>/ datasets")
     return found

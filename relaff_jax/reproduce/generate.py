@@ -28,8 +28,13 @@ def default_rollout_factory(action: str, batch: int, config: Any = None, engine:
                 "the generate stage needs relaff_jax.sim.rollouts (the arm's nine motor programs that label the "
                 "rollouts), which this installation does not have; the datasets cannot be generated") from e
         raise
+    from relaff_jax.sim.actions import record
+
     cfg = config if config is not None else sim.ActionConfig()
-    return sim.make_rollout_fn(action, batch, cfg, engine=engine), {"action": action, "action_config": sim.stored_config(cfg)}, None
+    stored = {"action": action, "action_config": sim.stored_config(cfg)}
+    if record(action) is not None:  # a user action: its spec's identity (a built-in's is the package's)
+        stored["action_spec"] = record(action)
+    return sim.make_rollout_fn(action, batch, cfg, engine=engine), stored, None
 
 
 def rollout_factory_for(cfg: Any):

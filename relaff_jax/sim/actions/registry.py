@@ -152,6 +152,21 @@ def record(name: str) -> dict[str, Any] | None:
     return {"origin": u.origin, "sha256": u.sha256, "spec_sha256": spec_hash(u.spec)}
 
 
+def check_recorded(name: str, recorded: dict[str, Any] | None) -> None:
+    """A folder made with action ``name`` (``recorded``: its ``record``, None for a built-in) is
+    read with the same spec: the action registered (``--plugins``) and its spec's hash equal."""
+    if recorded is None and is_builtin(name):
+        return
+    if name not in names():
+        raise UserError(f"action {name!r} is a user action ({(recorded or {}).get('origin', 'origin not recorded')}); "
+                        "give its plugin with --plugins FILE.py")
+    now = record(name)
+    if recorded is None or now is None or recorded.get("spec_sha256") != now["spec_sha256"]:
+        raise UserError(f"action {name!r}: the registered spec ({now and now['origin']}) is not the one that made "
+                        f"this folder ({(recorded or {}).get('origin')}; spec sha256 "
+                        f"{(recorded or {}).get('spec_sha256', '?')[:12]} vs {(now or {}).get('spec_sha256', '?')[:12]})")
+
+
 def key() -> tuple:
     """What the compiled programs depend on: the run's actions and their specs' identities
     (the caches of compiled functions are keyed on it with the config)."""
