@@ -34,7 +34,8 @@ PRESETS = ("tiny", "quick", "study", "paper")
 class ReproduceConfig:
     """What ``relaff reproduce`` covers besides the stages' own settings.
 
-    actions: the actions studied (the paper's nine; at least two, in ``ACTIONS`` order).
+    actions: the actions studied (the paper's nine, and registered user actions after them; at
+      least two, in the run's order ``sim.actions.names()``).
     spaces: state spaces of the experiment.
     examples_per_action: example scenes drawn per action in the report.
     """
@@ -45,10 +46,14 @@ class ReproduceConfig:
 
     def __post_init__(self):  # refused when the config is made
         acts, spaces = tuple(self.actions), tuple(self.spaces)
-        if len(acts) < 2 or len(set(acts)) != len(acts) or not set(acts) <= set(ACTIONS):
-            raise UserError(f"reproduce.actions must be at least two distinct values of {ACTIONS}, got {acts}")
-        if acts != tuple(a for a in ACTIONS if a in acts):
-            raise UserError(f"reproduce.actions must be in the canonical order {ACTIONS}, got {acts}")
+        from relaff_jax.sim.actions.registry import names  # the nine, then the user's registered (no JAX)
+
+        known = names()
+        if len(acts) < 2 or len(set(acts)) != len(acts) or not set(acts) <= set(known):
+            extra = "" if set(acts) <= set(known) else " (a user action needs --plugins FILE.py)"
+            raise UserError(f"reproduce.actions must be at least two distinct values of {known}, got {acts}{extra}")
+        if acts != tuple(a for a in known if a in acts):
+            raise UserError(f"reproduce.actions must be in the canonical order {known}, got {acts}")
         if not spaces or len(set(spaces)) != len(spaces) or not set(spaces) <= set(SPACES):
             raise UserError(f"reproduce.spaces must be distinct values of {SPACES}, got {spaces}")
         n = self.examples_per_action

@@ -93,6 +93,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         raise UserError("the run folder is required: --out DIR")
     options.check_counts(args, seed="--seed", jobs="--jobs")
     overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine)})
+    options.load_plugins(args)  # user actions registered before reproduce.actions names them
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     from relaff_jax import reproduce as R

@@ -127,8 +127,10 @@ def state_features(pca: np.ndarray, rhf: np.ndarray | None, action: str | None, 
 
 
 def check_action(action: str) -> None:
-    if action not in ACTIONS:
-        raise UserError(f"unknown action {action!r}; expected one of {ACTIONS}")
+    from relaff_jax.sim.actions.registry import names  # the nine, then the user's (no JAX)
+
+    if action not in names():
+        raise UserError(f"unknown action {action!r}; expected one of {names()}")
 
 
 def augment(X: np.ndarray, outputs: np.ndarray, repeats: int) -> np.ndarray:

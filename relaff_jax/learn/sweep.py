@@ -38,6 +38,8 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.config import to_dict
 from relaff_jax.constants import ACTIONS, SPACES
+from relaff_jax.constants import action_id  # noqa: E402 (the run's action ids: ACTIONS', then a user's)
+from relaff_jax.sim.actions.registry import record as action_record  # noqa: E402 (no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn import user_conditions
@@ -79,7 +81,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
             raise UserError(f"unknown space {s!r}; expected one of {SPACES}")
     actions = check_datasets(datasets, spaces)
     for a in actions:  # every action's pools fit its data: refused before experiment.json is written
-        split_pools(len(datasets[a]["label"]), ACTIONS.index(a), cfg, seed)
+        split_pools(len(datasets[a]["label"]), action_id(a), cfg, seed)
     out = Path(out)
     meta = {
         "format": FORMAT_VERSION,
@@ -90,6 +92,9 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         "fingerprint": fingerprint(datasets, spaces),
         "plugins": user_conditions.record(cfg),  # the user's conditions: origin and sha256 of their source
     }
+    specs = {a: action_record(a) for a in actions if action_record(a) is not None}
+    if specs:  # a user action's spec (its datasets record it too); none for the nine
+        meta["action_specs"] = specs
     meta_path = L.meta(out)
     if meta_path.exists():
         # same protocol, seed, actions and data; a space may be added to a finished one
@@ -99,6 +104,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         # not make it another run (config.result_differences)
         diff = [k for k in ("format", "seed", "actions") if old.get(k) != now[k]]
         diff += ["plugins"] if old.get("plugins", {}) != now["plugins"] else []
+        diff += ["action_specs"] if old.get("action_specs", {}) != now.get("action_specs", {}) else []
         diff += [f"config.{k}" for k in result_differences(old.get("config"), cfg)]
         diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
         if diff:
@@ -149,7 +155,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     loo_conds = loo_conditions(a, len(cfg.thresholds))
     loo_n = cfg.select_size if cfg.online_select else 0
     labels_of = {t: np.asarray(datasets[t]["label"]).astype(bool)[prep[f"target:{t}"]] for t in actions}
-    tests = {t: draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), 0,
+    tests = {t: draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, action_id(t), 0,
                          cfg.balanced_test, cfg.balanced_train)[0] for t in actions}
     n_test = np.asarray([len(tests[t]) if cfg.keep_outcomes else 0 for t in actions])
     # the outcomes bit-packed along the scenes as the blocks give them (a target with fewer
@@ -179,11 +185,11 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                     target_data[t] = (_states(ds, pool, t, space, cfg), np.asarray(ds["label"]).astype(bool)[pool],
                                       ext.boot(t, prep[f"boot:{t}"]))
                 if draws is None:
-                    draws = draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), r,
+                    draws = draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, action_id(t), r,
                                      cfg.balanced_test, cfg.balanced_train)
                 X, y, boot = target_data[t]
                 test_idx, train_order = draws
-                seed_keys = (seed, 5, SPACE_CODE[space], ACTIONS.index(t), r)
+                seed_keys = (seed, 5, SPACE_CODE[space], action_id(t), r)
                 calls.append((run_block_to_file, (str(path), X, y, boot, plans[ti], train_order, test_idx, chunk,
                                            reps_of[ti], n_cond, learner_of(cfg), seed_keys, loo_n or None, loo_conds,
                                            cfg.keep_outcomes, subsets[t]), {}))

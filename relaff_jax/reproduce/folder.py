@@ -22,7 +22,8 @@ from typing import Any
 
 from relaff_jax import io as rio
 from relaff_jax.config import differences, to_dict
-from relaff_jax.constants import ACTIONS
+from relaff_jax.constants import ACTIONS  # noqa: F401
+from relaff_jax.sim.actions.registry import names
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed, machine, versions
 
@@ -63,7 +64,7 @@ def seeds(seed: int) -> dict[str, Any]:
     """The seeds of every stage, derived from the run seed (independent streams)."""
     return {
         "run": int(seed),
-        "datasets": {a: derive_seed(seed, 0x5EED, 1, i) for i, a in enumerate(ACTIONS)},
+        "datasets": {a: derive_seed(seed, 0x5EED, 1, i) for i, a in enumerate(names())},  # ACTIONS', then a user's
         "features": derive_seed(seed, 0x5EED, 2),
         "experiment": int(seed),
     }

@@ -134,6 +134,9 @@ def run(run: Run, forced: bool) -> dict:
     if forced:
         rio.remove_tree(paths.data)
     acts = cfg.reproduce.actions
+    from relaff_jax.sim.actions import check_actions
+
+    check_actions(acts, cfg.action)  # a user action's rules traced once, before any simulation
     items: dict[str, Any] = {}
     todo = []
     for action in acts:
