@@ -40,8 +40,10 @@ STAGES = ("generate", "features", "experiment", "report")
 
 
 def action_id(action: str) -> int:
-    """Index of ``action`` in the run's action list (``sim.actions.names()``: ``ACTIONS``, then
-    the user's registered actions); an unknown name is a ``UserError`` listing the valid ones."""
-    from relaff_jax.sim.actions.registry import action_id as registered_id
+    """Index of ``action`` in ``ACTIONS``; an unknown name is a ``UserError`` listing the valid ones.
+    (The run's list, with a user's actions after the nine: ``sim.actions.registry.action_id``.)"""
+    from relaff_jax.errors import UserError
 
-    return registered_id(action)
+    if action not in ACTIONS:
+        raise UserError(f"unknown action {action!r}; valid actions: {', '.join(ACTIONS)}")
+    return ACTIONS.index(action)

@@ -125,7 +125,8 @@ def check_action(args: argparse.Namespace, action: str, cfg: Any = None) -> None
     """``action`` is built-in or registered (after ``load_plugins``); a user action's rules are
     traced once on a dummy scene (``sim.actions.check_actions``): one line before any simulation.
     A user action cannot run on a cluster: the workers would not have its plugin."""
-    from relaff_jax.constants import ACTIONS, action_id
+    from relaff_jax.constants import ACTIONS
+    from relaff_jax.sim.actions.registry import action_id
 
     action_id(action)
     if action in ACTIONS:

@@ -107,7 +107,7 @@ def cmd_scenes(args) -> int:
 
 def cmd_generate(args) -> int:
     options.load_plugins(args)  # a user action is registered before its name is checked
-    from relaff_jax.constants import action_id
+    from relaff_jax.sim.actions.registry import action_id
 
     action_id(args.action)
     options.check_counts(args, seed="--seed")

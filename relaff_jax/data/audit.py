@@ -68,7 +68,7 @@ def action_config(meta: Mapping[str, Any]):
 def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int) -> dict[str, np.ndarray]:
     """The plans of the scenes, by generation's jitted planner in calls of the dataset's batch
     (the last padded with repeats: a plan does not depend on the other rows of its call)."""
-    from relaff_jax.constants import action_id
+    from relaff_jax.sim.actions.registry import action_id
     from relaff_jax.sim.reach_screen import prepare_screened
     from relaff_jax.sim.rollouts import jitted_stage_fns
 
@@ -117,11 +117,14 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
                   nthread: int | None = None) -> dict[str, Any]:
     """Replay ``sample`` rollouts of the dataset ``path`` in MuJoCo C with the physics probe;
     the per-rollout readings and their summary (``summarise``)."""
-    from relaff_jax.constants import action_id
+    from relaff_jax.sim.actions.registry import action_id
     from relaff_jax.sim.native import replay_native
     from relaff_jax.sim.physics_probe import Probe
     from relaff_jax.sim.planning import setup
-    from relaff_jax.sim.templates import TPL_MEASURE
+    from relaff_jax.sim.actions.tables import spec_tables
+    from relaff_jax.sim.actions.registry import registry
+
+    TPL_MEASURE = spec_tables(registry()).measure  # the run's actions' (the nine's: templates.TPL_MEASURE)
 
     t0 = time.perf_counter()
     path = Path(path)

@@ -15,8 +15,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax.constants import ACTIONS
-from relaff_jax.constants import action_id  # noqa: E402 (the run's action ids: ACTIONS', then a user's)
-from relaff_jax.sim.actions.registry import names  # noqa: E402 (no JAX)
+from relaff_jax.sim.actions.registry import action_id, names  # noqa: E402 (the run's actions: the nine, then a user's; no JAX)
 from relaff_jax.learn.config import SPACE_CODE, ExperimentConfig
 from relaff_jax.learn.correlation import category_pairs, correlation_matrix, correlation_with
 from relaff_jax.learn.datasets import check_datasets

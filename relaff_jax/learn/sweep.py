@@ -38,8 +38,7 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.config import to_dict
 from relaff_jax.constants import ACTIONS, SPACES
-from relaff_jax.constants import action_id  # noqa: E402 (the run's action ids: ACTIONS', then a user's)
-from relaff_jax.sim.actions.registry import record as action_record  # noqa: E402 (no JAX)
+from relaff_jax.sim.actions.registry import action_id, record as action_record  # noqa: E402 (the run's actions; no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn import user_conditions

@@ -22,12 +22,12 @@ from . import objects as lib
 from . import scenes as sc
 from . import world as wd
 from .native_program import RestReader, native_labels, pad_hit, program_inputs, reachable, weld_relpose_np
-from .actions.registry import on_change
+from .actions.registry import action_id, on_change
 from .planning import make_plan_fn, setup
 from .simulate import welds
-from .templates import ActionConfig, tables
+from .actions.tables import tables
+from .templates import ActionConfig
 
-from relaff_jax.constants import action_id
 
 
 def relation_native(world: wd.World, pair: int, m: mujoco.MjModel, d: mujoco.MjData,

@@ -30,7 +30,8 @@ from .labels import Outcome, read_at_rest
 from .planning import setup
 from .programs import toy_reachable
 from .simulate import initial_data
-from .templates import ActionConfig, run_steps, tables
+from .actions.tables import run_steps, tables
+from .templates import ActionConfig
 
 
 class ProgramInputs(NamedTuple):

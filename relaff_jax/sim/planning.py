@@ -19,7 +19,8 @@ import numpy as np
 from . import arm as A
 from . import world as wd
 from .bodies import Geometry, geometry
-from .templates import N_TARGETS, ActionConfig, tables
+from .actions.tables import tables
+from .templates import N_TARGETS, ActionConfig
 
 
 class Setup(NamedTuple):

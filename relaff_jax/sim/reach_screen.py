@@ -43,7 +43,8 @@ from .planning import Plan, home_grip, make_plan_fn, setup
 from .actions.registry import on_change, registry
 from .actions.rules import plan_program
 from .programs import toy_grasp_target, toy_reachable
-from .templates import N_TARGETS, ActionConfig, tables
+from .actions.tables import tables
+from .templates import N_TARGETS, ActionConfig
 
 POS_MARGIN = 2e-3  # m, beyond ik_pos_tol
 ANG_MARGIN = 2e-3  # rad, beyond ik_ang_tol

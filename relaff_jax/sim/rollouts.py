@@ -28,7 +28,7 @@ import numpy as np
 
 from . import scenes as sc
 from . import world as wd
-from .actions.registry import on_change, spec
+from .actions.registry import action_id, on_change, spec
 from .bodies import geometry
 from .native_batch import default_threads, execute_native
 from .native_settle import settle_batch
@@ -37,7 +37,7 @@ from .reach_screen import prepare_screened
 from .simulate import make_prepare_fn, make_simulate_fn
 from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config: for reproduce)
 
-from relaff_jax.constants import SIM_ENGINES, action_id
+from relaff_jax.constants import SIM_ENGINES
 from relaff_jax.errors import UserError
 
 ENGINES = SIM_ENGINES  # executors of the planned programs in make_rollout_fn

@@ -32,7 +32,8 @@ from .actions.rules import goal_row
 from .labels import Outcome, read_at_rest
 from .planning import Setup, home_grip, make_plan_fn, setup
 from .programs import toy_reachable
-from .templates import N_STEPS, ActionConfig, run_steps, tables
+from .actions.tables import run_steps, tables
+from .templates import N_STEPS, ActionConfig
 
 
 def _finger_home(held: jax.Array) -> jax.Array:

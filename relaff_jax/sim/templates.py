@@ -84,8 +84,8 @@ GRASPS = np.asarray([{"take": 2, "move": 0, "rake": 0}.get(a, 1) for a in ACTION
 
 
 class Tables(NamedTuple):
-    """The templates of one version of the programs as (A, ...) tables in the run's action order
-    (``actions.registry()``: the nine built-ins in ``ACTIONS`` order, then a user's): ``steps``
+    """The templates of one version of the programs as (A, ...) tables in an action order (the
+    nine's ``ACTIONS`` order; ``actions.tables``: the run's, a user's after the nine): ``steps``
     (A, S), ``target`` (A, S), ``closed`` (A, S), ``measure`` (A,) the step the goal is read at
     (v2: the first step it may be read at), ``n_steps`` the padded length of every program,
     ``hold`` the control steps v2 may wait after ``measure`` for the objects to rest; ``grasp``
@@ -103,43 +103,26 @@ class Tables(NamedTuple):
     reach: np.ndarray = np.asarray(ACTIONS) == "unobstruct"
 
 
-def spec_tables(specs) -> Tables:
-    """v1's tables of ``specs`` (``actions.ActionSpec``s, checked): each template padded by
-    ``_template``, its measuring step the spec's (default: the end of its own segments). For
-    the nine built-ins these are the module's ``TPL_*`` and ``GRASPS``."""
-    from relaff_jax.sim.actions.spec import GRASP_CODE
-
-    tpl = [_template(s.segments) for s in specs]
-    measure = [t.measure if s.measure is None else s.measure for s, t in zip(specs, tpl)]
-    return Tables(np.asarray([t.seg_steps for t in tpl], np.int32), np.asarray([t.target for t in tpl], np.int32),
-                  np.asarray([t.closed for t in tpl], bool), np.asarray(measure, np.int32), N_STEPS, 0,
-                  np.asarray([GRASP_CODE[s.grasp] for s in specs], np.int32),
-                  np.asarray([s.grasp == "tool" for s in specs], bool), np.asarray([s.reach for s in specs], bool))
-
-
 def tables(cfg: ActionConfig) -> Tables:
-    """The templates ``cfg.programs`` runs for the run's actions (``actions.registry()``, built
-    from the specs): v1 as declared (``N_STEPS``); v2 the same segments with the final rest
-    ``cfg.rest_hold`` steps longer, so that a goal read at rest (``labels.read_at_rest``) can
-    wait up to ``rest_hold`` steps after ``measure``."""
-    from relaff_jax.sim.actions.registry import registry
-
-    tb = spec_tables(registry())
+    """The nine built-ins' templates ``cfg.programs`` runs: v1 the module's ``TPL_*`` tables
+    (``N_STEPS``); v2 the same segments with the final rest ``cfg.rest_hold`` steps longer, so
+    that a goal read at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after
+    ``measure``. The run's tables, a user's actions after the nine: ``actions.tables``."""
     if cfg.programs == "v1":
-        return tb
-    steps = tb.steps.copy()
+        return Tables(TPL_STEPS, TPL_TARGET, TPL_CLOSED, TPL_MEASURE, N_STEPS, 0)
+    steps = TPL_STEPS.copy()
     steps[:, -1] += int(cfg.rest_hold)
-    return tb._replace(steps=steps, n_steps=N_STEPS + int(cfg.rest_hold), hold=int(cfg.rest_hold))
+    return Tables(steps, TPL_TARGET, TPL_CLOSED, TPL_MEASURE, N_STEPS + int(cfg.rest_hold), int(cfg.rest_hold))
 
 
 def run_steps(cfg: ActionConfig) -> np.ndarray:
-    """(A,) int32: control steps simulated per action, ``measure + 1`` (the program's own
+    """(9,) int32: control steps simulated per action, ``TPL_MEASURE + 1`` (the program's own
     end; v2 plus the rest hold) or every action the padded length (``cfg.stop_at_program_end``
     False: ``N_STEPS``, v2 ``N_STEPS + rest_hold``)."""
     tb = tables(cfg)
     if cfg.stop_at_program_end:
         return (tb.measure + 1 + tb.hold).astype(np.int32)
-    return np.full(len(tb.measure), tb.n_steps, np.int32)
+    return np.full(len(ACTIONS), tb.n_steps, np.int32)
 
 
 def untuned(cfg: ActionConfig = ActionConfig()) -> ActionConfig:

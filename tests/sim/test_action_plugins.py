@@ -27,12 +27,13 @@ def _relaff(args, cwd):
 def test_builtin_specs_give_the_hard_wired_tables():
     from relaff_jax.sim import templates as T
     from relaff_jax.sim.actions import names, registry
+    from relaff_jax.sim.actions.tables import tables
 
     assert names()[:9] == ACTIONS and tuple(s.name for s in registry()[:9]) == ACTIONS
     assert [s.pairing for s in registry()[:9]] == [PAIRINGS[PAIRING[a]] for a in ACTIONS]
     for programs in ("v1", "v2"):
         cfg = T.ActionConfig(programs=programs)
-        tb = T.tables(cfg)
+        tb = tables(cfg)
         assert tb.steps.shape[0] >= 9
         ref = T.TPL_STEPS.copy()
         if programs == "v2":

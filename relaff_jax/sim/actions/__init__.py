@@ -4,7 +4,7 @@ An action is an ``ActionSpec`` (name, pairing, motor-program segments, target ru
 which after state the goal reads, grasp kind); the nine of the paper are built-ins declared the
 same way (``builtin.py``); a user's are registered with ``register_action`` in a Python file
 (``--plugins FILE.py``) or through the entry point group ``relaff_jax.actions``. The compiled
-programs are built from ``registry()`` (``templates.tables``, ``planning.make_plan_fn``,
+programs are built from ``registry()`` (``tables.tables``, ``planning.make_plan_fn``,
 ``simulate.make_simulate_fn``) and index it with the traced action id. docs/extending.md, "Actions".
 
 The spec and registry names load without JAX; the rule helpers on first use.
