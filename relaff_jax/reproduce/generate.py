@@ -134,9 +134,13 @@ def run(run: Run, forced: bool) -> dict:
     if forced:
         rio.remove_tree(paths.data)
     acts = cfg.reproduce.actions
-    from relaff_jax.sim.actions import check_actions
+    from relaff_jax.sim.actions import check_actions, record
 
     check_actions(acts, cfg.action)  # a user action's rules traced once, before any simulation
+    users = [a for a in acts if record(a) is not None]
+    if users and run.client is not None:
+        raise ReproduceError(f"--cluster: the user actions {users} run only here (the cluster's workers do not "
+                             "load --plugins files)")
     items: dict[str, Any] = {}
     todo = []
     for action in acts:
