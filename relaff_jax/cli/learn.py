@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from relaff_jax.cli import options
-from relaff_jax.constants import ACTIONS, SPACES  # noqa: F401
+from relaff_jax.constants import SPACES
 from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
 

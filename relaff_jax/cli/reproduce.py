@@ -5,7 +5,7 @@ import argparse
 from pathlib import Path
 
 from relaff_jax.cli import options
-from relaff_jax.constants import ACTIONS, SIM_ENGINES, STAGES
+from relaff_jax.constants import SIM_ENGINES, STAGES
 from relaff_jax.errors import UserError
 from relaff_jax.runconfig import PRESETS
 

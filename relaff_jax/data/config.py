@@ -15,7 +15,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.constants import ACTIONS, SIM_ENGINES
+from relaff_jax.constants import SIM_ENGINES
 from relaff_jax.data.errors import DatasetError
 from relaff_jax.data.selection import NEGATIVES, POPULATIONS
 

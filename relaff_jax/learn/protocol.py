@@ -18,7 +18,6 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from relaff_jax.constants import ACTIONS
 from relaff_jax.sim.actions.registry import names as _action_names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.learn.config import ExperimentConfig

@@ -14,7 +14,6 @@ import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
-from relaff_jax.constants import ACTIONS  # noqa: F401
 from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
 

@@ -16,7 +16,7 @@ import dataclasses
 
 import numpy as np
 
-from relaff_jax.constants import ACTIONS, PCA_PER_OBJECT, RHF_BINS, SPACES
+from relaff_jax.constants import PCA_PER_OBJECT, RHF_BINS, SPACES
 from relaff_jax.errors import UserError
 
 RHF_PARTS = ("dx", "dy", "dz", "dist", "angle_na_nb", "angle_na_d")  # perception.config.RHF_NAMES

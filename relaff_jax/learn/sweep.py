@@ -37,7 +37,7 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.config import to_dict
-from relaff_jax.constants import ACTIONS, SPACES
+from relaff_jax.constants import SPACES
 from relaff_jax.sim.actions.registry import action_id, record as action_record  # noqa: E402 (the run's actions; no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L

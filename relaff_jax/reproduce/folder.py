@@ -22,7 +22,6 @@ from typing import Any
 
 from relaff_jax import io as rio
 from relaff_jax.config import differences, to_dict
-from relaff_jax.constants import ACTIONS  # noqa: F401
 from relaff_jax.sim.actions.registry import names
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed, machine, versions

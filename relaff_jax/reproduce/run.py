@@ -22,7 +22,7 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.cluster import nthreads
 from relaff_jax.config import override
-from relaff_jax.constants import ACTIONS, STAGES  # noqa: F401
+from relaff_jax.constants import STAGES
 from relaff_jax.sim.actions.registry import names
 from relaff_jax.reproduce import experiment, features, generate, report
 from relaff_jax.reproduce.folder import Paths, ReproduceError, damaged_log_hint, now, open_log

@@ -8,7 +8,7 @@ pieces (``programs.py``), wrapped, so a user's target rule can reuse them.
 """
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
