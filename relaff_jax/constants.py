@@ -40,7 +40,8 @@ STAGES = ("generate", "features", "experiment", "report")
 
 
 def action_id(action: str) -> int:
-    """Index of ``action`` in ``ACTIONS``; an unknown name is a ``UserError`` listing the valid ones."""
+    """Index of ``action`` in ``ACTIONS``; an unknown name is a ``UserError`` listing the valid ones.
+    (The run's list, with a user's actions after the nine: ``sim.actions.registry.action_id``.)"""
     from relaff_jax.errors import UserError
 
     if action not in ACTIONS:

@@ -63,6 +63,9 @@ def _cmd_audit(args) -> int:
         raise UserError(f"--sample must be >= 1, got {args.sample}")
     if args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
+    from relaff_jax.cli import options
+
+    options.load_plugins(args)  # a user action's datasets replay with its spec (checked against the record)
     folders = A.dataset_folders(args.dir)  # one-line errors before any work
     audits = [A.ensure_audit(f, args.sample, args.seed) for f in folders]
     if args.json:
@@ -114,6 +117,9 @@ def register(subparsers) -> None:
     p.add_argument("--sample", type=int, default=64, help="rollouts audited per dataset")
     p.add_argument("--seed", type=int, default=0, help="seed of the sample")
     p.add_argument("--json", action="store_true", help="print JSON (a list for a run folder) instead of a table")
+    from relaff_jax.cli import options
+
+    options.add_plugins(p)
     p.set_defaults(func=_cmd_audit)
 
     p = subparsers.add_parser(

@@ -15,7 +15,8 @@ import argparse
 from pathlib import Path
 
 from relaff_jax.cli import options
-from relaff_jax.constants import ACTIONS, SPACES
+from relaff_jax.constants import SPACES
+from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
 
 EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bootstrap factors and Table II."
@@ -60,13 +61,13 @@ def cmd_report(args: argparse.Namespace) -> int:
         data_dirs = {}
         for folder in args.data:
             action = read_sidecar(Path(folder))["action"]
-            if action not in ACTIONS:  # refused, not dropped: the report would silently lack it
+            if action not in names():  # refused, not dropped: the report would silently lack it
                 raise UserError(f"--data {folder}: its sidecar names the action {action!r}, not one of "
-                                f"{', '.join(ACTIONS)}")
+                                f"{', '.join(names())}" + ("" if action in names() else " (a user action: --plugins)"))
             if action in data_dirs:
                 raise UserError(f"--data: {data_dirs[action]} and {folder} are both {action} datasets; give one")
             data_dirs[action] = folder
-        data_dirs = {a: data_dirs[a] for a in ACTIONS if a in data_dirs}  # the tables' canonical order
+        data_dirs = {a: data_dirs[a] for a in names() if a in data_dirs}  # the run's order
     from relaff_jax.stages.report import report_folder
 
     # the same stage function reproduce runs

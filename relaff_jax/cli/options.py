@@ -106,6 +106,40 @@ def check_in_file(path: Path, message: str) -> None:
         raise UserError(message)
 
 
+def add_plugins(p: argparse.ArgumentParser) -> None:
+    """``--plugins FILE.py ...``: Python files registering user actions (or conditions)."""
+    p.add_argument("--plugins", nargs="+", metavar="FILE.py", default=None,
+                   help="Python files that register user actions (relaff_jax.sim.actions.register_action) "
+                        "or conditions, loaded before anything else (docs/extending.md)")
+
+
+def load_plugins(args: argparse.Namespace) -> None:
+    """Execute the ``--plugins`` files (one loader for actions and conditions, ``relaff_jax.plugins``)."""
+    from relaff_jax.plugins import load_file
+
+    for path in getattr(args, "plugins", None) or ():
+        load_file(path)
+
+
+def check_action(args: argparse.Namespace, action: str, cfg: Any = None) -> None:
+    """``action`` is built-in or registered (after ``load_plugins``); a user action's rules are
+    traced once on a dummy scene (``sim.actions.check_actions``): one line before any simulation.
+    A user action cannot run on a cluster: the workers would not have its plugin."""
+    from relaff_jax.constants import ACTIONS
+    from relaff_jax.sim.actions.registry import action_id
+
+    action_id(action)
+    if action in ACTIONS:
+        return
+    if getattr(args, "cluster", None):
+        raise UserError(f"--cluster: the user action {action!r} runs only here (the cluster's workers do not "
+                        "load --plugins files)")
+    from relaff_jax.sim.actions import check_actions
+    from relaff_jax.config.action import ActionConfig
+
+    check_actions([action], cfg if cfg is not None else ActionConfig())
+
+
 def add_cluster(p: argparse.ArgumentParser) -> None:
     """``--cluster ADDRESS``: run the command's pieces as tasks on a Dask cluster."""
     p.add_argument("--cluster", metavar="ADDRESS", default=None,

@@ -49,6 +49,7 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=Path, default=None, help="scene.png (default), or action.gif with --rollout")
     p.add_argument("--rollout", action="store_true",
                    help="animate the sample's motor program (replayed in MuJoCo C) as a GIF instead")
+    options.add_plugins(p)
     options.add_set(p, "action.lift_height=0.3")
     p.set_defaults(func=cmd_show)
 
@@ -70,6 +71,7 @@ def cmd_features(args) -> int:
 
 def cmd_show(args) -> int:
     """``relaff show``: draw sample ``--index`` of the dataset into ``--out``."""
+    options.load_plugins(args)  # a user action's dataset replays with its spec (checked against the record)
     options.check_counts(args, index="--index")
     options.precheck(args)
     options.check_in_dir(args.dir)

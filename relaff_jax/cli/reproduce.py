@@ -5,7 +5,7 @@ import argparse
 from pathlib import Path
 
 from relaff_jax.cli import options
-from relaff_jax.constants import ACTIONS, SIM_ENGINES, STAGES
+from relaff_jax.constants import SIM_ENGINES, STAGES
 from relaff_jax.errors import UserError
 from relaff_jax.config import PRESETS
 
@@ -28,7 +28,7 @@ def register(sub) -> None:
                    "derives from it (the tree's seed key) (default: 0)")
     p.add_argument("--force", action="append", choices=STAGES, metavar="STAGE",
                    help=f"redo a stage ({', '.join(STAGES)}); may be repeated")
-    p.add_argument("--redo-dataset", action="append", choices=ACTIONS, metavar="ACTION",
+    p.add_argument("--redo-dataset", action="append", metavar="ACTION",
                    help="delete one action's dataset and make it again, keeping the other datasets (the repair "
                         "of one damaged dataset; later stages rerun only if their inputs changed); may be repeated")
     p.add_argument("--jobs", type=int, default=0, help="experiment worker processes (default: all cores)")
@@ -98,6 +98,11 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
     overrides = options.overrides_of(args, {"dataset.engine": ("--engine", args.engine), "seed": ("--seed", args.seed),
                                             "action.scene.library": ("--objects", args.objects)})
     seed = overrides.get("seed", 0)
+    options.load_plugins(args)  # user actions registered before reproduce.actions names them
+    from relaff_jax.sim.actions.registry import action_id
+
+    for a in args.redo_dataset or ():  # one of the nine or a registered user action
+        action_id(a)
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
     from relaff_jax import reproduce as R

@@ -46,7 +46,7 @@ def register(subparsers) -> None:
         "matched to the positives' COG-distance distribution). Rerun with the same arguments to resume "
         "an interrupted run. N beyond the rollout cap (--max-rollouts) is refused at once.",
     )
-    p.add_argument("action", help=f"one of: {', '.join(ACTIONS)}")
+    p.add_argument("action", help=f"one of: {', '.join(ACTIONS)}, or a user action registered by --plugins")
     p.add_argument("--samples", type=int, required=True, help="balanced samples to keep (N >= 2)")
     p.add_argument("--out", required=True, help="dataset directory (new, empty or resumable)")
     p.add_argument("--seed", type=int, default=None, help="seed of the dataset, every chunk's key derives from it "
@@ -64,6 +64,7 @@ def register(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     _add_objects(p)
     options.add_cluster(p)
+    options.add_plugins(p)
     options.add_set(p, "action.lift_height=0.3")
     p.set_defaults(func=cmd_generate)
 
@@ -119,8 +120,10 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_generate(args) -> int:
-    if args.action not in ACTIONS:
-        raise UserError(f"unknown action {args.action!r}; valid actions: {', '.join(ACTIONS)}")
+    options.load_plugins(args)  # a user action is registered before its name is checked
+    from relaff_jax.sim.actions.registry import action_id
+
+    action_id(args.action)
     options.check_counts(args, seed="--seed")
     options.check_out_dir(Path(args.out))  # before any simulation (minutes) or world building
     # the flags are aliases of tree keys: everything below reads the tree, which is what is recorded
@@ -140,6 +143,7 @@ def cmd_generate(args) -> int:
                          names=("--samples", "--max-rollouts (dataset.max_rollouts)"))
     if bound:
         raise UserError(bound)
+    options.check_action(args, args.action, tree.action)  # a user action's rules traced once, before any work
     from relaff_jax.data.validate import check_dataset_dir
 
     # a foreign folder, or a dataset of other settings, refused before the motor programs compile

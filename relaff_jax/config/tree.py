@@ -149,7 +149,12 @@ def check_tree(tree: RunConfig) -> RunConfig:
     from relaff_jax.sim.object_library import use_scene
 
     # the object library is read and checked, and its set made the active one, before any stage
-    use_scene(tree.action.scene, tree.action.grip_margin)
+    try:
+        use_scene(tree.action.scene, tree.action.grip_margin)
+    except UserError as e:  # a refusal of the file itself: named by the key that gave it
+        if str(e).startswith("config key "):
+            raise
+        raise ConfigError(f"config key 'action.scene.library': {e}") from e
     pipeline_config(tree)
     real_experiment(tree)
     return tree

@@ -62,13 +62,16 @@ def action_config(meta: Mapping[str, Any]):
     from relaff_jax.sim.object_library import use_recorded
 
     use_recorded(meta)  # the objects its pair indices refer to (the built-ins if it records none)
+    from relaff_jax.sim.actions.registry import check_recorded
+
+    check_recorded(str(meta.get("action")), record.get("action_spec"))  # a user action: the spec that made it
     return from_dict(ActionConfig, record["action_config"])
 
 
 def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int) -> dict[str, np.ndarray]:
     """The plans of the scenes, by generation's jitted planner in calls of the dataset's batch
     (the last padded with repeats: a plan does not depend on the other rows of its call)."""
-    from relaff_jax.constants import action_id
+    from relaff_jax.sim.actions.registry import action_id
     from relaff_jax.sim.reach_screen import prepare_screened
     from relaff_jax.sim.rollouts import jitted_stage_fns
 
@@ -117,11 +120,14 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
                   nthread: int | None = None) -> dict[str, Any]:
     """Replay ``sample`` rollouts of the dataset ``path`` in MuJoCo C with the physics probe;
     the per-rollout readings and their summary (``summarise``)."""
-    from relaff_jax.constants import action_id
+    from relaff_jax.sim.actions.registry import action_id
     from relaff_jax.sim.native import replay_native
     from relaff_jax.sim.physics_probe import Probe
     from relaff_jax.sim.planning import setup
-    from relaff_jax.sim.templates import TPL_MEASURE
+    from relaff_jax.sim.actions.tables import spec_tables
+    from relaff_jax.sim.actions.registry import registry
+
+    TPL_MEASURE = spec_tables(registry()).measure  # the run's actions' (the nine's: templates.TPL_MEASURE)
 
     t0 = time.perf_counter()
     path = Path(path)
@@ -265,8 +271,8 @@ def dataset_folders(path: str | os.PathLike) -> list[Path]:
     """The dataset folders of ``path``: itself if it is a dataset (has a sidecar), else the
     ``data/<action>/`` datasets of a run folder, in ``ACTIONS`` order. One-line errors for a
     missing folder, a file, or a folder that is neither."""
-    from relaff_jax.constants import ACTIONS
     from relaff_jax.data.layout import SIDECAR
+    from relaff_jax.sim.actions.registry import names
 
     p = Path(path)
     if not p.exists():
@@ -275,7 +281,7 @@ def dataset_folders(path: str | os.PathLike) -> list[Path]:
         raise DatasetError(f"{p}: not a folder")
     if (p / SIDECAR).is_file():
         return [p]
-    found = [p / "data" / a for a in ACTIONS if (p / "data" / a / SIDECAR).is_file()]
+    found = [p / "data" / a for a in names() if (p / "data" / a / SIDECAR).is_file()]
     if not found:
         raise DatasetError(f"{p}: not a relaff dataset (no {SIDECAR}) nor a run folder with data/<action>/ datasets")
     return found

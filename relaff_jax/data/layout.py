@@ -31,8 +31,10 @@ LOCK = ".relaff.lock"
 
 
 def check_action(action: Any) -> str:
-    if action not in ACTIONS:
-        raise DatasetError(f"unknown action {action!r}; valid actions: {', '.join(ACTIONS)}")
+    from relaff_jax.sim.actions.registry import names
+
+    if action not in names():  # the nine, then the user's registered actions
+        raise DatasetError(f"unknown action {action!r}; valid actions: {', '.join(names())}")
     return action
 
 

@@ -17,6 +17,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from relaff_jax.constants import ACTIONS
 from relaff_jax.learn.table2 import ORACLE, TABLE2_ROWS
 from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.user_conditions import builtin_results
@@ -151,8 +152,9 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
         half_means = half_curves(acc_x, corr_x, halves, reference=reference)
     bf = bootstrap_factor(mean, mean[:, lay["NB"]][:, None, :], cfg.chance, tol[:, None, None])
     t2 = table2_rows(mean, sizes, cfg, lay, tol, half_means, cbn_ok, masks)
-    table2, n_targets = summarise(t2["bf"])
-    gain, gain_n = summarise(t2["gain"])
+    paper = np.isin(np.asarray(actions), ACTIONS)  # Table II's rows average the paper's nine (a user action: per target only)
+    table2, n_targets = summarise(np.where(paper, t2["bf"], np.nan))
+    gain, gain_n = summarise(np.where(paper, t2["gain"], np.nan))
     conds = [str(c) for c in res["conditions"]] + ["DB1 online after ten", "CB1 online after ten"]
     out: dict[str, Any] = {"actions": actions, "sizes": sizes, "mean": mean, "sem": sem, "bf": bf, "tol": tol,
                            "avg_bf": window_mean(bf, sizes, *cfg.bf_sizes)[0], "defined": t2["defined"],
@@ -258,7 +260,8 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
         hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, streams.INTERVALS), halves, reference=reference)
     hs = half_sizes(n_test, halves)
     outcomes = bool(corr_x.shape[-1])
-    fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]), np.isfinite(pt["gain_per_target"])
+    paper = np.isin(np.asarray(pt["actions"]), ACTIONS)  # Table II's rows: the paper's nine
+    fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]) & paper, np.isfinite(pt["gain_per_target"]) & paper
     fixed_thr = np.isfinite(pt["thresholds"]["per_target"])
     boot: dict[str, list] = {k: [] for k in ("bf", "held", "gain", "per", "thr", "nb", "mean", "area", "saved")}
     for b in range(0, len(hm), CI_CHUNK):

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import importlib.util
 import inspect
 import re
 import sys
@@ -86,7 +85,7 @@ class Condition:
 
 
 _REGISTRY: dict[str, Condition] = {}
-_loading: list[tuple[str, str]] = []  # (origin, sha256) of the plugin file being loaded
+from relaff_jax.plugins import LOADING as _loading  # noqa: E402 (the plugin file being loaded)
 _entry_points_loaded = False
 
 
@@ -120,34 +119,12 @@ def _source_hash(f: Callable) -> str:
 
 
 def load_plugin_file(path: str | Path) -> list[str]:
-    """Execute a Python file that registers conditions; returns their names. A missing file, an
-    error while executing it or a file that registers nothing is a ``UserError``."""
-    p = Path(path)
-    if not p.is_file():
-        raise UserError(f"--plugins {path}: no such file")
-    data = p.read_bytes()
-    sha = hashlib.sha256(data).hexdigest()
-    origin = f"file {p.resolve()}"
-    if any(c.origin == origin and c.sha256 == sha for c in _REGISTRY.values()):
-        return [c.name for c in _REGISTRY.values() if c.origin == origin]  # loaded already
-    before = set(_REGISTRY)
-    spec = importlib.util.spec_from_file_location(f"relaff_plugin_{p.stem}_{sha[:8]}", p)
-    module = importlib.util.module_from_spec(spec)
-    _loading.append((origin, sha))
-    try:
-        sys.modules[spec.name] = module
-        spec.loader.exec_module(module)
-    except UserError:
-        raise
-    except Exception as e:
-        raise UserError(f"--plugins {path}: {type(e).__name__}: {e}") from e
-    finally:
-        _loading.pop()
-    new = [n for n in _REGISTRY if n not in before]
-    if not new:
-        raise UserError(f"--plugins {path} registers no condition (decorate a function with "
-                        "@relaff_jax.learn.register_condition(\"NAME\"))")
-    return new
+    """Execute a Python file that registers conditions (and/or actions: one loader for both,
+    ``relaff_jax.plugins.load_file``); returns what it registered. A missing file, an error
+    while executing it or a file that registers nothing is a ``UserError``."""
+    from relaff_jax.plugins import load_file
+
+    return load_file(path)
 
 
 def _load_entry_points() -> None:

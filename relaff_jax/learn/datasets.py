@@ -13,7 +13,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from relaff_jax.constants import ACTIONS
+from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
 
 
@@ -22,8 +22,8 @@ def check_datasets(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[s
     if len(datasets) < 2:
         raise UserError(f"bootstrapping needs datasets of at least two actions, got {sorted(datasets)}")
     for action, d in datasets.items():
-        if action not in ACTIONS:
-            raise UserError(f"unknown action {action!r}; expected one of {ACTIONS}")
+        if action not in names():  # the nine, then the user's registered actions
+            raise UserError(f"unknown action {action!r}; expected one of {names()}")
         if "action" in d and str(d["action"]) != action:
             raise UserError(f"dataset given for {action!r} says its action is {d['action']!r}")
         for key in ("label", "pca") + (("rhf",) if "rhf" in spaces else ()):
@@ -37,7 +37,7 @@ def check_datasets(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[s
         for key in ("pca",) + (("rhf",) if "rhf" in spaces else ()):
             if not np.all(np.isfinite(d[key])):
                 raise UserError(f"{action}: {key} features contain NaN or inf")
-    return [a for a in ACTIONS if a in datasets]
+    return [a for a in names() if a in datasets]
 
 
 def fingerprint(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[str]) -> dict[str, dict[str, str]]:

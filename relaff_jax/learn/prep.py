@@ -16,6 +16,7 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS
 from relaff_jax.config.experiment import ExperimentConfig
+from relaff_jax.sim.actions.registry import action_id, names  # the run's actions: the nine, then a user's; no JAX
 from relaff_jax.learn.correlation import category_pairs, correlation_matrix, correlation_with
 from relaff_jax.learn.datasets import check_datasets
 from relaff_jax.config.experiment import ForestConfig
@@ -35,7 +36,7 @@ def _source_job(feats: dict, action: str, labels: np.ndarray, src: np.ndarray, a
     def states(b: str, idx: np.ndarray) -> np.ndarray:  # scenes of action b in this source's order
         return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space, scfg)
 
-    forest = fit(states(action, src), labels[src], derive_seed(seed, streams.SOURCE_FOREST, streams.SPACE_CODE[space], ACTIONS.index(action)), fcfg)
+    forest = fit(states(action, src), labels[src], derive_seed(seed, streams.SOURCE_FOREST, streams.SPACE_CODE[space], action_id(action)), fcfg)
 
     def on(b: str, idx: np.ndarray) -> np.ndarray:
         return predict(forest, states(b, idx))
@@ -52,7 +53,7 @@ def _source_on_sources(feats: dict, action: str, labels: np.ndarray, src: dict, 
         return state_features(feats[b]["pca"][idx], feats[b]["rhf"][idx] if space == "rhf" else None, action, space, scfg)
 
     forest = fit(states(action, src[action]), labels[src[action]],
-                 derive_seed(seed, streams.SOURCE_FOREST, streams.SPACE_CODE[space], ACTIONS.index(action)), fcfg)
+                 derive_seed(seed, streams.SOURCE_FOREST, streams.SPACE_CODE[space], action_id(action)), fcfg)
     return {b: predict(forest, states(b, src[b])) for b in src if b != action}
 
 
@@ -69,6 +70,16 @@ def category_labels(pair: tuple[str, str], labels: dict, src: dict, other: dict 
     return np.concatenate([op(own_a, np.asarray(other[b][a]) > 0.5), op(own_b, np.asarray(other[a][b]) > 0.5)])
 
 
+def _category_index(a: str, b: str) -> int:
+    """The seed index of category (a, b): its place among the nine's 36 (as before actions were
+    specs), or, with a user action, 36 + its place among the run's other pairs."""
+    if a in ACTIONS and b in ACTIONS:
+        return category_pairs(ACTIONS).index((ACTIONS.index(a), ACTIONS.index(b)))
+    ids = names()
+    extra = [p for p in category_pairs(ids) if max(p) >= len(ACTIONS)]
+    return len(category_pairs(ACTIONS)) + extra.index((ids.index(a), ids.index(b)))
+
+
 def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, actions: list[str],
                   targets: dict, space: str, seed: int, fcfg: ForestConfig | SklearnLearner, scfg: StateConfig = StateConfig(),
                   y: np.ndarray | None = None):
@@ -80,7 +91,7 @@ def _category_job(feats: dict, pair: tuple[str, str], labels: dict, src: dict, a
     a, b = pair
     x = np.concatenate([canon(a, src[a]), canon(b, src[b])])
     y = np.concatenate([labels[a][src[a]], labels[b][src[b]]]) if y is None else np.asarray(y, bool)
-    k = category_pairs(ACTIONS).index((ACTIONS.index(a), ACTIONS.index(b)))
+    k = _category_index(a, b)
     forest = fit(x, y, derive_seed(seed, streams.CATEGORY_FOREST, streams.SPACE_CODE[space], k), fcfg)
     return [predict(forest, canon(t, targets[t])) for t in actions]
 
@@ -98,7 +109,7 @@ def prepare(datasets: Mapping[str, Mapping[str, Any]], space: str, cfg: Experime
     from joblib import delayed
 
     actions = check_datasets(datasets, [space])
-    pools = {a: split_pools(len(datasets[a]["label"]), ACTIONS.index(a), cfg, seed) for a in actions}
+    pools = {a: split_pools(len(datasets[a]["label"]), action_id(a), cfg, seed) for a in actions}
     feats = {a: {k: np.asarray(datasets[a][k], dtype=np.float32) for k in (("pca", "rhf") if space == "rhf" else ("pca",))} for a in actions}
     labels = {a: np.asarray(datasets[a]["label"]).astype(bool) for a in actions}
     targets = {a: pools[a]["target"] for a in actions}

@@ -18,7 +18,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from relaff_jax.constants import ACTIONS
+from relaff_jax.sim.actions.registry import names as _action_names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.correlation import categories_above, category_pairs
@@ -109,7 +109,7 @@ def split_pools(n: int, action_index: int, cfg: ExperimentConfig, seed: int) -> 
     need = s + q + max_size + test
     if n < need or min(s, q, test) < 1:
         raise UserError(
-            f"{ACTIONS[action_index]}: {n} samples, but the protocol needs {need} "
+            f"{_action_names()[action_index]}: {n} samples, but the protocol needs {need} "
             f"(source {s} + correlation scenes {q} + training {max_size} + test {test}); "
             "use more data, smaller sizes (--set test_size=..., source_size=...), or the quick preset"
         )

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from relaff_jax.constants import ACTIONS, PCA_PER_OBJECT, RHF_BINS, SPACES
+from relaff_jax.constants import PCA_PER_OBJECT, RHF_BINS, SPACES
 from relaff_jax.config.experiment import EXTRAS, RHF_PARTS, StateConfig
 from relaff_jax.errors import UserError
 
@@ -92,8 +92,10 @@ def state_features(pca: np.ndarray, rhf: np.ndarray | None, action: str | None, 
 
 
 def check_action(action: str) -> None:
-    if action not in ACTIONS:
-        raise UserError(f"unknown action {action!r}; expected one of {ACTIONS}")
+    from relaff_jax.sim.actions.registry import names  # the nine, then the user's (no JAX)
+
+    if action not in names():
+        raise UserError(f"unknown action {action!r}; expected one of {names()}")
 
 
 def augment(X: np.ndarray, outputs: np.ndarray, repeats: int) -> np.ndarray:

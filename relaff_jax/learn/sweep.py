@@ -37,7 +37,8 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.config import to_dict
-from relaff_jax.constants import ACTIONS, SPACES
+from relaff_jax.constants import SPACES
+from relaff_jax.sim.actions.registry import action_id, record as action_record  # noqa: E402 (the run's actions; no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn import user_conditions
@@ -81,7 +82,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
             raise UserError(f"unknown space {s!r}; expected one of {SPACES}")
     actions = check_datasets(datasets, spaces)
     for a in actions:  # every action's pools fit its data: refused before experiment.json is written
-        split_pools(len(datasets[a]["label"]), ACTIONS.index(a), cfg, seed)
+        split_pools(len(datasets[a]["label"]), action_id(a), cfg, seed)
     out = Path(out)
     meta = {
         "format": FORMAT_VERSION,
@@ -92,6 +93,9 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         "fingerprint": fingerprint(datasets, spaces),
         "plugins": user_conditions.record(cfg),  # the user's conditions: origin and sha256 of their source
     }
+    specs = {a: action_record(a) for a in actions if action_record(a) is not None}
+    if specs:  # a user action's spec (its datasets record it too); none for the nine
+        meta["action_specs"] = specs
     meta_path = L.meta(out)
     if meta_path.exists():
         # same protocol, seed, actions and data; a space may be added to a finished one
@@ -101,6 +105,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         # not make it another run (config.result_differences)
         diff = [k for k in ("format", "seed", "actions") if old.get(k) != now[k]]
         diff += ["plugins"] if old.get("plugins", {}) != now["plugins"] else []
+        diff += ["action_specs"] if old.get("action_specs", {}) != now.get("action_specs", {}) else []
         diff += [f"config.{k}" for k in result_differences(old.get("config"), cfg)]
         diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
         if diff:
@@ -151,7 +156,7 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     loo_conds = loo_conditions(a, len(cfg.thresholds))
     loo_n = cfg.select_size if cfg.online_select else 0
     labels_of = {t: np.asarray(datasets[t]["label"]).astype(bool)[prep[f"target:{t}"]] for t in actions}
-    tests = {t: draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), 0,
+    tests = {t: draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, action_id(t), 0,
                          cfg.balanced_test, cfg.balanced_train)[0] for t in actions}
     n_test = np.asarray([len(tests[t]) if cfg.keep_outcomes else 0 for t in actions])
     # the outcomes bit-packed along the scenes as the blocks give them (a target with fewer
@@ -181,12 +186,12 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                     target_data[t] = Target(_states(ds, pool, t, space, cfg), np.asarray(ds["label"]).astype(bool)[pool],
                                             ext.boot(t, prep[f"boot:{t}"]))
                 if draws is None:
-                    draws = draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, ACTIONS.index(t), r,
+                    draws = draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, action_id(t), r,
                                      cfg.balanced_test, cfg.balanced_train)
                 test_idx, train_order = draws
                 job = BlockJob(path=str(path), plan=plans[ti], train_order=train_order, test_idx=test_idx, sizes=chunk,
                                repeats=reps_of[ti], n_conditions=n_cond, learner=learner_of(cfg),
-                               seed_keys=(seed, streams.SWEEP_FOREST, streams.SPACE_CODE[space], ACTIONS.index(t), r), loo_size=loo_n or None,
+                               seed_keys=(seed, streams.SWEEP_FOREST, streams.SPACE_CODE[space], action_id(t), r), loo_size=loo_n or None,
                                loo_conditions=loo_conds, keep_outcomes=cfg.keep_outcomes, subset=subsets[t])
                 calls.append((run_block_job, (target_data[t], job), {}))
                 weights.append(fits)

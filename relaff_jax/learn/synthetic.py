@@ -48,7 +48,7 @@ def synthetic_datasets(
             "lift": near, "pull": near, "push": near,
             "pour": near & tall, "slide": near & ~tall,
             "move": side, "take": side & (pca[:, 5] > -0.5), "rake": side, "unobstruct": side & (pca[:, 4] < 0.5),
-        }[action]
+        }.get(action, near & (pca[:, 6] > -0.5))  # a user action: a relational rule of its own
         label = rule ^ (rng.random(m) < label_noise)
         pos, neg = np.flatnonzero(label), np.flatnonzero(~label)
         k = min(n_per_action // 2, len(pos), len(neg))

@@ -1,7 +1,7 @@
 """Normals from the cloud itself: PCA over an image-space window of an organized depth image.
 
 The same rule serves simulation (``PerceptionConfig.normals.source = "cloud"``, on the noisy
-object pixels) and real organized clouds (``real.config.NormalConfig.method = "window"``):
+object pixels) and real organized clouds (``config.real.NormalConfig.method = "window"``):
 
 * ``smallest_eigenvector(cov (..., 3, 3)) -> (..., 3)``: unit eigenvector of the smallest
   eigenvalue of symmetric 3x3 matrices, closed form (trigonometric eigenvalues, then the

@@ -14,7 +14,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from relaff_jax.constants import RELATIONS
+from relaff_jax.constants import ACTIONS, RELATIONS
 from relaff_jax.report import folder as F
 from relaff_jax.learn import TABLE2_ROWS, categories_per_threshold, layout, paper_row
 from relaff_jax.report.findings import VERDICTS, correlation_clusters
@@ -164,7 +164,8 @@ def table2_blocks(an: Mapping[str, Mapping[str, Any]], cfg: Any, out: Path, pres
     blocks: list[tuple] = []
     for space, x in an.items():
         paper = space == "pca"
-        n_aff = len(x["actions"])
+        n_aff = sum(a in ACTIONS for a in x["actions"])  # Table II's rows: the paper's nine
+        users = [a for a in x["actions"] if a not in ACTIONS]
         header = ["method", "avg", "min", "max", "n", "interval of avg", "gain", "interval of gain"] \
             + (["paper avg", "paper min", "paper max"] if paper else [])
         rows = [[name] + row_cells(x, i) + [f"{int(x['n_targets'][i])} of {n_aff}", ci_text(x, "table2_ci", i),
@@ -176,12 +177,16 @@ def table2_blocks(an: Mapping[str, Mapping[str, Any]], cfg: Any, out: Path, pres
                          f"n affordances with a value" + (", beside the paper's Table II." if paper else
                                                           " (the paper has no RHF table).") + " " + rests_on(x, cfg)),
                    ("table", header, rows), ("p", comparability(x, paper, preset))]
+        if users:
+            blocks += [("p", f"{', '.join(users)}: not in the paper (a user action, docs/extending.md): Table II's rows "
+                             "average the paper's affordances only; its values per method are in the table below, "
+                             "where it is a source for the others too.")]
         rows = [[name] + [fmt(v, 2) for v in r] for name, r in zip(TABLE2_ROWS, x["table2_per_target"])
                 if np.any(np.isfinite(r))]
         rows.append(["sizes with a bf"] + [f"{int(d)} of {x['window_sizes']}" for d in x["defined"]])
         blocks += [("p", "Per affordance (paper Fig. 10 as numbers); the last row: how many sizes of the window "
                          "each average rests on (bf is undefined where NB is at most half a test scene above chance):"),
-                   ("table", ["method"] + list(x["actions"]), rows)]
+                   ("table", ["method"] + [a if a in ACTIONS else f"{a} (not in the paper)" for a in x["actions"]], rows)]
     blocks += fig_block(out, F.FIG_AVERAGE_BF, "Average bootstrap factor per method and affordance, paper Fig. 10")
     return blocks
 

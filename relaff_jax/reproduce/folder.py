@@ -21,7 +21,7 @@ from typing import Any
 
 from relaff_jax import io as rio
 from relaff_jax.config import differences, to_dict
-from relaff_jax.constants import ACTIONS
+from relaff_jax.sim.actions.registry import names
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed, machine, versions
 from relaff_jax.config import streams
@@ -35,7 +35,7 @@ def seeds(seed: int) -> dict[str, Any]:
     """The seeds of every stage, derived from the run seed (independent streams)."""
     return {
         "run": int(seed),
-        "datasets": {a: derive_seed(seed, streams.RUN_FOLDER, 1, i) for i, a in enumerate(ACTIONS)},
+        "datasets": {a: derive_seed(seed, streams.RUN_FOLDER, 1, i) for i, a in enumerate(names())},  # ACTIONS', then a user's
         "features": derive_seed(seed, streams.RUN_FOLDER, 2),
         "experiment": int(seed),
     }
@@ -71,7 +71,7 @@ def _shadow_removed(key: str, stored: Any, wanted: Any, want: dict) -> bool:
 
 
 def _speed_only(key: str) -> bool:
-    """A run log key of a setting that changes no result (``learn.config.SPEED_ONLY``)."""
+    """A run log key of a setting that changes no result (``config.experiment.SPEED_ONLY``)."""
     from relaff_jax.config.experiment import SPEED_ONLY
 
     return key.startswith("config.experiment.") and key.removeprefix("config.experiment.") in SPEED_ONLY

@@ -22,7 +22,8 @@ import numpy as np
 from relaff_jax import io as rio
 from relaff_jax.cluster import nthreads
 from relaff_jax.config import override
-from relaff_jax.constants import ACTIONS, STAGES
+from relaff_jax.constants import STAGES
+from relaff_jax.sim.actions.registry import names
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import machine
 from relaff_jax.reproduce.folder import ReproduceError, damaged_log_hint, now, open_log
@@ -56,7 +57,7 @@ def check_config(cfg: RunConfig, seed: int) -> None:
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= seed < 2**32:
         raise ReproduceError(f"seed must be an integer in [0, 2**32), got {seed!r}")
     try:
-        for i in range(len(ACTIONS)):  # the learning pools of every action must fit in n_samples
+        for i in range(len(names())):  # the learning pools of every action must fit in n_samples
             split_pools(d.n_samples, i, cfg.experiment, seed)
     except ValueError as e:
         raise ReproduceError(f"the experiment cannot run on {d.n_samples} samples per action: {e}") from e

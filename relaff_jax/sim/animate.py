@@ -42,7 +42,7 @@ def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, ev
     import jax
     import jax.numpy as jnp
 
-    from relaff_jax.constants import action_id
+    from relaff_jax.sim.actions.registry import action_id
     from relaff_jax.sim.native import replay_native
     from relaff_jax.sim.planning import make_plan_fn, setup
     from relaff_jax.sim.templates import ActionConfig

@@ -22,11 +22,12 @@ from . import objects as lib
 from . import scenes as sc
 from . import world as wd
 from .native_program import RestReader, native_labels, pad_hit, program_inputs, reachable, weld_relpose_np
+from .actions.registry import action_id, on_change
 from .planning import make_plan_fn, setup
 from .simulate import welds
-from .templates import UNOBSTRUCT_ID, ActionConfig
+from .actions.tables import tables
+from .templates import ActionConfig
 
-from relaff_jax.constants import action_id
 
 
 def relation_native(world: wd.World, pair: int, m: mujoco.MjModel, d: mujoco.MjData,
@@ -101,6 +102,9 @@ def _plan_fn(cfg: ActionConfig):
     return jax.jit(make_plan_fn(cfg))
 
 
+on_change(_plan_fn.cache_clear)
+
+
 def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray,
                   qvel: np.ndarray, result: dict, record_every: int = 0,
                   observe: Callable[[int, int, mujoco.MjModel, mujoco.MjData], None] | None = None
@@ -128,7 +132,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
         direction = np.asarray(result["direction"])
     else:
         direction = np.asarray(_plan_fn(cfg)(aid, jnp.asarray(pair), jnp.asarray(qpos, jnp.float32)).direction)
-    before = reachable(cfg, pair, qpos) if aid == UNOBSTRUCT_ID else np.zeros(len(pair), bool)
+    before = reachable(cfg, pair, qpos) if tables(cfg).reach[aid] else np.zeros(len(pair), bool)
     inp = program_inputs(cfg, aid, qpos, qvel, result["q_way"], result["grip_way"])
     nqo = qpos.shape[-1]
     wl = welds(world)

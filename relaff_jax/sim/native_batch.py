@@ -26,6 +26,7 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
+from .actions.registry import action_id  # the run's list: the nine, then a user's
 from . import objects as lib
 from . import world as wd
 from .native_program import RestReader, native_labels, pad_hit, program_inputs, weld_relpose_np
@@ -33,7 +34,6 @@ from .planning import Plan, setup
 from .simulate import welds
 from .templates import ActionConfig
 
-from relaff_jax.constants import action_id
 from relaff_jax.errors import UserError
 
 # Contact slots per sensor: a box pad against the toy (a box and a sphere) or the other object

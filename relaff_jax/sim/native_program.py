@@ -24,11 +24,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import arm as A
-from .labels import Outcome, goals, read_at_rest
+from .actions.registry import on_change, registry
+from .actions.rules import goal_row
+from .labels import Outcome, read_at_rest
 from .planning import setup
 from .programs import toy_reachable
 from .simulate import initial_data
-from .templates import GRASPS, UNOBSTRUCT_ID, ActionConfig, run_steps, tables
+from .actions.tables import run_steps, tables
+from .templates import ActionConfig
 
 
 class ProgramInputs(NamedTuple):
@@ -69,8 +72,12 @@ def _jitted(cfg: ActionConfig):
         return jax.vmap(one)(q_way, grip_way)
 
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
-    rules = jax.vmap(lambda o: goals(cfg, o))
+    specs = registry()
+    rules = jax.vmap(lambda o: goal_row(specs, cfg, o))
     return jax.jit(init), jax.jit(ctrl), jax.jit(reach), jax.jit(rules)
+
+
+on_change(_jitted.cache_clear)
 
 
 def _padded(fn, *arrays):
@@ -105,7 +112,7 @@ def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarr
     tb = tables(cfg)
     seg = np.asarray(A.segment_index(tb.steps[aid], jnp.arange(tb.n_steps)))
     return ProgramInputs(full_q, full_v, np.asarray(eq0, np.float64), u, np.asarray(tb.closed[aid])[seg],
-                         int(GRASPS[aid]), int(tb.measure[aid]), int(run_steps(cfg)[aid]), cfg.programs == "v2")
+                         int(tb.grasp[aid]), int(tb.measure[aid]), int(run_steps(cfg)[aid]), cfg.programs == "v2")
 
 
 class RestReader:
@@ -200,7 +207,7 @@ def native_labels(cfg: ActionConfig, aid: int, pair: np.ndarray, com0: np.ndarra
     the action is unobstruct).
     """
     rules = _jitted(cfg)[3]
-    if aid == UNOBSTRUCT_ID:
+    if tables(cfg).reach[aid]:
         after = reachable(cfg, pair, qpos_final)
     else:
         after = np.zeros(len(pair), bool)

@@ -218,14 +218,14 @@ def select(user: tuple[lib.ObjectSpec, ...], names: Iterable[str], library: str 
     names = tuple(names)
     for n in names:
         if n not in merged:
-            raise UserError(f"action.scene.objects: unknown object {n!r}; valid objects: {', '.join(merged)}")
+            raise UserError(f"config key 'action.scene.objects': unknown object {n!r}; valid objects: {', '.join(merged)}")
     keep = set(names) or set(merged)
     specs = tuple(s for s in merged.values() if s.name in keep)
     if not any("toy" in s.groups for s in specs):
-        raise UserError("action.scene.objects: selects no toy; every scene needs one")
+        raise UserError("config key 'action.scene.objects': selects no toy; every scene needs one")
     out = lib.ObjectSet(specs, library, names)
     if not out.pairs():
-        raise UserError("action.scene.objects: selects no object to pair with a toy (a base, obstacle or rake)")
+        raise UserError("config key 'action.scene.objects': selects no object to pair with a toy (a base, obstacle or rake)")
     return out
 
 

@@ -19,10 +19,8 @@ import numpy as np
 from . import arm as A
 from . import world as wd
 from .bodies import Geometry, geometry
-from .programs import program
-from .templates import N_TARGETS, ActionConfig, tables
-
-from relaff_jax.constants import ACTIONS
+from .actions.tables import tables
+from .templates import N_TARGETS, ActionConfig
 
 
 class Setup(NamedTuple):
@@ -47,8 +45,8 @@ def setup(cfg: ActionConfig = ActionConfig()) -> Setup:
 
 
 def home_grip(cfg: ActionConfig) -> np.ndarray:
-    """(9,) finger command at the start: closed on the rake's handle, else half open."""
-    return np.where(np.asarray(ACTIONS) == "rake", cfg.arm.grip_closed, 0.06).astype(np.float32)
+    """(A,) finger command at the start: closed on the held rake's handle, else half open."""
+    return np.where(tables(cfg).held, cfg.arm.grip_closed, 0.06).astype(np.float32)
 
 
 class Plan(NamedTuple):
@@ -65,13 +63,17 @@ class Plan(NamedTuple):
 
 
 def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
-    """``plan_fn(action_id (), pair (B,), qpos (B, nq)) -> Plan`` for any of the nine actions
-    (``action_id`` indexes ``ACTIONS``; traced, so one compile serves all). Pure; caller jits."""
+    """``plan_fn(action_id (), pair (B,), qpos (B, nq)) -> Plan`` for any of the run's actions
+    (``action_id`` indexes ``actions.names()``; traced, so one compile serves all; the target
+    rules are the specs'). Pure; caller jits."""
+    from .actions.registry import registry
+    from .actions.rules import plan_program
+
     st = setup(cfg)
     tb = tables(cfg)
     q_home = jnp.asarray(st.q_home, jnp.float32)
     grip_home = jnp.asarray(home_grip(cfg))
-    branches = [functools.partial(program, a, st.arm, cfg, st.geo) for a in ACTIONS]
+    branches = [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
 
     def one(action_id, pair, qpos):
         prog = jax.lax.switch(action_id, branches, pair, qpos)

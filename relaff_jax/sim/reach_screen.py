@@ -41,10 +41,11 @@ import numpy as np
 from . import arm as A
 from relaff_jax.config.action import ArmConfig
 from .planning import Plan, home_grip, make_plan_fn, setup
-from .programs import program, toy_grasp_target, toy_reachable
-from .templates import N_TARGETS, UNOBSTRUCT_ID, ActionConfig, tables
-
-from relaff_jax.constants import ACTIONS
+from .actions.registry import on_change, registry
+from .actions.rules import plan_program
+from .programs import toy_grasp_target, toy_reachable
+from .actions.tables import tables
+from .templates import N_TARGETS, ActionConfig
 
 POS_MARGIN = 2e-3  # m, beyond ik_pos_tol
 ANG_MARGIN = 2e-3  # rad, beyond ik_ang_tol
@@ -108,7 +109,8 @@ def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     returns). Pure; the caller jits."""
     st = setup(cfg)
     bound = reach_bound(st.arm, cfg.arm)
-    branches = [functools.partial(program, a, st.arm, cfg, st.geo) for a in ACTIONS]
+    branches = [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
+    reads = jnp.asarray(tables(cfg).reach)
     far = jax.vmap(lambda t: beyond_reach(bound, t))
 
     def one(action_id, pair, qpos):
@@ -116,7 +118,7 @@ def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         used = jnp.arange(N_TARGETS) < jnp.max(jnp.asarray(tables(cfg).target)[action_id]) + 1
         infeasible = jnp.any(far(prog.targets) & used)
         grasp, _ = toy_grasp_target(st.arm, cfg, st.geo, pair, qpos)
-        unreachable = jnp.where(action_id == UNOBSTRUCT_ID, beyond_reach(bound, grasp), True)
+        unreachable = jnp.where(reads[action_id], beyond_reach(bound, grasp), True)
         return infeasible, unreachable, prog.direction
 
     def screen_fn(action_id, pair, qpos):
@@ -140,6 +142,10 @@ def jitted_parts(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable
     st = setup(cfg)
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
     return jax.jit(make_plan_fn(cfg)), jax.jit(reach)
+
+
+on_change(jitted_screen_fn.cache_clear)
+on_change(jitted_parts.cache_clear)
 
 
 def _in_chunks(fn: Callable, rows: np.ndarray, chunk: int, *arrays: np.ndarray) -> Iterator[tuple[np.ndarray, Any]]:
@@ -180,7 +186,7 @@ def prepare_screened(prepare_fn: Callable, cfg: ActionConfig, aid: int, pair: np
         q_way[rows], grip_way[rows], feasible[rows] = plan.q_way[:k], plan.grip_way[:k], plan.feasible[:k]
         direction[rows], ik_error[rows] = plan.direction[:k], plan.ik_error[:k]
 
-    if aid != UNOBSTRUCT_ID:  # reach_before is False: prepare_fn's own
+    if not tables(cfg).reach[aid]:  # reach_before is False: prepare_fn's own
         both, plan_only, toy_only = np.flatnonzero(~infeasible), np.zeros(0, int), np.zeros(0, int)
     else:
         both = np.flatnonzero(~infeasible & ~unreachable)

@@ -28,6 +28,7 @@ import numpy as np
 
 from . import scenes as sc
 from . import world as wd
+from .actions.registry import action_id, on_change, spec
 from .bodies import geometry
 from .native_batch import default_threads, execute_native
 from .native_settle import settle_batch
@@ -36,7 +37,7 @@ from .reach_screen import prepare_screened
 from .simulate import make_prepare_fn, make_simulate_fn
 from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config: for reproduce)
 
-from relaff_jax.constants import PAIRING, SIM_ENGINES, action_id
+from relaff_jax.constants import SIM_ENGINES
 from relaff_jax.errors import UserError
 
 ENGINES = SIM_ENGINES  # executors of the planned programs in make_rollout_fn
@@ -81,12 +82,15 @@ def jitted_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     return action_fn
 
 
+on_change(jitted_stage_fns.cache_clear)  # built for another action list
+
+
 # ----------------------------------------------------------------- dataset rollouts
 
 
 def allowed_pairs(world: wd.World, action: str) -> np.ndarray:
     """Pair indices whose pairing the action uses (toy+base, toy+obstacle or toy+rake)."""
-    return np.nonzero(geometry(world).pairing == PAIRING[action])[0]
+    return np.nonzero(geometry(world).pairing == spec(action).pairing_id)[0]
 
 
 def default_sim_batch(batch: int) -> int:

@@ -27,15 +27,18 @@ from mujoco import mjx
 
 from . import arm as A
 from . import world as wd
-from .labels import Outcome, goals, read_at_rest
+from .actions.registry import registry
+from .actions.rules import goal_row
+from .labels import Outcome, read_at_rest
 from .planning import Setup, home_grip, make_plan_fn, setup
 from .programs import toy_reachable
-from .templates import GRASPS, N_STEPS, RAKE_ID, UNOBSTRUCT_ID, ActionConfig, run_steps, tables
+from .actions.tables import run_steps, tables
+from .templates import N_STEPS, ActionConfig
 
 
-def _finger_home(action_id: jax.Array) -> jax.Array:
-    """Finger joint value at the start: on the 2.5 cm handle for the rake, else 6 cm."""
-    return jnp.where(action_id == RAKE_ID, 0.0125, 0.06)
+def _finger_home(held: jax.Array) -> jax.Array:
+    """Finger joint value at the start: on the 2.5 cm handle of the held rake, else 6 cm."""
+    return jnp.where(held, 0.0125, 0.06)
 
 
 def initial_data(st: Setup, cfg: ActionConfig, action_id: jax.Array, qpos_obj: jax.Array,
@@ -44,11 +47,12 @@ def initial_data(st: Setup, cfg: ActionConfig, action_id: jax.Array, qpos_obj: j
     d0 = mjx.make_data(st.world.mj_model)
     nqo, nvo = qpos_obj.shape[-1], qvel_obj.shape[-1]
     q_home = jnp.asarray(st.q_home, jnp.float32)
-    qpos = A.set_arm_qpos(st.arm, d0.qpos.at[:nqo].set(qpos_obj), q_home, _finger_home(action_id))
+    held = jnp.asarray(tables(cfg).held)[action_id]  # the rake scenes'
+    qpos = A.set_arm_qpos(st.arm, d0.qpos.at[:nqo].set(qpos_obj), q_home, _finger_home(held))
     qvel = d0.qvel.at[:nvo].set(qvel_obj)
     ctrl = A.make_ctrl(st.arm, q_home, jnp.asarray(home_grip(cfg))[action_id])
     # the rake is attached to the hand (weld "tool_grip") only in rake scenes
-    eq = jnp.zeros(d0.eq_active.shape, bool).at[welds(st.world).tool].set(action_id == RAKE_ID)
+    eq = jnp.zeros(d0.eq_active.shape, bool).at[welds(st.world).tool].set(held)
     return d0.replace(qpos=qpos, qvel=qvel, ctrl=ctrl, eq_active=eq)
 
 
@@ -125,10 +129,11 @@ def make_prepare_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     st = setup(cfg)
     plan_fn = make_plan_fn(cfg)
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
+    reads = jnp.asarray(tables(cfg).reach)
 
     def prepare_fn(action_id, pair, qpos):
         action_id = jnp.asarray(action_id, jnp.int32)
-        before = jax.lax.cond(action_id == UNOBSTRUCT_ID, lambda: reach(pair, qpos),
+        before = jax.lax.cond(reads[action_id], lambda: reach(pair, qpos),
                               lambda: jnp.zeros(pair.shape, bool))
         return plan_fn(action_id, pair, qpos), before
 
@@ -154,6 +159,7 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     forward = jax.vmap(mjx.forward, in_axes=(world.model_axes, 0))
     reach = jax.vmap(lambda p, q: toy_reachable(arm, cfg, st.geo, p, q))
     wl = welds(world)
+    specs = registry()
 
     def simulate_fn(action_id, pair, qpos, qvel, plan, before):
         action_id = jnp.asarray(action_id, jnp.int32)
@@ -161,7 +167,7 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         data = jax.vmap(lambda q, v: initial_data(st, cfg, action_id, q, v))(qpos, qvel)
         data = forward(models, data)
         com0 = jnp.stack([data.xipos[:, toy_b], data.xipos[:, obj_b]], 1)
-        grasp = jnp.asarray(GRASPS)[action_id]
+        grasp = jnp.asarray(tb.grasp)[action_id]
         closed = jnp.asarray(tb.closed)[action_id]
         # one value for the whole batch, so the cond stays a branch under vmap
         n_run = jnp.asarray(run_steps(cfg))[action_id] if cfg.stop_at_program_end else None
@@ -181,10 +187,10 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         else:  # v1: lift-type goals at the measuring step, the others at the end
             com_m, com_end = com_tr[:, measure], com_tr[:, -1]
             qpos_final = final.qpos[:, :qpos.shape[-1]]
-        after = jax.lax.cond(action_id == UNOBSTRUCT_ID, lambda: reach(pair, qpos_final),
+        after = jax.lax.cond(jnp.asarray(tb.reach)[action_id], lambda: reach(pair, qpos_final),
                              lambda: jnp.zeros(pair.shape, bool))
         out = Outcome(com0, com_m, com_end, plan.direction, before, after)
-        labels = jax.vmap(lambda o: goals(cfg, o))(out)[:, action_id] & plan.feasible
+        labels = jax.vmap(lambda o: goal_row(specs, cfg, o))(out)[:, action_id] & plan.feasible
         return dict(label=labels, feasible=plan.feasible, ik_error=plan.ik_error, com0=com0,
                     com_m=com_m, com_end=out.com_end, reach_before=before, reach_after=after,
                     qpos_final=qpos_final, settled=settled, q_way=plan.q_way, grip_way=plan.grip_way,

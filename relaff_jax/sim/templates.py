@@ -84,10 +84,13 @@ GRASPS = np.asarray([{"take": 2, "move": 0, "rake": 0}.get(a, 1) for a in ACTION
 
 
 class Tables(NamedTuple):
-    """The templates of one version of the programs as (9, ...) tables in ``ACTIONS`` order:
-    ``steps`` (9, S), ``target`` (9, S), ``closed`` (9, S), ``measure`` (9,) the step the goal
-    is read at (v2: the first step it may be read at), ``n_steps`` the padded length of every
-    program, ``hold`` the control steps v2 may wait after ``measure`` for the objects to rest."""
+    """The templates of one version of the programs as (A, ...) tables in an action order (the
+    nine's ``ACTIONS`` order; ``actions.tables``: the run's, a user's after the nine): ``steps``
+    (A, S), ``target`` (A, S), ``closed`` (A, S), ``measure`` (A,) the step the goal is read at
+    (v2: the first step it may be read at), ``n_steps`` the padded length of every program,
+    ``hold`` the control steps v2 may wait after ``measure`` for the objects to rest; ``grasp``
+    (A,) what a closed gripper locks onto (``GRASPS``' codes), ``held`` (A,) bool the rake is
+    held from the start, ``reach`` (A,) bool the toy's reachability is read before and after."""
 
     steps: np.ndarray
     target: np.ndarray
@@ -95,12 +98,16 @@ class Tables(NamedTuple):
     measure: np.ndarray
     n_steps: int
     hold: int
+    grasp: np.ndarray = GRASPS
+    held: np.ndarray = np.asarray(ACTIONS) == "rake"
+    reach: np.ndarray = np.asarray(ACTIONS) == "unobstruct"
 
 
 def tables(cfg: ActionConfig) -> Tables:
-    """The templates ``cfg.programs`` runs: v1 the module's ``TPL_*`` tables (``N_STEPS``); v2
-    the same segments with the final rest ``cfg.rest_hold`` steps longer, so that a goal read
-    at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after ``measure``."""
+    """The nine built-ins' templates ``cfg.programs`` runs: v1 the module's ``TPL_*`` tables
+    (``N_STEPS``); v2 the same segments with the final rest ``cfg.rest_hold`` steps longer, so
+    that a goal read at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after
+    ``measure``. The run's tables, a user's actions after the nine: ``actions.tables``."""
     if cfg.programs == "v1":
         return Tables(TPL_STEPS, TPL_TARGET, TPL_CLOSED, TPL_MEASURE, N_STEPS, 0)
     steps = TPL_STEPS.copy()

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from relaff_jax import io as rio
-from relaff_jax.constants import ACTIONS
+from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.stages.protocol import Run, ReproduceError, Status
 
@@ -69,7 +69,7 @@ def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str
     jobs = jobs if jobs and jobs > 0 else (os.cpu_count() or 1)
     paths = run_experiment(datasets, out, tree.experiment, list(tree.reproduce.spaces), seed=seed, jobs=jobs,
                            progress=progress, data_desc=desc, client=client)
-    ran = tuple(a for a in ACTIONS if a in datasets)  # run_experiment checked they are ACTIONS
+    ran = tuple(a for a in names() if a in datasets)  # run_experiment checked they are the run's actions
     record_config(out, override(tree, {"reproduce.actions": ran}), COMMAND)
     return paths
 

@@ -34,13 +34,16 @@ def default_rollout_factory(action: str, batch: int, config: Any = None, engine:
         raise
     from relaff_jax.config.action import ActionConfig
     from relaff_jax.sim import object_library as ol
+    from relaff_jax.sim.actions import record as spec_record
 
     cfg = config if config is not None else ActionConfig()
-    record = {"action": action, "action_config": sim.stored_config(cfg)}
+    stored = {"action": action, "action_config": sim.stored_config(cfg)}
     objs = ol.use_scene(cfg.scene, cfg.grip_margin)
     if cfg.scene.library or cfg.scene.objects:  # the resolved objects, so the folder never depends on the file
-        record["objects"] = ol.record(objs)
-    return sim.make_rollout_fn(action, batch, cfg, engine=engine), record, None
+        stored["objects"] = ol.record(objs)
+    if spec_record(action) is not None:  # a user action: its spec's identity (a built-in's is the package's)
+        stored["action_spec"] = spec_record(action)
+    return sim.make_rollout_fn(action, batch, cfg, engine=engine), stored, None
 
 
 def rollout_factory_for(cfg: Any):
@@ -140,6 +143,13 @@ def run(run: Run, forced: bool) -> dict:
     if forced:
         rio.remove_tree(paths.data)
     acts = cfg.reproduce.actions
+    from relaff_jax.sim.actions import check_actions, record
+
+    check_actions(acts, cfg.action)  # a user action's rules traced once, before any simulation
+    users = [a for a in acts if record(a) is not None]
+    if users and run.client is not None:
+        raise ReproduceError(f"--cluster: the user actions {users} run only here (the cluster's workers do not "
+                             "load --plugins files)")
     items: dict[str, Any] = {}
     todo = []
     for action in acts:

@@ -18,6 +18,7 @@ VALID = {
     ("action.arm.contact_face_cos", -1): "a cosine: -1 is in [-1, 1] (any contact normal counts)",
     ("action.phys.arm_max_geom_pairs", -1): "-1 is MJX's 'all pairs' (documented on the key)",
     ("experiment.state.extra", ()): "the default: no derived columns",
+    ("action.scene.objects", ()): "the default: every object (the built-ins and the library file's)",
     ("experiment.learner", "foo"): "an import path: resolved and fitted once by learn.checks.check_config "
                                    "before the experiment reads any data (needs scikit-learn, not loaded here)",
 }

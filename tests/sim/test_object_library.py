@@ -172,7 +172,7 @@ def test_file_level_refusals(tmp_path):
     twice = write(tmp_path, [dish(), dish(colour=[0.3, 0.3, 0.1])], ".json")
     with pytest.raises(UserError, match=r"object 'dish': defined twice"):
         ol.load_library(twice)
-    with pytest.raises(UserError, match=r"action.scene.objects: unknown object 'plate2'; valid objects: ball,"):
+    with pytest.raises(UserError, match=r"config key 'action.scene.objects': unknown object 'plate2'; valid objects: ball,"):
         ol.select((), ("ball", "plate2"))
     with pytest.raises(UserError, match=r"selects no toy"):
         ol.select((), ("plate", "bowl"))
