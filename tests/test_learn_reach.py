@@ -56,9 +56,9 @@ def test_rhf_parts_and_bins_only():
     assert state_width("rhf", StateConfig(rhf_pca=False, rhf_parts=("dist", "dx"))) == 100
     with pytest.raises(UserError, match="rhf_parts' must be a list of at least 1 values, distinct"):
         StateConfig(rhf_parts=("dist", "height"))
-    with pytest.raises(UserError, match="extra' must be a list of at least 0 values, distinct"):
+    with pytest.raises(UserError, match="extra' must be a list of values, distinct"):
         StateConfig(extra=("relative", "relative"))
-    with pytest.raises(UserError, match="'experiment.state.extra' must be a list of at least 0 values, distinct"):
+    with pytest.raises(UserError, match="'experiment.state.extra' must be a list of values, distinct"):
         check_config(override(ExperimentConfig(), {"state.extra": ("reach", "colour")}))
 
 

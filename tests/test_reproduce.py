@@ -488,7 +488,7 @@ def test_bad_input(tmp_path):
     with pytest.raises(R.ReproduceError, match="cannot run on 20 samples"):
         run(tmp_path / "a", overrides=dict(FAST, **{"dataset.n_samples": 20}))
     # a bad value is refused by its config node when the tree is built, before any work
-    with pytest.raises(UserError, match="'reproduce.actions' must be in the canonical order"):
+    with pytest.raises(UserError, match="'reproduce.actions' must be in the run's order"):
         run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("take", "lift")}))
     with pytest.raises(UserError, match="'reproduce.actions' must be a list of at least 2 values"):
         run(tmp_path / "a", overrides=dict(FAST, **{"reproduce.actions": ("lift",)}))
