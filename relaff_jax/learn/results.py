@@ -21,6 +21,7 @@ from relaff_jax.constants import SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn.config import ExperimentConfig
+from relaff_jax.learn.folder import is_complete  # noqa: F401 (re-exported; in folder.py so a status imports no JAX)
 
 FORMAT_VERSION = 2  # of experiment.json and results.npz (2: balanced test sets, outcomes, leave-one-out)
 
@@ -89,18 +90,6 @@ class Results(Mapping[str, Any]):
 
     def __len__(self) -> int:
         return 2 + len(self.spaces)
-
-
-def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:
-    """Whether ``out`` holds finished results for every one of ``spaces``."""
-    out = Path(out)
-    if not L.meta(out).exists():
-        return False
-    try:
-        done = rio.read_json(L.meta(out))["spaces"]
-    except (ValueError, KeyError):
-        return False
-    return all(s in done and L.results(out, s).exists() for s in spaces)
 
 
 class PackedBits:

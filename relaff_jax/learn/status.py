@@ -26,7 +26,8 @@ def experiment_status(out: str | os.PathLike, datasets: Mapping[str, Mapping[str
     dataset with features), ``cfg`` (``ExperimentConfig``), ``seed``, ``actions``, ``spaces``.
     ``fingerprints``: ``fingerprint(datasets, spaces)`` already known (then ``datasets`` is
     not read and may be None)."""
-    from relaff_jax.learn import fingerprint, is_complete
+    from relaff_jax.learn.datasets import fingerprint
+    from relaff_jax.learn.folder import is_complete
 
     out = Path(out)
     if not (out / META).exists():
