@@ -15,11 +15,13 @@ import os
 from pathlib import Path
 from typing import Any, Mapping
 
-from relaff_jax import io as rio
-from relaff_jax.data.config import CHUNKS, FEATURES, FEATURES_SIDECAR, LOCK, SELECTION, SIDECAR, jsonable_config
+from relaff_jax.data.config import FEATURES, FEATURES_SIDECAR, LOCK, SIDECAR, jsonable_config
 from relaff_jax.data.errors import CorruptDatasetError
 from relaff_jax.data.load import load_dataset, load_feature_chunks, load_rollouts, read_features_sidecar
 from relaff_jax.data.store import chunk_indices, chunk_path, mismatch, read_chunk, read_sidecar
+
+from relaff_jax import io as rio
+from relaff_jax.data.store import CHUNKS, SELECTION  # the layout names the store reads
 
 STATES = ("absent", "partial", "complete", "stale", "corrupt")
 FEATURE_KEYS = ("batch", "config", "n", "selection_sha256")

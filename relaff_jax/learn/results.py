@@ -21,7 +21,6 @@ from relaff_jax.constants import SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 from relaff_jax.learn.config import ExperimentConfig
-from relaff_jax.learn.folder import is_complete  # noqa: F401 (re-exported; in folder.py so a status imports no JAX)
 
 FORMAT_VERSION = 2  # of experiment.json and results.npz (2: balanced test sets, outcomes, leave-one-out)
 
@@ -90,6 +89,9 @@ class Results(Mapping[str, Any]):
 
     def __len__(self) -> int:
         return 2 + len(self.spaces)
+
+
+is_complete = L.is_complete  # in folder.py, so that a status imports no JAX
 
 
 class PackedBits:
