@@ -82,6 +82,24 @@ def _unchanged(path: Path, part: str) -> dict[str, Any] | None:
     return rec if rec[part] == _identity(path, part) else None
 
 
+def _rows_unread(cdir: Path, done: list[int], field: str | None) -> int | None:
+    """Rows of ``field`` in the chunks ``done`` of ``cdir`` from their ``meta.json`` alone (0
+    if ``field`` is None), or None when a chunk's metadata is missing or unreadable (the caller
+    then reads the chunks, for the exact error). The resume that continues a partial dataset or
+    its features reads and verifies every chunk, so the status of one does not."""
+    rows = 0
+    for k in done:
+        p = chunk_path(cdir, k)
+        try:
+            spec = rio.read_json(p / "meta.json")["arrays"]
+            rows += int(spec[field]["shape"][0]) if field else 0
+        except (OSError, ValueError, KeyError, TypeError, IndexError):
+            return None
+        if not isinstance(spec, dict) or not (p / "arrays").is_dir():
+            return None
+    return rows
+
+
 def manifest_fingerprint(path: str | os.PathLike) -> dict[str, str] | None:
     """``{space: sha256}`` recorded for the dataset's labels and features while neither its data
     nor its features changed since; None when it cannot be vouched for (compute it)."""
@@ -93,15 +111,16 @@ def manifest_fingerprint(path: str | os.PathLike) -> dict[str, str] | None:
 
 
 def dataset_status(path: str | os.PathLike, expected: Mapping[str, Any] | None = None, *,
-                   verify: bool = False) -> tuple[str, str]:
+                   verify: bool = True) -> tuple[str, str]:
     """State of the generated data at ``path``.
 
     expected: sidecar values the caller would generate with, e.g. ``{"action": "lift",
         "n_samples": 10000, "seed": 0, "batch": 256, "config": {...}}`` (any sidecar keys;
         compared after a JSON round trip, so tuples match lists). A difference is ``stale``.
-    Verifies every chunk (and, once complete, the selection index); damage is ``corrupt``.
-    A complete dataset unchanged since its ``write_manifest`` (same small files, same chunk
-    file sizes and mtimes) is not read again unless ``verify``.
+    verify: read and verify every chunk (and, once complete, the selection index); damage is
+    ``corrupt``. False (``relaff reproduce --status``): a complete dataset unchanged since its
+    ``write_manifest`` (same small files, same chunk file sizes and mtimes) and a partial one
+    (rows counted from its chunks' ``meta.json``) are not read; anything else is verified.
     """
     path = Path(path)
     if not path.exists():
@@ -118,8 +137,10 @@ def dataset_status(path: str | os.PathLike, expected: Mapping[str, Any] | None =
         return "stale", "; ".join(diff)
     try:
         if meta["status"] != "complete":
-            r = load_rollouts(path)
-            return "partial", f"{len(r['label'])} rollouts in {meta['counts']['chunks']} chunks, generation not finished"
+            done = chunk_indices(path / CHUNKS)
+            n = None if verify or len(done) < meta["counts"]["chunks"] else _rows_unread(path / CHUNKS, done, "label")
+            n = len(load_rollouts(path)["label"]) if n is None else n
+            return "partial", f"{n} rollouts in {meta['counts']['chunks']} chunks, generation not finished"
         if verify or _unchanged(path, "data") is None:
             n = len(load_dataset(path, features=False)["label"])
         else:  # verified when it was recorded, unchanged since (``write_manifest``)
@@ -130,12 +151,13 @@ def dataset_status(path: str | os.PathLike, expected: Mapping[str, Any] | None =
 
 
 def features_status(path: str | os.PathLike, batch: int, config: Mapping[str, Any] | None = None, *,
-                    verify: bool = False) -> tuple[str, str]:
+                    verify: bool = True) -> tuple[str, str]:
     """State of the features of the dataset at ``path`` for ``add_features(path, fn, batch,
     config_dict=config)``: ``absent`` (none, or the dataset is not finished), ``partial``,
     ``complete``, ``stale`` (other batch, config or selection) or ``corrupt`` (a damaged
     feature chunk or ``features.json``; ``add_features(..., overwrite=True)`` recomputes).
-    Complete features unchanged since ``write_manifest`` are not read again unless ``verify``.
+    verify: read and verify every feature chunk. False: complete features unchanged since
+    ``write_manifest`` and partial ones (chunk metadata present) are not read.
     """
     path = Path(path)
     try:
@@ -157,8 +179,9 @@ def features_status(path: str | os.PathLike, batch: int, config: Mapping[str, An
         if fmeta["status"] != "complete":
             fdir = path / FEATURES
             done = chunk_indices(fdir)
-            for k in done:
-                read_chunk(chunk_path(fdir, k))
+            if verify or _rows_unread(fdir, done, None) is None:
+                for k in done:
+                    read_chunk(chunk_path(fdir, k))
             return "partial", f"{len(done)} of {math.ceil(n / batch)} feature chunks"
         if verify or _unchanged(path, "features") is None:
             load_feature_chunks(path, fmeta, n)

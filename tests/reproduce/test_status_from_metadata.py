@@ -126,16 +126,56 @@ def test_a_dataset_without_a_manifest_falls_back_to_reading_it(done, tmp_path):
     assert new == ref and new["experiment"].state == "complete"
 
 
-def test_partial_folder(tmp_path, monkeypatch):
+def test_partial_folders_read_no_chunk(tmp_path, monkeypatch):
     out = tmp_path / "run"
     hooks = R.Hooks(rollout_factory=lambda a, b: stand_in_rollouts(a, b, stop_after=1),
                     feature_factory=stand_in_features, feature_config=stand_in_config)
     with pytest.raises(KeyboardInterrupt):
         R.reproduce(out, "tiny", 5, hooks=hooks, overrides=SETTINGS, jobs=1, progress=False)
-    ref, new = both(out)
+    ref, new = both(out, monkeypatch)
     assert new == ref
-    assert new["generate"].state == "partial" and "generation not finished" in new["generate"].why
+    assert new["generate"].state == "partial" and "rollouts in 1 chunks, generation not finished" in new["generate"].why
     assert new["experiment"].state == "absent"
+    monkeypatch.undo()
+
+    def killed_features(seed):
+        compute, cfg = stand_in_features(seed)
+        calls = [0]
+
+        def fn(s):
+            calls[0] += 1
+            if calls[0] > 1:
+                raise KeyboardInterrupt
+            return compute(s)
+
+        return fn, cfg
+
+    out = tmp_path / "features"
+    hooks = R.Hooks(rollout_factory=stand_in_rollouts, feature_factory=killed_features, feature_config=stand_in_config)
+    with pytest.raises(KeyboardInterrupt):
+        R.reproduce(out, "tiny", 5, hooks=hooks, overrides=SETTINGS, jobs=1, progress=False)
+    monkeypatch.setattr(stage_features, "factories_for", lambda cfg: (stand_in_features, stand_in_config))
+    ref, new = both(out, monkeypatch)
+    assert new == ref
+    assert new["generate"].state == "complete"
+    assert new["features"].state == "partial" and "1 of" in new["features"].why
+
+
+def test_a_damaged_chunk_of_a_partial_dataset_is_found_by_the_resume(tmp_path):
+    """The metadata path counts a partial dataset's rows from its chunks' meta.json: a
+    flipped array byte is seen by the reference path and by the resume, which reads every
+    chunk before simulating more."""
+    out = tmp_path / "run"
+    hooks = R.Hooks(rollout_factory=lambda a, b: stand_in_rollouts(a, b, stop_after=2),
+                    feature_factory=stand_in_features, feature_config=stand_in_config)
+    with pytest.raises(KeyboardInterrupt):
+        R.reproduce(out, "tiny", 5, hooks=hooks, overrides=SETTINGS, jobs=1, progress=False)
+    flip_byte(out / "data" / "lift" / "chunks" / "chunk_000000")
+    ref, new = both(out)
+    assert ref["generate"].state == "corrupt" and "chunk_000000" in ref["generate"].why
+    assert new["generate"].state == "partial"
+    with pytest.raises(R.ReproduceError, match="redo-dataset lift"):
+        reproduce(out)
 
 
 def test_stale_folder_after_a_changed_setting(done, tmp_path, monkeypatch):
