@@ -9,6 +9,7 @@ settings: regenerate, or recompute the features with ``overwrite=True``) or ``co
 """
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 from pathlib import Path
@@ -19,17 +20,107 @@ from relaff_jax.data.errors import CorruptDatasetError
 from relaff_jax.data.load import load_dataset, load_feature_chunks, load_rollouts, read_features_sidecar
 from relaff_jax.data.store import chunk_indices, chunk_path, mismatch, read_chunk, read_sidecar
 
+from relaff_jax import io as rio
+from relaff_jax.data.store import CHUNKS, SELECTION  # the layout names the store reads
+
 STATES = ("absent", "partial", "complete", "stale", "corrupt")
 FEATURE_KEYS = ("batch", "config", "n", "selection_sha256")
+# What a finished dataset looked like when it was verified: its small files' sha256 and every
+# chunk file's size and mtime (``write_manifest``). A status that finds the folder unchanged
+# since then answers from it without reading a chunk; any difference, or no manifest (a
+# dataset from before it), and the status verifies every chunk as it always did.
+MANIFEST = "status_manifest.json"
+MANIFEST_VERSION = 1
 
 
-def dataset_status(path: str | os.PathLike, expected: Mapping[str, Any] | None = None) -> tuple[str, str]:
+def _file_sha(p: Path) -> str | None:
+    try:
+        return hashlib.sha256(p.read_bytes()).hexdigest()
+    except FileNotFoundError:
+        return None
+
+
+def _tree(d: Path) -> dict[str, list[int]]:
+    """``{relative path: [size, mtime_ns]}`` of every file under ``d`` (none: {})."""
+    out = {}
+    for root, _, names in os.walk(d):
+        for n in names:
+            st = os.stat(os.path.join(root, n))
+            out[os.path.relpath(os.path.join(root, n), d)] = [st.st_size, st.st_mtime_ns]
+    return dict(sorted(out.items()))
+
+
+def _identity(path: Path, part: str) -> dict[str, Any]:
+    """What the ``part`` ("data": sidecar, selection, chunks; "features": features.json and
+    its chunks) of the dataset at ``path`` is on disk now, without reading a chunk."""
+    if part == "data":
+        return {SIDECAR: _file_sha(path / SIDECAR), SELECTION: _file_sha(path / SELECTION), CHUNKS: _tree(path / CHUNKS)}
+    return {FEATURES_SIDECAR: _file_sha(path / FEATURES_SIDECAR), FEATURES: _tree(path / FEATURES)}
+
+
+def write_manifest(path: str | os.PathLike, fingerprint: Mapping[str, Any] | None = None) -> None:
+    """Record the finished dataset at ``path`` as it is now (call it right after generation or
+    feature computation finished and verified it): the identity of its data part, of its
+    features part once their ``features.json`` says complete, and ``fingerprint`` (what the
+    experiment fingerprints of these features, ``learn.datasets.fingerprint`` per space) to
+    be returned by ``manifest_fingerprint`` while both parts are unchanged."""
+    path = Path(path)
+    fmeta = read_features_sidecar(path)
+    feats = _identity(path, "features") if fmeta is not None and fmeta.get("status") == "complete" else None
+    rio.atomic_write_json(path / MANIFEST, {"version": MANIFEST_VERSION, "data": _identity(path, "data"),
+                                            "features": feats, "fingerprint": dict(fingerprint or {}) if feats else None})
+
+
+def _unchanged(path: Path, part: str) -> dict[str, Any] | None:
+    """The manifest of ``path`` if its ``part`` is exactly as recorded, else None."""
+    try:
+        rec = rio.read_json(path / MANIFEST)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(rec, dict) or rec.get("version") != MANIFEST_VERSION or not rec.get(part):
+        return None
+    return rec if rec[part] == _identity(path, part) else None
+
+
+def _rows_unread(cdir: Path, done: list[int], field: str | None) -> int | None:
+    """Rows of ``field`` in the chunks ``done`` of ``cdir`` from their ``meta.json`` alone (0
+    if ``field`` is None), or None when a chunk's metadata is missing or unreadable (the caller
+    then reads the chunks, for the exact error). The resume that continues a partial dataset or
+    its features reads and verifies every chunk, so the status of one does not."""
+    rows = 0
+    for k in done:
+        p = chunk_path(cdir, k)
+        try:
+            spec = rio.read_json(p / "meta.json")["arrays"]
+            rows += int(spec[field]["shape"][0]) if field else 0
+        except (OSError, ValueError, KeyError, TypeError, IndexError):
+            return None
+        if not isinstance(spec, dict) or not (p / "arrays").is_dir():
+            return None
+    return rows
+
+
+def manifest_fingerprint(path: str | os.PathLike) -> dict[str, str] | None:
+    """``{space: sha256}`` recorded for the dataset's labels and features while neither its data
+    nor its features changed since; None when it cannot be vouched for (compute it)."""
+    path = Path(path)
+    rec = _unchanged(path, "features")
+    if rec is None or not rec.get("fingerprint") or _unchanged(path, "data") is None:
+        return None
+    return rec["fingerprint"]
+
+
+def dataset_status(path: str | os.PathLike, expected: Mapping[str, Any] | None = None, *,
+                   verify: bool = True) -> tuple[str, str]:
     """State of the generated data at ``path``.
 
     expected: sidecar values the caller would generate with, e.g. ``{"action": "lift",
         "n_samples": 10000, "seed": 0, "batch": 256, "config": {...}}`` (any sidecar keys;
         compared after a JSON round trip, so tuples match lists). A difference is ``stale``.
-    Verifies every chunk (and, once complete, the selection index); damage is ``corrupt``.
+    verify: read and verify every chunk (and, once complete, the selection index); damage is
+    ``corrupt``. False (``relaff reproduce --status``): a complete dataset unchanged since its
+    ``write_manifest`` (same small files, same chunk file sizes and mtimes) and a partial one
+    (rows counted from its chunks' ``meta.json``) are not read; anything else is verified.
     """
     path = Path(path)
     if not path.exists():
@@ -46,19 +137,27 @@ def dataset_status(path: str | os.PathLike, expected: Mapping[str, Any] | None =
         return "stale", "; ".join(diff)
     try:
         if meta["status"] != "complete":
-            r = load_rollouts(path)
-            return "partial", f"{len(r['label'])} rollouts in {meta['counts']['chunks']} chunks, generation not finished"
-        d = load_dataset(path, features=False)
+            done = chunk_indices(path / CHUNKS)
+            n = None if verify or len(done) < meta["counts"]["chunks"] else _rows_unread(path / CHUNKS, done, "label")
+            n = len(load_rollouts(path)["label"]) if n is None else n
+            return "partial", f"{n} rollouts in {meta['counts']['chunks']} chunks, generation not finished"
+        if verify or _unchanged(path, "data") is None:
+            n = len(load_dataset(path, features=False)["label"])
+        else:  # verified when it was recorded, unchanged since (``write_manifest``)
+            n = meta["n_samples"]
     except CorruptDatasetError as e:
         return "corrupt", str(e)
-    return "complete", f"{len(d['label'])} samples from {meta['counts']['rollouts']} rollouts"
+    return "complete", f"{n} samples from {meta['counts']['rollouts']} rollouts"
 
 
-def features_status(path: str | os.PathLike, batch: int, config: Mapping[str, Any] | None = None) -> tuple[str, str]:
+def features_status(path: str | os.PathLike, batch: int, config: Mapping[str, Any] | None = None, *,
+                    verify: bool = True) -> tuple[str, str]:
     """State of the features of the dataset at ``path`` for ``add_features(path, fn, batch,
     config_dict=config)``: ``absent`` (none, or the dataset is not finished), ``partial``,
     ``complete``, ``stale`` (other batch, config or selection) or ``corrupt`` (a damaged
     feature chunk or ``features.json``; ``add_features(..., overwrite=True)`` recomputes).
+    verify: read and verify every feature chunk. False: complete features unchanged since
+    ``write_manifest`` and partial ones (chunk metadata present) are not read.
     """
     path = Path(path)
     try:
@@ -80,10 +179,12 @@ def features_status(path: str | os.PathLike, batch: int, config: Mapping[str, An
         if fmeta["status"] != "complete":
             fdir = path / FEATURES
             done = chunk_indices(fdir)
-            for k in done:
-                read_chunk(chunk_path(fdir, k))
+            if verify or _rows_unread(fdir, done, None) is None:
+                for k in done:
+                    read_chunk(chunk_path(fdir, k))
             return "partial", f"{len(done)} of {math.ceil(n / batch)} feature chunks"
-        load_feature_chunks(path, fmeta, n)
+        if verify or _unchanged(path, "features") is None:
+            load_feature_chunks(path, fmeta, n)
     except CorruptDatasetError as e:
         return "corrupt", str(e)
     return "complete", f"features of {n} samples in {fmeta['chunks']} chunks"

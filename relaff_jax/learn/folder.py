@@ -9,6 +9,10 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Sequence
+
+from relaff_jax import io as rio
+from relaff_jax.constants import SPACES
 
 META = "experiment.json"
 RESULTS = "results.npz"
@@ -51,3 +55,15 @@ def block_chunk(path: str | os.PathLike) -> int | None:
     """The size-chunk index of a block file's name (None if the name is not a block's)."""
     ci = Path(path).stem.rsplit("_c", 1)[-1]
     return int(ci) if ci.isdigit() else None
+
+
+def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:
+    """Whether ``out`` holds finished results for every one of ``spaces``."""
+    out = Path(out)
+    if not meta(out).exists():
+        return False
+    try:
+        done = rio.read_json(meta(out))["spaces"]
+    except (ValueError, KeyError):
+        return False
+    return all(s in done and results(out, s).exists() for s in spaces)

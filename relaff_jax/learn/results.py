@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import os
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any, Iterator, Mapping
 
 import chex
 import numpy as np
@@ -91,16 +91,7 @@ class Results(Mapping[str, Any]):
         return 2 + len(self.spaces)
 
 
-def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:
-    """Whether ``out`` holds finished results for every one of ``spaces``."""
-    out = Path(out)
-    if not L.meta(out).exists():
-        return False
-    try:
-        done = rio.read_json(L.meta(out))["spaces"]
-    except (ValueError, KeyError):
-        return False
-    return all(s in done and L.results(out, s).exists() for s in spaces)
+is_complete = L.is_complete  # in folder.py, so that a status imports no JAX
 
 
 class PackedBits:

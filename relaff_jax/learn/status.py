@@ -20,10 +20,14 @@ from relaff_jax.learn.folder import META  # noqa: F401 (re-exported)
 
 
 def experiment_status(out: str | os.PathLike, datasets: Mapping[str, Mapping[str, Any]], cfg: Any, seed: int,
-                      actions: Sequence[str], spaces: Sequence[str]) -> tuple[str, str]:
+                      actions: Sequence[str], spaces: Sequence[str], *,
+                      fingerprints: Mapping[str, Mapping[str, str]] | None = None) -> tuple[str, str]:
     """``(state, why)`` of the experiment folder ``out`` for ``datasets`` (name -> loaded
-    dataset with features), ``cfg`` (``ExperimentConfig``), ``seed``, ``actions``, ``spaces``."""
-    from relaff_jax.learn import fingerprint, is_complete
+    dataset with features), ``cfg`` (``ExperimentConfig``), ``seed``, ``actions``, ``spaces``.
+    ``fingerprints``: ``fingerprint(datasets, spaces)`` already known (then ``datasets`` is
+    not read and may be None)."""
+    from relaff_jax.learn.datasets import fingerprint
+    from relaff_jax.learn.folder import is_complete
 
     out = Path(out)
     if not (out / META).exists():
@@ -39,7 +43,7 @@ def experiment_status(out: str | os.PathLike, datasets: Mapping[str, Mapping[str
         return "stale", f"made with seed {meta.get('seed')}, not {seed}"
     if meta.get("actions") != list(actions):
         return "stale", f"made for actions {meta.get('actions')}, not {list(actions)}"
-    now = rio.jsonable(fingerprint(datasets, spaces))
+    now = rio.jsonable(fingerprint(datasets, spaces) if fingerprints is None else fingerprints)
     stored = meta.get("fingerprint", {})
     changed = [s for s in spaces if s in stored and stored[s] != now[s]]
     if changed:

@@ -164,8 +164,9 @@ def _reproduce_locked(paths: Paths, preset_name: str, cfg: RunConfig, seed: int,
         entry["machine"] = here
     log["runs"].append(entry)
     prog = Progress(estimate_seconds(cfg, jobs, cpus), enabled=progress, stream=hooks.stream)
+    # a run trusts no manifest: every stage it skips is verified chunk by chunk first
     run = Run(paths, preset_name, cfg, int(seed), jobs, tuple(force), prog, *bound_hooks(cfg, hooks), log, entry,
-              client)
+              client, verify=True)
     run.save()
     prog.start()
     t_run = time.perf_counter()
@@ -269,8 +270,13 @@ def fold_killed_run(paths: Paths, log: dict) -> None:
         os.unlink(paths.root / HEARTBEAT)
 
 
-def status(out: str | os.PathLike) -> dict[str, Any]:
-    """The status of every stage of an existing run folder (for ``relaff reproduce --status``)."""
+def status(out: str | os.PathLike, *, reference: bool = False) -> dict[str, Any]:
+    """The status of every stage of an existing run folder (for ``relaff reproduce --status``).
+
+    Finished datasets and features unchanged since their status manifest
+    (``data.status.write_manifest``) are not read: their recorded state and fingerprints
+    stand. ``reference``: read and verify every chunk as a rerun would trust nothing (the
+    same states; ``benchmarks/status.py`` times both)."""
     paths = Paths(Path(out))
     if not paths.log.exists():
         raise ReproduceError(f"{out} holds no {paths.log.name}: not a relaff reproduce folder")
@@ -281,7 +287,8 @@ def status(out: str | os.PathLike) -> dict[str, Any]:
     except (OSError, ValueError, KeyError, TypeError) as e:
         why = e if not isinstance(e, (KeyError, TypeError)) else f"no valid {e} entry"
         raise ReproduceError(f"{paths.log} is damaged ({why}); {damaged_log_hint(paths.root)}") from None
-    run = Run(paths, log["preset"], cfg, log["seed"], 1, (), Silent(), *bound_hooks(cfg, Hooks()), log, {})
+    run = Run(paths, log["preset"], cfg, log["seed"], 1, (), Silent(), *bound_hooks(cfg, Hooks()), log, {},
+              verify=reference)
     out = {}
     upstream = None  # the first stage that is not complete: every later one depends on it
     for name, m in STAGE_MODULES.items():

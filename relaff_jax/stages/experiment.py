@@ -93,10 +93,27 @@ def status(run: Run, datasets: dict | None = None) -> Status:
     res = run.paths.results
     if not res.exists():
         return Status("absent", "no results folder")
-    datasets = load_datasets(run) if datasets is None else datasets
     c = run.cfg
+    prints = None if datasets is not None or run.verify else recorded_fingerprints(run)
+    if datasets is None and prints is None:
+        datasets = load_datasets(run)
     return Status(*experiment_status(res, datasets, c.experiment, run.log["seeds"]["experiment"],
-                                     c.reproduce.actions, c.reproduce.spaces))
+                                     c.reproduce.actions, c.reproduce.spaces, fingerprints=prints))
+
+
+def recorded_fingerprints(run: Run) -> dict[str, dict[str, str]] | None:
+    """``{space: {action: sha256}}`` of the run's datasets from their status manifests
+    (``data.status.manifest_fingerprint``, recorded when their features finished), without
+    loading them; None if any dataset's cannot be vouched for (then the datasets are loaded)."""
+    from relaff_jax.data.status import manifest_fingerprint
+
+    spaces, out = run.cfg.reproduce.spaces, {}
+    for a in run.cfg.reproduce.actions:
+        fp = manifest_fingerprint(run.paths.dataset(a))
+        if fp is None or any(s not in fp for s in spaces):
+            return None
+        out[a] = fp
+    return {s: {a: out[a][s] for a in sorted(out)} for s in spaces}
 
 
 def progress(run: Run) -> float:

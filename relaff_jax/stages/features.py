@@ -69,7 +69,23 @@ def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, 
     out = D.add_features(path, fn, tree.dataset.feature_batch, progress, config_dict, overwrite=overwrite,
                          client=client)
     record_config(path, tree, "features")  # the tree that made the folder, as every stage's folder holds it
+    record_fingerprint(path)
     return out
+
+
+def record_fingerprint(path: Any) -> None:
+    """The dataset at ``path`` with finished features, loaded (every chunk verified) and
+    fingerprinted as the experiment fingerprints its inputs (``learn.datasets.fingerprint``),
+    recorded in its status manifest (``data.status.write_manifest``): a later status of the
+    experiment reads the fingerprint instead of loading the dataset again."""
+    from relaff_jax.data.status import write_manifest
+    from relaff_jax.learn.datasets import fingerprint
+
+    d = D.load_dataset(path)
+    if "pca" not in d:  # features not finished: nothing to fingerprint yet
+        return
+    spaces = ("pca", "rhf") if "rhf" in d else ("pca",)
+    write_manifest(path, {s: v["x"] for s, v in fingerprint({"x": d}, spaces).items()})
 
 
 def factories_for(cfg: Any):
@@ -82,7 +98,7 @@ def action_status(run: Run, action: str) -> Status:
     if not run.paths.dataset(action).exists():  # nothing generated yet: nothing to featurise, not an error
         return Status("absent", "no dataset yet")
     want = run.feature_config(run.log["seeds"]["features"])
-    return Status(*D.features_status(run.paths.dataset(action), run.cfg.dataset.feature_batch, want))
+    return Status(*D.features_status(run.paths.dataset(action), run.cfg.dataset.feature_batch, want, verify=run.verify))
 
 
 def status(run: Run) -> Status:

@@ -10,10 +10,13 @@ from __future__ import annotations
 import functools
 import importlib
 import time
+from pathlib import Path
 from typing import Any
 
 from relaff_jax import data as D
 from relaff_jax import io as rio
+from relaff_jax.data.status import write_manifest
+from relaff_jax.data.store import read_sidecar
 from relaff_jax.provenance import record_config
 from relaff_jax.stages.protocol import Run, ReproduceError, Status
 
@@ -58,7 +61,7 @@ def _expected(run: Run, action: str) -> dict[str, Any]:
 
 
 def action_status(run: Run, action: str) -> Status:
-    return Status(*D.dataset_status(run.paths.dataset(action), _expected(run, action)))
+    return Status(*D.dataset_status(run.paths.dataset(action), _expected(run, action), verify=run.verify))
 
 
 def status(run: Run) -> Status:
@@ -87,6 +90,8 @@ def generate_one(tree: Any, action: str, out: Any, seed: int, *, client: Any = N
     summary = D.generate_dataset(out, action, tree.dataset.n_samples, fn, seed, batch, config_dict, progress=progress,
                                  dataset_config=tree.dataset, object_names=names, client=client, window=window)
     record_config(out, tree, "generate")  # the tree that made the folder, as every stage's folder holds it
+    if read_sidecar(Path(out)).get("status") == "complete":
+        write_manifest(out)  # later statuses answer from it while the folder is unchanged
     return summary
 
 

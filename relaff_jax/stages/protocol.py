@@ -142,6 +142,9 @@ class Run:
     log: dict  # the run log (run.json): ``seeds`` of every stage, ``versions``, ``timings``
     entry: dict  # this invocation's entry of ``log["runs"]``
     client: Any = None  # a distributed.Client: chunks and sweep blocks run on its cluster
+    # statuses read every chunk even where a dataset's status manifest vouches for it
+    # (``data.status.write_manifest``): the reference of the metadata path (benchmarks, tests)
+    verify: bool = False
 
     def remote(self, factory: Callable, *args: Any) -> Callable:
         """The function ``factory(*args)[0]`` shipped to the cluster's workers as its recipe
