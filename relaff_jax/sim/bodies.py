@@ -196,17 +196,11 @@ def clear_grasp(arm: A.Arm, cfg: ActionConfig, g: Grasp, body: Body, other: Body
     tip = jnp.maximum(tip0, zmax - reach)
     tip = jnp.maximum(tip, top_under(other, inner, c, g.closing, palm) + cfg.palm_margin - arm.palm_above_tip)
     holds = zmax - tip >= jnp.minimum(cfg.min_grip, zmax - tip0) - 1e-6
-    return g._replace(tcp_z=tip + arm.tip_below_tcp, fits=g.fits & holds & pads_free(arm, g, other, inner, tip))
-
-
-def pads_free(arm: A.Arm, g: Grasp, body: Body, inner: jax.Array, tip: jax.Array) -> jax.Array:
-    """() bool: do both open pads of grasp ``g`` come down beside ``body`` (its highest point
-    under each pad's footprint, ``top_under``, below the fingertips' height ``tip``)?
-    ``inner``: the body's container opening (zeros for a toy)."""
     pad = jnp.array([arm.pad_thickness / 2, arm.pad_half_x], jnp.float32)
     off = g.opening + arm.pad_thickness / 2
-    return jnp.all(jnp.stack([top_under(body, inner, g.xy + s * off * g.closing, g.closing, pad) < tip
-                              for s in (-1.0, 1.0)]))
+    pads_free = jnp.all(jnp.stack([top_under(other, inner, c + s * off * g.closing, g.closing, pad) < tip
+                                   for s in (-1.0, 1.0)]))
+    return g._replace(tcp_z=tip + arm.tip_below_tcp, fits=g.fits & holds & pads_free)
 
 
 def top_down_grasp(arm: A.Arm, cfg: ActionConfig, body: Body) -> Grasp:

@@ -17,7 +17,8 @@ from relaff_jax.errors import UserError
 # ActionConfig.programs: the motor programs' versions (v1: before issue 43)
 PROGRAMS = ("v1", "v2")
 # ActionConfig fields only v2 reads; a v1 dataset's sidecar leaves them out (templates.stored_config)
-V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window")
+V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window",
+             "guard_depth")
 
 # PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
 PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
@@ -202,6 +203,8 @@ class ActionConfig:
     squeeze_safety: float = 3.0  # v2: squeeze = safety x the held weight / (2 pads x friction)
     rest_hold: int = 200  # v2: control steps the goal may wait for the objects to come to rest
     rest_window: int = 10  # control steps both objects must stay below scene.rest_speed
+    guard_depth: float = 0.0  # m, v2: a pad landing on an object (a contact off its gripping
+    # face) this deep stops the descent to a grasp where it is (sim/guard.py)
     arm: ArmConfig = ArmConfig()
     phys: PhysicsConfig = PhysicsConfig()
     scene: SceneConfig = SceneConfig()
@@ -214,6 +217,7 @@ class ActionConfig:
         rules["programs"] = (self.programs in PROGRAMS, f"one of {', '.join(PROGRAMS)}, got {self.programs!r}")
         rules["palm_margin"] = (self.palm_margin >= 0, f">= 0 m, got {self.palm_margin}")
         rules["min_grip"] = (self.min_grip >= 0, f">= 0 m, got {self.min_grip}")
+        rules["guard_depth"] = (self.guard_depth >= 0, f">= 0 m, got {self.guard_depth}")
         rules["squeeze_min"] = (0 < self.squeeze_min <= self.squeeze_max,
                                 f"in (0, squeeze_max = {self.squeeze_max}] N, got {self.squeeze_min}")
         rules["squeeze_max"] = (self.squeeze_max <= 60.0, f"<= 60 N (the finger actuator's limit), got {self.squeeze_max}")

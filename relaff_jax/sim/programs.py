@@ -15,8 +15,8 @@ import jax
 import jax.numpy as jnp
 
 from . import arm as A
-from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, pads_free, perp, squeeze_command,
-                     stack_targets, top_down, top_down_grasp, unit_xy)
+from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, perp, squeeze_command, stack_targets,
+                     top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
 from .templates import N_TARGETS, ActionConfig
 
@@ -85,9 +85,6 @@ def _toy_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Arr
     if cfg.programs == "v1":
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
     g = clear_grasp(arm, cfg, g, sc.toy, sc.oth, sc.inner)
-    # the fixed opening may be narrower than the toy: pads that would come down on the toy
-    # itself press it into its support (no descent stops on contact), so refuse that grasp too
-    g = g._replace(fits=g.fits & pads_free(arm, g, sc.toy, jnp.zeros(3), g.tcp_z - arm.tip_below_tcp))
     half = jnp.where(sc.toy_radius > 0, sc.toy_radius, sc.toy.half_width(g.closing))  # a ball's is its radius
     return g, squeeze_command(arm, cfg, half, sc.toy_mass)
 
