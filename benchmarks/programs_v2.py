@@ -2,6 +2,7 @@
 
 Usage: python benchmarks/programs_v2.py N [ACTION ...] [--seed S] [--json OUT] [--save NPZ]
        [--before NPZ] [--v2-only]
+       [--guard-depth M]
 Per action: N scenes prepared from one key with each version (the placements and the C
 settle do not depend on the programs, checked), executed by the native engine; prints the
 feasible programs, positives, labels that differ, and unsettled reads per version, per
@@ -39,11 +40,12 @@ def main() -> None:
     ap.add_argument("--json")
     ap.add_argument("--save")
     ap.add_argument("--before")
+    ap.add_argument("--guard-depth", type=float, default=None, help="v2's ActionConfig.guard_depth (default: its default)")
     ap.add_argument("--v2-only", action="store_true", help="run v2 alone (with --save: a file for --before)")
     a = ap.parse_args()
     before = dict(np.load(a.before)) if a.before else None
     saved = {}
-    v2 = ActionConfig()
+    v2 = ActionConfig() if a.guard_depth is None else ActionConfig(guard_depth=a.guard_depth)
     v1 = dataclasses.replace(v2, programs="v1")
     rows = {}
     print("action relation scenes | feasible v1 v2 | positives v1 v2 | differ (v1+ v2-, v1- v2+) | unsettled v1 v2")
