@@ -21,7 +21,7 @@ from . import arm as A
 from . import objects as lib
 from . import scenes as sc
 from . import world as wd
-from .guard import pad_landing_np
+from .guard import hold_joints, pad_landing_np
 from .native_program import (RestReader, native_labels, pad_hit, program_inputs, reachable, stop_descent,
                              weld_relpose_np)
 from .planning import make_plan_fn, setup
@@ -167,7 +167,7 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
         for t in range(inp.n_run):
             if inp.guard[t] and not stopped and landing(d, st.arm, cfg, obj_geoms | toy_geoms):
                 stopped = True  # the descent stops where a pad lands (guard.py)
-                stop_descent(cfg, inp, b, t, d.qpos[st.arm.qpos_arm])
+                stop_descent(cfg, inp, b, t, hold_joints(d.qpos[st.arm.qpos_arm], d.qvel[st.arm.qvel_arm]))
             # the grasp lock of simulate.run_program_locked, on C contacts
             for row, body, geoms, kind in ((wl.obj, world.obj_body, obj_geoms, 1),
                                            (wl.toy, world.toy_body, toy_geoms, 2)):

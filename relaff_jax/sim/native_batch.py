@@ -28,7 +28,7 @@ import numpy as np
 
 from . import objects as lib
 from . import world as wd
-from .guard import pad_landing_np
+from .guard import hold_joints, pad_landing_np
 from .native_program import RestReader, native_labels, pad_hit, program_inputs, stop_descent, weld_relpose_np
 from .planning import Plan, setup
 from .simulate import welds
@@ -121,12 +121,12 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
     rest = RestReader(cfg, inp)
     grasp = {1: (wl.obj, world.obj_body, "obj"), 2: (wl.toy, world.toy_body, "toy")}.get(inp.grasp)
     stopped = np.zeros(len(rows), bool)
-    q_arm = setup(cfg).arm.qpos_arm
+    q_arm, v_arm = setup(cfg).arm.qpos_arm, setup(cfg).arm.qvel_arm
     for t in range(inp.n_run):
         if inp.guard[t]:  # the descent stops where a pad lands (guard.py)
             for i in np.flatnonzero(~stopped & _landing(sd, gxmat, own[0], cfg)):
                 stopped[i] = True
-                stop_descent(cfg, inp, int(rows[i]), t, qpos[i, q_arm])
+                stop_descent(cfg, inp, int(rows[i]), t, hold_joints(qpos[i, q_arm], qvel[i, v_arm]))
         # the grasp lock of simulate.run_program_locked, on the pads' contact sensors (the
         # other hand weld stays off: initial_data leaves it off and only the grasp row moves)
         if grasp is not None:

@@ -102,7 +102,7 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
         if guard is not None:  # v2: the descent stops where a pad lands (v1 traces as before)
             q_w, stopped = carry[2:]
             stop = ~stopped & jnp.asarray(guard[0])[A.segment_index(seg_steps, t)] & G.pad_landing(arm, cfg, d, both)
-            q_w = jnp.where(stop, G.stopped_way(q_w, jnp.asarray(guard[1]), d.qpos[arm.qpos_arm]), q_w)
+            q_w = jnp.where(stop, G.stopped_way(q_w, jnp.asarray(guard[1]), G.hold_joints(d.qpos[arm.qpos_arm], d.qvel[arm.qvel_arm])), q_w)
             stopped = stopped | stop
         else:
             q_w = q_way
