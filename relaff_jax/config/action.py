@@ -13,7 +13,8 @@ from relaff_jax.config.node import Node
 # ActionConfig.programs: the motor programs' versions (v1: before issue 43)
 PROGRAMS = ("v1", "v2")
 # ActionConfig fields only v2 reads; a v1 dataset's sidecar leaves them out (templates.stored_config)
-V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window")
+V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window",
+             "guard_depth")
 
 # PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
 PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
@@ -219,6 +220,8 @@ class ActionConfig(Node):
     squeeze_safety: float = 3.0  # v2: squeeze = safety x the held weight / (2 pads x friction)
     rest_hold: int = 200  # v2: control steps the goal may wait for the objects to come to rest
     rest_window: int = 10  # control steps both objects must stay below scene.rest_speed
+    guard_depth: float = 0.0  # m, v2: a pad landing on an object (a contact off its gripping
+    # face) this deep stops the descent to a grasp where it is (sim/guard.py)
     arm: ArmConfig = ArmConfig()
     phys: PhysicsConfig = PhysicsConfig()
     scene: SceneConfig = SceneConfig()
@@ -236,6 +239,7 @@ class ActionConfig(Node):
         "squeeze_safety": Interval(float, 0.0, 1000.0, closed="right"),
         "rest_hold": count(0, 1_000_000),
         "rest_window": STEPS,
+        "guard_depth": length(1.0),  # 1 m: no contact is that deep, the guard never stops
         ("squeeze_min", "squeeze_max"): Rule(
             lambda c: c.squeeze_min <= c.squeeze_max,
             lambda c: f"must be in (0, squeeze_max = {c.squeeze_max}] N, got {c.squeeze_min}"),

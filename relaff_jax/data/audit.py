@@ -37,13 +37,13 @@ from relaff_jax.data.store import read_sidecar
 from relaff_jax.sim import physics_bounds as bounds
 
 AUDIT_FILE = "audit.json"
-AUDIT_VERSION = 3  # 3: force = the press held 0.1 s (was a pair's one-step peak), penetration 3 mm (was 5)
+AUDIT_VERSION = 4  # 4: penetration held 0.1 s (was one step's); 3: force = the press held 0.1 s, penetration 3 mm
 DEFAULT_SAMPLE = 64
 # The checks' bounds are the programs' (sim/physics_bounds.py; reasoning: docs/arm.md,
 # "Bounded forces"): a rollout fails a check when it has more hand-object contact steps than
 # PALM_CONTACTS, its press exceeds FORCE_WEIGHTS weights of the heavier object, a contact with
-# an object is deeper than PENETRATION_M, or an object not held by the hand moves faster than
-# MOVING_M_S at the measuring step
+# an object stays deeper than PENETRATION_M for 0.1 s (an impact's one-step depth is reported),
+# or an object not held by the hand moves faster than MOVING_M_S at the measuring step
 PALM_CONTACTS = bounds.PALM_CONTACT_STEPS
 FORCE_WEIGHTS = bounds.PRESS_WEIGHTS
 PENETRATION_M = bounds.PENETRATION_M
@@ -194,8 +194,14 @@ def failures(row: Mapping[str, Any]) -> dict[str, bool]:
               if s is not None and not held]  # a held object moves with the arm
     return {"palm_contact": row["palm_steps"] > PALM_CONTACTS,
             "force": row["press_weights"] > FORCE_WEIGHTS,
-            "penetration": row["max_penetration_m"] > PENETRATION_M,
+            "penetration": _held_depth(row) > PENETRATION_M,
             "moving": bool(speeds) and max(speeds) > MOVING_M_S}
+
+
+def _held_depth(row: Mapping[str, Any]) -> float:
+    """The deepest contact held over 0.1 s (rows made before that reading: the one-step depth)."""
+    held = row.get("held_penetration_m")
+    return row["max_penetration_m"] if held is None else held
 
 
 def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[str, Any]:
@@ -216,7 +222,9 @@ def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[
                       weights=_dist(arr("press_weights")), newtons=_dist(arr("press_n")),
                       peak_weights=_dist(arr("peak_force_weights")), peak_newtons=_dist(arr("peak_force_n"))),
         "penetration": dict(count=count["penetration"], share=share("penetration"), bound_m=PENETRATION_M,
-                            metres=_dist(arr("max_penetration_m"))),
+                            held_steps=bounds.SUSTAIN_STEPS,
+                            metres=_dist(np.asarray([_held_depth(r) for r in rows], float)),
+                            peak_metres=_dist(arr("max_penetration_m"))),
         "moving": dict(count=count["moving"], share=share("moving"), bound_m_s=MOVING_M_S,
                        speed_toy=_dist(arr("speed_toy")), speed_other=_dist(arr("speed_other"))),
     }
@@ -313,7 +321,8 @@ def format_audit(audits: list[Mapping[str, Any]]) -> str:
                  f"contact between the hand body and an object; force = the summed normal force on an object held "
                  f"over {bounds.SUSTAIN_STEPS} steps (a press, not an impact) > {FORCE_WEIGHTS:g} weights of the "
                  f"heavier object; pen. = a contact with an object deeper than "
-                 f"{1000 * PENETRATION_M:g} mm; moving = an object not held by the hand faster than {MOVING_M_S:g} m/s "
+                 f"{1000 * PENETRATION_M:g} mm held over {bounds.SUSTAIN_STEPS} steps; moving = an object not held by "
+                 f"the hand faster than {MOVING_M_S:g} m/s "
                  f"at the measuring step. A check passes when no audited rollout fails it. label agr.: the C replay's labels "
                  f"equal to the stored ones.")
     return "\n".join(lines)

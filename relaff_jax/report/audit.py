@@ -22,7 +22,7 @@ from relaff_jax.report import folder as F
 from relaff_jax.report.figures import save_png
 
 CHECKS = (("palm_contact", "palm on an object"), ("force", f"press > {A.FORCE_WEIGHTS:g} weights"),
-          ("penetration", f"penetration > {1000 * A.PENETRATION_M:g} mm"),
+          ("penetration", f"penetration held 0.1 s > {1000 * A.PENETRATION_M:g} mm"),
           ("moving", f"moving > {A.MOVING_M_S:g} m/s at measuring"))
 
 
@@ -85,13 +85,14 @@ def audit_blocks(audits: Mapping[str, Mapping[str, Any]], missing: Mapping[str, 
         "docs/audit.md). A rollout fails a check when the hand's palm touches an object; when the summed contact "
         f"normal force on an object held over 0.1 s (a press, not an impact) exceeds {A.FORCE_WEIGHTS:g} weights of "
         "the heavier object; when a contact with an "
-        f"object is deeper than {1000 * A.PENETRATION_M:g} mm; when an object not held by the hand moves faster than "
+        f"object held over 0.1 s is deeper than {1000 * A.PENETRATION_M:g} mm (an impact's one-step depth is in "
+        "audit.json, `peak_metres`); when an object not held by the hand moves faster than "
         f"{A.MOVING_M_S:g} m/s "
         "at the step whose positions the goal reads. Shares of failing rollouts, over all audited and over the "
         "positives; `label agr.`: the replay's labels equal to the stored ones.")]
     if audits:
         header = ["action", "engine", "audited", "palm", "palm (pos.)", "press/weight med / p95 / max",
-                  "pen. max (mm)", "moving", "moving (pos.)", "label agr."]
+                  "held pen. max (mm)", "moving", "moving (pos.)", "label agr."]
         rows = []
         for act, a in audits.items():
             c, pos = a["checks"], a.get("by_label", {}).get("positive", {})

@@ -21,7 +21,9 @@ from . import arm as A
 from . import objects as lib
 from . import scenes as sc
 from . import world as wd
-from .native_program import RestReader, native_labels, pad_hit, program_inputs, reachable, weld_relpose_np
+from .guard import hold_joints, pad_landing_np
+from .native_program import (RestReader, native_labels, pad_hit, program_inputs, reachable, stop_descent,
+                             weld_relpose_np)
 from .actions.registry import action_id, on_change
 from .planning import make_plan_fn, setup
 from .simulate import welds
@@ -97,6 +99,22 @@ def both_pads(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bo
     return hit[0] and hit[1]
 
 
+def landing(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bool:
+    """Does a pad land on one of ``geoms`` (C contacts, the rule of ``guard.pad_landing`` as
+    ``guard.pad_landing_np`` writes it)?"""
+    for pad in arm.pad_geoms:
+        cons = [c for c in d.contact[:d.ncon]
+                if (c.geom1 == pad and c.geom2 in geoms) or (c.geom2 == pad and c.geom1 in geoms)]
+        if not cons:
+            continue
+        axis = np.asarray(d.geom_xmat[pad], np.float64).reshape(3, 3)[:, 1]
+        dist = np.array([c.dist for c in cons])
+        normal = np.array([np.asarray(c.frame[:3], np.float64) for c in cons])
+        if pad_landing_np(dist, normal, axis, np.ones(len(cons), bool), cfg):
+            return True
+    return False
+
+
 @functools.lru_cache(maxsize=2)
 def _plan_fn(cfg: ActionConfig):
     return jax.jit(make_plan_fn(cfg))
@@ -149,7 +167,11 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
         cm = None
         rest = RestReader(cfg, inp)
         shots = [(d.geom_xpos.copy(), d.geom_xmat.copy())] if record_every > 0 else []
+        stopped = False
         for t in range(inp.n_run):
+            if inp.guard[t] and not stopped and landing(d, st.arm, cfg, obj_geoms | toy_geoms):
+                stopped = True  # the descent stops where a pad lands (guard.py)
+                stop_descent(cfg, inp, b, t, hold_joints(d.qpos[st.arm.qpos_arm], d.qvel[st.arm.qvel_arm]))
             # the grasp lock of simulate.run_program_locked, on C contacts
             for row, body, geoms, kind in ((wl.obj, world.obj_body, obj_geoms, 1),
                                            (wl.toy, world.toy_body, toy_geoms, 2)):

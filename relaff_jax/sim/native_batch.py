@@ -29,7 +29,8 @@ import numpy as np
 from .actions.registry import action_id  # the run's list: the nine, then a user's
 from . import objects as lib
 from . import world as wd
-from .native_program import RestReader, native_labels, pad_hit, program_inputs, weld_relpose_np
+from .guard import hold_joints, pad_landing_np
+from .native_program import RestReader, native_labels, pad_hit, program_inputs, stop_descent, weld_relpose_np
 from .planning import Plan, setup
 from .simulate import welds
 from .templates import ActionConfig
@@ -80,21 +81,32 @@ def default_threads() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+def _pad_contacts(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel, pad: str, body: str):
+    """One pad's contacts with ``body`` ("toy" / "obj") from ``sensordata`` (n, S) and
+    ``geom_xmat`` (n, G, 9) of the same forward pass: dist (n, K), normal (n, K, 3), the pad's
+    closing axis (n, 3), valid (n, K)."""
+    n = sd.shape[0]
+    s = m.sensor(f"{pad}_{body}")
+    k = SLOTS[body]
+    block = sd[:, s.adr[0]:s.adr[0] + 5 * k].reshape(n, k, 5)  # found, dist, normal (3)
+    found = block[:, 0, 0]
+    if np.any(found > k):
+        raise RuntimeError(f"contact sensor {pad}_{body}: {int(found.max())} contacts > {k} slots")
+    valid = np.arange(k)[None, :] < found[:, None]
+    axis = gxmat[:, m.geom(pad).id].reshape(n, 3, 3)[:, :, 1]
+    return block[:, :, 1], block[:, :, 2:5], axis, valid
+
+
 def _touching(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel, body: str, cfg: ActionConfig) -> np.ndarray:
-    """(n,) bool: do both pads grip ``body`` ("toy" / "obj"), from ``sensordata`` (n, S) and
-    ``geom_xmat`` (n, G, 9) of the same forward pass?"""
-    n, hits = sd.shape[0], []
-    for pad in ("arm_pad_l", "arm_pad_r"):
-        s = m.sensor(f"{pad}_{body}")
-        k = SLOTS[body]
-        block = sd[:, s.adr[0]:s.adr[0] + 5 * k].reshape(n, k, 5)  # found, dist, normal (3)
-        found = block[:, 0, 0]
-        if np.any(found > k):
-            raise RuntimeError(f"contact sensor {pad}_{body}: {int(found.max())} contacts > {k} slots")
-        valid = np.arange(k)[None, :] < found[:, None]
-        axis = gxmat[:, m.geom(pad).id].reshape(n, 3, 3)[:, :, 1]
-        hits.append(pad_hit(block[:, :, 1], block[:, :, 2:5], axis, valid, cfg))
+    """(n,) bool: do both pads grip ``body`` ("toy" / "obj")?"""
+    hits = [pad_hit(*_pad_contacts(sd, gxmat, m, pad, body), cfg) for pad in ("arm_pad_l", "arm_pad_r")]
     return hits[0] & hits[1]
+
+
+def _landing(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel, cfg: ActionConfig) -> np.ndarray:
+    """(n,) bool: does a pad land on either object (``guard.pad_landing_np``)?"""
+    return np.any([pad_landing_np(*_pad_contacts(sd, gxmat, m, pad, body), cfg)
+                   for pad in ("arm_pad_l", "arm_pad_r") for body in ("toy", "obj")], axis=0)
 
 
 def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: int, nqo: int) -> dict:
@@ -113,7 +125,13 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
     com_m = None
     rest = RestReader(cfg, inp)
     grasp = {1: (wl.obj, world.obj_body, "obj"), 2: (wl.toy, world.toy_body, "toy")}.get(inp.grasp)
+    stopped = np.zeros(len(rows), bool)
+    q_arm, v_arm = setup(cfg).arm.qpos_arm, setup(cfg).arm.qvel_arm
     for t in range(inp.n_run):
+        if inp.guard[t]:  # the descent stops where a pad lands (guard.py)
+            for i in np.flatnonzero(~stopped & _landing(sd, gxmat, own[0], cfg)):
+                stopped[i] = True
+                stop_descent(cfg, inp, int(rows[i]), t, hold_joints(qpos[i, q_arm], qvel[i, v_arm]))
         # the grasp lock of simulate.run_program_locked, on the pads' contact sensors (the
         # other hand weld stays off: initial_data leaves it off and only the grasp row moves)
         if grasp is not None:

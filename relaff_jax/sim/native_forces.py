@@ -22,7 +22,8 @@ def physics(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray, 
 
     Returns (B,) arrays: ``peak`` (N) the largest summed normal force on either object in one
     step; ``press`` (N) the largest force on either object held over ``SUSTAIN_STEPS`` steps;
-    ``depth`` (m) the deepest contact penetration involving an object; ``palm`` (N) the largest
+    ``depth`` (m) the deepest contact penetration involving an object, ``held_depth`` (m) the
+    deepest held over ``SUSTAIN_STEPS`` steps; ``palm`` (N) the largest
     summed normal force between the palm (hand body) and the objects, ``palm_steps`` the steps
     with such a contact; ``weight`` (N) the heavier
     object's weight; and the replay's ``label``, ``settled`` and ``com_read``.
@@ -32,5 +33,6 @@ def physics(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray, 
     out = replay_native(action, cfg, pair, qpos, qvel, result, observe=probe)
     got = probe.result(0)  # the forces do not depend on the measuring step
     return dict(peak=got["object_peak_n"], press=got["press_n"], depth=got["max_penetration_m"],
+                held_depth=got["held_penetration_m"],
                 palm=got["palm_force_n"], palm_steps=got["palm_steps"], weight=got["weight_n"],
                 label=out["label"], settled=out["settled"], com_read=out["com_m"])

@@ -29,6 +29,7 @@ from .actions.rules import goal_row
 from .labels import Outcome, read_at_rest
 from .planning import setup
 from .programs import toy_reachable
+from .guard import guard_tables, stopped_way
 from .simulate import initial_data
 from .actions.tables import run_steps, tables
 from .templates import ActionConfig
@@ -42,7 +43,10 @@ class ProgramInputs(NamedTuple):
     does step t belong to a segment that closes the fingers; grasp: 0 none, 1 the other
     object, 2 the toy (``templates.GRASPS``); measure: the control step of the lift-type goals
     (v2: the first step a goal may be read at); n_run: the control steps to simulate
-    (``templates.run_steps``); v2: whether goals are read at rest (``labels.read_at_rest``).
+    (``templates.run_steps``); v2: whether goals are read at rest (``labels.read_at_rest``);
+    guard (T,) bool: may a landing pad stop the descent at step t (``guard.guard_tables``),
+    guard_rows (W,) bool the waypoints a stop replaces, aid the action id, q_way (B, W, 6) and
+    grip_way (B, W) the plan's waypoints (float32; ``stop_descent`` recomputes ``ctrl``).
     """
 
     qpos: np.ndarray
@@ -54,6 +58,11 @@ class ProgramInputs(NamedTuple):
     measure: int
     n_run: int
     v2: bool
+    guard: np.ndarray
+    guard_rows: np.ndarray
+    aid: int
+    q_way: np.ndarray
+    grip_way: np.ndarray
 
 
 @functools.lru_cache(maxsize=4)
@@ -111,8 +120,22 @@ def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarr
     u = np.asarray(_padded(lambda qw, gw: ctrl(a, qw, gw), q_way, grip_way), np.float64)
     tb = tables(cfg)
     seg = np.asarray(A.segment_index(tb.steps[aid], jnp.arange(tb.n_steps)))
+    g_seg, g_rows = guard_tables(cfg)
     return ProgramInputs(full_q, full_v, np.asarray(eq0, np.float64), u, np.asarray(tb.closed[aid])[seg],
-                         int(tb.grasp[aid]), int(tb.measure[aid]), int(run_steps(cfg)[aid]), cfg.programs == "v2")
+                         int(tb.grasp[aid]), int(tb.measure[aid]), int(run_steps(cfg)[aid]), cfg.programs == "v2",
+                         g_seg[aid][seg], g_rows[aid], int(aid), np.array(q_way, np.float32),
+                         np.array(grip_way, np.float32))
+
+
+def stop_descent(cfg: ActionConfig, inp: ProgramInputs, b: int, t: int, q_arm: np.ndarray) -> None:
+    """A pad of program ``b`` landed at step ``t`` (``guard.pad_landing_np``): its waypoints
+    become ``guard.stopped_way`` of the arm's joints ``q_arm`` (6,) (float64, read as float32
+    like MJX's) and ``inp.ctrl[b, t:]`` the commands of those waypoints (the same jitted
+    ``arm.program_ctrl`` as ``program_inputs``, one row: both C executors get the same bits)."""
+    q_way = stopped_way(inp.q_way[b], inp.guard_rows, np.asarray(q_arm, np.float32))
+    inp.q_way[b] = q_way
+    u = _padded(lambda qw, gw: _jitted(cfg)[1](jnp.int32(inp.aid), qw, gw), q_way[None], inp.grip_way[b][None])
+    inp.ctrl[b, t:] = np.asarray(u[0], np.float64)[t:]
 
 
 class RestReader:

@@ -17,7 +17,9 @@ rollout:
   consecutive steps (the minimum over a window, maximised over windows: a press, not an
   impact), in newtons and in weights of the heavier object (the bound of
   ``physics_bounds.PRESS_WEIGHTS``);
-- penetration: the deepest contact (``-dist``) that involves an object;
+- penetration: the deepest contact (``-dist``) that involves an object, in one step and held
+  over ``SUSTAIN_STEPS`` steps (a toy dropping onto the table sinks into MuJoCo's soft contact
+  for the contact's time constant, ~20 ms: an impact; a press holds its depth);
 - the objects' speeds (linear, at the centre of mass, ``mj_objectVelocity``) at the step whose
   positions the goal reads (``ProgramInputs.measure``), and whether each is then welded to the
   hand (held: its motion is the arm's).
@@ -97,7 +99,8 @@ class Probe:
     ``palm_force_n`` (largest summed hand-object normal force), ``peak_force_n``,
     ``peak_force_weights`` (peak over steps and pairs of the summed force / the pair's
     heaviest object's weight), ``peak_pair`` (str "a|b" body names), ``peak_step``,
-    ``max_penetration_m``, ``penetration_pair``, ``speed_toy``/``speed_other`` (m/s at the
+    ``max_penetration_m``, ``penetration_pair``, ``held_penetration_m`` (the deepest held over
+    ``SUSTAIN_STEPS`` steps; 0 for a shorter rollout), ``speed_toy``/``speed_other`` (m/s at the
     measuring step ``measure``; NaN if it was not reached), ``held_toy``/``held_other`` (welded
     to the hand at that step: a held object moves with the arm, its speed is the arm's),
     ``speed_end`` (the faster object's speed at the last step), ``object_peak_n`` (the largest
@@ -120,6 +123,7 @@ class Probe:
         self.speeds: list[list[tuple[float, float]]] = [[] for _ in range(n)]  # per step (toy, other)
         self.held: list[list[tuple[bool, bool]]] = [[] for _ in range(n)]  # welded to the hand, per step
         self.load: list[list[float]] = [[] for _ in range(n)]  # per step: the larger object's summed force
+        self.depth: list[list[float]] = [[] for _ in range(n)]  # per step: the deepest contact with an object
         self.weight_n = np.zeros(n)
         self._names: dict[int, list[str]] = {}
         self._hand: dict[int, int] = {}
@@ -135,6 +139,7 @@ class Probe:
         hand, names, weight = self._hand[key], self._names[key], self._weight[key]
         forces, on, deepest, where, n_hand = step_contacts(m, d, self.objects, hand)
         self.load[b].append(float(on.max()))
+        self.depth[b].append(deepest)
         self.weight_n[b] = max(weight[x] for x in self.objects)
         palm = 0.0
         for (a, c), f in forces.items():
@@ -167,6 +172,7 @@ class Probe:
         held = np.asarray([h[m] if m < len(h) else (False, False) for h, m in zip(self.held, ms)]).reshape(-1, 2)
         end = np.asarray([max(s[-1]) if s else np.nan for s in self.speeds])
         press = np.asarray([held_peak(s, SUSTAIN_STEPS) for s in self.load])
+        held_pen = np.asarray([held_peak(s, SUSTAIN_STEPS) for s in self.depth])
         with np.errstate(divide="ignore", invalid="ignore"):
             press_w = np.where(self.weight_n > 0, press / self.weight_n, 0.0)
         return dict(palm_contact=self.palm_steps > 0, palm_steps=self.palm_steps,
@@ -174,6 +180,7 @@ class Probe:
                     palm_force_n=self.palm_force, peak_force_n=self.peak_n, peak_force_weights=self.peak_w,
                     peak_pair=self.peak_pair.astype(str), peak_step=self.peak_step,
                     max_penetration_m=self.pen, penetration_pair=self.pen_pair.astype(str),
+                    held_penetration_m=held_pen,
                     speed_toy=at[:, 0], speed_other=at[:, 1], held_toy=held[:, 0], held_other=held[:, 1],
                     speed_end=end, object_peak_n=np.asarray([max(s) if s else 0.0 for s in self.load]),
                     press_n=press, weight_n=self.weight_n.copy(), press_weights=press_w)

@@ -26,6 +26,7 @@ import numpy as np
 from mujoco import mjx
 
 from . import arm as A
+from . import guard as G
 from . import world as wd
 from .actions.registry import registry
 from .actions.rules import goal_row
@@ -77,7 +78,7 @@ def welds(world: wd.World) -> Welds:
 
 
 def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array, mx, d, q_way, grip_way,
-              seg_steps, closed, observe, n_run=None, n_steps=N_STEPS):
+              seg_steps, closed, observe, n_run=None, n_steps=N_STEPS, guard=None):
     """Run a program on one scene (``lax.scan`` over ``N_STEPS`` control steps) with grasp locks.
 
     With ``n_run`` (scalar, may be traced but not batched) only the first ``n_run`` steps are
@@ -91,12 +92,24 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
     touch the grasped body (``arm.finger_contacts``), with the relative pose the two bodies
     have at that moment; it releases when a segment opens the fingers. A closed gripper that
     misses holds nothing. Returns the final data and ``observe(d)`` per control step.
+
+    ``guard`` (v2): (S,) bool guarded segments and (W,) bool waypoints of this action
+    (``guard.guard_tables``): at the first guarded step where a pad lands on an object
+    (``guard.pad_landing``) the waypoints become ``guard.stopped_way`` of the arm's joints.
     """
     arm = st.arm
     toy_b, obj_b = st.world.toy_body, st.world.obj_body
+    both = np.concatenate([w.toy_geoms, w.obj_geoms])
 
     def control_step(carry, t):
-        d, eq_data = carry
+        d, eq_data = carry[:2]
+        if guard is not None:  # v2: the descent stops where a pad lands (v1 traces as before)
+            q_w, stopped = carry[2:]
+            stop = ~stopped & jnp.asarray(guard[0])[A.segment_index(seg_steps, t)] & G.pad_landing(arm, cfg, d, both)
+            q_w = jnp.where(stop, G.stopped_way(q_w, jnp.asarray(guard[1]), G.hold_joints(d.qpos[arm.qpos_arm], d.qvel[arm.qvel_arm])), q_w)
+            stopped = stopped | stop
+        else:
+            q_w = q_way
         closing = jnp.asarray(closed)[A.segment_index(seg_steps, t)]
         touch_obj = jnp.all(A.finger_contacts(arm, cfg.arm, d, w.obj_geoms))
         touch_toy = jnp.all(A.finger_contacts(arm, cfg.arm, d, w.toy_geoms))
@@ -110,16 +123,20 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
         eq_data = eq_data.at[w.obj, 3:10].set(jnp.where(new_obj, rel_obj, eq_data[w.obj, 3:10]))
         eq_data = eq_data.at[w.toy, 3:10].set(jnp.where(new_toy, rel_toy, eq_data[w.toy, 3:10]))
         active = active.at[w.obj].set(lock_obj).at[w.toy].set(lock_toy)
-        d = d.replace(ctrl=A.program_ctrl(arm, q_way, grip_way, seg_steps, t), eq_active=active)
+        d = d.replace(ctrl=A.program_ctrl(arm, q_w, grip_way, seg_steps, t), eq_active=active)
         d = mjx.step(mx.replace(eq_data=eq_data), d)
-        return (d, eq_data), observe(d)
+        out = (d, eq_data) if guard is None else (d, eq_data, q_w, stopped)
+        return out, observe(d)
 
     def step_or_hold(carry, t):
         return jax.lax.cond(t < n_run, control_step, lambda c, _: (c, observe(c[0])), carry, t)
 
     body = control_step if n_run is None else step_or_hold
-    (d, _), trace = jax.lax.scan(body, (d, jnp.asarray(mx.eq_data)), jnp.arange(n_steps))
-    return d, trace
+    init = (d, jnp.asarray(mx.eq_data))
+    if guard is not None:
+        init = init + (jnp.asarray(q_way, jnp.float32), jnp.asarray(False))
+    carry, trace = jax.lax.scan(body, init, jnp.arange(n_steps))
+    return carry[0], trace
 
 
 def make_prepare_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
@@ -160,6 +177,7 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     reach = jax.vmap(lambda p, q: toy_reachable(arm, cfg, st.geo, p, q))
     wl = welds(world)
     specs = registry()
+    g_seg, g_rows = G.guard_tables(cfg)
 
     def simulate_fn(action_id, pair, qpos, qvel, plan, before):
         action_id = jnp.asarray(action_id, jnp.int32)
@@ -171,8 +189,9 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         closed = jnp.asarray(tb.closed)[action_id]
         # one value for the whole batch, so the cond stays a branch under vmap
         n_run = jnp.asarray(run_steps(cfg))[action_id] if cfg.stop_at_program_end else None
+        guard = (jnp.asarray(g_seg)[action_id], jnp.asarray(g_rows)[action_id]) if v2 else None
         run = lambda mx, d, qw, gw: run_program_locked(st, cfg, wl, grasp, mx, d, qw, gw, plan.seg_steps,
-                                                         closed, observe, n_run, tb.n_steps)
+                                                         closed, observe, n_run, tb.n_steps, guard)
         final, trace = jax.vmap(run, in_axes=(world.model_axes, 0, 0, 0))(
             models, data, plan.q_way, plan.grip_way)
         measure = jnp.asarray(tb.measure)[action_id]

@@ -150,7 +150,7 @@ def test_the_tenth_action_generates_labels_from_its_rule(tmp_path):
 
     from relaff_jax.data import load_rollouts
     from relaff_jax.sim import build_world
-    from relaff_jax.sim.config import ActionConfig
+    from relaff_jax.config.action import ActionConfig
 
     r = load_rollouts(out)
     assert r["selected"].sum() == 8 and r["label"][r["selected"]].sum() == 4
