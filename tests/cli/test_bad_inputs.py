@@ -1,4 +1,4 @@
-"""The table of damaged and foreign inputs of issue 48, through the real CLI (``cli.main``):
+"""The table of damaged and foreign inputs, through the real CLI (``cli.main``):
 each case exits 2 with one line ``relaff CMD: error: ...`` naming what is wrong, prints no
 traceback, and writes nothing into its output folder before refusing.
 
@@ -16,7 +16,8 @@ import pytest
 
 from relaff_jax import cli
 
-OSD = Path(__file__).parent / "data" / "osd"
+from helpers import OSD
+
 
 
 def no_work(*args, **kwargs):

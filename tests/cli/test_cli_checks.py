@@ -1,4 +1,4 @@
-"""What a new user trips over (issue 30): every path and every input-only condition is
+"""What a new user trips over: every path and every input-only condition is
 checked before any work, with the one-line ``relaff CMD: error: ...`` and exit code 2.
 
 The work itself is replaced by a function that fails the test if it is reached, so each test
@@ -6,13 +6,13 @@ takes well under a second and shows that the check comes first."""
 from __future__ import annotations
 
 import shutil
-from pathlib import Path
 
 import pytest
 
 from relaff_jax import cli
 
-OSD = Path(__file__).parent / "data" / "osd"
+from helpers import OSD, TESTS
+
 
 
 def no_work(*args, **kwargs):
@@ -252,9 +252,9 @@ def test_reproduce_refuses_a_sample_count_beyond_the_rollout_cap(monkeypatch, ca
 def test_no_test_prints_past_the_capture():
     """`pytest -q` output is the dots and the summary: a test's figures go in its assertion
     messages or in captured prints (shown with a failure), never past the capture."""
-    here = Path(__file__).parent
+    here = TESTS
     bypass = "capsys" + ".disabled("
-    offenders = [p.name for p in sorted(here.glob("test_*.py")) if bypass in p.read_text()]
+    offenders = [p.name for p in sorted(here.rglob("test_*.py")) if bypass in p.read_text()]
     assert offenders == []
 
 

@@ -1,6 +1,6 @@
 """`--cluster`: the stages as Dask tasks give the bits of the run without a cluster.
 
-The simulation and the perception are numpy stand-ins (as in tests/test_reproduce.py; the
+The simulation and the perception are numpy stand-ins (tests/helpers/standins.py, as in the reproduce tests; the
 real ones would cost minutes of compiling per worker), so these tests check the task
 plumbing: ordering, the stopping point, resume, faults and the checks made before any work.
 The forests, the sweep blocks and the report are the real ones. Every cluster test shares
@@ -23,61 +23,18 @@ import pytest
 
 from relaff_jax import cluster as C
 from relaff_jax import data as D
-from relaff_jax import reproduce as R
 from relaff_jax.cli import main
-from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
 from relaff_jax.learn.parallel import run_parallel
 
-ROOT = Path(__file__).resolve().parents[1]
+from helpers import ROOT, TESTS, standins
+from helpers.standins import builds, rollout_factory
+
 ACTS = ("lift", "take")
-SMALL = {"reproduce.actions": ACTS, "dataset.n_samples": 32, "experiment.forest.base_trees": 4,
-         "experiment.forest.max_trees": 4, "experiment.sizes": (4, 10), "reproduce.examples_per_action": 0}
-FEATURE_CONFIG = {"kind": "numpy stand-in"}
-BUILDS = {"n": 0}  # rollout/feature functions built in this process (on a worker: by its tasks)
-
-
-def rollout_factory(action, batch, delay=0.0):
-    """A stand-in for the simulation: rollouts drawn from the chunk's key (same key, same bits)."""
-    BUILDS["n"] += 1
-
-    def fn(key, b):
-        time.sleep(delay)
-        rng = np.random.default_rng(np.asarray(key).tolist() + [ACTIONS.index(action)])
-        rel = rng.integers(0, 3, b)
-        dist = np.where(rel == 0, rng.uniform(0.1, 1.2, b), rng.uniform(0.03, 0.2, b))
-        return {"label": rng.random(b) < np.where(rel == 0, 0.25, 0.75),
-                "relation": rel.astype(np.int32), "cog_distance": dist.astype(np.float32),
-                "toy": np.asarray(("ball", "cube"))[rng.integers(0, 2, b)],
-                "other": np.asarray(("plate", "cup"))[rng.integers(0, 2, b)]}
-
-    return fn, {"stand_in": action}, None
-
-
-def feature_factory(seed):
-    BUILDS["n"] += 1
-
-    def compute(s):
-        rng = np.random.default_rng([seed, int(s["rollout"][0])])
-        n = len(s["label"])
-        pca = rng.normal(size=(n, 18)).astype(np.float32)
-        pca[:, 9] = s["cog_distance"] + 0.3 * s["label"]  # something learnable
-        return {"pca": pca, "rhf": rng.random((n, 300)).astype(np.float32), "unseen": np.zeros((n, 2), bool)}
-
-    return compute, dict(FEATURE_CONFIG, seed=seed)
-
-
-def feature_config(seed):
-    return dict(FEATURE_CONFIG, seed=seed)
-
-
-def builds():
-    return BUILDS["n"]
 
 
 def run(out, client=None, rollouts=rollout_factory):
-    return R.reproduce(out, "tiny", 3, overrides=SMALL, jobs=1, progress=False, rollout_factory=rollouts,
-                       feature_factory=feature_factory, feature_config_fn=feature_config, client=client)
+    return standins.run(out, ACTS, rollout_factory=rollouts, client=client)
 
 
 def fingerprint(folder):
@@ -216,17 +173,18 @@ def test_worker_killed_mid_run(client, baseline, tmp_path):
 DRIVER = textwrap.dedent("""
     import functools, sys
     sys.path.insert(0, {tests!r})
-    import test_cluster as T
+    from helpers import standins
     from relaff_jax import cluster as C
     with C.connect({address!r}, folder={out!r}) as client:
-        T.run({out!r}, client, rollouts=functools.partial(T.rollout_factory, delay=0.15))
+        standins.run({out!r}, {acts!r}, rollout_factory=functools.partial(standins.rollout_factory, delay=0.15),
+                     client=client)
 """)
 
 
 @pytest.mark.slow
 def test_driver_killed_and_restarted(client, baseline, tmp_path):
     out = tmp_path / "run"
-    script = DRIVER.format(tests=str(ROOT / "tests"), address=client.scheduler.address, out=str(out))
+    script = DRIVER.format(tests=str(TESTS), acts=ACTS, address=client.scheduler.address, out=str(out))
     proc = subprocess.Popen([sys.executable, "-c", script], start_new_session=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     chunks = out / "data" / "lift" / "chunks"

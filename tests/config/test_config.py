@@ -63,7 +63,7 @@ def test_presets():
     assert (quick.dataset.n_samples, quick.dataset.rollout_batch, quick.dataset.feature_batch) == (100, 64, 16)
     assert paper.dataset.n_samples == 10_000
     assert paper.dataset.rollout_batch == 1024
-    # the paper preset reads the feasible population (issue 24), the others today's reading
+    # the paper preset reads the feasible population, the others today's reading
     assert (paper.dataset.population, paper.dataset.match_patience, paper.dataset.max_rollouts) == ("feasible", 1.0, 300_000)
     assert {p.dataset.population for p in (tiny, quick, study)} == {"all"}
     assert tiny.experiment.forest.max_trees == 8

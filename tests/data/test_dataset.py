@@ -1,6 +1,6 @@
 """Dataset storage layer: balance, COG-distance matching, determinism, resume, errors, info, features.
 
-The rollout function here is a synthetic test fixture (numpy draws seeded by the chunk key),
+The rollout function is a synthetic test fixture (tests/helpers/standins.py) (numpy draws seeded by the chunk key),
 not physics: "beside" scenes are far apart and rarely positive, "on_top"/"inside" scenes are
 close and mostly positive, which is the regime the paper's distance matching is about.
 """
@@ -18,47 +18,11 @@ from relaff_jax import data as ds
 from relaff_jax.cli import data as cli_data
 from relaff_jax.data import generate, store
 
-TOYS = ("ball", "cube")
-OTHERS = ("plate", "cup", "box")
-
-
-class Killed(Exception):
-    pass
-
-
-def synthetic_rollout_fn(kill_after: int | None = None, all_negative: bool = False, calls: list | None = None):
-    calls = [] if calls is None else calls
-
-    def rollout_fn(key, b):
-        if kill_after is not None and len(calls) >= kill_after:
-            raise Killed("simulated kill")
-        calls.append(np.asarray(key).tolist())
-        rng = np.random.default_rng(np.asarray(key).tolist())
-        rel = rng.integers(0, 3, b)
-        dist = np.where(rel == 0, rng.uniform(0.1, 1.2, b), rng.uniform(0.03, 0.2, b))
-        p = np.where(rel == 0, 0.15, 0.8)
-        label = (rng.random(b) < p) & (not all_negative)
-        return {
-            "label": label,
-            "relation": np.asarray(ds.RELATIONS)[rel],
-            "cog_distance": dist.astype(np.float32),
-            "toy": np.asarray(TOYS)[rng.integers(0, 2, b)],
-            "other": np.asarray(OTHERS)[rng.integers(0, 3, b)],
-            "qpos": rng.normal(size=(b, 2, 7)).astype(np.float32),
-            "pair": rng.integers(0, 6, b).astype(np.int32),
-            "sample_seed": rng.integers(0, 2**31, b).astype(np.uint32),
-        }
-
-    return rollout_fn
-
-
-EXACT = ds.DatasetConfig(max_rollouts=2000, distance_bins=8, borrow_fraction=0.0)
-CFG = {"physics": {"dt": 0.002}, "lift_height": 0.05}
-
-
-def gen(path, n=40, seed=3, batch=16, fn=None, **kw):
-    kw.setdefault("dataset_config", EXACT)
-    return ds.generate_dataset(path, "lift", n, fn or synthetic_rollout_fn(), seed, batch, CFG, progress=False, **kw)
+from helpers import ROOT, TESTS
+from helpers.standins import ACTION_CFG as CFG
+from helpers.standins import DATASET_OTHERS as OTHERS
+from helpers.standins import DATASET_TOYS as TOYS
+from helpers.standins import EXACT, Killed, feature_fn, gen, synthetic_rollout_fn
 
 
 @pytest.fixture(scope="module")
@@ -509,22 +473,6 @@ def test_info_while_generating(tmp_path):
 # ----------------------------------------------------------------------------- features
 
 
-def feature_fn(kill_after: int | None = None, sizes: list | None = None):
-    sizes = [] if sizes is None else sizes
-
-    def compute(s):
-        if kill_after is not None and len(sizes) >= kill_after:
-            raise Killed("simulated kill")
-        sizes.append(len(s["label"]))
-        d = s["cog_distance"].astype(np.float64)
-        pca = np.stack([d * (i + 1) for i in range(18)], axis=1).astype(np.float32)
-        rhf = np.tile(s["rollout"][:, None] % 7, (1, 300)).astype(np.float32)
-        unseen = np.stack([s["rollout"] % 5 == 0, s["toy"] == "cube"], axis=1)
-        return {"pca": pca, "rhf": rhf, "unseen": unseen}
-
-    return compute
-
-
 def test_a_sidecar_of_the_old_generate_record_shape_resumes(tmp_path):
     """relaff generate recorded {"action": cfg}, reproduce {"action": name, "action_config": cfg};
     both write the second now, and a dataset with the first is read in it, so it resumes."""
@@ -631,14 +579,14 @@ def test_sigkill_mid_run_then_resume(built, tmp_path):
     path, summary = built
     target = tmp_path / "killed"
     code = (
-        "import sys, time; sys.path[:0] = [%r, %r]\n"
-        "import test_dataset as t\n"
+        "import sys, time; sys.path[:0] = [%r]\n"
+        "import helpers.standins as t\n"
         "fn = t.synthetic_rollout_fn()\n"
         "def slow(key, b):\n"
         "    time.sleep(0.05)\n"
         "    return fn(key, b)\n"
         "t.gen(%r, fn=slow)\n"
-    ) % (str(Path(__file__).parent), str(Path(__file__).parent.parent), str(target))
+    ) % (str(TESTS), str(target))
     proc = subprocess.Popen([sys.executable, "-c", code], env=dict(os.environ, JAX_PLATFORMS="cpu"))
     try:
         deadline = time.time() + 60
@@ -792,7 +740,7 @@ def test_corrupt_chunk_read_prints_no_event_loop_error(built, tmp_path):
         "    gc.collect()\n"
     )
     res = subprocess.run([sys.executable, "-c", code, str(p)], capture_output=True, text=True, timeout=300,
-                         env=dict(os.environ, JAX_PLATFORMS="cpu"), cwd=str(Path(__file__).parent.parent))
+                         env=dict(os.environ, JAX_PLATFORMS="cpu"), cwd=str(ROOT))
     assert res.returncode == 0, res.stderr
     assert res.stderr.count("clear: chunk") == 3
     assert "Event loop is closed" not in res.stderr

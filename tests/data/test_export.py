@@ -1,13 +1,11 @@
 """``relaff export``: a dataset as Parquet + feature schema + dataset card, values bit for bit.
 
-Built with the synthetic numpy rollout and feature functions of test_dataset.py (not physics).
+Built with the synthetic numpy rollout and feature functions of tests/helpers/standins.py (not physics).
 """
 from __future__ import annotations
 
 import argparse
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,13 +13,12 @@ import pytest
 pa = pytest.importorskip("pyarrow")
 import pyarrow.parquet as pq  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).parent))
-import test_dataset as t  # noqa: E402
-
 from relaff_jax import data as D  # noqa: E402
 from relaff_jax.cli import data as cli_data  # noqa: E402
 from relaff_jax.data import export as X  # noqa: E402
 from relaff_jax.errors import UserError  # noqa: E402
+
+import helpers.standins as t  # noqa: E402
 
 PERCEPTION = {"perception": {"rhf": {"bins": 50, "ranges": [[-0.5, 0.5]] * 3 + [[0.0, 0.75]] + [[0.0, 3.1]] * 2}}}
 

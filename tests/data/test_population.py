@@ -1,4 +1,4 @@
-"""Dataset population and negatives (issue 24): which rollouts a selection may take, how its
+"""Dataset population and negatives: which rollouts a selection may take, how its
 negatives are drawn, what the labels consist of (``data.anatomy``).
 
 The rollout function is a synthetic fixture (numpy draws seeded by the chunk key), not
@@ -100,7 +100,7 @@ def test_feasible_population_is_feasible_and_balanced(tmp_path):
 
 
 def test_all_population_negatives_are_mostly_out_of_reach(tmp_path):
-    """The mechanism of issue 24 in miniature: matched negatives are unreachable stacks."""
+    """Distance matching in miniature: matched negatives are unreachable stacks."""
     gen(tmp_path / "a", n=200)
     a = ds.anatomy(tmp_path / "a")
     s = a["selection"]

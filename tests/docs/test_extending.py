@@ -5,12 +5,12 @@ import os
 import re
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from helpers import ROOT
+
 EXAMPLES = ROOT / "examples"
 SETS = ["--set", 'reproduce.actions=["lift","pull","take"]', "--set", "experiment.sizes=[2,4,10]",
         "--set", "experiment.reps_pca=2", "--set", "experiment.online_select=false"]

@@ -1,6 +1,6 @@
 """The notebooks run top to bottom (nbclient) on a small run folder, so they cannot rot.
 
-Notebooks 02 and 03 read test_reproduce_report's ``scene_run`` folder: real settled scenes
+Notebooks 02 and 03 read the session's ``scene_run`` folder (tests/helpers/fixtures.py): real settled scenes
 with features under data/, and results/ from `relaff experiment --synthetic`. Notebook 01
 builds its own two scenes and runs the lift action on them.
 """
@@ -10,9 +10,9 @@ import nbclient
 import nbformat
 import pytest
 
-from test_reproduce_report import scene_run  # noqa: E402,F401  (session fixture, built once)
+from helpers import ROOT
 
-NOTEBOOKS = Path(__file__).resolve().parent.parent / "notebooks"
+NOTEBOOKS = ROOT / "notebooks"
 
 
 def execute(name: str, run_dir: Path, monkeypatch) -> nbformat.NotebookNode:
@@ -66,7 +66,7 @@ def test_03_learning_and_bootstrapping(scene_run, monkeypatch):
 
 @pytest.mark.slow  # compiles the settle and the action programs in a fresh kernel: minutes
 def test_01_scenes_and_actions(monkeypatch, tmp_path):
-    # 8 scenes: the batch shape of tests/test_actions.py, whose programs the kernel loads
+    # 8 scenes: the batch shape of tests/sim/test_actions.py, whose programs the kernel loads
     # from the session's compilation cache (conftest.py) instead of compiling them again
     monkeypatch.setenv("RELAFF_NB_SCENES", "8")
     nb = execute("01_scenes_and_actions.ipynb", tmp_path, monkeypatch)

@@ -1,12 +1,13 @@
 """``benchmarks/paper_stages.py``'s projection of the paper preset, on a hand-worked case."""
 from __future__ import annotations
 
-import os
 import sys
 
 import pytest
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "benchmarks"))
+from helpers import ROOT
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import paper_stages as P  # noqa: E402
 

@@ -315,7 +315,7 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
 
 
 def test_results_outcomes_are_the_blocks_bits(data3, tmp_path):
-    """The sweep holds the blocks' outcomes bit-packed (issue 26): results.npz's ``correct``
+    """The sweep holds the blocks' outcomes bit-packed: results.npz's ``correct``
     is what packing the whole bool array once gave (every block unpacked, zero-padded to
     the most test scenes), from fresh blocks and from blocks read back on a resume."""
     cfg = tiny_cfg(test_size=21, keep_outcomes=True)  # 20 scenes: a partial last byte

@@ -1,6 +1,6 @@
 """`relaff experiment --data` on real dataset folders (dataset stage storage, synthetic rollouts).
 
-The rollouts and features here are numpy draws, not physics: this checks the hand-over from
+The rollouts and features are numpy draws (tests/helpers/standins.py), not physics: this checks the hand-over from
 ``relaff_jax.data.load_dataset`` to the learning stage, not any result.
 """
 import argparse
@@ -12,35 +12,16 @@ from relaff_jax import data as ds
 from relaff_jax import learn as E
 from relaff_jax.cli import learn as cli_learn
 
-
-def _rollout_fn(key, b):
-    rng = np.random.default_rng(np.asarray(key).tolist())
-    rel = rng.integers(0, 3, b)
-    dist = np.where(rel == 0, rng.uniform(0.1, 1.2, b), rng.uniform(0.03, 0.2, b))
-    return {
-        "label": rng.random(b) < np.where(rel == 0, 0.2, 0.8),
-        "relation": np.asarray(ds.RELATIONS)[rel],
-        "cog_distance": dist.astype(np.float32),
-        "toy": np.asarray(("ball", "cube"))[rng.integers(0, 2, b)],
-        "other": np.asarray(("plate", "cup"))[rng.integers(0, 2, b)],
-    }
-
-
-def _features(s):
-    rng = np.random.default_rng(int(s["rollout"][0]))
-    n = len(s["label"])
-    pca = rng.normal(size=(n, 18)).astype(np.float32)
-    pca[:, 9] = s["cog_distance"]  # something learnable
-    return {"pca": pca, "rhf": rng.random((n, 300)).astype(np.float32), "unseen": np.zeros((n, 2), bool)}
+from helpers import standins
 
 
 def test_experiment_reads_dataset_folders(tmp_path):
     dirs = []
     for i, action in enumerate(("lift", "take", "pour")):
         p = tmp_path / action
-        ds.generate_dataset(p, action, 120, _rollout_fn, seed=i, batch=64, progress=False,
+        ds.generate_dataset(p, action, 120, standins.rollout_factory(action, 64)[0], seed=i, batch=64, progress=False,
                             dataset_config=ds.DatasetConfig(max_rollouts=4000, distance_bins=4, borrow_fraction=0.5))
-        ds.add_features(p, _features, batch=64, progress=False)
+        ds.add_features(p, standins.feature_factory(i)[0], batch=64, progress=False)
         dirs.append(str(p))
     loaded = E.load_datasets(dirs)
     assert sorted(loaded) == ["lift", "pour", "take"]

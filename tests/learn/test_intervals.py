@@ -1,4 +1,4 @@
-"""Issue 25: intervals that mean what they say. A choice made on one half of the test scenes and
+"""Intervals that mean what they say. A choice made on one half of the test scenes and
 scored on the other is not optimistic where the in-sample choice is; the bias-corrected
 bootstrap of Table II covers a known truth at its nominal level; the BC interval by hand."""
 import numpy as np

@@ -1,4 +1,4 @@
-"""What a learner relies on (issue 24): derived and partial states, forest.max_features as a
+"""What a learner relies on: derived and partial states, forest.max_features as a
 number, accuracies by test subset, predictor correlations with reach and relation. Each is
 checked against a hand-worked case or numpy."""
 from __future__ import annotations

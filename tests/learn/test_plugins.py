@@ -1,4 +1,4 @@
-"""Learners and conditions as plugins (issue 45): relaff_jax.learn.learners, relaff_jax.learn.conditions.
+"""Learners and conditions as plugins: relaff_jax.learn.learners, relaff_jax.learn.conditions.
 
 Checked against scikit-learn fitted directly on the same draws, and against the sweep's own
 plan for the built-in conditions; bad learners and plugins are one error line before any work.

@@ -1,4 +1,4 @@
-"""The paper's open choices as readings (issue 44): each reading changes what it should and
+"""The paper's open choices as readings: each reading changes what it should and
 nothing else; the extra statistics on hand-worked cases."""
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Workers end with their driver (issue 48): a joblib worker watches its driver's pid and
+"""Workers end with their driver: a joblib worker watches its driver's pid and
 exits when it is gone, and its atomic writes are fenced, so that no file appears in a run
 folder after the driver (and with it the folder's lock) has gone.
 

@@ -12,6 +12,8 @@ from relaff_jax.errors import UserError
 from relaff_jax.perception import from_sim as features
 from relaff_jax.sim import scenes as sc
 
+from helpers.scenes import scene_rollout_fn
+
 B = 8
 
 
@@ -29,24 +31,6 @@ def test_scene_geoms_match_mujoco_c(scene_world, settle):
         np.testing.assert_allclose(size[i], m.geom_size, atol=1e-7)
         np.testing.assert_allclose(xpos[i], d.geom_xpos, atol=1e-5)
         np.testing.assert_allclose(xmat[i].reshape(-1, 9), d.geom_xmat, atol=1e-5)
-
-
-def scene_rollout_fn(w, settle):
-    """Test fixture: rollouts whose label is 'the toy is on top of / inside the base'."""
-    allowed = np.array([i for i, p in enumerate(w.pairs) if p[2] == "toy+base"])
-
-    def rollout(key, batch):
-        kp, ks = jax.random.split(key)
-        pair = sc.sample_pairs(kp, allowed, w, batch)
-        out = jax.device_get(settle(pair, *sc.place(w, sc.SceneConfig(), ks, pair)))
-        bits = np.asarray(jax.random.randint(ks, (batch,), 0, 2**31 - 1))
-        return {"label": out.relation != sc.BESIDE, "relation": out.relation,
-                "cog_distance": out.cog_distance, "pair": out.pair,
-                "toy": np.array([w.pairs[p][0] for p in out.pair]),
-                "other": np.array([w.pairs[p][1] for p in out.pair]),
-                "qpos_settled": out.qpos, "rollout_id": bits.astype(np.int64)}
-
-    return rollout
 
 
 @pytest.fixture(scope="module")

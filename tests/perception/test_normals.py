@@ -1,4 +1,4 @@
-"""Normals from the cloud (issue 16): the image-window PCA rule in simulation and on real clouds.
+"""Normals from the cloud: the image-window PCA rule in simulation and on real clouds.
 
 Checks the closed-form eigenvector against numpy, a hand-worked plane, the label and radius
 rules, the config errors, and (slow) agreement with the kNN normals, Open3D and the exact
@@ -6,7 +6,6 @@ ray-hit normals on a rendered simulated scene and on the real test scenes.
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -17,7 +16,9 @@ from relaff_jax import perception as P
 from relaff_jax.config import override
 from relaff_jax.errors import UserError
 
-DATA = Path(__file__).parent / "data" / "osd"
+from helpers import OSD
+
+DATA = OSD
 
 _eig = jax.jit(P.smallest_eigenvector)
 _win = P.window_normals  # eager: compiling the 25 unrolled window offsets costs more than running them
@@ -144,11 +145,11 @@ def _o3d_normals(points):
 
 @pytest.mark.slow  # renders a 640 x 480 scene (~25 s with compilation)
 def test_sim_cloud_normals_agree_with_ray_knn_and_open3d():
-    from test_perception import _library_scene
+    from helpers.scenes import library_scene
 
     from relaff_jax.real.cloud_features import cloud_normals
 
-    m, d, seg = _library_scene("block", "bowl", [1.0, 0.3, 0.0, np.cos(0.2), 0, 0, np.sin(0.2)],
+    m, d, seg = library_scene("block", "bowl", [1.0, 0.3, 0.0, np.cos(0.2), 0, 0, np.sin(0.2)],
                                [1.0, -0.1, 0.0, np.cos(0.3), 0, 0, np.sin(0.3)])
     scene = P.make_scene(m.geom_type, seg, m.geom_size, d.geom_xpos, d.geom_xmat)
     res = {}
@@ -208,9 +209,9 @@ def test_real_window_normals_agree_with_knn_and_open3d():
 
 @pytest.mark.slow  # two batched feature compilations at 320 x 240 (~15 s)
 def test_batched_features_with_cloud_normals_keep_pca_and_change_rhf():
-    from test_perception import _library_scene
+    from helpers.scenes import library_scene
 
-    s = _library_scene("ball", "bowl", [1.0, 0.35, 0.0, 1, 0, 0, 0], [1.0, -0.1, 0.0, np.cos(0.3), 0, 0, np.sin(0.3)])
+    s = library_scene("ball", "bowl", [1.0, 0.35, 0.0, 1, 0, 0, 0], [1.0, -0.1, 0.0, np.cos(0.3), 0, 0, np.sin(0.3)])
     base = override(P.PerceptionConfig(), {"camera.width": 320, "camera.height": 240})
     out = {}
     for src in ("ray", "cloud"):

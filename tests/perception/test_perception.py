@@ -15,6 +15,8 @@ import pytest
 from relaff_jax import perception as P
 from relaff_jax.config import ConfigError, override
 
+from helpers.scenes import library_scene
+
 SMALL = P.PerceptionConfig(
     camera=P.CameraConfig(width=160, height=120),
     voxel=P.VoxelConfig(max_object_pixels=8192, max_voxels=2048),
@@ -597,27 +599,13 @@ def test_features_batched_no_retrace_and_sane(random_scenes, chain):
         np.testing.assert_array_equal(np.asarray(o1[k]), np.asarray(again[k]))
 
 
-def _library_scene(toy, other, toy_pose, other_pose):
-    from relaff_jax.sim import world as wd
-
-    m = mujoco.MjModel.from_xml_string(wd.pair_xml(toy, other))
-    d = mujoco.MjData(m)
-    d.qpos[m.jnt_qposadr[0]:m.jnt_qposadr[0] + 7] = toy_pose
-    d.qpos[m.jnt_qposadr[1]:m.jnt_qposadr[1] + 7] = other_pose
-    mujoco.mj_forward(m, d)
-    seg = np.zeros(m.ngeom, np.int32)
-    seg[m.geom_bodyid == 1] = 1
-    seg[m.geom_bodyid == 2] = 2
-    return m, d, seg
-
-
 @pytest.fixture(scope="module")
 def library_features():
     """The real geom layout (world.pair_xml: collapsed geoms, finite table plane), 320x240:
     scene 0 a ball beside a bowl, scene 1 a block out of view and a tray."""
-    s0 = _library_scene("ball", "bowl", [1.0, 0.35, 0.0, 1, 0, 0, 0],
+    s0 = library_scene("ball", "bowl", [1.0, 0.35, 0.0, 1, 0, 0, 0],
                         [1.0, -0.1, 0.0, np.cos(0.3), 0, 0, np.sin(0.3)])
-    s1 = _library_scene("block", "tray", [-4.0, 0.0, 0.0, 1, 0, 0, 0], [1.0, 0.0, 0.0, 1, 0, 0, 0])
+    s1 = library_scene("block", "tray", [-4.0, 0.0, 0.0, 1, 0, 0, 0], [1.0, 0.0, 0.0, 1, 0, 0, 0])
     cfg = override(P.PerceptionConfig(), {"camera.width": 320, "camera.height": 240})
     f = P.make_batched_features(s0[0].geom_type, s0[2], cfg)
     size = np.stack([m.geom_size for m, _, _ in (s0, s1)])

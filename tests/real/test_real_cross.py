@@ -1,11 +1,10 @@
-"""Sim-to-real across folders (issue 28): grouped splits, cross-folder figures on a hand-worked
+"""Sim-to-real across folders: grouped splits, cross-folder figures on a hand-worked
 case, the simulated-data guard on a killed build, and a train/test study through the CLI on
 the shipped scenes split in two (settle + perceive replaced by a stand-in)."""
 from __future__ import annotations
 
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,7 +14,8 @@ from relaff_jax.errors import UserError
 from relaff_jax.real import splits
 from relaff_jax.real.config import RealExperimentConfig, SensorTolerance, SimRelationConfig, SimSensor
 
-OSD = Path(__file__).parent / "data" / "osd"
+from helpers import OSD, ROOT
+
 
 
 def test_scene_splits_never_put_a_scene_on_both_sides():
@@ -122,7 +122,7 @@ def test_guard_on_a_killed_build(tmp_path, monkeypatch):
     monkeypatch.setattr(sr, "_chunk_fn", _fake_chunks(calls))
     with pytest.raises(UserError, match=r"another sensor \(tilt_deg 50.8 vs 44.0 \(\|diff\| 6.8 > tolerance 2.5\)"):
         sr.build_sim_relations(tmp_path / "sim", b, cfg, progress=False)
-    # within the tolerance (2 mm, 2 deg: the issue's unseen folder): resumed with the folder's own sensor
+    # within the tolerance (2 mm, 2 deg: an unseen folder): resumed with the folder's own sensor
     near = SimSensor(0.588, 48.8, 49.1)
     s = sr.build_sim_relations(tmp_path / "sim", near, cfg, progress=False)
     assert [c for c, _ in calls] == [0, 1, 2]
@@ -132,7 +132,7 @@ def test_guard_on_a_killed_build(tmp_path, monkeypatch):
     assert s["counts"]["on_top"] == 6
     with pytest.raises(UserError, match="another sensor"):  # tolerance 0 asks for the exact sensor
         sr.guard(tmp_path / "sim", near, cfg, SensorTolerance(0.0, 0.0, 0.0))
-    # chunks without a guard (a build killed before issue 28): which sensor made them is unknown
+    # chunks without a guard (a build from before the guard): which sensor made them is unknown
     (tmp_path / "old").mkdir()
     shutil.copy(tmp_path / "sim" / "chunk_00000.npz", tmp_path / "old")
     with pytest.raises(UserError, match="no sim_relations.json, so which sensor made them is unknown"):
@@ -247,7 +247,7 @@ def test_config_and_inputs_are_checked_first(tmp_path, monkeypatch, capsys):
 
 
 def test_check_only_present(capsys):
-    shipped = Path(__file__).parents[1] / "scenes" / "osd_learn_relations.csv"
+    shipped = ROOT / "scenes" / "osd_learn_relations.csv"
     assert cli.main(["real", "check", str(OSD), "--labels", str(shipped)]) == 2
     assert "unknown scene 'learn1.pcd'" in capsys.readouterr().err
     assert cli.main(["real", "check", str(OSD), "--labels", str(shipped), "--only-present"]) == 0

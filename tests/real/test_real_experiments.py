@@ -12,6 +12,8 @@ from relaff_jax.errors import UserError
 from relaff_jax.real import experiments as ex
 from relaff_jax.real import report
 
+from helpers import OSD
+
 
 def synthetic(n, p_on_top, margin, seed=0):
     """Relation data separable in every PCA column: 0.1 N(0, 1) jitter plus ``margin`` times
@@ -151,12 +153,10 @@ def test_sim_camera_sits_where_the_real_one_does():
 
 @pytest.mark.slow
 def test_real_features_put_the_upper_object_first(tmp_path):
-    from pathlib import Path
-
     from relaff_jax.real import labels as lab
     from relaff_jax.real import real_data
 
-    osd = Path(__file__).parent / "data" / "osd"
+    osd = OSD
     rows = [lab.Label("learn17.pcd", 3, 2, "on_top", lab.file_sha256(osd / "learn17.pcd")),
             lab.Label("learn0.pcd", 2, 3, "beside", lab.file_sha256(osd / "learn0.pcd"))]
     path = lab.write_labels(tmp_path / "l.csv", rows)

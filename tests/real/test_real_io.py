@@ -1,6 +1,5 @@
 """Real point clouds in: PCD (ascii, binary, binary_compressed), PLY, npz readers and writers,
 LZF, intrinsics, checked against files the tests write and against Open3D on real scenes."""
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,7 +10,9 @@ from relaff_jax.real import (estimate_intrinsics, make_cloud, read_cloud, read_p
 from relaff_jax.real import lzf
 from relaff_jax.real.cloud import pack_rgb, unpack_rgb
 
-DATA = Path(__file__).parent / "data" / "osd"
+from helpers import OSD
+
+DATA = OSD
 REAL = sorted(DATA.glob("*.pcd"))
 K = (525.0, 520.0, 319.5, 239.5)
 

@@ -12,7 +12,8 @@ from relaff_jax.errors import UserError
 from relaff_jax.real import labels as lab
 from relaff_jax.real.propose import RuleConfig, overlap_fraction, propose_scene
 
-OSD = Path(__file__).parent / "data" / "osd"
+from helpers import OSD
+
 SHA = "ab" * 32
 
 

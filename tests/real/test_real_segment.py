@@ -1,7 +1,6 @@
 """Real scenes: RANSAC table plane and k-means against Open3D and scikit-learn, the table frame
 and camera pose on hand-worked planes, normals against Open3D, the voxel grid against numpy,
 IoU against the hand segmentation, errors, and the figure."""
-from pathlib import Path
 
 import jax
 import numpy as np
@@ -14,7 +13,9 @@ from relaff_jax.real import (RealConfig, camera_pose, camera_pose_stats, cloud_n
                              to_table, vectors_to_table)
 from relaff_jax.real.ransac import kmeans_from, kmeans_pp_init
 
-DATA = Path(__file__).parent / "data" / "osd"
+from helpers import OSD
+
+DATA = OSD
 
 
 def _plane_for(height, tilt_deg):

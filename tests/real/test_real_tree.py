@@ -1,9 +1,8 @@
 """The real stages read the one config tree: ``--set perception.voxel.size`` reaches the real
-features, bad real settings are refused before any work (issue 27)."""
+features, bad real settings are refused before any work."""
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import jax
 import numpy as np
@@ -15,7 +14,9 @@ from relaff_jax.real import (cloud_normals, fit_table_plane, hand_segmentation, 
                              table_frame, to_table, vectors_to_table)
 from relaff_jax.real.config import REAL_MAX_OBJECT_PIXELS, RealConfig, pipeline_config
 
-DATA = Path(__file__).parent / "data" / "osd"
+from helpers import OSD
+
+DATA = OSD
 
 
 def _tree(*sets):

@@ -18,50 +18,6 @@ from relaff_jax.config import override
 from relaff_jax import data as dataset
 from relaff_jax import learn as E
 from relaff_jax import report as R
-from relaff_jax import runconfig
-from relaff_jax.reproduce import features as stage_features
-from relaff_jax.sim import scenes as sc
-
-B = 8
-_CACHE = {}  # the run folder is built once per session, also when test_notebooks imports the fixture
-
-
-def scene_rollout_fn(w, settle):
-    """Rollouts of real settled toy+base scenes; label: the toy ended on top of / inside the base."""
-    allowed = np.array([i for i, p in enumerate(w.pairs) if p[2] == "toy+base"])
-
-    def rollout(key, batch):
-        kp, ks = jax.random.split(key)
-        pair = sc.sample_pairs(kp, allowed, w, batch)
-        out = jax.device_get(settle(pair, *sc.place(w, sc.SceneConfig(), ks, pair)))
-        bits = np.asarray(jax.random.randint(ks, (batch,), 0, 2**31 - 1))
-        return {"label": out.relation != sc.BESIDE, "relation": out.relation, "cog_distance": out.cog_distance,
-                "pair": out.pair, "toy": np.array([w.pairs[p][0] for p in out.pair]),
-                "other": np.array([w.pairs[p][1] for p in out.pair]), "qpos_settled": out.qpos,
-                "rollout_id": bits.astype(np.int64)}
-
-    return rollout
-
-
-@pytest.fixture(scope="session")
-def scene_run(tmp_path_factory, scene_world, settle):
-    """A run-shaped folder: data/lift and data/take (16 real scenes each, with features) and
-    results/ from `relaff experiment --synthetic` (small forests, two sizes)."""
-    if "root" not in _CACHE:
-        root = tmp_path_factory.mktemp("scene_run")
-        for seed, action in enumerate(("lift", "take")):
-            path = root / "data" / action
-            dataset.generate_dataset(path, action, 16, scene_rollout_fn(scene_world, settle), seed=seed, batch=B,
-                                     progress=False, dataset_config=dataset.DatasetConfig(borrow_fraction=1.0))
-            stage_features.add_features(override(runconfig.RunConfig(), {"dataset.feature_batch": B}), path,
-                                        progress=False)
-        argv = ["experiment", "--synthetic", "150", "--out", str(root / "results"), "--jobs", "2", "--no-progress",
-                "--set", "experiment.sizes=[4,10]", "--set", "experiment.reps_pca=1", "--set", "experiment.reps_rhf=1",
-                "--set", "experiment.forest.base_trees=4", "--set", "experiment.forest.max_trees=4"]
-        assert cli.main(argv) == 0
-        _CACHE["root"] = root
-    return _CACHE["root"]
-
 
 # ------------------------------------------------------------------- findings, by hand
 

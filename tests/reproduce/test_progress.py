@@ -86,11 +86,10 @@ def test_generation_estimate_follows_the_engine():
         9 * 100 * COST["rollouts_per_sample_feasible"] / COST["rollouts_per_s"])
 
 
-def test_the_paper_presets_estimate_by_hand_and_against_its_measured_run():
-    """The paper preset with the native engine, stage by stage from COST by hand, and within
-    25 % of the one-stretch run of 2026-12-05 (generate 2,977 s, features 811 s, experiment
-    1,471 s, report 255 s; docs/reproduce.md): the first ETA a researcher sees is not off by
-    hours, as the model before that run was (5 h 35 min)."""
+def test_the_paper_presets_estimate_by_hand():
+    """The paper preset with the native engine, stage by stage from COST by hand; the workers
+    divide the experiment stage alone, up to the CPUs there are. (How close the model comes to
+    a measured run is a benchmark figure, docs/reproduce.md, not something a test can know.)"""
     from relaff_jax.learn import forests_per_space
     from relaff_jax.reproduce.progress import COST, estimate_seconds
     from relaff_jax.runconfig import preset, resolve
@@ -102,10 +101,10 @@ def test_the_paper_presets_estimate_by_hand_and_against_its_measured_run():
     assert est["features"] == pytest.approx(COST["feature_compile"] + 90_000 / 110.0)
     assert est["experiment"] == pytest.approx(fits * COST["cpu_s_per_fit_compiled"] / 2)
     assert est["report"] == pytest.approx(fits * COST["report_s_per_forest"] + 9 * 2 * COST["report_per_example"])
-    measured = {"generate": 2977, "features": 811, "experiment": 1471, "report": 255}
-    for stage, t in measured.items():
-        assert abs(est[stage] / t - 1) < 0.25, (stage, est[stage], t)
-    assert abs(sum(est.values()) / sum(measured.values()) - 1) < 0.1
+    one, four = estimate_seconds(cfg, 1, 2), estimate_seconds(cfg, 4, 2)
+    assert one["experiment"] == pytest.approx(2 * est["experiment"])
+    assert four["experiment"] == pytest.approx(est["experiment"])  # two CPUs: two workers at most
+    assert {k: v for k, v in one.items() if k != "experiment"} == {k: v for k, v in est.items() if k != "experiment"}
     # the report's floor holds for a small sweep
     assert estimate_seconds(preset("tiny"), 2, 2)["report"] >= COST["report_fixed"]
 

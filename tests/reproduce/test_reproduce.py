@@ -3,12 +3,11 @@
 The simulation and the perception are replaced by numpy stand-ins (rollouts and features drawn
 from the rollout key / index), so these tests run the real dataset, experiment and report
 stages in seconds; they check the driver, not any result. The end-to-end run with the arm's
-actions is tests/test_reproduce_e2e.py.
+actions is tests/e2e/test_reproduce_e2e.py. The stand-ins are tests/helpers/standins.py.
 """
 import argparse
 import io
 import json
-import os
 import shutil
 import signal
 import subprocess
@@ -25,56 +24,20 @@ from relaff_jax import reproduce as R
 from relaff_jax import runconfig
 from relaff_jax.cli import reproduce as cli_reproduce
 from relaff_jax.config import override
-from relaff_jax.constants import ACTIONS, FAMILIES
+from relaff_jax.constants import FAMILIES
 from relaff_jax.errors import UserError
 from relaff_jax.reproduce import features as stage_features
 from relaff_jax.reproduce import generate as stage_generate
 
-# the tiny preset, smaller still: three actions, 4-tree forests, two sizes, no example scenes
-# (the stand-in rollouts have no scene to draw)
+from helpers import TESTS, standins
+from helpers.standins import HOOKS, feature_factory, rollout_factory
+
 ACTS = ("lift", "take", "pour")
-FAST = {"reproduce.actions": ACTS, "dataset.n_samples": 32, "experiment.forest.base_trees": 4,
-        "experiment.forest.max_trees": 4, "experiment.sizes": (4, 10), "reproduce.examples_per_action": 0}
-FEATURE_CONFIG = {"kind": "numpy stand-in"}
-
-
-def rollout_factory(action, batch, stop_after=None):
-    calls = [0]
-
-    def fn(key, b):
-        calls[0] += 1
-        if stop_after is not None and calls[0] > stop_after:
-            raise KeyboardInterrupt  # what Ctrl-C does mid-stage
-        rng = np.random.default_rng(np.asarray(key).tolist() + [ACTIONS.index(action)])
-        rel = rng.integers(0, 3, b)
-        dist = np.where(rel == 0, rng.uniform(0.1, 1.2, b), rng.uniform(0.03, 0.2, b))
-        return {"label": rng.random(b) < np.where(rel == 0, 0.25, 0.75),
-                "relation": rel.astype(np.int32), "cog_distance": dist.astype(np.float32),
-                "toy": np.asarray(("ball", "cube"))[rng.integers(0, 2, b)],
-                "other": np.asarray(("plate", "cup"))[rng.integers(0, 2, b)]}
-
-    return fn, {"stand_in": action}, None
-
-
-def feature_factory(seed):
-    def compute(s):
-        rng = np.random.default_rng([seed, int(s["rollout"][0])])
-        n = len(s["label"])
-        pca = rng.normal(size=(n, 18)).astype(np.float32)
-        pca[:, 9] = s["cog_distance"] + 0.3 * s["label"]  # something learnable
-        return {"pca": pca, "rhf": rng.random((n, 300)).astype(np.float32), "unseen": np.zeros((n, 2), bool)}
-
-    return compute, dict(FEATURE_CONFIG, seed=seed)
-
-
-HOOKS = dict(rollout_factory=rollout_factory, feature_factory=feature_factory,
-             feature_config_fn=lambda seed: dict(FEATURE_CONFIG, seed=seed))
+FAST = dict(standins.SMALL_RUN, **{"reproduce.actions": ACTS})
 
 
 def run(out, seed=3, **kw):
-    args = dict(HOOKS, overrides=FAST, jobs=1, progress=False)
-    args.update(kw)
-    return R.reproduce(out, "tiny", seed, **args)
+    return standins.run(out, ACTS, seed, **kw)
 
 
 def statuses(log):
@@ -249,8 +212,8 @@ def test_forced_stage_with_identical_output_keeps_the_later_ones(base):
 KILL_SCRIPT = textwrap.dedent("""
     import sys
     sys.path.insert(0, {tests!r})
-    import test_reproduce as T
-    T.run(sys.argv[1])
+    from helpers import standins
+    standins.run(sys.argv[1], {acts!r})
 """)
 
 
@@ -269,7 +232,7 @@ def test_interrupted_and_killed_run_continues_to_the_same_results(base, tmp_path
     assert not (out / "data" / "take" / D.SELECTION).exists()
 
     script = tmp_path / "go.py"
-    script.write_text(KILL_SCRIPT.format(tests=os.path.dirname(__file__)))
+    script.write_text(KILL_SCRIPT.format(tests=str(TESTS), acts=ACTS))
     proc = subprocess.Popen([sys.executable, str(script), str(out)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     blocks = out / "results" / "pca" / "blocks"
     t0 = time.time()
@@ -426,7 +389,7 @@ def test_a_corrupt_feature_chunk_is_reported_and_recomputed(base, tmp_path, monk
     """One flipped byte in a feature chunk: the status names it, and both a plain rerun and
     --force features recompute it (the forced rerun used to fail on the same error)."""
     out0, *_ = base
-    # R.status rebuilds the run from run.json: give it the stand-in perception of this module
+    # R.status rebuilds the run from run.json: give it the stand-in perception
     monkeypatch.setattr(stage_features, "factories_for", lambda cfg: (feature_factory, HOOKS["feature_config_fn"]))
     for force in ((), ("features",)):
         out = tmp_path / f"run{len(force)}"
@@ -577,13 +540,14 @@ def test_the_heartbeat_records_the_running_stage(tmp_path, monkeypatch):
 TERM_SCRIPT = textwrap.dedent("""
     import json, sys
     sys.path.insert(0, {tests!r})
-    import test_reproduce as T
+    from helpers import standins as T
     from relaff_jax import cli
     from relaff_jax.reproduce import features, generate
     slow = lambda a, b: (lambda fn: (lambda k, n: (__import__("time").sleep(0.5), fn(k, n))[1]))(T.rollout_factory(a, b)[0])
     generate.rollout_factory_for = lambda cfg: (lambda a, b: (slow(a, b), {{"stand_in": a}}, None))
     features.factories_for = lambda cfg: (T.feature_factory, T.HOOKS["feature_config_fn"])
-    sets = [x for k, v in T.FAST.items() for x in ("--set", f"{{k}}={{json.dumps(v)}}")]
+    fast = dict(T.SMALL_RUN, **{{"reproduce.actions": {acts!r}}})
+    sets = [x for k, v in fast.items() for x in ("--set", f"{{k}}={{json.dumps(v)}}")]
     sys.exit(cli.main(["reproduce", "--preset", "tiny", "--out", sys.argv[1], "--seed", "3", "--jobs", "1",
                        "--no-progress"] + sets))
 """)
@@ -593,7 +557,7 @@ TERM_SCRIPT = textwrap.dedent("""
 def test_sigterm_is_one_line_and_the_run_log_says_terminated(tmp_path):
     out = tmp_path / "run"
     script = tmp_path / "go.py"
-    script.write_text(TERM_SCRIPT.format(tests=os.path.dirname(__file__)))
+    script.write_text(TERM_SCRIPT.format(tests=str(TESTS), acts=ACTS))
     proc = subprocess.Popen([sys.executable, str(script), str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     t0 = time.time()

@@ -11,44 +11,12 @@ from relaff_jax.cli import sim as cli_sim
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.errors import UserError
 from relaff_jax.sim import bodies, geometry, labels, native, planning, programs, rollouts, templates
-from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
-from relaff_jax.sim import world as wd
+
+from helpers.scenes import BASE_ROWS, OBST_ROWS, RAKE_ROWS, hand_built, quat
 
 B = 8
-CUP_FLOOR = dict(lib.get("cup").parts)["base"].size[2]
-HELD = wd.PhysicsConfig().held_rake_pos
 
-
-def quat(yaw):
-    return [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
-
-
-# (toy, other, toy xyz, other xyz, other yaw); toy+base scenes shared by seven actions
-BASE_ROWS = [
-    ("block", "cup", (0.8, 0.0, CUP_FLOOR + 0.002), (0.8, 0.0, 0.0), 0.0),  # 0 inside
-    ("block", "tray", (0.7, -0.3, 0.022), (0.7, -0.3, 0.0), 0.2),  # 1 on top of a flat base
-    ("block", "cup", (0.8, 0.45, 0.0), (0.8, 0.0, 0.0), 0.0),  # 2 beside, 45 cm apart
-    ("ball", "bowl", (0.6, 0.5, 0.012), (0.6, 0.5, 0.0), 0.5),  # 3 inside
-    ("block", "plate", (1.55, -0.3, 0.0), (0.9, -0.6, 0.0), 0.0),  # 4 beside, toy out of reach
-    ("toy_car", "book", (0.9, 0.2, 0.032), (0.9, 0.2, 0.0), 0.0),  # 5 on top
-    ("block", "open_box", (0.75, -0.15, 0.0), (0.75, 0.05, 0.0), 0.0),  # 6 beside, 7.5 cm gap
-    # 7 beside, far; the car's long side 25 deg off take's closing axis (11 cm across the
-    # 10 cm opening: the pads land on its corners and may turn it into the gap)
-    ("toy_car", "tray", (0.604, -0.667, 0.0), (0.5, 0.95, 0.0), 0.0),
-]
-OBST_ROWS = [
-    ("block", "brick", (0.8, 0.0, 0.0), (0.6, 0.0, 0.0), 0.0),  # 0 brick in the way
-    ("block", "brick", (0.8, 0.0, 0.0), (0.6, 0.5, 0.0), 0.0),  # 1 brick far off the line
-    ("block", "bottle", (1.5, 0.0, 0.0), (1.3, 0.0, 0.0), 0.0),  # 2 toy out of reach
-    ("ball", "vase", (0.7, -0.4, 0.0), (0.4, 0.3, 0.0), 0.0),  # 3 vase far off the line
-] * 2
-RAKE_ROWS = [
-    ("ball", "rake_short", (0.9, 0.3, 0.0), HELD, 0.0),  # 0 within reach of the rake
-    ("block", "rake_long", (1.45, -0.2, 0.0), HELD, 0.0),  # 1 beyond the arm, within the rake's
-    ("ball", "rake_long", (1.75, 0.0, 0.0), HELD, 0.0),  # 2 beyond arm + rake: infeasible
-    ("block", "rake_short", (0.3, 0.1, 0.0), HELD, 0.0),  # 3 too close to put the head behind
-] * 2
 
 # Obvious outcomes: True / False per scene, None where physics may go either way.
 T, F, _ = True, False, None
@@ -65,17 +33,6 @@ EXPECT = {
     "unobstruct": [T, F, F, F] * 2,
     "rake": [T, _, F, F] * 2,
 }
-
-
-def hand_built(w, rows):
-    pair, qpos = [], []
-    for toy, other, txyz, oxyz, oyaw in rows:
-        q = np.array(w.mj_model.qpos0, np.float32)
-        q[w.toy_qpos:w.toy_qpos + 7] = [*txyz, *quat(0.3)]
-        q[w.obj_qpos:w.obj_qpos + 7] = [*oxyz, *quat(oyaw)]
-        pair.append(w.pair_id(toy, other))
-        qpos.append(q)
-    return jnp.asarray(pair, jnp.int32), jnp.asarray(np.stack(qpos))
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ import mujoco
 import numpy as np
 import pytest
 
-from test_actions import BASE_ROWS, OBST_ROWS, RAKE_ROWS, hand_built
 
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.errors import UserError
@@ -17,6 +16,8 @@ from relaff_jax.sim import native, native_batch, native_program, native_settle, 
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
+
+from helpers.scenes import BASE_ROWS, OBST_ROWS, RAKE_ROWS, hand_built
 
 CFG = templates.ActionConfig()
 FIELDS = ("label", "com0", "com_m", "com_end", "qpos_final", "reach_after", "settled")
@@ -68,7 +69,7 @@ def test_sensor_models_same_physics():
 
 @pytest.fixture(scope="module")
 def planned():
-    """Hand-built scenes of test_actions settled in C, and the JAX plan of every action."""
+    """Hand-built scenes (helpers/scenes.py) settled in C, and the JAX plan of every action."""
     w = wd.build_world(CFG.phys)
     prepare_fn, _ = rollouts.jitted_stage_fns(CFG)
     out = {}

@@ -1,4 +1,4 @@
-"""Motor programs v2 (issue 43): grasps that keep the palm off the objects, a squeeze from the
+"""Motor programs v2: grasps that keep the palm off the objects, a squeeze from the
 held weight, goals read at rest; v1 one ``--set`` away. Fast tests build programs without
 simulating; the slow ones replay them in MuJoCo C and read the contacts (``native_forces``)."""
 import dataclasses

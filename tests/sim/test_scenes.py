@@ -1,4 +1,4 @@
-"""Scene sampling and MJX settling (issue 2 checks), at batch 8."""
+"""Scene sampling and MJX settling, at batch 8."""
 import json
 import subprocess
 import sys
@@ -15,23 +15,9 @@ from relaff_jax.sim import native
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
 
+from helpers.scenes import hand_built
+
 B = 8
-
-
-def quat(yaw):
-    return [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
-
-
-def hand_built(w, rows):
-    """rows: (toy, other, toy_xyz, obj_xyz, obj_yaw) -> (pair, qpos0) at batch len(rows)."""
-    pair, qpos = [], []
-    for toy, other, txyz, oxyz, oyaw in rows:
-        q = np.array(w.mj_model.qpos0, np.float32)
-        q[w.toy_qpos:w.toy_qpos + 7] = [*txyz, *quat(0.3)]
-        q[w.obj_qpos:w.obj_qpos + 7] = [*oxyz, *quat(oyaw)]
-        pair.append(w.pair_id(toy, other))
-        qpos.append(q)
-    return jnp.asarray(pair, jnp.int32), jnp.asarray(np.stack(qpos))
 
 
 def test_hand_built_relations(scene_world, settle):

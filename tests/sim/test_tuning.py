@@ -1,8 +1,8 @@
-"""Issue 14's arm-world tuning (``PhysicsConfig.arm_*``, ``ActionConfig.stop_at_program_end``):
+"""The arm world's tuning (``PhysicsConfig.arm_*``, ``ActionConfig.stop_at_program_end``):
 the geom pairs and contact slots MJX compiles, the steps each action runs and ``templates.untuned``
 (today's world, kept for the benchmark). The early stop's effect on outcomes is checked in C
-(deterministic stepping) in ``test_native_engine.py``; the tuned MJX's labels by the hand-built
-scenes of ``test_actions.py``."""
+(deterministic stepping) in ``sim/test_native_engine.py``; the tuned MJX's labels by the hand-built
+scenes of ``sim/test_actions.py``."""
 import dataclasses
 
 import mujoco
@@ -26,6 +26,17 @@ def _pairs(phys):
 def _groups(m):
     """{((geom type, geom type), condim): pairs} of MJX's collision functions in model ``m``."""
     return {(tuple(int(t) for t in k.types), int(k.condim)): len(v) for k, v in cd._geom_groups(m).items()}
+
+
+# contacts one pair gives in each of MJX's collision functions (geom types: 0 plane, 2 sphere,
+# 3 capsule, 6 box; mujoco/mjx/_src/collision_driver.py, _COLLISION_FUNC)
+NCON = {(0, 2): 1, (0, 6): 4, (2, 3): 1, (2, 6): 1, (3, 6): 2, (6, 6): 4}
+
+
+def _slots(groups, cap):
+    """Contact slots of ``_groups``' pairs: each function's pairs (at most ``cap`` of them
+    unless a plane is involved) times the contacts one pair gives."""
+    return sum((n if cap is None or 0 in types else min(n, cap)) * NCON[types] for (types, _), n in groups.items())
 
 
 def test_run_steps_by_hand():
@@ -61,8 +72,9 @@ def test_tuned_world_pairs_and_slots():
     assert groups[((6, 6), 4)] == 12
     assert groups[((6, 6), 3)] == 11
     # contact slots MJX allocates: every pair's contacts untuned, 6 pairs per function tuned
-    assert len(cd.make_condim(mu)) == 138
-    assert len(cd.make_condim(m)) == 79
+    # (planes take no broad phase, so no cap), by hand from the pairs per function above
+    assert len(cd.make_condim(mu)) == _slots(_groups(mu), None) == 1 + 4 * 4 + 2 * 4 + 8 + 11 * 4 + 1 + 6 * 2 + 12 * 4
+    assert len(cd.make_condim(m)) == _slots(_groups(m), 6) == 1 + 4 * 4 + 2 * 4 + 6 + 6 * 4 + 6 * 4
 
 
 def test_palm_modes_pairs():
@@ -128,9 +140,9 @@ def test_disagreement_classes_by_hand():
 
 def _bench(name):
     import importlib.util
-    import pathlib
+    from helpers import ROOT
 
-    path = pathlib.Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    path = ROOT / "benchmarks" / f"{name}.py"
     spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
