@@ -13,19 +13,28 @@ import paper_stages as P  # noqa: E402
 
 
 def test_projection_hand_worked():
+    """The projection on two timed actions, from the script's record of the paper run
+    (``PAPER_RUN_*``, which a test cannot know independently, so it is read, not copied)."""
     rollout = [dict(action="lift", per_s=100.0, first_s=30.0, batch=1000, n=2000),
                dict(action="take", per_s=200.0, first_s=5.0, batch=1000, n=2000)]
     got = P.project(rollout, {"rates": {"new": 100.0}})
-    # lift 20,480 / 100 + take 181,248 / 200 + the other seven's 246,784 at the mean 150 /s,
-    # plus one compile: the first call's 30 s less one batch at the rate (10 s)
-    others = 31_744 + 20_480 + 34_816 + 14_336 + 46_080 + 54_272 + 45_056
-    assert others == 246_784
-    data = 204.8 + 906.24 + others / 150 + 20.0
+    runs = P.PAPER_RUN_ROLLOUTS
+    # lift at 100 /s, take at 200 /s, the other seven at the mean 150 /s, plus one compile:
+    # the first call's 30 s less one batch at the rate (10 s)
+    others = sum(n for a, n in runs.items() if a not in ("lift", "take"))
+    assert len(runs) == 9 and others == sum(runs.values()) - runs["lift"] - runs["take"]
+    data = runs["lift"] / 100.0 + runs["take"] / 200.0 + others / 150.0 + 20.0
+    features = P.PAPER_SCENES / 100.0
+    experiment = P.PAPER_RUN_S["experiment"] * P.EXPERIMENT_RATIO
+    report = P.PAPER_RUN_S["report"] / P.REPORT_RATIO
     assert got["projected"]["data"] == pytest.approx(data)
-    assert got["projected"]["features"] == pytest.approx(900.0)  # 90,000 scenes at 100 /s
-    assert got["projected"]["experiment"] == pytest.approx(1_624.5)  # the paper run's 2,850 s x 0.57
-    assert got["projected"]["report"] == pytest.approx(1_942 / 2.51)  # the stage's reference / new
-    assert got["projected"]["total"] == pytest.approx(data + 900 + 1_624.5 + 1_942 / 2.51)
-    assert got["measured"] == {"data": 7_014, "features": 1_457, "experiment": 2_850, "report": 1_942,
-                               "total": 13_263}
-    assert sum(P.PAPER_RUN_ROLLOUTS.values()) == 448_512  # docs/reproduce.md, the paper run
+    assert got["projected"]["features"] == pytest.approx(features)
+    assert got["projected"]["experiment"] == pytest.approx(experiment)
+    assert got["projected"]["report"] == pytest.approx(report)
+    assert got["projected"]["total"] == pytest.approx(data + features + experiment + report)
+    assert got["measured"] == dict(P.PAPER_RUN_S, total=sum(P.PAPER_RUN_S.values()))
+    # a faster rollout rate projects a shorter data stage and leaves the other stages alone
+    fast = P.project([dict(r, per_s=2 * r["per_s"]) for r in rollout], {"rates": {"new": 100.0}})
+    assert fast["projected"]["data"] < got["projected"]["data"]
+    assert {k: fast["projected"][k] for k in ("features", "experiment", "report")} == \
+        {k: got["projected"][k] for k in ("features", "experiment", "report")}
