@@ -161,7 +161,7 @@ def experiment_preset(name: str) -> ExperimentConfig:
     the compiled engine, like ``paper``. ``quick`` keeps the default ``fast`` engine, whose
     forests are the same, and so does every preset built on it."""
     # the long presets build their forests with the compiled engine: the same forests
-    # (tests/test_engine.py), 4-10x faster per forest, for a ~26 s numba compile on first use
+    # (tests/learn/test_engine.py), 4-10x faster per forest, for a ~26 s numba compile on first use
     compiled = ForestConfig(engine="compiled")
     if name == "paper":  # without the outcomes the held-out "best" rows and the threshold study are not measurable
         return ExperimentConfig(keep_outcomes=True, forest=compiled)
@@ -204,7 +204,7 @@ def check_experiment_node(cfg: ExperimentConfig) -> None:
 
 
 # ExperimentConfig keys (dotted) that change no result: a folder made with other values holds the
-# same experiment. The forest engines build bit-identical forests (tests/test_engine.py), so a run
+# same experiment. The forest engines build bit-identical forests (tests/learn/test_engine.py), so a run
 # may resume with another; the sweep never reads the analysis keys, which a folder begun before
 # they existed lacks.
 SPEED_ONLY = ("forest.engine",)

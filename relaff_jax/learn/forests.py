@@ -131,7 +131,7 @@ class ForestConfig:
     per_tree: str = "bootstrap"
     # "fast": the same trees built by scikit-learn's Cython builder without the estimator and
     # evaluated in one jitted program (learn/engine.py), bit-identical to "sklearn", the
-    # RandomForestClassifier reference (tests/test_engine.py); "compiled": the same trees and
+    # RandomForestClassifier reference (tests/learn/test_engine.py); "compiled": the same trees and
     # predictions from scikit-learn's builder re-expressed in numba, many forests per call
     # (learn/compiled/, docs/learning.md)
     engine: str = "fast"
