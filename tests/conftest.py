@@ -51,15 +51,3 @@ def scene_world():
 def settle(scene_world):
     """jitted ``settle_fn(pair, qpos0, intended)`` of the default config."""
     return scenes.jitted_scene_fns(scene_world)[1]
-
-
-def pytest_collection_modifyitems(config, items):
-    """Under pytest-xdist's ``--dist loadgroup`` a file's tests go to one worker, so its module
-    fixtures are built once; the tests on the session's ``scene_run`` folder (report and
-    notebooks) share one worker for the same reason. A test's own ``xdist_group`` wins."""
-    if not config.pluginmanager.hasplugin("xdist"):
-        return
-    for item in items:
-        if item.get_closest_marker("xdist_group") is None:
-            group = "scene_run" if "scene_run" in item.fixturenames else item.nodeid.split("::")[0]
-            item.add_marker(pytest.mark.xdist_group(group))
