@@ -217,7 +217,7 @@ def project(row: dict, nine: tuple | None = None) -> str:
 def refusal_seconds(timeout: float = 1.0) -> float:
     """Seconds until ``cluster.connect`` refuses a scheduler that is not there (port 9, the
     discard port: nothing listens), with ``timeout``: a bad ``--cluster`` must fail at once,
-    not hang (was a timed assertion in tests/test_cluster.py)."""
+    not hang (was a timed assertion in tests/cluster/test_cluster.py)."""
     from relaff_jax import cluster as C
     from relaff_jax.errors import UserError
 

@@ -1,5 +1,6 @@
 """Shared fixtures: the world and its jitted settle function are built once per session
-(compiling an MJX step costs tens of seconds on two cores)."""
+(compiling an MJX step costs tens of seconds on two cores); the fixtures several files share
+are in helpers/fixtures.py, the shared stand-ins and scenes in helpers/ (tests/helpers/__init__.py)."""
 import atexit
 import os
 import shutil
@@ -37,6 +38,8 @@ _preload_libusb()
 import pytest  # noqa: E402
 
 from relaff_jax.sim import scenes, world  # noqa: E402
+
+pytest_plugins = ["helpers.fixtures"]
 
 
 @pytest.fixture(scope="session")

@@ -10,7 +10,7 @@ target pool once, and the sweep takes its training and test rows from it).
 
 The paper's five (NB, DB1, DBn, CB1, CBn) are registered here as built-ins with the same
 signature. The sweep runs them through their plan (``protocol.condition_plan``: shared test
-columns, the same bits as before conditions were registered; ``tests/test_plugins.py`` checks
+columns, the same bits as before conditions were registered; ``tests/learn/test_plugins.py`` checks
 that each built-in's columns are the plan's); a user's conditions run after them, one learner
 per variant, appended to the condition axis (``user_conditions.py``). A user registers conditions with
 ``@register_condition("NAME")`` in a Python file (``relaff experiment --plugins FILE.py``) or in an

@@ -3,7 +3,7 @@
 Takes states ``X: (N, D)`` float32 and labels ``y: (N,)`` bool; gives fitted forests
 (``fit``) and their 0/1 predictions, one forest (``predict``) or a block of forests on
 shared test columns (``predict_many``). All three engines give bit-identical forests and
-predictions (``tests/test_engine.py``): ``fast`` builds the trees with scikit-learn's own
+predictions (``tests/learn/test_engine.py``): ``fast`` builds the trees with scikit-learn's own
 Cython builder without the estimator (``engine_fit``) and evaluates many forests in one
 jitted program (``engine_eval``); ``sklearn`` is ``RandomForestClassifier``
 (``forests.fit_forest`` / ``predict_class``); ``compiled`` builds the same trees with

@@ -3,7 +3,7 @@
 Takes states ``X: (N, D)`` float32, labels ``y: (N,)`` and a seed; ``fit_trees`` gives a
 ``Trees``: the T fitted ``sklearn.tree._tree.Tree`` objects (node arrays) and the classes,
 exactly the trees ``RandomForestClassifier(random_state=seed).fit(X, y)`` builds with the
-settings of ``ForestConfig`` (scikit-learn 1.9.1, pinned; ``tests/test_engine.py`` checks
+settings of ``ForestConfig`` (scikit-learn 1.9.1, pinned; ``tests/learn/test_engine.py`` checks
 the private API and compares predictions bit for bit).
 
 What ``RandomForestClassifier.fit`` does, and what is kept here (sklearn/ensemble/_forest.py,

@@ -17,7 +17,7 @@ scatter and RHF counts see the same valid entries in the same order (the RHF cou
 integers, so their tiling does not matter). Overflow flags are
 those of the full capacities: a group with more than the largest bucket's tiles runs at the
 config's capacities, where the chain sets ``tile_overflow`` itself; a smaller buffer can
-never overflow (object pixels <= K * tile^2). Tested: ``tests/test_features.py``.
+never overflow (object pixels <= K * tile^2). Tested: ``tests/perception/test_features.py``.
 """
 from __future__ import annotations
 

@@ -91,7 +91,7 @@ def jitted_geoms(world: wd.World):
 
 # Scenes per perception call inside a feature chunk. The chain's per-scene cost grows with the
 # batch (640 x 480 rays per scene: a call of 32 scenes streams ~8x the working set of 4 through
-# the caches); features do not depend on it, bit for bit (tests/test_features.py), so a chunk
+# the caches); features do not depend on it, bit for bit (tests/perception/test_features.py), so a chunk
 # of ``feature_batch`` samples is perceived in calls of this many (docs/perception.md,
 # "Performance notes").
 SUB_BATCH = 4

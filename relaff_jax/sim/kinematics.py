@@ -224,7 +224,7 @@ def solve_ik_path(arm: Arm, cfg: ArmConfig, targets: IKTarget, q_init: jax.Array
     the later rows hold the last solution with zero residuals and ``reachable`` False
     (``lax.cond``: skipped, not computed). A lift uses 3 of the 6 targets, so its plan costs
     about half; the solved rows are bit-identical to those of a full solve
-    (``tests/test_arm.py``)."""
+    (``tests/sim/test_arm.py``)."""
 
     def solve(q_prev, target):
         res = solve_ik(arm, cfg, target, q_prev)

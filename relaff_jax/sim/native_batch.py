@@ -6,7 +6,7 @@ before the action; gives ``execute_native``, the same per-scene fields as MJX's
 ``simulate.make_simulate_fn`` (labels, centres of mass, final states), computed by MuJoCo C
 (``mj_step``, float64) with the same grasp-lock rule, weld relpose, measuring step and outcome
 rules. It equals ``native.replay_native`` (one ``MjData`` per scene) bit for bit, at any
-thread count and chunk size (``tests/test_native_engine.py``).
+thread count and chunk size (``tests/sim/test_native_engine.py``).
 
 How the grasp lock is read: ``mujoco.batch`` cannot bind contacts, so every scene's model
 carries four contact sensors (``sensor_models``: each finger pad against the toy body and

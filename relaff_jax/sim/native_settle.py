@@ -5,7 +5,7 @@ Takes the arm-less ``World`` (``World.mj_models``, one model per pair), placemen
 ``scenes.make_settle_fn`` (settled state, relation, COG distance, at rest) computed by
 ``mj_step`` in float64, with a held rake pinned after every step exactly as MJX and
 ``native.settle_native`` pin it. It equals ``settle_native`` (one ``MjData`` per scene) bit
-for bit at any thread count (``tests/test_native_engine.py``); how far it agrees with MJX's
+for bit at any thread count (``tests/sim/test_native_engine.py``); how far it agrees with MJX's
 settle is measured in ``docs/scenes.md`` ("Native settle").
 """
 from __future__ import annotations

@@ -27,7 +27,7 @@ target is (``programs.toy_reachable``); unobstruct's two are screened apart. The
 scenes' plans are what the plan function gives every infeasible scene (home waypoints,
 ``feasible`` False); only their ``ik_error``, never solved, is NaN. The other scenes are planned by the same jitted function in calls of
 ``PLAN_CHUNK`` rows; a scene's plan does not depend on the other rows of its call
-(``tests/test_reach_screen.py`` checks the whole batch against the unscreened plan).
+(``tests/sim/test_reach_screen.py`` checks the whole batch against the unscreened plan).
 """
 from __future__ import annotations
 

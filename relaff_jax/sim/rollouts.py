@@ -122,7 +122,7 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     False by definition, so skipping its simulation changes no label; its ``qpos_final`` is
     the settled state and ``reach_after`` equals ``reach_before``. About 60 % of the sampled
     scenes are infeasible (out of the arm's 1.2 m reach in the 1.8 m workspace), so this
-    simulates ~2.5x fewer scenes. ``tests/test_actions.py`` checks the labels against running
+    simulates ~2.5x fewer scenes. ``tests/sim/test_actions.py`` checks the labels against running
     every scene.
 
     Fields: ``label``, ``relation`` (int codes into ``scenes.RELATIONS``), ``cog_distance``,

@@ -4,7 +4,7 @@
 Takes forests to fit (``X: (N, D)`` float32, ``y: (N,)`` binary labels, seeds); gives the
 same trees as ``RandomForestClassifier(random_state=seed)`` with ``ForestConfig``'s settings
 (``Forest``: node arrays equal to each estimator's ``tree_``) and bit-identical
-``predict_proba`` and ``predict`` (``tests/test_engine.py``).
+``predict_proba`` and ``predict`` (``tests/learn/test_engine.py``).
 
 - ``rng.py``: numpy's legacy MT19937 (seeding, masked ``randint``) and scikit-learn's ``rand_r``;
 - ``split.py``: one node's best split (``node_split_best``, Gini, constant-feature bookkeeping);

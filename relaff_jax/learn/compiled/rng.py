@@ -22,7 +22,7 @@ State: ``mt: (625,)`` int64, words 0..623 and the read position at ``mt[624]``; 
 is kept in [0, 2**32) in int64 arithmetic. For speed, not for other draws: ``mt_seed4``
 seeds four states at once, ``draw_bootstrap`` is ``randint(0, N)`` repeated with the read
 position in a register, and the functions called per draw are ``inline="always"`` (a numba
-call that passes an array pays reference counting). ``tests/test_engine.py`` checks the streams
+call that passes an array pays reference counting). ``tests/learn/test_engine.py`` checks the streams
 against numpy's.
 """
 from __future__ import annotations

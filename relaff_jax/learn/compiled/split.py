@@ -197,7 +197,7 @@ def may_win(l0, l1, r0, r1, wl, wr, cut):
     arithmetic the proxy is ``-wn + q / (wl wr)``, ``q = (r0^2 + r1^2) wl + (l0^2 + l1^2)
     wr``; the computed proxy (``gini_pair``) is within ~10 * 2**-53 * wn of it, and q and the
     product within a few 2**-53 relative, all far below MARGIN * wn: a candidate whose
-    computed proxy is above the best one always passes (tests/test_engine.py checks it on
+    computed proxy is above the best one always passes (tests/learn/test_engine.py checks it on
     mirrored candidates, whose exact proxies are equal)."""
     q = (r0 * r0 + r1 * r1) * wl + (l0 * l0 + l1 * l1) * wr
     return q > cut * (wl * wr)
