@@ -151,7 +151,7 @@ def test_cli_one_line_errors(tmp_path):
 
 ROLLOUT_KEYS = {"rollout", "toy", "other", "relation", "label", "replay_label", "plan_feasible", "resettled",
                 "palm_contact", "palm_steps", "palm_seconds", "palm_force_n", "peak_force_n", "peak_force_weights",
-                "peak_pair", "peak_step", "max_penetration_m", "penetration_pair", "speed_toy", "speed_other",
+                "peak_pair", "peak_step", "max_penetration_m", "held_penetration_m", "penetration_pair", "speed_toy", "speed_other",
                 "held_toy", "held_other", "speed_end", "object_peak_n", "press_n", "weight_n", "press_weights"}
 TOP_KEYS = {"version", "dataset", "action", "engine", "settle", "sample", "seed", "selection_sha256", "population",
             "n_audited", "thresholds", "rollouts", "checks", "by_label", "by_relation", "replay", "seconds"}
