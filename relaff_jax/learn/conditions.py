@@ -21,10 +21,7 @@ recorded in ``experiment.json`` with a sha256 of its source (``record``).
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import inspect
 import re
-import sys
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -86,6 +83,7 @@ class Condition:
 
 _REGISTRY: dict[str, Condition] = {}
 from relaff_jax.plugins import LOADING as _loading  # noqa: E402 (the plugin file being loaded)
+from relaff_jax.plugins import source_hash as _source_hash  # noqa: E402 (one hash for every plugin kind)
 _entry_points_loaded = False
 
 
@@ -107,15 +105,6 @@ def register_condition(name: str, fn: Callable | None = None):
         return f
 
     return add(fn) if fn is not None else add
-
-
-def _source_hash(f: Callable) -> str:
-    mod = sys.modules.get(getattr(f, "__module__", ""), None)
-    try:
-        src = inspect.getsource(mod) if mod is not None else inspect.getsource(f)
-    except (OSError, TypeError):
-        src = getattr(f, "__qualname__", repr(f))
-    return hashlib.sha256(src.encode()).hexdigest()
 
 
 def load_plugin_file(path: str | Path) -> list[str]:
