@@ -43,7 +43,7 @@ class ProgramInputs(NamedTuple):
     does step t belong to a segment that closes the fingers; grasp: 0 none, 1 the other
     object, 2 the toy (``templates.GRASPS``); measure: the control step of the lift-type goals
     (v2: the first step a goal may be read at); n_run: the control steps to simulate
-    (``templates.run_steps``); v2: whether goals are read at rest (``labels.read_at_rest``);
+    (``actions.tables.run_steps``); v2: whether goals are read at rest (``labels.read_at_rest``);
     guard (T,) bool: may a landing pad stop the descent at step t (``guard.guard_tables``),
     guard_rows (W,) bool the waypoints a stop replaces, aid the action id, q_way (B, W, 6) and
     grip_way (B, W) the plan's waypoints (float32; ``stop_descent`` recomputes ``ctrl``).
