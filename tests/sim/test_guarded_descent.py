@@ -35,6 +35,27 @@ def test_guard_tables_by_hand():
     assert seg.shape == (len(ACTIONS), templates.N_SEGMENTS) and rows.shape[1] == templates.N_SEGMENTS + 1
 
 
+def test_guard_tables_cover_a_user_action():
+    """The tables are the run's (the nine, then a user's), as the compiled programs index them:
+    a registered user action that grasps its base gets a row, guarded like lift's."""
+    import runpy
+
+    from helpers import ROOT
+    from relaff_jax.sim.actions.registry import names, unregister
+
+    nine = guard.guard_tables(V2)
+    runpy.run_path(str(ROOT / "examples" / "tenth_action.py"))  # registers "drag" (no plugin-file record left)
+    try:
+        seg, rows = guard.guard_tables(V2)
+        i = names().index("drag")
+        assert seg.shape[0] == rows.shape[0] == len(names()) == len(ACTIONS) + 1
+        np.testing.assert_array_equal(seg[:len(ACTIONS)], nine[0])
+        np.testing.assert_array_equal(rows[:len(ACTIONS)], nine[1])
+        assert np.flatnonzero(seg[i]).tolist() == [1, 2]  # the descent to the base's grasp and the dwell
+    finally:
+        unregister("drag")
+
+
 def test_landing_rule_by_hand():
     axis = np.array([0.0, 1.0, 0.0])  # the pad's closing axis
     up, face = np.array([0.0, 0.0, 1.0]), np.array([0.0, -1.0, 0.0])
