@@ -14,7 +14,7 @@ from relaff_jax.config.node import Node
 PROGRAMS = ("v1", "v2")
 # ActionConfig fields only v2 reads; a v1 dataset's sidecar leaves them out (templates.stored_config)
 V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window",
-             "guard_depth")
+             "guard_depth", "tilt_lean")
 
 # PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
 PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
@@ -222,6 +222,9 @@ class ActionConfig(Node):
     rest_window: int = 10  # control steps both objects must stay below scene.rest_speed
     guard_depth: float = 0.0  # m, v2: a pad landing on an object (a contact off its gripping
     # face) this deep stops the descent to a grasp where it is (sim/guard.py)
+    tilt_lean: str = "toy"  # v2, pour/slide: "toy" tips the base's side the toy stands on down, so a
+    # sliding toy leaves the hand; "robot" leans the tool towards the robot as v1 does (a toy
+    # on the near side then slides under the palm)
     arm: ArmConfig = ArmConfig()
     phys: PhysicsConfig = PhysicsConfig()
     scene: SceneConfig = SceneConfig()
@@ -239,6 +242,7 @@ class ActionConfig(Node):
         "squeeze_safety": Interval(float, 0.0, 1000.0, closed="right"),
         "rest_hold": count(0, 1_000_000),
         "rest_window": STEPS,
+        "tilt_lean": Options(("toy", "robot")),
         "guard_depth": length(1.0),  # 1 m: no contact is that deep, the guard never stops
         ("squeeze_min", "squeeze_max"): Rule(
             lambda c: c.squeeze_min <= c.squeeze_max,

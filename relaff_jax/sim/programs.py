@@ -106,6 +106,12 @@ def _program_lift(arm, cfg, sc: Scene, *, grasp_toy: bool, tilt: bool) -> Progra
         # towards the robot, the side the arm reaches more easily
         rot = axis_rotation(g.closing, jnp.deg2rad(cfg.tilt_deg))
         lean_out = jnp.dot(rot @ DOWN, unit_xy(g.xy)) > 0
+        if cfg.programs == "v2" and cfg.tilt_lean == "toy":
+            # the base's side under the toy goes down (the surface falls away from the tool's
+            # lean), so a sliding or toppling toy leaves the hand instead of passing under the
+            # palm; a toy within 1 cm of the grasp along the slope keeps the lean towards the robot
+            off = jnp.dot(toy.centre - g.xy, perp(g.closing))
+            lean_out = jnp.where(jnp.abs(off) > 0.01, jnp.dot(rot @ DOWN, perp(g.closing)) * off > 0, lean_out)
         rot = jnp.where(lean_out, rot.T, rot)
         targets.append(A.IKTarget(pos(g.tcp_z + cfg.lift_height), rot @ DOWN, rot @ g.closing,
                                   jnp.asarray(1.0), jnp.asarray(0.0)))

@@ -194,3 +194,29 @@ def test_forces_and_penetration_within_bounds(action):
     assert np.all(r["palm_steps"] <= PALM_CONTACT_STEPS) and np.all(r["palm"] == 0.0), r["palm"]
     assert np.all(r["press"] <= PRESS_WEIGHTS * r["weight"]), r["press"] / r["weight"]
     assert np.all(r["depth"] <= PENETRATION_M), r["depth"]
+
+
+def _surface_falls_towards(pr, d):
+    """Does the grasped base's surface, held at the tilt target (the last), fall towards the
+    horizontal direction d? Its normal is minus the tool's z (the tcp's approach axis)."""
+    normal = -np.asarray(pr.targets.approach[-1])
+    return float(np.dot(normal[:2], np.asarray(d)[:2])) > 0
+
+
+@pytest.mark.parametrize("action", ["pour", "slide"])
+def test_tilt_lowers_the_side_the_toy_stands_on(action):
+    # a cup 13 cm along a tray's long side from the grasp, on the robot's side and on the
+    # far side: v2 (tilt_lean="toy") lowers the cup's side in both, so a sliding cup leaves
+    # the hand; "robot" (v1's lean) lowers the far side whatever the cup, so the near cup
+    # slides back under the palm
+    robot = dataclasses.replace(V2, tilt_lean="robot")
+    for x, towards in ((0.57, -1.0), (0.83, 1.0)):
+        rows = ("cup", "tray", (x, 0.0, 0.02), (0.7, 0.0, 0.0))
+        p_toy, _ = prog(action, V2, *rows)
+        p_rob, _ = prog(action, robot, *rows)
+        p_v1, _ = prog(action, V1, *rows)
+        assert bool(p_toy.ok)
+        assert _surface_falls_towards(p_toy, (towards, 0.0))
+        assert _surface_falls_towards(p_rob, (1.0, 0.0))  # away from the robot at the origin
+        np.testing.assert_array_equal(np.asarray(p_rob.targets.pos), np.asarray(p_v1.targets.pos))
+        np.testing.assert_array_equal(np.asarray(p_rob.targets.approach), np.asarray(p_v1.targets.approach))
