@@ -33,7 +33,9 @@ def variant(entry: str) -> ActionConfig:
     cfg = dataclasses.replace(ActionConfig(), programs=version)
     for item in filter(None, rest.split(",")):
         k, v = item.split("=", 1)
-        cfg = dataclasses.replace(cfg, **{k: type(getattr(cfg, k))(v)})
+        kind = type(getattr(cfg, k))
+        value = v.lower() in ("1", "true", "yes") if kind is bool else kind(v)
+        cfg = dataclasses.replace(cfg, **{k: value})
     return cfg
 
 
@@ -44,6 +46,7 @@ def measure(action: str, cfg: ActionConfig, n: int, seed: int) -> dict:
     r = native_forces.physics(action, cfg, prep.pair[run], np.asarray(prep.scenes.qpos)[run],
                               np.asarray(prep.scenes.qvel)[run], plan)
     r["relation"] = np.asarray(prep.scenes.relation)[run]
+    r["names"] = np.asarray(prep.names)[run]
     return r
 
 
@@ -53,6 +56,8 @@ def main() -> None:
     ap.add_argument("actions", nargs="*", default=list(ACTIONS))
     ap.add_argument("--seed", type=int, default=11)
     ap.add_argument("--programs", nargs="+", default=["v1", "v2"])
+    ap.add_argument("--worst", type=int, default=0, help="also list the K programs with the largest press (x weight) "
+                    "and every one with a palm contact")
     a = ap.parse_args()
     rel = "/".join(RELATIONS)
     print(f"action version feasible | press max N (x weight) | peak max N (x weight) | depth max mm | held mm | "
@@ -70,6 +75,12 @@ def main() -> None:
                   f"{1e3 * r['held_depth'].max():5.1f} | {int((r['palm'] > 0).sum()):3d} ({by(r['palm'] > 0)}) | "
                   f"{int(r['label'].sum()):3d} ({by(r['label'])}) | {int((~r['settled']).sum()):3d}   ({time.time() - t:.0f} s)",
                   flush=True)
+            if a.worst:
+                xw = r["press"] / r["weight"]
+                for i in sorted(set(np.argsort(-xw)[:a.worst]) | set(np.flatnonzero(r["palm"] > 0))):
+                    print(f"    {'/'.join(map(str, r['names'][i]))} {RELATIONS[int(r['relation'][i])]}: press "
+                          f"{xw[i]:.1f} x weight, palm {r['palm'][i]:.1f} N over {int(r['palm_steps'][i])} steps, "
+                          f"held depth {1e3 * r['held_depth'][i]:.1f} mm, label {bool(r['label'][i])}", flush=True)
 
 
 if __name__ == "__main__":

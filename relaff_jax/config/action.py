@@ -14,7 +14,7 @@ from relaff_jax.config.node import Node
 PROGRAMS = ("v1", "v2")
 # ActionConfig fields only v2 reads; a v1 dataset's sidecar leaves them out (templates.stored_config)
 V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window",
-             "guard_depth", "tilt_lean")
+             "guard_depth", "tilt_lean", "tilt_sweep")
 
 # PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
 PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
@@ -225,6 +225,8 @@ class ActionConfig(Node):
     tilt_lean: str = "toy"  # v2, pour/slide: "toy" tips the base's side the toy stands on down, so a
     # sliding toy leaves the hand; "robot" leans the tool towards the robot as v1 does (a toy
     # on the near side then slides under the palm)
+    tilt_sweep: bool = True  # v2, pour/slide: the palm also clears the toy's diagonal, the height
+    # a toy tipping over in or on its base reaches (False: its height, as the other programs)
     arm: ArmConfig = ArmConfig()
     phys: PhysicsConfig = PhysicsConfig()
     scene: SceneConfig = SceneConfig()
@@ -243,6 +245,7 @@ class ActionConfig(Node):
         "rest_hold": count(0, 1_000_000),
         "rest_window": STEPS,
         "tilt_lean": Options(("toy", "robot")),
+        "tilt_sweep": Boolean(),
         "guard_depth": length(1.0),  # 1 m: no contact is that deep, the guard never stops
         ("squeeze_min", "squeeze_max"): Rule(
             lambda c: c.squeeze_min <= c.squeeze_max,

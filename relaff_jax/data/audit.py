@@ -37,18 +37,21 @@ from relaff_jax.data.store import read_sidecar
 from relaff_jax.sim import physics_bounds as bounds
 
 AUDIT_FILE = "audit.json"
-AUDIT_VERSION = 4  # 4: penetration held 0.1 s (was one step's); 3: force = the press held 0.1 s, penetration 3 mm
+AUDIT_VERSION = 5  # 5: a press under PRESS_FLOOR_N newtons passes; 4: penetration held 0.1 s (was one step's); 3: force = the press held 0.1 s, penetration 3 mm
 DEFAULT_SAMPLE = 64
 # The checks' bounds are the programs' (sim/physics_bounds.py; reasoning: docs/arm.md,
 # "Bounded forces"): a rollout fails a check when it has more hand-object contact steps than
-# PALM_CONTACTS, its press exceeds FORCE_WEIGHTS weights of the heavier object, a contact with
+# PALM_CONTACTS, its press exceeds FORCE_WEIGHTS weights of the heavier object and
+# FORCE_FLOOR_N newtons, a contact with
 # an object stays deeper than PENETRATION_M for 0.1 s (an impact's one-step depth is reported),
 # or an object not held by the hand moves faster than MOVING_M_S at the measuring step
 PALM_CONTACTS = bounds.PALM_CONTACT_STEPS
 FORCE_WEIGHTS = bounds.PRESS_WEIGHTS
+FORCE_FLOOR_N = bounds.PRESS_FLOOR_N
 PENETRATION_M = bounds.PENETRATION_M
 MOVING_M_S = bounds.MOVING_M_S
-THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "press_weights": FORCE_WEIGHTS, "press_steps": bounds.SUSTAIN_STEPS,
+THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "press_weights": FORCE_WEIGHTS, "press_floor_n": FORCE_FLOOR_N,
+              "press_steps": bounds.SUSTAIN_STEPS,
               "penetration_m": PENETRATION_M, "moving_m_s": MOVING_M_S}
 
 
@@ -193,7 +196,7 @@ def failures(row: Mapping[str, Any]) -> dict[str, bool]:
     speeds = [s for s, held in ((row["speed_toy"], row.get("held_toy")), (row["speed_other"], row.get("held_other")))
               if s is not None and not held]  # a held object moves with the arm
     return {"palm_contact": row["palm_steps"] > PALM_CONTACTS,
-            "force": row["press_weights"] > FORCE_WEIGHTS,
+            "force": not bool(bounds.press_ok(row["press_n"], row["weight_n"])),
             "penetration": _held_depth(row) > PENETRATION_M,
             "moving": bool(speeds) and max(speeds) > MOVING_M_S}
 
@@ -218,6 +221,7 @@ def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[
                              bound="no contact between the hand body (palm) and an object",
                              palm_seconds=_dist(arr("palm_seconds")), palm_force_n=_dist(arr("palm_force_n"))),
         "force": dict(count=count["force"], share=share("force"), bound_weights=FORCE_WEIGHTS,
+                      bound_floor_n=FORCE_FLOOR_N,
                       held_steps=bounds.SUSTAIN_STEPS,
                       weights=_dist(arr("press_weights")), newtons=_dist(arr("press_n")),
                       peak_weights=_dist(arr("peak_force_weights")), peak_newtons=_dist(arr("peak_force_n"))),
@@ -320,7 +324,7 @@ def format_audit(audits: list[Mapping[str, Any]]) -> str:
     lines.append(f"audited: sampled selected samples whose program ran / all of them. A rollout fails: palm = a "
                  f"contact between the hand body and an object; force = the summed normal force on an object held "
                  f"over {bounds.SUSTAIN_STEPS} steps (a press, not an impact) > {FORCE_WEIGHTS:g} weights of the "
-                 f"heavier object; pen. = a contact with an object deeper than "
+                 f"heavier object and > {FORCE_FLOOR_N:g} N; pen. = a contact with an object deeper than "
                  f"{1000 * PENETRATION_M:g} mm held over {bounds.SUSTAIN_STEPS} steps; moving = an object not held by "
                  f"the hand faster than {MOVING_M_S:g} m/s "
                  f"at the measuring step. A check passes when no audited rollout fails it. label agr.: the C replay's labels "

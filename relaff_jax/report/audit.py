@@ -21,7 +21,8 @@ from relaff_jax.data import audit as A
 from relaff_jax.report import folder as F
 from relaff_jax.report.figures import save_png
 
-CHECKS = (("palm_contact", "palm on an object"), ("force", f"press > {A.FORCE_WEIGHTS:g} weights"),
+CHECKS = (("palm_contact", "palm on an object"),
+          ("force", f"press > {A.FORCE_WEIGHTS:g} weights and {A.FORCE_FLOOR_N:g} N"),
           ("penetration", f"penetration held 0.1 s > {1000 * A.PENETRATION_M:g} mm"),
           ("moving", f"moving > {A.MOVING_M_S:g} m/s at measuring"))
 
@@ -84,7 +85,7 @@ def audit_blocks(audits: Mapping[str, Mapping[str, Any]], missing: Mapping[str, 
         "settled scene with the dataset's recorded config, every step's contacts read (`relaff audit DIR`, "
         "docs/audit.md). A rollout fails a check when the hand's palm touches an object; when the summed contact "
         f"normal force on an object held over 0.1 s (a press, not an impact) exceeds {A.FORCE_WEIGHTS:g} weights of "
-        "the heavier object; when a contact with an "
+        f"the heavier object and {A.FORCE_FLOOR_N:g} N (the least squeeze of two pads on a light pair); when a contact with an "
         f"object held over 0.1 s is deeper than {1000 * A.PENETRATION_M:g} mm (an impact's one-step depth is in "
         "audit.json, `peak_metres`); when an object not held by the hand moves faster than "
         f"{A.MOVING_M_S:g} m/s "

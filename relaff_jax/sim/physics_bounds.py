@@ -5,7 +5,14 @@ audit (``data/audit.py``, ``relaff audit``) checks them on a dataset's rollouts 
 tests/sim/test_programs_v2.py on replayed scenes. All are read by ``physics_probe.Probe``.
 """
 SUSTAIN_STEPS = 25  # control steps (0.1 s at 4 ms): a force held this long is a press, not an impact
-PRESS_WEIGHTS = 10.0  # the force on an object held over SUSTAIN_STEPS <= this x the heavier object's weight
+PRESS_WEIGHTS = 10.0  # the force on an object held over SUSTAIN_STEPS <= this x the heavier object's weight ...
+PRESS_FLOOR_N = 12.0  # ... or <= this many newtons: two pads at the least squeeze (ActionConfig.squeeze_min,
+# 5 N) plus a light pair's weight, which is more than 10 weights of a pair under 120 g (a block on a placemat)
+
+
+def press_ok(press_n, weight_n):
+    """Is a held force (N) within the bound, for the heavier object's weight (N)? Arrays broadcast."""
+    return (press_n <= PRESS_WEIGHTS * weight_n) | (press_n <= PRESS_FLOOR_N)
 PENETRATION_M = 0.003  # no contact with an object deeper than this held over SUSTAIN_STEPS (impacts: reported)
 PALM_CONTACT_STEPS = 0  # steps with a contact between the hand body (palm) and an object
 MOVING_M_S = 0.02  # an object not held by the hand at the measuring step (SceneConfig.rest_speed)

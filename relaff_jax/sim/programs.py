@@ -54,13 +54,25 @@ def _scene(geo: Geometry, pair: jax.Array, qpos: jax.Array) -> Scene:
     return Scene(toy, oth, g(geo.oth_inner), g(geo.toy_mass), g(geo.oth_mass), g(geo.toy_radius))
 
 
-def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Array]:
+def tipping_body(toy: Body, radius: jax.Array) -> Body:
+    """The toy's box grown upwards to its diagonal: the highest a toy tipping over about a
+    bottom edge reaches above its bottom (upright toys; its own frame's z is up). A ball
+    (``radius`` > 0) rolls instead: its box as it is."""
+    size = toy.hi - toy.lo
+    reach = jnp.sqrt(size[2] ** 2 + jnp.maximum(size[0], size[1]) ** 2)
+    return toy._replace(hi=toy.hi.at[2].set(jnp.where(radius > 0, toy.hi[2], toy.lo[2] + reach)))
+
+
+def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) -> tuple[Grasp, jax.Array]:
     """The grasp of the other object (base or obstacle) and the closing command: v1 as ever;
-    v2 with the palm clear of both objects and a squeeze for both objects' weight."""
+    v2 with the palm clear of both objects and a squeeze for both objects' weight. ``tilt``
+    (pour, slide; ``cfg.tilt_sweep``): the palm clears the toy's diagonal, since a tilted
+    toy may tip over inside or on its base."""
     g = top_down_grasp(arm, cfg, sc.oth)
     if cfg.programs == "v1":
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
-    g = clear_grasp(arm, cfg, g, sc.oth, sc.toy, jnp.zeros(3))
+    toy = tipping_body(sc.toy, sc.toy_radius) if tilt and cfg.tilt_sweep else sc.toy
+    g = clear_grasp(arm, cfg, g, sc.oth, toy, jnp.zeros(3))
     return g, squeeze_command(arm, cfg, sc.oth.half_width(g.closing), sc.toy_mass + sc.oth_mass)
 
 
@@ -95,7 +107,7 @@ def _transit_z(arm: A.Arm, cfg: ActionConfig, toy: Body, oth: Body) -> jax.Array
 
 def _program_lift(arm, cfg, sc: Scene, *, grasp_toy: bool, tilt: bool) -> Program:
     toy, oth = sc.toy, sc.oth
-    g, squeeze = _toy_grasp(arm, cfg, sc) if grasp_toy else _base_grasp(arm, cfg, sc)
+    g, squeeze = _toy_grasp(arm, cfg, sc) if grasp_toy else _base_grasp(arm, cfg, sc, tilt)
     up = jnp.maximum(_transit_z(arm, cfg, toy, oth), g.tcp_z + 0.05)
     pos = lambda z: g.xy + jnp.array([0.0, 0.0, 1.0]) * z
     targets = [top_down(pos(up), g.closing), top_down(pos(g.tcp_z), g.closing),

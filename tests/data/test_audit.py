@@ -115,21 +115,23 @@ def _row(**kw):
 
 def test_checks_count_failures_against_the_stated_bounds():
     rows = [_row(), _row(rollout=1, palm_contact=True, palm_steps=5, label=False, replay_label=False, relation="beside"),
-            _row(rollout=2, press_weights=A.FORCE_WEIGHTS + 1, max_penetration_m=A.PENETRATION_M * 2,
-                 speed_toy=A.MOVING_M_S * 1.5, replay_label=False),
-            _row(rollout=3, press_weights=A.FORCE_WEIGHTS, max_penetration_m=A.PENETRATION_M,
+            _row(rollout=2, press_weights=A.FORCE_WEIGHTS + 1, press_n=5.0 * (A.FORCE_WEIGHTS + 1),
+                 max_penetration_m=A.PENETRATION_M * 2, speed_toy=A.MOVING_M_S * 1.5, replay_label=False),
+            _row(rollout=3, press_weights=A.FORCE_WEIGHTS, press_n=5.0 * A.FORCE_WEIGHTS, max_penetration_m=A.PENETRATION_M,
                  speed_other=A.MOVING_M_S, peak_force_weights=50.0),  # on the bounds: not failures; an impact
             # (a one-step peak) above the bound is not a press
-            _row(rollout=4, speed_other=1.0, held_other=True)]  # a held object moves with the arm: no failure
+            _row(rollout=4, speed_other=1.0, held_other=True),  # a held object moves with the arm: no failure
+            # 11 weights of a 100 g pair, under the floor (the least squeeze): not a failure
+            _row(rollout=5, press_weights=11.0, press_n=11 * 0.981, weight_n=0.981)]
     s = A.summarise(rows, "native")
     c = s["checks"]
     assert (c["palm_contact"]["count"], c["force"]["count"], c["penetration"]["count"], c["moving"]["count"]) == (1, 1, 1, 1)
-    assert c["palm_contact"]["share"] == 0.2 and not c["palm_contact"]["pass"]
-    assert c["force"]["weights"] == {"median": 1.0, "p95": pytest.approx(np.quantile([1, 1, 11, 10, 1], 0.95)),
+    assert c["palm_contact"]["share"] == pytest.approx(1 / 6) and not c["palm_contact"]["pass"]
+    assert c["force"]["weights"] == {"median": 5.5, "p95": pytest.approx(np.quantile([1, 1, 11, 10, 1, 11], 0.95)),
                                      "max": 11.0}
     assert s["by_label"]["negative"] == {"n": 1, "palm_contact": 1, "force": 0, "penetration": 0, "moving": 0}
-    assert s["by_relation"]["on_top"]["n"] == 4
-    assert s["replay"]["agree"] == 4 and s["replay"]["disagreements"] == [2]
+    assert s["by_relation"]["on_top"]["n"] == 5
+    assert s["replay"]["agree"] == 5 and s["replay"]["disagreements"] == [2]
     assert A.summarise([_row()], "native")["checks"]["force"]["pass"]
     json.dumps(s)  # serialisable as it is
 
@@ -189,7 +191,7 @@ def test_audit_of_a_native_dataset_reproduces_its_labels(tmp_path):
 def test_report_section_plots_the_press_against_the_bound(tmp_path):
     from relaff_jax.report import audit as RA
 
-    rows = [_row(), _row(rollout=1, press_weights=A.FORCE_WEIGHTS * 2)]
+    rows = [_row(), _row(rollout=1, press_weights=A.FORCE_WEIGHTS * 2, press_n=5.0 * A.FORCE_WEIGHTS * 2)]
     a = dict(action="lift", engine="native", n_audited=2, population=2, rollouts=rows, **A.summarise(rows, "native"))
     blocks = RA.audit_blocks({"lift": a}, {}, tmp_path)
     assert (tmp_path / RA.F.FIG_AUDIT).is_file()

@@ -183,7 +183,7 @@ def test_toy_sliding_off_a_tilted_placemat_is_labelled_where_it_rests():
 @pytest.mark.parametrize("action", ["lift", "unobstruct"])
 def test_forces_and_penetration_within_bounds(action):
     from relaff_jax.sim import native_forces, rollouts
-    from relaff_jax.sim.physics_bounds import PALM_CONTACT_STEPS, PENETRATION_M, PRESS_WEIGHTS
+    from relaff_jax.sim.physics_bounds import PALM_CONTACT_STEPS, PENETRATION_M, press_ok
 
     prep = rollouts.make_batch_prepare_fn(action, V2, settle="native")(jax.random.PRNGKey(3), 16)
     run = np.flatnonzero(prep.plan.feasible)
@@ -192,7 +192,7 @@ def test_forces_and_penetration_within_bounds(action):
     r = native_forces.physics(action, V2, prep.pair[run], np.asarray(prep.scenes.qpos)[run],
                               np.asarray(prep.scenes.qvel)[run], plan)
     assert np.all(r["palm_steps"] <= PALM_CONTACT_STEPS) and np.all(r["palm"] == 0.0), r["palm"]
-    assert np.all(r["press"] <= PRESS_WEIGHTS * r["weight"]), r["press"] / r["weight"]
+    assert np.all(press_ok(r["press"], r["weight"])), (r["press"], r["weight"])
     assert np.all(r["depth"] <= PENETRATION_M), r["depth"]
 
 
@@ -220,3 +220,37 @@ def test_tilt_lowers_the_side_the_toy_stands_on(action):
         assert _surface_falls_towards(p_rob, (1.0, 0.0))  # away from the robot at the origin
         np.testing.assert_array_equal(np.asarray(p_rob.targets.pos), np.asarray(p_v1.targets.pos))
         np.testing.assert_array_equal(np.asarray(p_rob.targets.approach), np.asarray(p_v1.targets.approach))
+
+
+def test_tilted_base_grasp_clears_a_tipping_toy():
+    # a 12 cm can (6.5 cm square) in a bowl: lift's palm clears its top by palm_margin; pour's
+    # (tilt_sweep) clears its diagonal, the height it reaches tipping over about a bottom
+    # edge, sqrt(0.12^2 + 0.065^2) = 0.1365 m, or the grasp is refused
+    floor = dict(lib.get("bowl").parts)["base"].size[2]
+    rows = ("toy_can", "bowl", (0.7, 0.0, floor), (0.7, 0.0, 0.0))
+    lift, arm = prog("lift", V2, *rows)
+    pour, _ = prog("pour", V2, *rows)
+    flat, _ = prog("pour", dataclasses.replace(V2, tilt_sweep=False), *rows)
+    diag = float(np.hypot(0.12, 0.065))
+    assert bool(lift.ok) and bool(flat.ok)
+    np.testing.assert_allclose(palm_z(arm, flat), palm_z(arm, lift), atol=1e-6)
+    if bool(pour.ok):
+        np.testing.assert_allclose(palm_z(arm, pour) - palm_z(arm, lift), diag - 0.12, atol=1e-5)
+    else:  # the pads would hold less than min_grip of the bowl
+        assert lib.get("bowl").height - (palm_z(arm, lift) + diag - 0.12 - arm.palm_above_tip) < V2.min_grip
+    # a ball rolls: its height is all the palm clears
+    ball, _ = prog("pour", V2, "ball", "bowl", (0.7, 0.0, floor), (0.7, 0.0, 0.0))
+    ball_lift, _ = prog("lift", V2, "ball", "bowl", (0.7, 0.0, floor), (0.7, 0.0, 0.0))
+    np.testing.assert_allclose(palm_z(arm, ball), palm_z(arm, ball_lift), atol=1e-6)
+
+
+def test_press_floor_covers_the_least_squeeze():
+    from relaff_jax.sim.physics_bounds import PRESS_FLOOR_N, PRESS_WEIGHTS, press_ok
+
+    # two pads at the least squeeze on a 100 g pair: 10 N is 10.2 weights, within the floor
+    assert PRESS_FLOOR_N >= 2 * V2.squeeze_min
+    w = 0.1 * 9.81
+    assert 2 * V2.squeeze_min > PRESS_WEIGHTS * w and press_ok(2 * V2.squeeze_min + w, w)
+    # above both: refused; a heavy pair's 10 weights: within
+    assert not press_ok(PRESS_FLOOR_N + 0.1, w)
+    np.testing.assert_array_equal(press_ok(np.array([30.0, 30.0]), np.array([2.9, 3.1])), [False, True])
