@@ -5,9 +5,11 @@ by active tiles and cut into calls of ``from_sim.SUB_BATCH`` (4) as ``make_culle
 does; each call runs at its ``tile_capacity``. Every stage of the chain is jitted on its own
 (vmapped over the call's scenes, inputs computed by the stage before, untimed) and timed
 over all calls after one untimed pass: tile count, ray cast (``render_objects``), compaction,
-ray-hit normals, noise, voxel grid, PCA, RHF; then the whole chain (``make_culled_features``,
-today's path, the reference) in the same run. Prints ms per scene of each stage, its share
-of the sum and the whole chain's scenes/s.
+ray-hit normals, noise, voxel grid, PCA, RHF, and the RHF as it was (``rhf_histograms_fused``,
+the reference); then the whole chain (``make_culled_features``) with the RHF of now and with
+the one before, in the same run, rounds alternating. Asserts that both chains give the same
+bits. Prints ms per scene of each stage (process CPU seconds: the machine is shared), its
+share, and both chains' scenes/s (wall clock) and the ratio.
 
     python benchmarks/perception_stages.py [--actions lift take pour] [--scenes 64] [--rounds 3]
 """
@@ -28,7 +30,10 @@ import relaff_jax  # noqa: F401  (XLA flags before JAX work)
 from relaff_jax import perception as pc
 from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.perception import from_sim
-from relaff_jax.perception.descriptors import pca_object, rhf_histograms
+import contextlib
+
+from relaff_jax.perception import pipeline
+from relaff_jax.perception.descriptors import pca_object, rhf_histograms, rhf_histograms_fused
 from relaff_jax.perception.noise import add_depth_noise
 from relaff_jax.perception.raycast import surface_normals
 from relaff_jax.perception.render import active_tiles, compact_objects, render_objects
@@ -51,10 +56,11 @@ def stage_fns(geom_type, geom_seg, cfg):
     def pca2(vox):
         return [pca_object(vox["points"][o], vox["mask"][o], cfg.min_points) for o in range(2)]
 
-    def rhf(vox):
-        cnt = jnp.minimum(vox["count"], cfg.voxel.max_voxels)
-        return rhf_histograms(vox["points"][0], vox["normals"][0], cnt[0], vox["points"][1],
-                              vox["normals"][1], cnt[1], cfg.rhf)
+    def rhf(fn):
+        def f(vox):
+            cnt = jnp.minimum(vox["count"], cfg.voxel.max_voxels)
+            return fn(vox["points"][0], vox["normals"][0], cnt[0], vox["points"][1], vox["normals"][1], cnt[1], cfg.rhf)
+        return f
 
     return {
         "tile count": v(lambda s, x, m: jnp.sum(active_tiles(sc(s, x, m), cfg))),
@@ -64,8 +70,19 @@ def stage_fns(geom_type, geom_seg, cfg):
         "noise": v(lambda pix, k: add_depth_noise(pix, k, cfg)),
         "voxel grid": v(lambda pix: voxel_downsample(pix["points"], pix["normal"], pix["seg"], cfg)),
         "PCA": v(pca2),
-        "RHF": v(rhf),
+        "RHF": v(rhf(rhf_histograms)),
+        "RHF before (reference)": v(rhf(rhf_histograms_fused)),
     }
+
+
+@contextlib.contextmanager
+def fused_rhf():
+    """The chain traced with ``rhf_histograms_fused`` (the RHF before) while inside."""
+    pipeline.rhf_histograms = rhf_histograms_fused
+    try:
+        yield
+    finally:
+        pipeline.rhf_histograms = rhf_histograms
 
 
 def run_stages(fns, s, x, m, k):
@@ -73,9 +90,9 @@ def run_stages(fns, s, x, m, k):
     t, out = {}, {}
 
     def go(name, *args):
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         r = jax.block_until_ready(fns[name](*args))
-        t[name] = time.perf_counter() - t0
+        t[name] = time.process_time() - t0
         return r
 
     go("tile count", s, x, m)
@@ -86,6 +103,7 @@ def run_stages(fns, s, x, m, k):
     vox = go("voxel grid", pix)
     go("PCA", vox)
     go("RHF", vox)
+    go("RHF before (reference)", vox)
     return t
 
 
@@ -116,7 +134,8 @@ def main() -> None:
     order = np.concatenate([order, np.full(-n % sb, order[-1])])
     calls = [(grp, pc.tile_capacity(int(tiles[grp].max()), cfg)) for grp in np.split(order, len(order) // sb)]
     fns = {k: stage_fns(gt, gs, pc.capacity_config(cfg, k)) for k in {c for _, c in calls}}
-    chain = pc.make_culled_features(gt, gs, cfg, sub_batch=sb)
+    chains = {"now": pc.make_culled_features(gt, gs, cfg, sub_batch=sb),
+              "before": pc.make_culled_features(gt, gs, cfg, sub_batch=sb)}
 
     def stages_pass():
         tot = {}
@@ -125,28 +144,39 @@ def main() -> None:
                 tot[name] = tot.get(name, 0.0) + dt
         return tot
 
-    def chain_pass():
-        t0 = time.perf_counter()
-        for lo in range(0, n, 32):
-            chain(size[lo:lo + 32], xpos[lo:lo + 32], xmat[lo:lo + 32], keys[lo:lo + 32])
-        return time.perf_counter() - t0
+    def chain_pass(name):
+        outs = []
+        with fused_rhf() if name == "before" else contextlib.nullcontext():  # traced on first use
+            t0 = time.perf_counter()
+            for lo in range(0, n, 32):
+                outs.append(chains[name](size[lo:lo + 32], xpos[lo:lo + 32], xmat[lo:lo + 32], keys[lo:lo + 32]))
+            return time.perf_counter() - t0, outs
 
-    stages_pass(), chain_pass()  # compiles
-    best, best_chain = {}, np.inf
-    for _ in range(args.rounds):
+    stages_pass()  # compiles
+    first = {name: chain_pass(name) for name in chains}
+    for a, b in zip(first["now"][1], first["before"][1]):
+        for k in a:
+            if not np.array_equal(a[k], b[k]):
+                raise AssertionError(f"the RHF of now changed {k}")
+    best, best_chain = {}, {name: np.inf for name in chains}
+    for r in range(args.rounds):
         for name, dt in stages_pass().items():
             best[name] = min(best.get(name, np.inf), dt)
-        best_chain = min(best_chain, chain_pass())
-    total = sum(best.values())
+        for name in (("now", "before") if r % 2 == 0 else ("before", "now")):
+            best_chain[name] = min(best_chain[name], chain_pass(name)[0])
+    total = sum(dt for name, dt in best.items() if name != "RHF before (reference)")
     print(f"\n{n} settled scenes ({', '.join(args.actions)}), calls of {sb} at capacities "
           f"{sorted({k for _, k in calls})} tiles; active tiles median {np.median(tiles):.0f}, max {tiles.max()}; "
           f"best of {args.rounds} passes")
-    print("\n| stage | ms / scene | share |\n|---|---:|---:|")
+    print("\n| stage | CPU ms / scene | share |\n|---|---:|---:|")
     for name, dt in best.items():
-        print(f"| {name} | {1e3 * dt / n:.2f} | {dt / total:.0%} |")
-    print(f"| sum of stages | {1e3 * total / n:.2f} | |")
-    print(f"| whole chain (make_culled_features, chunks of 32) | {1e3 * best_chain / n:.2f} | |")
-    print(f"\nwhole chain: {n / best_chain:.1f} scenes/s; load average after {os.getloadavg()[0]:.2f}")
+        print(f"| {name} | {1e3 * dt / n:.2f} | {'' if 'before' in name else f'{dt / total:.0%}'} |")
+    print(f"| sum of stages (now) | {1e3 * total / n:.2f} | |")
+    print("\n| whole chain (make_culled_features, chunks of 32) | scenes/s | ms / scene |\n|---|---:|---:|")
+    for name in ("before", "now"):
+        print(f"| RHF {name} | {n / best_chain[name]:.1f} | {1e3 * best_chain[name] / n:.2f} |")
+    print(f"\nnow / before: {best_chain['before'] / best_chain['now']:.2f}; outputs equal bit for bit; "
+          f"load average after {os.getloadavg()[0]:.2f}")
 
 
 if __name__ == "__main__":

@@ -57,3 +57,14 @@ def test_rhf_counts_nested_vmap_and_unbatched_operands():
     shared = jax.jit(jax.vmap(lambda a, n, c: rhf_histograms(a, n, c, pb[0], nb[0], cb[0], RCFG)))(pa, na, ca)
     ref = jax.vmap(lambda a, n, c: rhf_histograms_fused(a, n, c, pb[0], nb[0], cb[0], RCFG))(pa, na, ca)
     np.testing.assert_array_equal(np.asarray(shared), np.asarray(ref))
+
+
+def test_rhf_counts_equal_the_fused_loop_at_the_stage_tile():
+    """The tile the features stage runs (``culled.RHF_CHUNK`` = 128), clouds past one tile."""
+    from relaff_jax.perception.culled import RHF_CHUNK
+    rcfg = dataclasses.replace(RCFG, chunk=RHF_CHUNK)
+    pts, nrm, cnt = clouds(2, 4, v=2 * RHF_CHUNK)
+    cnt[3] = (RHF_CHUNK + 3, 2 * RHF_CHUNK - 1)
+    new = jax.jit(jax.vmap(lambda *a: rhf_histograms(*a, rcfg)))(*_args(pts, nrm, cnt))
+    old = jax.jit(jax.vmap(lambda *a: rhf_histograms_fused(*a, rcfg)))(*_args(pts, nrm, cnt))
+    np.testing.assert_array_equal(np.asarray(new), np.asarray(old))
