@@ -35,7 +35,7 @@ from .scene import SceneGeoms, make_scene
 # Tile capacities a group can run at (each one compiled when first used), then the config's.
 TILE_BUCKETS = (32, 64, 128)
 # RHF pair tile edge: the histograms are integer counts, so any tiling gives the same bits;
-# 128 x 128 pairs run ~3x faster than the config's 256 x 256 on XLA CPU (the tile's pair
+# 128 x 128 pairs run faster than the config's 256 x 256 on XLA CPU (the tile's pair
 # arrays fit the caches; benchmarks/perception_culled.py).
 RHF_CHUNK = 128
 

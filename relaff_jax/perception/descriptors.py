@@ -6,6 +6,8 @@ with normals -> (6 * bins,) relational histograms over all point pairs.
 """
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -108,6 +110,79 @@ def rhf_bin(value, feature: int, rcfg: RHFConfig):
     return jnp.clip(b, 0, rcfg.bins - 1).astype(jnp.int32)
 
 
+def _rhf_tiles(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
+    """(ca, cb, tb, load, index): what both RHF loops share. ``load(t)`` gives pair tile t
+    (A's and B's points, normals (3, C), validity (C,)); ``index(tiles)`` the three joint-bin
+    indices (a list of three (C, C)) of its pairs (invalid pairs: the dump slot 3 * bins^2)."""
+    C, nbin = rcfg.chunk, rcfg.bins
+    V = pa.shape[0]
+    if V % C:
+        raise ValueError(f"point capacity {V} is not a multiple of rhf.chunk {C}")
+    ca = jnp.minimum(ca, V).astype(jnp.int32)
+    cb = jnp.minimum(cb, V).astype(jnp.int32)
+    tb = jnp.maximum((cb + C - 1) // C, 1)
+    ar = jnp.arange(C)
+    joint = nbin * nbin
+    pa_t, na_t, pb_t, nb_t = pa.T, na.T, pb.T, nb.T  # (3, V) structure of arrays
+
+    def load(t):
+        i, j = t // tb, t % tb
+        sl = lambda x, k: jax.lax.dynamic_slice(x, (0, k * C), (3, C))
+        return sl(pa_t, i), sl(na_t, i), (i * C + ar) < ca, sl(pb_t, j), sl(nb_t, j), (j * C + ar) < cb
+
+    def index(tiles):
+        a, an, wa, b, bn, wb = tiles
+        w = wa[:, None] & wb[None, :]
+        vals = rhf_pair_values(a[:, :, None], an[:, :, None], b[:, None, :], bn[:, None, :])
+        bins = [rhf_bin(v, f, rcfg) for f, v in enumerate(vals)]
+        return [jnp.where(w, q * joint + bins[2 * q] * nbin + bins[2 * q + 1], 3 * joint) for q in range(3)]
+
+    return ca, cb, tb, load, index
+
+
+def _rhf_normalise(hist, ca, cb, nbin):
+    """(6 * bins,) histograms from the three joint count histograms ``hist`` (3 * bins^2 + 1,)."""
+    j3 = hist[:3 * nbin * nbin].reshape(3, nbin, nbin)
+    marg = jnp.stack([j3.sum(2), j3.sum(1)], axis=1).reshape(len(RHF_NAMES), nbin)  # dx,dy,dz,d,...
+    pairs = ca.astype(jnp.float32) * cb.astype(jnp.float32)
+    out = marg.astype(jnp.float32) / jnp.maximum(pairs, 1.0)
+    return jnp.where(pairs > 0, out, 0.0).reshape(-1)
+
+
+@functools.lru_cache(maxsize=None)
+def _rhf_counts_for(rcfg: RHFConfig):
+    """``counts(pa, na, ca, pb, nb, cb) -> (3 * bins^2 + 1,) int32``: the three joint count
+    histograms of one scene (the last slot collects invalid pairs), built once per config."""
+
+    @jax.custom_batching.custom_vmap
+    def counts(pa, na, ca, pb, nb, cb):
+        ca, cb, tb, load, index = _rhf_tiles(pa, na, ca, pb, nb, cb, rcfg)
+        n_tiles = (ca + rcfg.chunk - 1) // rcfg.chunk * tb
+
+        def body(state):
+            # The current tiles travel in the loop state: read as loop parameters, the pair
+            # arithmetic vectorises (with the dynamic slices fused into it, it ran ~10x
+            # slower). The indices stay (3, C, C): flattened to 1-D inside the fusion, XLA CPU
+            # computes each pair's (i, j) by division and gathers its operands unvectorised
+            # (~5x slower per tile).
+            t, hist, tiles = state
+            idx = jnp.stack(index(tiles))
+            return t + 1, scatter_add(hist, idx, jnp.ones_like(idx)), load(t + 1)
+
+        init = (jnp.int32(0), jnp.zeros(3 * rcfg.bins ** 2 + 1, jnp.int32), load(jnp.int32(0)))
+        return jax.lax.while_loop(lambda s: s[0] < n_tiles, body, init)[1]
+
+    @counts.def_vmap
+    def _rule(axis_size, in_batched, *args):
+        # Scenes one after another, each loop to its own tile count: a vmapped loop runs every
+        # scene to the batch's longest (1.7x the pairs on settled scenes, and a padded pair
+        # costs as much as a valid one).
+        args = [x if b else jnp.broadcast_to(x, (axis_size,) + x.shape) for x, b in zip(args, in_batched)]
+        return jax.lax.map(lambda a: counts(*a), tuple(args)), True
+
+    return counts
+
+
 def rhf_histograms(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
     """Six histograms over all pairs (a in object A, b in object B), tile by tile.
 
@@ -115,47 +190,31 @@ def rhf_histograms(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
     Values per pair: ``rhf_pair_values``; bins: ``rhf_bin``. Work is done on
     ``chunk`` x ``chunk`` tiles in a while loop over only the tiles that hold valid pairs, so
     memory is bounded and time follows ca * cb, not V * V. Counts are accumulated in three joint
-    bins x bins histograms (dx,dy), (dz,|d|), (the two angles) -- one scatter per two
-    features -- and marginalised at the end (exact: the same counts).
-    Returns (6 * bins,): counts divided by ca * cb (each histogram sums to 1), or all zeros if
-    ca * cb == 0.
+    bins x bins histograms (dx,dy), (dz,|d|), (the two angles) -- one scatter per tile for
+    the three -- and marginalised at the end (exact: the same counts). Under ``vmap`` the
+    scenes run one after another, each loop to its own tile count (integer counts: the same
+    bits as any order). Returns (6 * bins,): counts divided by ca * cb (each histogram sums to
+    1), or all zeros if ca * cb == 0.
     """
-    C, nbin = rcfg.chunk, rcfg.bins
-    V = pa.shape[0]
-    if V % C:
-        raise ValueError(f"point capacity {V} is not a multiple of rhf.chunk {C}")
-    ca = jnp.minimum(ca, V).astype(jnp.int32)
-    cb = jnp.minimum(cb, V).astype(jnp.int32)
-    ta = (ca + C - 1) // C
-    tb = jnp.maximum((cb + C - 1) // C, 1)
-    ar = jnp.arange(C)
-    joint = nbin * nbin
-    dump = 3 * joint  # invalid pairs land here and are discarded
-    pa_t, na_t, pb_t, nb_t = pa.T, na.T, pb.T, nb.T  # (3, V) structure of arrays
+    ca, cb = jnp.asarray(ca, jnp.int32), jnp.asarray(cb, jnp.int32)
+    hist = _rhf_counts_for(rcfg)(jnp.asarray(pa), jnp.asarray(na), ca, jnp.asarray(pb), jnp.asarray(nb), cb)
+    return _rhf_normalise(hist, jnp.minimum(ca, pa.shape[0]), jnp.minimum(cb, pb.shape[0]), rcfg.bins)
 
-    def load(t):
-        i, j = t // tb, t % tb
-        wa = (i * C + ar) < ca
-        wb = (j * C + ar) < cb
-        sl = lambda x, k: jax.lax.dynamic_slice(x, (0, k * C), (3, C))
-        return sl(pa_t, i), sl(na_t, i), wa, sl(pb_t, j), sl(nb_t, j), wb
+
+def rhf_histograms_fused(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
+    """``rhf_histograms`` as it was computed before (same bits): the bin indices flattened and
+    fused into three scatters per tile, a vmapped loop run to the batch's longest scene. Kept as
+    the reference of ``tests/perception/test_rhf_counts.py`` and ``benchmarks/perception_stages.py``."""
+    ca, cb, tb, load, index = _rhf_tiles(pa, na, ca, pb, nb, cb, rcfg)
+    n_tiles = (ca + rcfg.chunk - 1) // rcfg.chunk * tb
 
     def body(state):
-        # The current tiles travel in the loop state: read as loop parameters, the pair
-        # arithmetic vectorises; with the dynamic slices fused into it, it ran ~10x slower.
-        t, hist, (a, an, wa, b, bn, wb) = state
-        w = wa[:, None] & wb[None, :]
-        vals = rhf_pair_values(a[:, :, None], an[:, :, None], b[:, None, :], bn[:, None, :])
-        bins = [rhf_bin(v, f, rcfg) for f, v in enumerate(vals)]
-        for q in range(3):  # joint (feature 2q, feature 2q+1) histogram q
-            idx = jnp.where(w, q * joint + bins[2 * q] * nbin + bins[2 * q + 1], dump).reshape(-1)
+        t, hist, tiles = state
+        for idx in index(tiles):
+            idx = idx.reshape(-1)
             hist = scatter_add(hist, idx, jnp.ones_like(idx))
         return t + 1, hist, load(t + 1)
 
-    init = (jnp.int32(0), jnp.zeros(dump + 1, jnp.int32), load(jnp.int32(0)))
-    _, hist, _ = jax.lax.while_loop(lambda s: s[0] < ta * tb, body, init)
-    j3 = hist[:dump].reshape(3, nbin, nbin)
-    marg = jnp.stack([j3.sum(2), j3.sum(1)], axis=1).reshape(len(RHF_NAMES), nbin)  # dx,dy,dz,d,...
-    pairs = ca.astype(jnp.float32) * cb.astype(jnp.float32)
-    out = marg.astype(jnp.float32) / jnp.maximum(pairs, 1.0)
-    return jnp.where(pairs > 0, out, 0.0).reshape(-1)
+    init = (jnp.int32(0), jnp.zeros(3 * rcfg.bins ** 2 + 1, jnp.int32), load(jnp.int32(0)))
+    hist = jax.lax.while_loop(lambda s: s[0] < n_tiles, body, init)[1]
+    return _rhf_normalise(hist, ca, cb, rcfg.bins)
