@@ -3,7 +3,8 @@ actions (``sim/actions/registry.py``), given with ``--plugins FILE.py``.
 
 One loader for both kinds: ``load_file`` executes the file once (by its path and the sha256 of
 its bytes), with ``LOADING`` telling the registries where what they register comes from, so
-each record names the file and its hash. No JAX at import.
+each record names the file and its hash; ``loaded_files`` / ``load_files`` give a worker process
+the driver's files. No JAX at import.
 """
 from __future__ import annotations
 
@@ -72,3 +73,22 @@ def load_file(path: str | Path) -> list[str]:
                         "relaff_jax.sim.actions.register_action(ActionSpec(...)))")
     _LOADED[origin] = (sha, new)
     return new
+
+
+def loaded_files() -> tuple[tuple[str, str], ...]:
+    """``(path, sha256)`` of every plugin file executed in this process, for its worker processes
+    (``load_files``)."""
+    return tuple((origin[len("file "):], sha) for origin, (sha, _) in _LOADED.items())
+
+
+def load_files(files) -> None:
+    """In a worker process: execute the driver's plugin files ``files`` (``loaded_files``) not
+    yet executed here, so that its registries hold the driver's actions and conditions. A file
+    whose bytes changed since the driver read them is a ``UserError``."""
+    for path, sha in files:
+        if _LOADED.get(f"file {path}", (None,))[0] == sha:
+            continue
+        p = Path(path)
+        if not p.is_file() or hashlib.sha256(p.read_bytes()).hexdigest() != sha:
+            raise UserError(f"--plugins {path}: the file changed or went away while the run used it")
+        load_file(p)
