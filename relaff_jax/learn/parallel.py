@@ -116,9 +116,8 @@ def _watch(driver: int, locks=()) -> None:
 def _indexed(i: int, call, driver: tuple | None = None, files: tuple = ()):
     if driver is not None:
         _watch(*driver)
-    if files:
-        from relaff_jax.plugins import load_files
+    from relaff_jax.plugins import load_files
 
-        load_files(files)
+    load_files(files)  # the driver's plugin files, and only those (a reused worker forgets others)
     fn, args, kwargs = call
     return i, fn(*args, **kwargs)

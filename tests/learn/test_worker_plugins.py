@@ -1,7 +1,7 @@
 """Worker processes know the driver's plugin actions: ``run_parallel`` over joblib workers (fresh
 processes) runs calls that read a user action's spec (its state order, as the prep's source
-predictors do) the same as the driver does; a plugin file changed since the driver read it is
-one error."""
+predictors do) the same as the driver does; a reused worker holds the driver's plugins and no
+earlier driver's; a plugin file changed since the driver read it is one error."""
 import importlib
 
 import numpy as np
@@ -9,6 +9,7 @@ import pytest
 
 from relaff_jax import plugins
 from relaff_jax.errors import UserError
+from relaff_jax.learn import conditions as C
 from relaff_jax.learn.parallel import run_parallel
 from relaff_jax.learn.states import manipulated_first_order
 
@@ -54,3 +55,25 @@ def test_a_plugin_changed_under_the_run_is_one_error(plugin):
     plugin.write_text(PLUGIN + "\n# changed\n")
     with pytest.raises(UserError, match="the file changed or went away while the run used it"):
         run_parallel([(manipulated_first_order, ("nudge_w",), {})], 2, False, total=1, desc="t", unit="call")
+
+
+def _origin_of(name):
+    return C.registered()[name].origin
+
+
+def test_a_reused_worker_holds_this_driver_s_plugins_only(tmp_path, monkeypatch):
+    """Two plugin files register the same condition name one after the other (the first undone,
+    as a test's registry fixture does); the workers, reused, read the second's."""
+    monkeypatch.setattr(C, "_REGISTRY", dict(C._REGISTRY))
+    origins = []
+    for i in range(2):
+        f = tmp_path / f"cond_{i}.py"
+        f.write_text("from relaff_jax.learn import register_condition\n\n"
+                     f"@register_condition('WCOND')\ndef w(k):\n    return k.state[:, :{i + 1}]\n")
+        plugins.load_file(f)
+        origins.append(f"file {f.resolve()}")
+        got = run_parallel([(_origin_of, ("WCOND",), {})] * 3, 2, False, total=3, desc="t", unit="call")
+        assert got == [origins[-1]] * 3
+        C._REGISTRY.pop("WCOND")  # undone, as the registry fixtures do
+    for o in origins:
+        plugins._LOADED.pop(o, None)
