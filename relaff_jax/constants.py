@@ -12,6 +12,9 @@ ACTIONS = ("lift", "move", "pull", "push", "rake", "take", "pour", "slide", "uno
 PAIRINGS = ("toy+base", "toy+obstacle", "toy+rake")
 PAIRING = {"lift": 0, "move": 0, "pull": 0, "push": 0, "take": 0, "pour": 0, "slide": 0,
            "unobstruct": 1, "rake": 2}
+# The object each action's program moves (paper Table I): the toy for these, the other object
+# (base, obstacle, rake) for the rest; its nine PCA values come first in the action's state.
+TOY_MANIPULATED = frozenset({"move", "take"})
 
 # Spatial relation of a settled pair; datasets store the index.
 RELATIONS = ("beside", "on_top", "inside")

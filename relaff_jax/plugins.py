@@ -3,7 +3,8 @@ actions (``sim/actions/registry.py``), given with ``--plugins FILE.py``.
 
 One loader for both kinds: ``load_file`` executes the file once (by its path and the sha256 of
 its bytes), with ``LOADING`` telling the registries where what they register comes from, so
-each record names the file and its hash. No JAX at import.
+each record names the file and its hash; ``loaded_files`` / ``load_files`` give a worker process
+the driver's files. No JAX at import.
 """
 from __future__ import annotations
 
@@ -72,3 +73,57 @@ def load_file(path: str | Path) -> list[str]:
                         "relaff_jax.sim.actions.register_action(ActionSpec(...)))")
     _LOADED[origin] = (sha, new)
     return new
+
+
+
+def _origins() -> dict[str, str]:
+    """``{"condition NAME" / "action NAME": origin}`` of everything registered now."""
+    import importlib
+
+    conditions = importlib.import_module("relaff_jax.learn.conditions")
+    registry = importlib.import_module("relaff_jax.sim.actions.registry")
+    out = {f"condition {n}": c.origin for n, c in conditions._REGISTRY.items()}
+    out.update({f"action {n}": u.origin for n, u in registry._USER.items()})
+    return out
+
+
+def loaded_files() -> tuple[tuple[str, str], ...]:
+    """``(path, sha256)`` of the plugin files executed in this process whose registrations all
+    still stand (a test may have undone some), for its worker processes (``load_files``)."""
+    live = _origins()
+    return tuple((origin[len("file "):], sha) for origin, (sha, names) in _LOADED.items()
+                 if all(live.get(n) == origin for n in names))
+
+
+def _forget(origin: str) -> None:
+    """Undo what the plugin file ``origin`` registered in this process (what still stands)."""
+    import importlib
+
+    conditions = importlib.import_module("relaff_jax.learn.conditions")
+    registry = importlib.import_module("relaff_jax.sim.actions.registry")
+    live = _origins()
+    for n in _LOADED.pop(origin)[1]:
+        if live.get(n) != origin:
+            continue
+        kind, _, name = n.partition(" ")
+        if kind == "condition":
+            conditions._REGISTRY.pop(name, None)
+        else:
+            registry.unregister(name)
+
+
+def load_files(files) -> None:
+    """In a worker process: make its plugin files the driver's ``files`` (``loaded_files``):
+    what another driver had it execute is forgotten (a reused worker), the files not yet
+    executed here are, so that its registries hold the driver's actions and conditions. A file
+    whose bytes changed since the driver read them is a ``UserError``."""
+    want = {f"file {path}": sha for path, sha in files}
+    for origin in [o for o, (sha, _) in _LOADED.items() if want.get(o) != sha]:
+        _forget(origin)
+    for path, sha in files:
+        if _LOADED.get(f"file {path}", (None,))[0] == sha:
+            continue
+        p = Path(path)
+        if not p.is_file() or hashlib.sha256(p.read_bytes()).hexdigest() != sha:
+            raise UserError(f"--plugins {path}: the file changed or went away while the run used it")
+        load_file(p)

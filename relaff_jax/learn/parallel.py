@@ -14,7 +14,9 @@ watches the driver's pid and the folder locks the driver holds (a thread, every
 ``WATCH_SECONDS``) and exits when either is gone, and fences its writes
 (``io.set_write_fence``): an atomic write is discarded before its rename once the driver or
 its lock has gone, so no file appears in the run folder after the lock is released (a dying
-process releases its locks before its children are handed to init).
+process releases its locks before its children are handed to init). A worker first executes
+the driver's ``--plugins`` files (``plugins.load_files``): a user action's state order and its
+id are the registry's, in every process.
 """
 from __future__ import annotations
 
@@ -54,8 +56,11 @@ def run_parallel(calls: list, jobs: int, progress: bool, total: int, desc: str, 
 
             from relaff_jax.io import held_locks
 
+            from relaff_jax.plugins import loaded_files
+
             driver = (os.getpid(), held_locks())  # the workers' fence: this pid, and the folder locks it holds
-            indexed = [(_indexed, (i, c, driver), {}) for i, c in enumerate(calls)]
+            files = loaded_files()  # the driver's --plugins files: a worker registers the same actions
+            indexed = [(_indexed, (i, c, driver, files), {}) for i, c in enumerate(calls)]
             for i, r in Parallel(n_jobs=jobs, return_as="generator_unordered")(indexed):
                 done(i, r)
     finally:
@@ -108,8 +113,11 @@ def _watch(driver: int, locks=()) -> None:
     threading.Thread(target=loop, name="relaff-driver-watch", daemon=True).start()
 
 
-def _indexed(i: int, call, driver: tuple | None = None):
+def _indexed(i: int, call, driver: tuple | None = None, files: tuple = ()):
     if driver is not None:
         _watch(*driver)
+    from relaff_jax.plugins import load_files
+
+    load_files(files)  # the driver's plugin files, and only those (a reused worker forgets others)
     fn, args, kwargs = call
     return i, fn(*args, **kwargs)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from relaff_jax.constants import PCA_PER_OBJECT, RHF_BINS, SPACES
+from relaff_jax.constants import PCA_PER_OBJECT, RHF_BINS, SPACES, TOY_MANIPULATED  # noqa: F401 (re-exported)
 from relaff_jax.config.experiment import EXTRAS, RHF_PARTS, StateConfig
 from relaff_jax.errors import UserError
 
@@ -46,17 +46,15 @@ def state_width(space: str, cfg: StateConfig = StateConfig()) -> int:
         return base
     return (base if cfg.rhf_pca else 0) + len(rhf_columns(cfg.rhf_parts))
 
-# Actions whose manipulated object is the toy; for the others it is the base / obstacle /
-# rake (paper Table I), whose nine PCA values then come first in the state.
-TOY_MANIPULATED = frozenset({"move", "take"})
-
-
 def manipulated_first_order(action: str) -> np.ndarray:
     """Column order ``(18,)`` that turns canonical PCA (toy first) into the action's order
-    (manipulated object first)."""
+    (manipulated object first: the spec's ``manipulated``; of the nine, the toy for
+    ``TOY_MANIPULATED``, paper Table I)."""
+    from relaff_jax.sim.actions.registry import manipulated  # the nine, then the user's (no JAX)
+
     check_action(action)
     toy, other = np.arange(PCA_PER_OBJECT), np.arange(PCA_PER_OBJECT, 2 * PCA_PER_OBJECT)
-    return np.concatenate([toy, other] if action in TOY_MANIPULATED else [other, toy])
+    return np.concatenate([toy, other] if manipulated(action) == "toy" else [other, toy])
 
 
 def state_features(pca: np.ndarray, rhf: np.ndarray | None, action: str | None, space: str,

@@ -20,6 +20,7 @@ from relaff_jax import io as rio
 from relaff_jax.constants import RELATIONS
 from relaff_jax.learn import TABLE2_ROWS
 from relaff_jax.report import folder as F
+from relaff_jax.report import user as U
 from relaff_jax.report.formatting import SHORT
 
 
@@ -132,7 +133,12 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
         save(fig, F.FIG_DB1_BEST_BF)
 
     # Fig. 10: average bootstrap factor per method and affordance (PCA)
-    rows = [r for r in range(1, len(TABLE2_ROWS)) if np.any(np.isfinite(a["table2_per_target"][r]))]
+    rows = [(TABLE2_ROWS[r], a["table2_per_target"][r], a["table2"][r, 0], None) for r in range(1, len(TABLE2_ROWS))
+            if np.any(np.isfinite(a["table2_per_target"][r]))]
+    u = U.rows_of(a)  # a user's conditions, beside the paper's rows, hatched
+    rows += [(U.label(n), v, m, "//") for n, v, m in zip(u.get("names", ()), u.get("table2_per_target", ()),
+                                                         np.asarray(u.get("table2", np.zeros((0, 3))))[:, 0])
+             if np.any(np.isfinite(v))]
     if rows:
         fig = Figure(figsize=(12, 6))
         ax = fig.subplots()
@@ -140,10 +146,10 @@ def write_figures(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], o
         width = 0.8 / len(rows)
         colours = _colours(len(rows))
         missing = []
-        for k, r in enumerate(rows):
-            vals = np.append(a["table2_per_target"][r], a["table2"][r, 0])
+        for k, (name, per, avg, hatch) in enumerate(rows):
+            vals = np.append(per, avg)
             x = np.arange(len(groups)) + (k - (len(rows) - 1) / 2) * width
-            ax.bar(x, np.nan_to_num(vals), width, label=TABLE2_ROWS[r], color=colours[k])
+            ax.bar(x, np.nan_to_num(vals), width, label=name, color=colours[k], hatch=hatch)
             # an undefined cell is marked where its bar would stand, not left as a silent gap
             gone = ~np.isfinite(vals)
             ax.plot(x[gone], np.zeros(gone.sum()), "x", color="k", ms=4)

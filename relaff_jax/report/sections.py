@@ -16,6 +16,7 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS, RELATIONS
 from relaff_jax.report import folder as F
+from relaff_jax.report import user as U
 from relaff_jax.learn import TABLE2_ROWS, categories_per_threshold, layout, paper_row
 from relaff_jax.report.findings import VERDICTS, correlation_clusters
 from relaff_jax.report.formatting import (
@@ -172,17 +173,18 @@ def table2_blocks(an: Mapping[str, Mapping[str, Any]], cfg: Any, out: Path, pres
                                                   fmt(x["gain"][i, 0]), ci_text(x, "gain_ci", i)]
                 + ([fmt(v) for v in paper_row(name)] if paper else [])
                 for i, (name, row) in enumerate(zip(TABLE2_ROWS, x["table2"])) if i in rows_run(cfg, space)]
+        rows += U.table_rows(x, n_aff, paper)
         blocks += [("h", 2, f"Table II ({space.upper()})"),
                    ("p", f"Average bootstrap factor over n = {span(x['sizes'], *cfg.bf_sizes)}, avg / min / max over the "
                          f"n affordances with a value" + (", beside the paper's Table II." if paper else
                                                           " (the paper has no RHF table).") + " " + rests_on(x, cfg)),
-                   ("table", header, rows), ("p", comparability(x, paper, preset))]
+                   ("table", header, rows), ("p", comparability(x, paper, preset))] + U.note(x)
         if users:
             blocks += [("p", f"{', '.join(users)}: not in the paper (a user action, docs/extending.md): Table II's rows "
                              "average the paper's affordances only; its values per method are in the table below, "
                              "where it is a source for the others too.")]
         rows = [[name] + [fmt(v, 2) for v in r] for name, r in zip(TABLE2_ROWS, x["table2_per_target"])
-                if np.any(np.isfinite(r))]
+                if np.any(np.isfinite(r))] + U.per_target_rows(x)
         rows.append(["sizes with a bf"] + [f"{int(d)} of {x['window_sizes']}" for d in x["defined"]])
         blocks += [("p", "Per affordance (paper Fig. 10 as numbers); the last row: how many sizes of the window "
                          "each average rests on (bf is undefined where NB is at most half a test scene above chance):"),

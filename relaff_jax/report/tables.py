@@ -17,7 +17,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from relaff_jax.constants import ACTIONS
 from relaff_jax.learn import PAPER_TABLE2, TABLE2_ROWS, categories_per_threshold, layout, paper_row
+from relaff_jax.report import user as U
 from relaff_jax.report.formatting import (
     SHORT,
     ci_text,
@@ -46,6 +48,8 @@ def table2_csv(a: Mapping[str, Any], paper: bool) -> str:
         w.writerow([name] + [fmt(v, 4) for v in row] + [fmt(v, 4) for v in ref] + [int(a["n_targets"][i])]
                    + [fmt(v, 4) for v in ci[i]] + [fmt(a["gain"][i, 0], 4)] + [fmt(v, 4) for v in gci[i]]
                    + [(a.get("unmeasurable") or {}).get(name, "")])
+    for row in U.csv_rows(a):  # a user's conditions, after the paper's rows
+        w.writerow(row)
     return buf.getvalue()
 
 
@@ -83,6 +87,7 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
                                              fmt(a["gain"][i, 0]), ci_text(a, "gain_ci", i)]
             cells += [fmt(v) for v in paper_row(name)] if paper else []
             lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        lines += U.markdown_rows(a, sum(t in ACTIONS for t in a["actions"]), paper)
         lines += ["", "Sizes of the window with a bootstrap factor (NB above chance), per affordance: "
                   + ", ".join(f"{t} {int(d)} of {a['window_sizes']}" for t, d in zip(a["actions"], a["defined"])) + "."]
         lines += ["", f"### Average bootstrap factor per affordance ({space.upper()}, paper Fig. 10)", ""]
@@ -90,6 +95,7 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
         lines += ["| method | " + " | ".join(acts) + " |", "|---|" + "---|" * len(acts)]
         for name, row in zip(TABLE2_ROWS, a["table2_per_target"]):
             lines.append(f"| {name} | " + " | ".join(fmt(v, 2) for v in row) + " |")
+        lines += ["| " + " | ".join(r) + " |" for r in U.per_target_rows(a)]
         conds = a["conditions"]
         lines += ["", "Chosen bootstrapping sources (target <- source):", ""]
         for fam in ("db1", "cb1"):
@@ -98,6 +104,7 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
             best = ", ".join(f"{t} <- ({conds[i].split(':')[1]})" for t, i in zip(acts, a[f"best_{fam}"]))
             ten = ", ".join(f"{t} <- ({conds[i].split(':')[1]})" for t, i in zip(acts, a[f"ten_{fam}"]))
             lines += [f"- {fam.upper()} best: {best}", f"- {fam.upper()} best after ten: {ten}"]
+        lines += U.source_lines(a)
         lines += ["", f"### Correlation of the nine predictors' outputs ({space.upper()}, paper Fig. 11)", ""]
         corr = r["corr"]
         lines += ["| | " + " | ".join(SHORT.get(x, x) for x in acts) + " |", "|---|" + "---|" * len(acts)]
@@ -150,6 +157,7 @@ def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures
             "corr": res[s]["corr"],
             "against_nb": {k: v for k, v in x.get("methods", {}).items() if k != "weights"},
             "categories_per_threshold": categories_per_threshold(res[s]["corr"], res["config"].thresholds),
+            "user_conditions": U.summary(x),
         }
         for s, x in an.items()
     }

@@ -24,6 +24,7 @@ from typing import Any, Mapping
 from relaff_jax import io as rio
 from relaff_jax import provenance
 from relaff_jax.learn import analyse, load_results
+from relaff_jax.learn.user_rows import user_rows
 from relaff_jax.report import folder as F
 from relaff_jax.report.audit import audit_blocks, stored_audits
 from relaff_jax.report import sections as S
@@ -63,6 +64,8 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     cfg = res["config"]
     spaces = list(res["meta"]["spaces"])
     an = {s: analyse(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference) for s in spaces}
+    for s in spaces:  # a user's registered conditions, beside Table II's rows (none: empty)
+        an[s]["user"] = user_rows(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference)
     main = "pca" if "pca" in an else spaces[0]
     infos: dict[str, Any] = {}
     anat: dict[str, Any] = {}

@@ -87,6 +87,13 @@ BAD = {
                           "targets=drag_targets, goal=toy_rode_along)",
                           "action 'drag2': field segments: the template needs 1205 control steps, longer than the "
                           "compiled step budget of 815"),
+    "unknown manipulated object": ("ActionSpec(name='drag2', pairing='toy+base', segments=SEGMENTS, "
+                                   "targets=drag_targets, goal=toy_rode_along, manipulates='base')",
+                                   "action 'drag2': field manipulates: 'base'; valid: toy, other"),
+    "manipulated object not the one held": (
+        "ActionSpec(name='drag2', pairing='toy+base', segments=SEGMENTS, targets=drag_targets, "
+        "goal=toy_rode_along, manipulates='toy')",
+        "action 'drag2': field manipulates: 'toy', but the closed gripper holds the other object (grasp 'other')"),
     "target rule of the wrong shape": (
         "ActionSpec(name='drag2', pairing='toy+base', segments=SEGMENTS, "
         "targets=lambda s: drag_targets(s)._replace(direction=jnp.zeros(2)), goal=toy_rode_along)",

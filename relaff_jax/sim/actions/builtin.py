@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import functools
 
-from relaff_jax.constants import ACTIONS, PAIRING, PAIRINGS
+from relaff_jax.constants import ACTIONS, PAIRING, PAIRINGS, TOY_MANIPULATED
 from relaff_jax.sim import templates as T
 
 from .rules import Reading, Settled, as_outcome
@@ -49,6 +49,7 @@ def _spec(name: str) -> ActionSpec:
     return ActionSpec(name=name, pairing=PAIRINGS[PAIRING[name]], segments=tuple(_ROWS[name]),
                       targets=functools.partial(_targets, name), goal=functools.partial(_goal, name),
                       reads="measure" if name in _MEASURE_READ else "end", grasp=_GRASP.get(name, "other"),
+                      manipulates="toy" if name in TOY_MANIPULATED else "other",
                       reach=name == "unobstruct", measure=T.TEMPLATES[name].measure, doc=_DOC[name])
 
 

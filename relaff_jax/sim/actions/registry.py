@@ -15,7 +15,7 @@ import json
 from typing import Any
 
 from relaff_jax import plugins
-from relaff_jax.constants import ACTIONS
+from relaff_jax.constants import ACTIONS, TOY_MANIPULATED
 from relaff_jax.errors import UserError
 
 from .spec import ActionSpec, check_fields
@@ -133,9 +133,22 @@ def is_builtin(name: str) -> bool:
     return name in ACTIONS
 
 
+def manipulated(name: str) -> str:
+    """``"toy"`` or ``"other"``: the object action ``name``'s program manipulates (the spec's
+    ``manipulated``; the nine's from ``constants.TOY_MANIPULATED``, which their specs declare,
+    so that the learning stage reads it without JAX)."""
+    action_id(name)
+    if is_builtin(name):
+        return "toy" if name in TOY_MANIPULATED else "other"
+    return _USER[name].spec.manipulated
+
+
 def spec_hash(s: ActionSpec) -> str:
-    """sha256 of the spec: its name and fields and the source of the modules defining its rules."""
+    """sha256 of the spec: its name and fields and the source of the modules defining its rules
+    (``manipulates`` only where declared: a spec written before the field keeps its hash)."""
     fields = {f.name: getattr(s, f.name) for f in dataclasses.fields(s) if f.name not in ("targets", "goal")}
+    if s.manipulates is None:
+        del fields["manipulates"]
     fields["segments"] = [list(x) for x in s.segments]
     fields["targets"] = plugins.source_hash(s.targets)
     fields["goal"] = plugins.source_hash(s.goal)

@@ -22,6 +22,10 @@ GRASP_CODE = {"other": 1, "toy": 2, "none": 0, "tool": 0}
 # Which after state a goal reads: "measure" the objects at the measuring step (the lift-type
 # goals), "end" at the end of the run; with programs v2 both are the first step at rest.
 READINGS = ("measure", "end")
+# Which object the program manipulates (moves or grasps): its nine PCA values come first in the
+# action's state (``learn.states.manipulated_first_order``). None: the one the grasp holds ("toy"
+# for grasp "toy", else "other").
+MANIPULATED = ("toy", "other")
 REQUIRED = ("name", "pairing", "segments", "targets", "goal")
 
 
@@ -44,7 +48,9 @@ class ActionSpec:
       ``r.before``/``r.after`` (2, 3) centres of mass of (toy, other), ``r.direction`` (3,),
       ``r.reach_before``/``r.reach_after`` () unobstruct's reachability of the toy;
     reads: ``"measure"`` (after = the objects at the measuring step) or ``"end"`` (at the end);
-    grasp: one of ``GRASP_KINDS``; reach: evaluate the toy's reachability before and after;
+    grasp: one of ``GRASP_KINDS``; manipulates: one of ``MANIPULATED``, the object the program
+      moves or grasps, first in the state the action's predictor learns from (None: the one
+      the grasp holds, ``manipulated``); reach: evaluate the toy's reachability before and after;
     measure: the control step the goal is first read at (None: the last step of the segments);
     doc: one line for listings.
     """
@@ -56,6 +62,7 @@ class ActionSpec:
     goal: Callable[..., Any] = None
     reads: str = "end"
     grasp: str = "other"
+    manipulates: str | None = None
     reach: bool = False
     measure: int | None = None
     doc: str = ""
@@ -66,6 +73,13 @@ class ActionSpec:
     @property
     def pairing_id(self) -> int:
         return PAIRINGS.index(self.pairing)
+
+    @property
+    def manipulated(self) -> str:
+        """``"toy"`` or ``"other"``: the declared ``manipulates``, else the object the grasp holds."""
+        if self.manipulates is not None:
+            return self.manipulates
+        return "toy" if self.grasp == "toy" else "other"
 
 
 def _bad(spec_name: Any, field: str, why: str) -> UserError:
@@ -115,6 +129,13 @@ def check_fields(spec: Any) -> None:
         raise _bad(name, "grasp", f"{spec.grasp!r}; valid: {', '.join(GRASP_KINDS)}")
     if (spec.grasp == "tool") != (spec.pairing == "toy+rake"):
         raise _bad(name, "grasp", "'tool' (the held rake) goes with the pairing toy+rake and only with it")
+    if spec.manipulates is not None and spec.manipulates not in MANIPULATED:
+        raise _bad(name, "manipulates", f"{spec.manipulates!r}; valid: {', '.join(MANIPULATED)} (or None: the "
+                                        "object the grasp holds)")
+    held = {"toy": "toy", "other": "other", "tool": "other"}.get(spec.grasp)
+    if spec.manipulates is not None and held is not None and spec.manipulates != held:
+        raise _bad(name, "manipulates", f"{spec.manipulates!r}, but the closed gripper holds "
+                                        f"{'the toy' if held == 'toy' else 'the other object'} (grasp {spec.grasp!r})")
     if not isinstance(spec.reach, bool):
         raise _bad(name, "reach", f"expected True or False, got {spec.reach!r}")
     end = sum(s[0] for s in segs) - 1
