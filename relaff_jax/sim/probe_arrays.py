@@ -46,12 +46,15 @@ class _Model:
 
 
 class _Rollout:
+    """One rollout's raw per-step copies (the contact arrays and constraint forces)."""
+
     def __init__(self):
         self.model: _Model | None = None
-        self.bodies: list[np.ndarray] = []  # per step (k, 2) body ids of the object contacts
-        self.pyramid: list[np.ndarray] = []  # per step (k, width) their constraint forces
-        self.depth: list[float] = []
-        self.where: list[tuple[int, int]] = []
+        self.geom: list[np.ndarray] = []  # per step (ncon, 2)
+        self.dist: list[np.ndarray] = []  # per step (ncon,)
+        self.adr: list[np.ndarray] = []  # per step (ncon,) efc_address
+        self.dim: list[np.ndarray] = []  # per step (ncon,)
+        self.efc: list[np.ndarray] = []  # per step (nefc,) efc_force
         self.vel: list[np.ndarray] = []  # per step (2, 6) mj_objectVelocity of (toy, other)
         self.eq_active: list[np.ndarray] = []
 
@@ -74,25 +77,12 @@ class ArrayProbe:
         run = self.runs[b]
         run.model = mm
         assert len(run.vel) == t, "observe every step of a rollout in order"
-        n = d.ncon
-        bodies, deepest, where = None, 0.0, (0, 0)
-        if n:
-            con = d.contact
-            bod = mm.geom_body[con.geom]  # (n, 2)
-            obj = mm.is_obj[bod]
-            rows = obj[:, 0] | obj[:, 1]
-            if rows.any():
-                bodies = bod[rows]
-                dist = con.dist[rows]
-                k = int(np.argmin(dist))
-                deepest, where = float(max(0.0, -dist[k])), tuple(sorted(bodies[k].tolist()))
-                run.pyramid.append(self._pyramid(mm, d, con.efc_address[rows], con.dim[rows]))
-        if bodies is None:
-            bodies = np.zeros((0, 2), np.int64)
-            run.pyramid.append(np.zeros((0, mm.width)))
-        run.bodies.append(bodies)
-        run.depth.append(deepest)
-        run.where.append(where)
+        con = d.contact  # copies of this step's arrays (views of d, sized ncon); the work is done in result
+        run.geom.append(np.array(con.geom))
+        run.dist.append(np.array(con.dist))
+        run.adr.append(np.array(con.efc_address))
+        run.dim.append(np.array(con.dim))
+        run.efc.append(np.array(d.efc_force))
         vel = np.empty((2, 6))
         for j, body in enumerate(self.objects):
             mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, vel[j], 0)
@@ -100,15 +90,16 @@ class ArrayProbe:
         run.eq_active.append(np.array(d.eq_active))
 
     @staticmethod
-    def _pyramid(mm: _Model, d: mujoco.MjData, adr: np.ndarray, dim: np.ndarray) -> np.ndarray:
-        """(k, width) the forces ``mj_contactForce`` sums into the normal force, 0 elsewhere."""
+    def _pyramid(mm: _Model, efc: np.ndarray, adr: np.ndarray, dim: np.ndarray) -> np.ndarray:
+        """(k, width) the forces ``mj_contactForce`` sums into each contact's normal force
+        (``efc`` the constraint forces, ``adr`` each contact's first row or -1), 0 elsewhere."""
         if mm.pyramidal:
             n_used = np.where(dim == 1, 1, 2 * (dim - 1))
         else:  # elliptic: the normal force is the first row's
             n_used = np.ones_like(dim)
         use = (mm.cols[None, :] < n_used[:, None]) & (adr[:, None] >= 0)
         idx = np.where(use, adr[:, None] + mm.cols[None, :], 0)
-        return np.where(use, np.asarray(d.efc_force)[idx], 0.0)
+        return np.where(use, efc[idx], 0.0)
 
     def result(self, measure: int | np.ndarray) -> dict[str, Any]:
         """``measure``: the step the goal is read at, one for all rollouts or (B,) per rollout."""
@@ -125,10 +116,24 @@ class ArrayProbe:
             return self._empty()
         hand, names, weight = mm.hand, mm.names, mm.weight
         o0, o1 = self.objects
-        counts = np.asarray([len(x) for x in run.bodies])
-        step = np.repeat(np.arange(steps), counts)  # (K,) the step of each object contact
-        bodies = np.concatenate(run.bodies).astype(np.int64)
-        pyr = np.concatenate(run.pyramid)
+        ncon = np.asarray([len(x) for x in run.dist])
+        step = np.repeat(np.arange(steps), ncon)  # (N,) the step of each contact
+        efc_start = np.cumsum([0] + [len(x) for x in run.efc])[:-1]
+        efc = np.concatenate(run.efc) if run.efc else np.zeros(0)
+        adr = np.concatenate(run.adr).astype(np.int64)
+        adr = np.where(adr >= 0, adr + efc_start[step], -1)  # into the concatenated forces
+        bodies = mm.geom_body[np.concatenate(run.geom).reshape(-1, 2)]
+        obj = mm.is_obj[bodies]
+        rows = obj[:, 0] | obj[:, 1]  # the contacts with an object on one side, in step and contact order
+        step, bodies, dist = step[rows], bodies[rows], np.concatenate(run.dist)[rows]
+        pyr = self._pyramid(mm, efc, adr[rows], np.concatenate(run.dim)[rows])
+        # per step the deepest of them (the first on ties, as argmin): sorted by step, dist, order
+        first_deep = np.lexsort((np.arange(len(dist)), dist, step))
+        first_deep = first_deep[np.r_[True, step[first_deep][1:] != step[first_deep][:-1]]] if len(dist) else first_deep
+        depth = np.zeros(steps)
+        where = np.zeros((steps, 2), np.int64)
+        depth[step[first_deep]] = [float(max(0.0, -x)) for x in dist[first_deep]]
+        where[step[first_deep]] = np.sort(bodies[first_deep], axis=1)
         force = np.zeros(len(bodies))
         for c in range(pyr.shape[1]):  # mju_decodePyramid's order: 0, then each force in turn
             force += pyr[:, c]
@@ -158,11 +163,10 @@ class ArrayProbe:
             has = (bodies[:, 0] == o) | (bodies[:, 1] == o)
             np.add.at(on[j], step[has], force[has])
         load = np.maximum(on[0], on[1])
-        depth = np.asarray(run.depth)
         pen, pen_pair = 0.0, ""
         if steps and depth.max() > 0.0:
             i = int(np.argmax(depth))
-            pen, pen_pair = float(depth[i]), f"{names[run.where[i][0]]}|{names[run.where[i][1]]}"
+            pen, pen_pair = float(depth[i]), f"{names[where[i, 0]]}|{names[where[i, 1]]}"
         weight_n = max(weight[x] for x in self.objects)
         speed = lambda s: tuple(float(np.linalg.norm(run.vel[s][j][3:])) for j in range(2))
         if measure < steps:
