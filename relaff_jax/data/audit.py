@@ -9,7 +9,9 @@ How a stored rollout is re-simulated: the dataset's sidecar records its ``Action
 (``qpos0``) and settled state (``qpos_settled``). The audit plans the sampled scenes with the
 same jitted planner and batch shape as generation (``rollouts.make_batch_prepare_fn``), and
 replays the programs one ``MjData`` per scene (``native.replay_native``, the reference the
-native engine equals bit for bit) with ``physics_probe.Probe`` reading every step. A native
+native engine equals bit for bit) with ``probe_arrays.ArrayProbe`` (``physics_probe.Probe``'s
+readings from the contact arrays) reading every step, in ``jobs`` processes
+(``audit_replay``: the same audit at any count). A native
 dataset's scenes are re-settled in MuJoCo C from ``qpos0`` (``native_settle.settle_batch``,
 what generation ran) for the settled velocities, which are not stored; the settled positions
 are checked against the stored ones. An MJX dataset is replayed in C from its stored settled

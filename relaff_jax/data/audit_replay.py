@@ -53,7 +53,7 @@ def replay_probed(meta: Mapping[str, Any], cfg: Any, action: str, pair: np.ndarr
 
     plugins = [o[len("file "):] for o in _LOADED if o.startswith("file ")]
     parts = np.array_split(np.arange(len(pair)), k)
-    jobs_args = [(dict(meta), plugins, action, pair[i], qpos[i], qvel[i], {f: v[i] for f, v in plan.items()}, measure)
+    jobs_args = [(dict(meta), plugins, cfg, action, pair[i], qpos[i], qvel[i], {f: v[i] for f, v in plan.items()}, measure)
                  for i in parts]
     with ProcessPoolExecutor(k, mp_context=get_context("spawn")) as pool:
         outs = list(pool.map(_worker, jobs_args))
@@ -76,11 +76,15 @@ def _replay(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, qvel: np.
 
 
 def _worker(args: tuple) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """One chunk in a spawned process: the parent's plugins and recorded config, then ``_replay``."""
-    meta, plugins, action, pair, qpos, qvel, plan, measure = args
-    from relaff_jax.data.audit import action_config
+    """One chunk in a spawned process: the parent's plugins, the sidecar's object set and action
+    spec (as ``audit.action_config`` sets them up), then ``_replay``."""
+    meta, plugins, cfg, action, pair, qpos, qvel, plan, measure = args
     from relaff_jax.plugins import load_file
+    from relaff_jax.sim.actions.registry import check_recorded
+    from relaff_jax.sim.object_library import use_recorded
 
     for path in plugins:
         load_file(path)
-    return _replay(action_config(meta), action, pair, qpos, qvel, plan, measure)
+    use_recorded(meta)
+    check_recorded(action, meta["config"].get("action_spec"))
+    return _replay(cfg, action, pair, qpos, qvel, plan, measure)

@@ -25,7 +25,9 @@ rollout:
   hand (held: its motion is the arm's).
 
 Everything is float64 numpy; ``step_contacts`` is the per-step reading (a pure function of
-the model and data), ``Probe`` accumulates it over the steps of B rollouts.
+the model and data), ``Probe`` accumulates it over the steps of B rollouts. ``Probe`` reads
+each contact through ``d.contact[i]`` and ``mj_contactForce``: the reference of
+``probe_arrays.ArrayProbe``, which the audit uses (the same readings from the contact arrays).
 """
 from __future__ import annotations
 
