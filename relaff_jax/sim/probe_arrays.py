@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 
 from .physics_bounds import SUSTAIN_STEPS
-from .physics_probe import HAND_BODY, body_names, held_peak
+from .physics_probe import HAND_BODY, body_names, held_peak, welded_to
 
 
 class _Model:
@@ -186,13 +186,7 @@ class ArrayProbe:
 
     def _held(self, mm: _Model, eq_active: np.ndarray) -> tuple[bool, bool]:
         """``physics_probe.held_bodies``'s rule on a recorded ``eq_active``."""
-        m = mm.m
-        rows = np.flatnonzero((np.asarray(m.eq_type) == mujoco.mjtEq.mjEQ_WELD) & (eq_active != 0))
-        out = set()
-        for r in rows:
-            a, b = int(m.eq_obj1id[r]), int(m.eq_obj2id[r])
-            if mm.hand in (a, b):
-                out.add(b if a == mm.hand else a)
+        out = welded_to(mm.m, eq_active, mm.hand)
         return self.objects[0] in out, self.objects[1] in out
 
     def _empty(self) -> dict[str, Any]:
