@@ -20,6 +20,9 @@ from pathlib import Path
 import numpy as np
 
 import relaff_jax  # noqa: F401  (XLA flags before JAX)
+from relaff_jax import compile_cache
+
+compile_cache.configure()  # as the command does, before JAX: the workers load the replay's programs from the cache
 from relaff_jax.data import audit as A
 from relaff_jax.data import audit_replay as AR
 from relaff_jax.data.load import load_rollouts
@@ -61,9 +64,6 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=AR.default_jobs())
     ap.add_argument("--cache", default=None, help="npz file keeping the prepared scenes")
     a = ap.parse_args()
-    from relaff_jax import compile_cache
-
-    compile_cache.configure()  # as the command does: the workers load the replay's programs from the cache
     meta = read_sidecar(a.dir)
     cfg, action = A.action_config(meta), str(meta["action"])
     z = prepare(a.dir, a.sample, a.cache)

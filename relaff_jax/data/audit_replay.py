@@ -20,9 +20,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-# A worker starts a Python with JAX and compiles the replay's small jitted functions (seconds
-# on a busy machine); fewer scenes than this per worker are replayed here.
-MIN_PER_JOB = 24
+# A worker starts a Python with JAX, builds the planner's setup (``planning.setup``: the world's
+# models, an IK solve) and compiles the replay's small jitted functions: ~30 s at load 12 on two
+# cores (docs/journal/2026-12-05.md), the time of ~250 rollouts replayed here. Fewer scenes
+# than this per worker are replayed in this process.
+MIN_PER_JOB = 250
 
 
 def default_jobs() -> int:
