@@ -63,11 +63,13 @@ def _cmd_audit(args) -> int:
         raise UserError(f"--sample must be >= 1, got {args.sample}")
     if args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
+    if args.jobs is not None and args.jobs < 1:
+        raise UserError(f"--jobs must be >= 1, got {args.jobs}")
     from relaff_jax.cli import options
 
     options.load_plugins(args)  # a user action's datasets replay with its spec (checked against the record)
     folders = A.dataset_folders(args.dir)  # one-line errors before any work
-    audits = [A.ensure_audit(f, args.sample, args.seed) for f in folders]
+    audits = [A.ensure_audit(f, args.sample, args.seed, jobs=args.jobs) for f in folders]
     if args.json:
         print(json.dumps(audits if len(audits) > 1 else audits[0], sort_keys=True))
     else:
@@ -116,6 +118,8 @@ def register(subparsers) -> None:
     p.add_argument("dir", metavar="DIR", help="dataset folder or run folder")
     p.add_argument("--sample", type=int, default=64, help="rollouts audited per dataset")
     p.add_argument("--seed", type=int, default=0, help="seed of the sample")
+    p.add_argument("--jobs", type=int, default=None,
+                   help="processes replaying the rollouts (default: the cores; the same audit at any value)")
     p.add_argument("--json", action="store_true", help="print JSON (a list for a run folder) instead of a table")
     from relaff_jax.cli import options
 

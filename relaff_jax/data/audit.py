@@ -9,7 +9,9 @@ How a stored rollout is re-simulated: the dataset's sidecar records its ``Action
 (``qpos0``) and settled state (``qpos_settled``). The audit plans the sampled scenes with the
 same jitted planner and batch shape as generation (``rollouts.make_batch_prepare_fn``), and
 replays the programs one ``MjData`` per scene (``native.replay_native``, the reference the
-native engine equals bit for bit) with ``physics_probe.Probe`` reading every step. A native
+native engine equals bit for bit) with ``probe_arrays.ArrayProbe`` (``physics_probe.Probe``'s
+readings from the contact arrays) reading every step, in ``jobs`` processes
+(``audit_replay``: the same audit at any count). A native
 dataset's scenes are re-settled in MuJoCo C from ``qpos0`` (``native_settle.settle_batch``,
 what generation ran) for the settled velocities, which are not stored; the settled positions
 are checked against the stored ones. An MJX dataset is replayed in C from its stored settled
@@ -120,13 +122,12 @@ def _sample(rollouts: Mapping[str, Any], sample: int, seed: int) -> np.ndarray:
 
 
 def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: int = 0,
-                  nthread: int | None = None) -> dict[str, Any]:
-    """Replay ``sample`` rollouts of the dataset ``path`` in MuJoCo C with the physics probe;
-    the per-rollout readings and their summary (``summarise``)."""
+                  nthread: int | None = None, jobs: int | None = None) -> dict[str, Any]:
+    """Replay ``sample`` rollouts of the dataset ``path`` in MuJoCo C with the physics probe
+    (in ``jobs`` processes, default the cores: ``audit_replay``); the per-rollout readings and
+    their summary (``summarise``)."""
+    from relaff_jax.data.audit_replay import default_jobs, replay_probed
     from relaff_jax.sim.actions.registry import action_id
-    from relaff_jax.sim.native import replay_native
-    from relaff_jax.sim.physics_probe import Probe
-    from relaff_jax.sim.planning import setup
     from relaff_jax.sim.actions.tables import spec_tables
     from relaff_jax.sim.actions.registry import registry
 
@@ -155,11 +156,8 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
     if len(idx):
         qvel, resettled = settled_velocities(cfg, meta, r, nthread)
         plan = _plan(cfg, action, r["pair"], r["qpos_settled"], int(meta["batch"]))
-        world = setup(cfg).world
-        probe = Probe(len(idx), world.toy_body, world.obj_body, cfg.phys.timestep)
-        rep = replay_native(action, cfg, r["pair"], r["qpos_settled"], qvel, plan, observe=probe)
-        # the step each goal was read at: the template's (v1) or the first at rest after it (v2)
-        got = probe.result(rep.get("read_step", int(TPL_MEASURE[action_id(action)])))
+        rep, got = replay_probed(meta, cfg, action, r["pair"], r["qpos_settled"], qvel, plan,
+                                 int(TPL_MEASURE[action_id(action)]), default_jobs() if jobs is None else jobs)
         for i in range(len(idx)):
             rel = r["relation"][i]
             rows.append(dict(
@@ -269,12 +267,12 @@ def stored_audit(path: str | os.PathLike, sample: int, seed: int) -> dict[str, A
 
 
 def ensure_audit(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: int = 0,
-                 nthread: int | None = None) -> dict[str, Any]:
+                 nthread: int | None = None, jobs: int | None = None) -> dict[str, Any]:
     """The stored audit of ``path`` if it matches (``stored_audit``), else a new one written
     atomically to ``path/audit.json``: resumable, a killed run leaves no partial file."""
     d = stored_audit(path, sample, seed)
     if d is None:
-        d = audit_dataset(path, sample, seed, nthread)
+        d = audit_dataset(path, sample, seed, nthread, jobs)
         rio.atomic_write_json(Path(path) / AUDIT_FILE, d)
     return d
 

@@ -82,35 +82,40 @@ def settle_native(world: wd.World, pair: np.ndarray, qpos0: np.ndarray,
     return out_q, out_r
 
 
+def _pad_contacts(d: mujoco.MjData, pad: int, geoms: set) -> tuple[np.ndarray, np.ndarray]:
+    """(dist (k,), normal (k, 3)) of the contacts between geom ``pad`` and one of ``geoms``, in
+    contact order, read from the contact arrays (the values of each ``d.contact[i]``)."""
+    if not d.ncon:
+        return np.zeros(0), np.zeros((0, 3))
+    con = d.contact
+    g = con.geom
+    other = np.where(g[:, 0] == pad, g[:, 1], np.where(g[:, 1] == pad, g[:, 0], -1))
+    rows = (other[:, None] == np.fromiter(geoms, np.int64, len(geoms))[None, :]).any(axis=1)
+    return con.dist[rows], con.frame[rows, :3]
+
+
 def both_pads(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bool:
     """Do both finger pads touch one of ``geoms`` with their gripping face (C contacts, the
     rule of ``arm.finger_contacts`` as ``native_program.pad_hit`` writes it)?"""
-    hit = []
     for pad in arm.pad_geoms:
-        cons = [c for c in d.contact[:d.ncon]
-                if (c.geom1 == pad and c.geom2 in geoms) or (c.geom2 == pad and c.geom1 in geoms)]
-        if not cons:
-            hit.append(False)
-            continue
+        dist, normal = _pad_contacts(d, pad, geoms)
+        if not len(dist):
+            return False
         axis = np.asarray(d.geom_xmat[pad], np.float64).reshape(3, 3)[:, 1]
-        dist = np.array([c.dist for c in cons])
-        normal = np.array([np.asarray(c.frame[:3], np.float64) for c in cons])
-        hit.append(bool(pad_hit(dist, normal, axis, np.ones(len(cons), bool), cfg)))
-    return hit[0] and hit[1]
+        if not pad_hit(dist, normal, axis, np.ones(len(dist), bool), cfg):
+            return False
+    return True
 
 
 def landing(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bool:
     """Does a pad land on one of ``geoms`` (C contacts, the rule of ``guard.pad_landing`` as
     ``guard.pad_landing_np`` writes it)?"""
     for pad in arm.pad_geoms:
-        cons = [c for c in d.contact[:d.ncon]
-                if (c.geom1 == pad and c.geom2 in geoms) or (c.geom2 == pad and c.geom1 in geoms)]
-        if not cons:
+        dist, normal = _pad_contacts(d, pad, geoms)
+        if not len(dist):
             continue
         axis = np.asarray(d.geom_xmat[pad], np.float64).reshape(3, 3)[:, 1]
-        dist = np.array([c.dist for c in cons])
-        normal = np.array([np.asarray(c.frame[:3], np.float64) for c in cons])
-        if pad_landing_np(dist, normal, axis, np.ones(len(cons), bool), cfg):
+        if pad_landing_np(dist, normal, axis, np.ones(len(dist), bool), cfg):
             return True
     return False
 

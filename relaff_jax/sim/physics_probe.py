@@ -25,7 +25,9 @@ rollout:
   hand (held: its motion is the arm's).
 
 Everything is float64 numpy; ``step_contacts`` is the per-step reading (a pure function of
-the model and data), ``Probe`` accumulates it over the steps of B rollouts.
+the model and data), ``Probe`` accumulates it over the steps of B rollouts. ``Probe`` reads
+each contact through ``d.contact[i]`` and ``mj_contactForce``: the reference of
+``probe_arrays.ArrayProbe``, which the audit uses (the same readings from the contact arrays).
 """
 from __future__ import annotations
 
@@ -81,7 +83,12 @@ def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, int],
 
 def held_bodies(m: mujoco.MjModel, d: mujoco.MjData, hand: int) -> set[int]:
     """Bodies welded to the hand by an active equality constraint (the grasp lock, the rake)."""
-    rows = np.flatnonzero((np.asarray(m.eq_type) == mujoco.mjtEq.mjEQ_WELD) & (np.asarray(d.eq_active) != 0))
+    return welded_to(m, np.asarray(d.eq_active), hand)
+
+
+def welded_to(m: mujoco.MjModel, eq_active: np.ndarray, hand: int) -> set[int]:
+    """``held_bodies`` for the equality constraints' activity ``eq_active`` (neq,)."""
+    rows = np.flatnonzero((np.asarray(m.eq_type) == mujoco.mjtEq.mjEQ_WELD) & (eq_active != 0))
     out = set()
     for r in rows:
         a, b = int(m.eq_obj1id[r]), int(m.eq_obj2id[r])

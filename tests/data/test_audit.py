@@ -149,6 +149,9 @@ def test_cli_one_line_errors(tmp_path):
     p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(tmp_path), "--sample", "0"],
                        capture_output=True, text=True)
     assert p.returncode == 2 and p.stderr.strip() == "relaff audit: error: --sample must be >= 1, got 0"
+    p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(tmp_path), "--jobs", "0"],
+                       capture_output=True, text=True)
+    assert p.returncode == 2 and p.stderr.strip() == "relaff audit: error: --jobs must be >= 1, got 0"
 
 
 ROLLOUT_KEYS = {"rollout", "toy", "other", "relation", "label", "replay_label", "plan_feasible", "resettled",

@@ -250,8 +250,8 @@ def test_grasp_needs_the_pads_faces_mjx_and_c():
         dx = NS(_impl=NS(contact=NS(geom=jnp.array([[pl, obj], [obj, pr]]), dist=jnp.array([0.0, -0.001]),
                                     frame=jnp.asarray(frames))), geom_xmat=jnp.asarray(xmat))
         assert bool(jnp.all(A.finger_contacts(arm, cfg.arm, dx, [obj]))) == want
-        cons = [NS(dist=0.0, geom1=pl, geom2=obj, frame=fl.reshape(-1)),
-                NS(dist=-0.001, geom1=obj, geom2=pr, frame=fr.reshape(-1))]
+        cons = NS(geom=np.array([[pl, obj], [obj, pr]]), dist=np.array([0.0, -0.001]),  # MjData's contact arrays
+                  frame=np.stack([fl.reshape(-1), fr.reshape(-1)]))
         d = NS(contact=cons, ncon=2, geom_xmat=xmat.reshape(m.ngeom, 9))
         assert native.both_pads(d, arm, cfg, {obj}) == want
     # far contacts do not count, whatever their normal
