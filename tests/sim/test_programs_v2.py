@@ -185,12 +185,19 @@ def test_forces_and_penetration_within_bounds(action):
     from relaff_jax.sim import native_forces, rollouts
     from relaff_jax.sim.physics_bounds import PALM_CONTACT_STEPS, PENETRATION_M, PRESS_WEIGHTS
 
-    prep = rollouts.make_batch_prepare_fn(action, V2, settle="native")(jax.random.PRNGKey(3), 16)
-    run = np.flatnonzero(prep.plan.feasible)
+    # 16 scenes in two batches of 8: the place, screen and plan programs of batch 8 are the
+    # session's (the tiny preset's batch), not compiled again for 16
+    prepare = rollouts.make_batch_prepare_fn(action, V2, settle="native")
+    preps = [prepare(jax.random.fold_in(jax.random.PRNGKey(3), i), 8) for i in range(2)]
+    feasible = np.concatenate([p.plan.feasible for p in preps])
+    run = np.flatnonzero(feasible)
     assert len(run) >= 4
-    plan = {k: np.asarray(getattr(prep.plan, k))[run] for k in ("q_way", "grip_way", "feasible", "direction")}
-    r = native_forces.physics(action, V2, prep.pair[run], np.asarray(prep.scenes.qpos)[run],
-                              np.asarray(prep.scenes.qvel)[run], plan)
+    plan = {k: np.concatenate([np.asarray(getattr(p.plan, k)) for p in preps])[run]
+            for k in ("q_way", "grip_way", "feasible", "direction")}
+    pair = np.concatenate([p.pair for p in preps])[run]
+    qpos = np.concatenate([np.asarray(p.scenes.qpos) for p in preps])[run]
+    qvel = np.concatenate([np.asarray(p.scenes.qvel) for p in preps])[run]
+    r = native_forces.physics(action, V2, pair, qpos, qvel, plan)
     assert np.all(r["palm_steps"] <= PALM_CONTACT_STEPS) and np.all(r["palm"] == 0.0), r["palm"]
     assert np.all(r["press"] <= PRESS_WEIGHTS * r["weight"]), r["press"] / r["weight"]
     assert np.all(r["depth"] <= PENETRATION_M), r["depth"]
