@@ -14,6 +14,8 @@ from relaff_jax.sim import objects as lib
 from relaff_jax.sim import world as wd
 from relaff_jax.config.action import ActionConfig
 
+from helpers.scenes import plan_rows
+
 V2 = ActionConfig()
 V1 = dataclasses.replace(V2, programs="v1")
 
@@ -136,7 +138,6 @@ def test_versions_config_and_sidecar():
 
 def _replay(action, cfg, rows):
     """Settle hand-built scenes in C, plan them (JAX) and measure their replay in C."""
-    from relaff_jax.constants import action_id
     from relaff_jax.sim import native_forces
 
     st = planning.setup(cfg)
@@ -147,9 +148,7 @@ def _replay(action, cfg, rows):
     qs, _ = native.settle_native(wd.build_world(cfg.phys), pair, q0)
     qpos = qs[:, :14]
     qvel = np.zeros((len(rows), 12))
-    plan = jax.device_get(jax.jit(planning.make_plan_fn(cfg))(action_id(action), jnp.asarray(pair),
-                                                              jnp.asarray(qpos, jnp.float32)))
-    res = {k: np.asarray(getattr(plan, k)) for k in ("q_way", "grip_way", "feasible", "direction")}
+    res = plan_rows(action, cfg, pair, qpos)  # the session's planner at batch 8
     return res, native_forces.physics(action, cfg, pair, qpos, qvel, res)
 
 
