@@ -86,3 +86,20 @@ def scene_rollout_fn(w, settle):
                 "rollout_id": bits.astype(np.int64)}
 
     return rollout
+
+
+def plan_rows(action, cfg, pair, qpos, batch=8):
+    """The motor programs of a few hand-built scenes, as a dataset's rollouts get them: the
+    session's jitted ``prepare_fn`` (``rollouts.jitted_stage_fns``) at ``batch`` (8, the tiny
+    preset's), the rows padded with repeats, so that no test compiles the planner for its own
+    row count. Host arrays: pair (n,) with n <= batch, qpos (n, 14). Returns the plan's fields
+    the C replay reads (``q_way``, ``grip_way``, ``feasible``, ``direction``), n rows each."""
+    from relaff_jax.constants import action_id
+    from relaff_jax.sim import rollouts
+
+    n = len(pair)
+    idx = np.resize(np.arange(n), batch)
+    plan, _ = rollouts.jitted_stage_fns(cfg)[0](action_id(action), jnp.asarray(np.asarray(pair)[idx], jnp.int32),
+                                                jnp.asarray(np.asarray(qpos)[idx], jnp.float32))
+    plan = jax.device_get(plan)
+    return {k: np.asarray(getattr(plan, k))[:n] for k in ("q_way", "grip_way", "feasible", "direction")}

@@ -14,6 +14,8 @@ from relaff_jax.sim import objects as lib
 from relaff_jax.sim import world as wd
 from relaff_jax.config.action import ActionConfig
 
+from helpers.scenes import plan_rows
+
 V2 = ActionConfig()
 V1 = dataclasses.replace(V2, programs="v1")
 
@@ -136,7 +138,6 @@ def test_versions_config_and_sidecar():
 
 def _replay(action, cfg, rows):
     """Settle hand-built scenes in C, plan them (JAX) and measure their replay in C."""
-    from relaff_jax.constants import action_id
     from relaff_jax.sim import native_forces
 
     st = planning.setup(cfg)
@@ -147,9 +148,7 @@ def _replay(action, cfg, rows):
     qs, _ = native.settle_native(wd.build_world(cfg.phys), pair, q0)
     qpos = qs[:, :14]
     qvel = np.zeros((len(rows), 12))
-    plan = jax.device_get(jax.jit(planning.make_plan_fn(cfg))(action_id(action), jnp.asarray(pair),
-                                                              jnp.asarray(qpos, jnp.float32)))
-    res = {k: np.asarray(getattr(plan, k)) for k in ("q_way", "grip_way", "feasible", "direction")}
+    res = plan_rows(action, cfg, pair, qpos)  # the session's planner at batch 8
     return res, native_forces.physics(action, cfg, pair, qpos, qvel, res)
 
 
@@ -185,12 +184,19 @@ def test_forces_and_penetration_within_bounds(action):
     from relaff_jax.sim import native_forces, rollouts
     from relaff_jax.sim.physics_bounds import PALM_CONTACT_STEPS, PENETRATION_M, press_ok
 
-    prep = rollouts.make_batch_prepare_fn(action, V2, settle="native")(jax.random.PRNGKey(3), 16)
-    run = np.flatnonzero(prep.plan.feasible)
+    # 16 scenes in two batches of 8: the place, screen and plan programs of batch 8 are the
+    # session's (the tiny preset's batch), not compiled again for 16
+    prepare = rollouts.make_batch_prepare_fn(action, V2, settle="native")
+    preps = [prepare(jax.random.fold_in(jax.random.PRNGKey(3), i), 8) for i in range(2)]
+    feasible = np.concatenate([p.plan.feasible for p in preps])
+    run = np.flatnonzero(feasible)
     assert len(run) >= 4
-    plan = {k: np.asarray(getattr(prep.plan, k))[run] for k in ("q_way", "grip_way", "feasible", "direction")}
-    r = native_forces.physics(action, V2, prep.pair[run], np.asarray(prep.scenes.qpos)[run],
-                              np.asarray(prep.scenes.qvel)[run], plan)
+    plan = {k: np.concatenate([np.asarray(getattr(p.plan, k)) for p in preps])[run]
+            for k in ("q_way", "grip_way", "feasible", "direction")}
+    pair = np.concatenate([p.pair for p in preps])[run]
+    qpos = np.concatenate([np.asarray(p.scenes.qpos) for p in preps])[run]
+    qvel = np.concatenate([np.asarray(p.scenes.qvel) for p in preps])[run]
+    r = native_forces.physics(action, V2, pair, qpos, qvel, plan)
     assert np.all(r["palm_steps"] <= PALM_CONTACT_STEPS) and np.all(r["palm"] == 0.0), r["palm"]
     assert np.all(press_ok(r["press"], r["weight"])), (r["press"], r["weight"])
     assert np.all(r["depth"] <= PENETRATION_M), r["depth"]

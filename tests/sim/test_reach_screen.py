@@ -15,6 +15,7 @@ from relaff_jax.sim.planning import setup
 from relaff_jax.sim.reach_screen import beyond_reach, jitted_screen_fn, prepare_screened, reach_bound
 
 CFG = templates.ActionConfig()
+B = 8  # scenes per batch: the tiny preset's, whose compiled programs the session shares
 
 
 @pytest.fixture(scope="module")
@@ -69,39 +70,50 @@ def test_no_reachable_pose_is_screened(arm):
     assert np.asarray(far(_targets(out, app))).all()
 
 
-@pytest.mark.slow  # compiles the plan (~20 s) and the screen
+@pytest.mark.slow  # plans 9 x 64 scenes (the programs at batch 8 are the session's: generate's)
 def test_screened_plan_equals_plan():
-    """Every action, 64 scenes: the screened plan equals the unscreened plan in every field but
-    ``ik_error`` (NaN where screened); the screened scenes are infeasible in the full plan.
-    Unobstruct's scenes include all three of its calls: program and toy, program only (toy
-    beyond reach), toy only (program beyond reach)."""
+    """Every action, 64 scenes in 8 batches of 8: the screened plan equals the unscreened plan
+    in every field but ``ik_error`` (NaN where screened); the screened scenes are infeasible in
+    the full plan. Unobstruct's scenes include all three of its calls: program and toy, program
+    only (toy beyond reach), toy only (program beyond reach). Batches of 8 (the tiny preset's,
+    tests/sim/test_actions.py's) reuse the session's compiled place, plan and screen programs
+    instead of compiling them for 64 scenes."""
     sw = wd.build_world(CFG.phys)
     place_fn, _, _ = sc.jitted_scene_fns(sw, CFG.scene)
     prep = rollouts.jitted_stage_fns(CFG)[0]
     screened = 0
     for action in ACTIONS:
         aid = action_id(action)
-        kp, ks = jax.random.split(rollouts.bench_batch_key(0, 64, 0))[:2]
-        pair = sc.sample_pairs(kp, rollouts.allowed_pairs(sw, action), sw, 64)
-        qpos0, intended = jax.device_get(place_fn(ks, pair))
-        pair = np.asarray(pair)
-        q = np.asarray(native_settle.settle_batch(sw, pair, qpos0, intended, CFG.scene, 2).qpos, np.float32)
-        ref, ref_before = jax.device_get(prep(aid, jnp.asarray(pair), jnp.asarray(q)))
-        got, before = prepare_screened(prep, CFG, aid, pair, q)
-        skip = np.isnan(got.ik_error)
-        for f in ("q_way", "grip_way", "seg_steps", "feasible", "direction"):
-            a, g = np.asarray(getattr(ref, f)), np.asarray(getattr(got, f))
-            assert a.dtype == g.dtype and a.shape == g.shape, (action, f)
-            np.testing.assert_array_equal(g, a, err_msg=f"{action} {f}")
-        np.testing.assert_array_equal(got.ik_error[~skip], np.asarray(ref.ik_error)[~skip])
-        np.testing.assert_array_equal(before, ref_before)
-        assert not np.asarray(ref.feasible)[skip].any()
+        kinds = []
+        for c in range(8):
+            kp, ks = jax.random.split(rollouts.bench_batch_key(0, B, c))[:2]
+            pair = sc.sample_pairs(kp, rollouts.allowed_pairs(sw, action), sw, B)
+            qpos0, intended = jax.device_get(place_fn(ks, pair))
+            pair = np.asarray(pair)
+            q = np.asarray(native_settle.settle_batch(sw, pair, qpos0, intended, CFG.scene, 2).qpos, np.float32)
+            ref, ref_before = jax.device_get(prep(aid, jnp.asarray(pair), jnp.asarray(q)))
+            got, before = prepare_screened(prep, CFG, aid, pair, q)
+            skip = np.isnan(got.ik_error)
+            for f in ("q_way", "grip_way", "seg_steps", "feasible", "direction"):
+                a, g = np.asarray(getattr(ref, f)), np.asarray(getattr(got, f))
+                assert a.dtype == g.dtype and a.shape == g.shape, (action, f)
+                np.testing.assert_array_equal(g, a, err_msg=f"{action} {f}")
+            np.testing.assert_array_equal(got.ik_error[~skip], np.asarray(ref.ik_error)[~skip])
+            np.testing.assert_array_equal(before, ref_before)
+            assert not np.asarray(ref.feasible)[skip].any()
+            kinds.append(skip)
+            if action == "unobstruct":
+                far, toy_far, _ = jax.device_get(jitted_screen_fn(CFG)(aid, jnp.asarray(pair), jnp.asarray(q)))
+                kinds[-1] = np.stack([far, toy_far])
+                np.testing.assert_array_equal(skip, far)
+        if action == "unobstruct":
+            far, toy_far = np.concatenate(kinds, axis=1)
+            assert (~far & ~toy_far).any() and (~far & toy_far).any() and (far & ~toy_far).any()
+            skip = far
+        else:
+            skip = np.concatenate(kinds)
         assert (~skip).any(), action
         screened += skip.sum()
-        if action == "unobstruct":
-            far, toy_far, _ = jax.device_get(jitted_screen_fn(CFG)(aid, jnp.asarray(pair), jnp.asarray(q)))
-            assert (~far & ~toy_far).any() and (~far & toy_far).any() and (far & ~toy_far).any()
-            np.testing.assert_array_equal(skip, far)
     assert screened > 0.25 * 64 * len(ACTIONS)  # about half the scenes are beyond reach
 
 
