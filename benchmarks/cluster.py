@@ -94,7 +94,8 @@ def run_mode(mode, args, work: Path) -> dict:
     from relaff_jax.data.store import chunk_path, read_chunk
     from relaff_jax.data.tasks import feature_chunk, rollout_chunk
     from relaff_jax.config.experiment import experiment_preset
-    from relaff_jax.learn import run_experiment, synthetic_datasets
+    from relaff_jax.learn import synthetic_datasets
+    from relaff_jax.learn.sweep import run_experiment
     from relaff_jax.stages.features import default_feature_factory
     from relaff_jax.stages.generate import default_rollout_factory
 

@@ -29,6 +29,7 @@ import time
 import numpy as np
 
 from relaff_jax import learn as E
+from relaff_jax.learn.blocks import run_block
 from relaff_jax.config.experiment import ExperimentConfig, experiment_preset
 from relaff_jax.learn.checks import check_config
 from relaff_jax import learn as L
@@ -55,7 +56,7 @@ def _one_call(space: str, n: int, k: int, seed: int, engine: str = "fast") -> tu
     X, y, boot, test_idx, order = _block_inputs(space, seed=seed)
     plan = [(1 + s, (s,)) for s in range(k)]
     c = time.process_time()
-    E.run_block(X, y, boot, plan, order, test_idx, [n], cfg.repeats(space), 1 + k, cfg.forest, (seed, n))
+    run_block(X, y, boot, plan, order, test_idx, [n], cfg.repeats(space), 1 + k, cfg.forest, (seed, n))
     return k, time.process_time() - c
 
 

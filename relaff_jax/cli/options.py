@@ -134,7 +134,7 @@ def check_action(args: argparse.Namespace, action: str, cfg: Any = None) -> None
     if getattr(args, "cluster", None):
         raise UserError(f"--cluster: the user action {action!r} runs only here (the cluster's workers do not "
                         "load --plugins files)")
-    from relaff_jax.sim.actions import check_actions
+    from relaff_jax.sim.actions.check import check_actions
     from relaff_jax.config.action import ActionConfig
 
     check_actions([action], cfg if cfg is not None else ActionConfig())

@@ -23,7 +23,8 @@ from typing import Any, Mapping
 
 from relaff_jax import io as rio
 from relaff_jax import provenance
-from relaff_jax.learn import analyse, load_results
+from relaff_jax.learn import analyse
+from relaff_jax.learn.results import load_results
 from relaff_jax.report import folder as F
 from relaff_jax.report.audit import audit_blocks, stored_audits
 from relaff_jax.report import sections as S

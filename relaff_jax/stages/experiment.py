@@ -1,5 +1,5 @@
 """Stage 3, ``experiment``: the learning and bootstrapping sweeps in every state space
-(``relaff_jax.learn.run_experiment``), in ``DIR/results/``.
+(``relaff_jax.learn.sweep.run_experiment``), in ``DIR/results/``.
 
 ``experiment_folder(tree, data, out, seed=...)`` runs (or resumes) the experiment of one
 results folder and writes its config record: what ``relaff experiment`` calls, and what

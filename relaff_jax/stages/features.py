@@ -26,7 +26,7 @@ def default_feature_factory(seed: int, config: Any = None, objects: Any = None, 
     only the built-ins active): ``objects`` (a ``sim.objects.ObjectSet``, e.g. a dataset's
     record) or the one ``action`` (an ``ActionConfig``) selects; neither: the active set."""
     from relaff_jax.perception import from_sim
-    from relaff_jax.sim import build_world
+    from relaff_jax.sim.world import build_world
     from relaff_jax.sim import objects as lib
 
     if objects is not None:

@@ -148,7 +148,8 @@ def run(run: Run, forced: bool) -> dict:
     if forced:
         rio.remove_tree(paths.data)
     acts = cfg.reproduce.actions
-    from relaff_jax.sim.actions import check_actions, record
+    from relaff_jax.sim.actions import record
+    from relaff_jax.sim.actions.check import check_actions
 
     check_actions(acts, cfg.action)  # a user action's rules traced once, before any simulation
     users = [a for a in acts if record(a) is not None]

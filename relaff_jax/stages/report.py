@@ -1,5 +1,5 @@
 """Stage 4, ``report``: Table II beside the paper's, findings, figures and example scenes
-(``relaff_jax.report.write_report``), in ``DIR/report/``.
+(``relaff_jax.report.write.write_report``), in ``DIR/report/``.
 
 ``report_folder(tree, results, out, data_dirs=...)`` writes the report of one experiment
 folder, its config record and, last, the inputs' stamp (``report.status``), so a killed writer
