@@ -4,6 +4,7 @@ The order of each tuple is part of the stored formats: datasets store relation a
 codes as indices into these tuples, and result arrays are laid out in ``ACTIONS`` order.
 """
 from __future__ import annotations
+from relaff_jax.errors import UserError
 
 # The nine actions of the paper's Table I, in the order of every result array.
 ACTIONS = ("lift", "move", "pull", "push", "rake", "take", "pour", "slide", "unobstruct")
@@ -42,8 +43,6 @@ STAGES = ("generate", "features", "experiment", "report")
 def action_id(action: str) -> int:
     """Index of ``action`` in ``ACTIONS``; an unknown name is a ``UserError`` listing the valid ones.
     (The run's list, with a user's actions after the nine: ``sim.actions.registry.action_id``.)"""
-    from relaff_jax.errors import UserError
-
     if action not in ACTIONS:
         raise UserError(f"unknown action {action!r}; valid actions: {', '.join(ACTIONS)}")
     return ACTIONS.index(action)

@@ -11,15 +11,16 @@ import json
 
 from relaff_jax import data as D
 from relaff_jax.data import export as X
+from relaff_jax.constants import ACTIONS
+from relaff_jax.errors import UserError
+from relaff_jax.data import audit as A
+from relaff_jax.cli import options
 
 
 def _not_a_run_folder(path) -> None:
     """``relaff info RUN_FOLDER`` (a ``relaff reproduce`` folder, not a dataset): name the
     datasets it holds instead of "not a relaff dataset"."""
     from pathlib import Path
-
-    from relaff_jax.constants import ACTIONS
-    from relaff_jax.errors import UserError
 
     root = Path(path)
     if (root / "run.json").is_file() and not (root / "relaff_dataset.json").exists():
@@ -56,14 +57,10 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_audit(args) -> int:
-    from relaff_jax.data import audit as A
-    from relaff_jax.errors import UserError
-
     if args.sample < 1:
         raise UserError(f"--sample must be >= 1, got {args.sample}")
     if args.seed < 0:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
-    from relaff_jax.cli import options
 
     options.load_plugins(args)  # a user action's datasets replay with its spec (checked against the record)
     folders = A.dataset_folders(args.dir)  # one-line errors before any work
@@ -117,7 +114,6 @@ def register(subparsers) -> None:
     p.add_argument("--sample", type=int, default=64, help="rollouts audited per dataset")
     p.add_argument("--seed", type=int, default=0, help="seed of the sample")
     p.add_argument("--json", action="store_true", help="print JSON (a list for a run folder) instead of a table")
-    from relaff_jax.cli import options
 
     options.add_plugins(p)
     p.set_defaults(func=_cmd_audit)

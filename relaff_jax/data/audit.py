@@ -35,6 +35,11 @@ from relaff_jax.data.errors import DatasetError
 from relaff_jax.data.load import load_rollouts
 from relaff_jax.data.store import read_sidecar
 from relaff_jax.sim import physics_bounds as bounds
+from relaff_jax.config import from_dict
+from relaff_jax.sim.object_library import use_recorded
+from relaff_jax.sim.actions.registry import action_id, check_recorded, names, registry
+from relaff_jax.data.layout import SIDECAR
+from relaff_jax.config.action import ActionConfig
 
 AUDIT_FILE = "audit.json"
 AUDIT_VERSION = 4  # 4: penetration held 0.1 s (was one step's); 3: force = the press held 0.1 s, penetration 3 mm
@@ -53,16 +58,11 @@ THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "press_weights": FORCE_WEIGHT
 
 
 def action_config(meta: Mapping[str, Any]):
-    from relaff_jax.config import from_dict
-    from relaff_jax.sim.templates import ActionConfig
-
     record = meta.get("config")
     if not isinstance(record, dict) or not isinstance(record.get("action_config"), dict):
         raise DatasetError(f"{meta.get('action')}: the sidecar records no action_config; cannot replay")
-    from relaff_jax.sim.object_library import use_recorded
 
     use_recorded(meta)  # the objects its pair indices refer to (the built-ins if it records none)
-    from relaff_jax.sim.actions.registry import check_recorded
 
     check_recorded(str(meta.get("action")), record.get("action_spec"))  # a user action: the spec that made it
     return from_dict(ActionConfig, record["action_config"])
@@ -71,7 +71,7 @@ def action_config(meta: Mapping[str, Any]):
 def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int) -> dict[str, np.ndarray]:
     """The plans of the scenes, by generation's jitted planner in calls of the dataset's batch
     (the last padded with repeats: a plan does not depend on the other rows of its call)."""
-    from relaff_jax.sim.actions.registry import action_id
+    # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
     from relaff_jax.sim.reach_screen import prepare_screened
     from relaff_jax.sim.rollouts import jitted_stage_fns
 
@@ -98,6 +98,7 @@ def settled_velocities(cfg: Any, meta: Mapping[str, Any], r: Mapping[str, np.nda
     n = len(r["pair"])
     if meta.get("engine") != "native":
         return np.zeros((n, 12), np.float32), np.zeros(n, bool)
+    # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
     from relaff_jax.sim import world as wd
     from relaff_jax.sim.native_batch import default_threads
     from relaff_jax.sim.native_settle import settle_batch
@@ -120,12 +121,11 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
                   nthread: int | None = None) -> dict[str, Any]:
     """Replay ``sample`` rollouts of the dataset ``path`` in MuJoCo C with the physics probe;
     the per-rollout readings and their summary (``summarise``)."""
-    from relaff_jax.sim.actions.registry import action_id
+    # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
     from relaff_jax.sim.native import replay_native
     from relaff_jax.sim.physics_probe import Probe
     from relaff_jax.sim.planning import setup
     from relaff_jax.sim.actions.tables import spec_tables
-    from relaff_jax.sim.actions.registry import registry
 
     TPL_MEASURE = spec_tables(registry()).measure  # the run's actions' (the nine's: templates.TPL_MEASURE)
 
@@ -279,9 +279,6 @@ def dataset_folders(path: str | os.PathLike) -> list[Path]:
     """The dataset folders of ``path``: itself if it is a dataset (has a sidecar), else the
     ``data/<action>/`` datasets of a run folder, in ``ACTIONS`` order. One-line errors for a
     missing folder, a file, or a folder that is neither."""
-    from relaff_jax.data.layout import SIDECAR
-    from relaff_jax.sim.actions.registry import names
-
     p = Path(path)
     if not p.exists():
         raise DatasetError(f"{p}: no such dataset or run folder")

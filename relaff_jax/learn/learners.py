@@ -82,6 +82,7 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
     """F fitted models, model f on ``Xs[f]: (N_f, D_f)``, ``ys[f]: (N_f,)`` bool, seed
     ``seeds[f]`` (forests: ``engine.fit_many``)."""
     if isinstance(learner, ForestConfig):
+        # scikit-learn loads with the first fit: reproduce --status reads this module
         from relaff_jax.learn import engine  # here: the config imports this module without JAX
 
         return engine.fit_many(Xs, ys, seeds, learner)
@@ -105,6 +106,7 @@ def fit(X: np.ndarray, y: np.ndarray, seed: int, learner: ForestConfig | Sklearn
 def predict(model, X: np.ndarray) -> np.ndarray:
     """0/1 float32 ``(N,)`` predictions of a model from ``fit`` (``engine.predict`` for every
     kind: a model that is no forest is asked for ``predict``)."""
+    # scikit-learn loads with the first fit: reproduce --status reads this module
     from relaff_jax.learn import engine
 
     return engine.predict(model, X)

@@ -16,6 +16,12 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from relaff_jax.sim.actions.registry import action_id
+from relaff_jax.sim.native import replay_native
+from relaff_jax.sim.planning import make_plan_fn, setup
+from relaff_jax.sim.templates import ActionConfig
+from relaff_jax.io import atomic_write_bytes
+from relaff_jax.perception import rollout_view as rv
 
 STEP_SECONDS = 0.004  # PhysicsConfig's default timestep: frames are shown at real time
 
@@ -41,11 +47,6 @@ def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, ev
     """
     import jax
     import jax.numpy as jnp
-
-    from relaff_jax.sim.actions.registry import action_id
-    from relaff_jax.sim.native import replay_native
-    from relaff_jax.sim.planning import make_plan_fn, setup
-    from relaff_jax.sim.templates import ActionConfig
 
     cfg = cfg if cfg is not None else ActionConfig()
     q = np.asarray(qpos, np.float32)[None]
@@ -75,9 +76,6 @@ def write_gif(frames: dict[str, Any], out: str | Path, title: str = "", fps: flo
     import time
 
     from PIL import Image, ImageDraw, ImageFont
-
-    from relaff_jax.io import atomic_write_bytes
-    from relaff_jax.perception import rollout_view as rv
 
     t0 = time.perf_counter()
     model = frames["model"]

@@ -39,6 +39,7 @@ from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config:
 
 from relaff_jax.constants import SIM_ENGINES
 from relaff_jax.errors import UserError
+from .object_library import use_scene
 
 ENGINES = SIM_ENGINES  # executors of the planned programs in make_rollout_fn
 
@@ -186,7 +187,6 @@ def make_batch_prepare_fn(action: str, cfg: ActionConfig, settle: str = "mjx",
     if settle not in ENGINES:
         raise UserError(f"unknown settle {settle!r}; valid: {', '.join(ENGINES)}")
     aid = action_id(action)
-    from .object_library import use_scene
 
     use_scene(cfg.scene, cfg.grip_margin)  # the objects cfg selects (a Dask worker's first call reads them here)
     scene_world = wd.build_world(cfg.phys)

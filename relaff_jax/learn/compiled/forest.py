@@ -67,6 +67,7 @@ def kernels() -> dict:
     sources clears the cache when any of them changed (a development concern only)."""
     if not _KERNELS:
         _clear_stale_cache()
+        # numba loads (and compiles) on the first call, not with the package
         from relaff_jax.learn.compiled import build, evaluate
 
         _KERNELS.update(build_forests=build.build_forests, block_sums=evaluate.block_sums)
