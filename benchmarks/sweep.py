@@ -8,7 +8,7 @@ Then projects the full paper protocol (sizes 2..100, 50 PCA / 25 RHF repetitions
 condition) and the quick preset from the measured all-core rates, plus the one-off source
 predictors and categories.
 
-Before that, per forest and in the same run, the two forest engines (``relaff_jax.learn.engine``):
+Before that, per forest and in the same run, the two forest engines (``relaff_jax.learn.forest.engine``):
 ``sklearn`` (``RandomForestClassifier`` fit + ``predict`` on 4000 rows, one forest at a time)
 and ``fast`` (scikit-learn's Cython builder called directly + all forests of a block evaluated
 in one jitted program), their ratio, and the paper protocol's sweep projected on 2 cores from
@@ -33,7 +33,7 @@ from relaff_jax.learn.blocks import run_block
 from relaff_jax.config.experiment import ExperimentConfig, experiment_preset
 from relaff_jax.learn.checks import check_config
 from relaff_jax import learn as L
-from relaff_jax.learn import engine as G
+from relaff_jax.learn.forest import engine as G
 
 SIZES = (4, 25, 100)
 DIMS = {"pca": 18, "rhf": 318}

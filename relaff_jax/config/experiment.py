@@ -91,10 +91,10 @@ class ForestConfig(Node):
     # of the samples without replacement (``forests.subsample_weights``), the other reading of III-B
     per_tree: str = "bootstrap"
     # "fast": the same trees built by scikit-learn's Cython builder without the estimator and
-    # evaluated in one jitted program (learn/engine.py), bit-identical to "sklearn", the
+    # evaluated in one jitted program (learn/forest/engine.py), bit-identical to "sklearn", the
     # RandomForestClassifier reference (tests/learn); "compiled": the same trees and
     # predictions from scikit-learn's builder re-expressed in numba, many forests per call
-    # (learn/compiled/, docs/learning.md)
+    # (learn/forest/compiled/, docs/learning.md)
     engine: str = "fast"
 
     _path = "experiment.forest"

@@ -6,12 +6,12 @@ and gives, per state space, the accuracies of every bootstrapping condition on d
 
 Files, in pipeline order:
 
-- ``forests.py``: ``ForestConfig``, ``n_trees``, ``make_forest``, ``fit_forest``, ``predict_class``;
-- ``engine_fit.py``: the same forests built by scikit-learn's Cython tree builder directly;
-- ``engine_eval.py``: their exact predictions, many forests at once in one jitted program;
-- ``compiled/``: the same forests and predictions from scikit-learn's builder in numba, many
-  forests per kernel call (issue 26);
-- ``engine.py``: the engine the sweep and prep use (``ForestConfig.engine``: fast | compiled | sklearn);
+- ``forest/``: the paper's forests and the engines that build them (``forest/__init__.py``):
+  ``estimator.py`` (``ForestConfig``'s forests as scikit-learn estimators: ``n_trees``,
+  ``make_forest``, ``fit_forest``, ``predict_class``), ``fit.py`` (the same trees from
+  scikit-learn's Cython builder directly), ``evaluate.py`` (their exact predictions, many forests
+  in one jitted program), ``compiled/`` (trees and predictions in numba), ``engine.py`` (the
+  engine the sweep and prep use: ``ForestConfig.engine``: fast | compiled | sklearn);
 - ``learners.py``: the learner of every forest: the paper's (default) or a scikit-learn classifier
   by import path (``ExperimentConfig.learner``, ``learner_params``);
 - ``conditions.py``: conditions as registered functions (``register_condition``, ``Knowledge``),
@@ -56,7 +56,7 @@ from relaff_jax.learn.conditions import (Knowledge, load_plugin_file, register_c
 from relaff_jax.learn.correlation import categories_above, category_pairs, correlation_matrix
 from relaff_jax.learn.datasets import check_datasets, fingerprint, load_datasets
 from relaff_jax.learn.draws import draw_rep, draw_test, draw_train
-from relaff_jax.learn.forests import check_forest_config, fit_forest, make_forest, n_trees, predict_class
+from relaff_jax.learn.forest.estimator import check_forest_config, fit_forest, make_forest, n_trees, predict_class
 from relaff_jax.learn.intervals import bc_interval, half_sizes, percentile_interval, resampled_means, scene_halves, whole
 from relaff_jax.learn.measures import (bootstrap_factor, chance_tolerance, min_defined, size_mask, summarise,
                                        table2_rows, tie_weights, window_mean)

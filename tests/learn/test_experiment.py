@@ -220,7 +220,8 @@ def test_forests_per_space_hand_worked():
 
 
 def _count_fits(monkeypatch):
-    from relaff_jax.learn import blocks, engine, prep
+    from relaff_jax.learn import blocks, prep
+    from relaff_jax.learn.forest import engine
 
     n = {"fits": 0}
     real, real_many = engine.fit, engine.fit_many  # what prep and the sweep fit with (any engine)

@@ -150,7 +150,7 @@ def test_subsample_trees_are_sklearns_on_the_subsample_alone(n):
     other rows out of the tree entirely."""
     from sklearn.tree import DecisionTreeClassifier
 
-    from relaff_jax.learn.forests import subsample_size, subsample_weights
+    from relaff_jax.learn.forest.estimator import subsample_size, subsample_weights
 
     rng = np.random.default_rng(n)
     X = rng.normal(size=(n, 18)).astype(np.float32)

@@ -140,7 +140,7 @@ def test_online_choice_differs_from_the_offline_one_in_the_known_way():
 
 def test_leave_one_out_accuracy_matches_sklearn_forests_on_nine_samples():
     from relaff_jax.config.experiment import ForestConfig
-    from relaff_jax.learn.forests import fit_forest, predict_class
+    from relaff_jax.learn.forest.estimator import fit_forest, predict_class
     from relaff_jax.provenance import derive_seed
 
     rng = np.random.default_rng(0)
