@@ -16,7 +16,7 @@ import argparse
 import importlib
 import sys
 
-from relaff_jax import compile_cache, quiet
+from relaff_jax import quiet
 from relaff_jax.errors import UserError
 from relaff_jax.io import disk_full, is_no_space
 
@@ -148,6 +148,8 @@ def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     name = command_name(args)
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax import compile_cache
 
     compile_cache.configure(disable=args.no_compile_cache)  # before any JAX work (docs/reproduce.md)
     try:

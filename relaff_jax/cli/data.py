@@ -13,7 +13,6 @@ from relaff_jax import data as D
 from relaff_jax.data import export as X
 from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
-from relaff_jax.data import audit as A
 from relaff_jax.cli import options
 
 
@@ -57,6 +56,9 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_audit(args) -> int:
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax.data import audit as A
+
     if args.sample < 1:
         raise UserError(f"--sample must be >= 1, got {args.sample}")
     if args.seed < 0:

@@ -18,11 +18,8 @@ from relaff_jax.cli import options
 from relaff_jax.constants import SPACES
 from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
-from relaff_jax import learn
 from relaff_jax.config.experiment import experiment_preset
 from relaff_jax.config import RunConfig
-from relaff_jax.stages.experiment import experiment_folder
-from relaff_jax.stages.report import report_folder
 from relaff_jax.data.store import read_sidecar
 
 EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bootstrap factors and Table II."
@@ -37,6 +34,8 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         raise UserError(f"--synthetic N takes a number of samples per action >= 1, got {args.synthetic}")
     options.check_counts(args, seed="--seed", jobs="--jobs")
     options.precheck(args)
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax import learn
 
     for path in args.plugins or ():  # the user's conditions, registered before the config names them
         learn.load_plugin_file(path)
@@ -45,6 +44,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
     tree = options.config(args, base=RunConfig(experiment=experiment_preset(args.preset)),
                           flags={"reproduce.spaces": ("--space", spaces), "seed": ("--seed", args.seed)})
     options.check_out_dir(Path(args.out))  # before a --cluster client connects (seconds) and any work
+    from relaff_jax.stages.experiment import experiment_folder
 
     with options.cluster(args, args.out) as client:  # the same stage function reproduce runs
         paths = experiment_folder(tree, args.data or args.synthetic, args.out, seed=tree.seed, jobs=args.jobs,
@@ -68,6 +68,8 @@ def cmd_report(args: argparse.Namespace) -> int:
                 raise UserError(f"--data: {data_dirs[action]} and {folder} are both {action} datasets; give one")
             data_dirs[action] = folder
         data_dirs = {a: data_dirs[a] for a in names() if a in data_dirs}  # the run's order
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax.stages.report import report_folder
 
     # the same stage function reproduce runs
     print(f"report: {report_folder(tree, args.results, args.out, data_dirs=data_dirs)}")
@@ -75,7 +77,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.report.readings import compare
 
     if args.size < 1:

@@ -126,7 +126,7 @@ def load_plugins(args: argparse.Namespace) -> None:
 
 def check_action(args: argparse.Namespace, action: str, cfg: Any = None) -> None:
     """``action`` is built-in or registered (after ``load_plugins``); a user action's rules are
-    traced once on a dummy scene (``sim.actions.check_actions``): one line before any simulation.
+    traced once on a dummy scene (``sim.actions.check.check_actions``): one line before any simulation.
     A user action cannot run on a cluster: the workers would not have its plugin."""
     action_id(action)
     if action in ACTIONS:
@@ -134,7 +134,8 @@ def check_action(args: argparse.Namespace, action: str, cfg: Any = None) -> None
     if getattr(args, "cluster", None):
         raise UserError(f"--cluster: the user action {action!r} runs only here (the cluster's workers do not "
                         "load --plugins files)")
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+
+    # the trace imports JAX: loaded for a user action only, not by --help or a --set check
     from relaff_jax.sim.actions.check import check_actions
 
     check_actions([action], cfg if cfg is not None else ActionConfig())

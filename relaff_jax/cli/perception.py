@@ -17,7 +17,6 @@ from pathlib import Path
 from relaff_jax.cli import options
 from relaff_jax.cli.options import check_out_file
 from relaff_jax.config.dataset import DatasetConfig
-from relaff_jax.stages.features import add_features
 
 
 def register(subparsers) -> None:
@@ -59,6 +58,8 @@ def cmd_features(args) -> int:
     options.check_counts(args, seed="--seed")
     options.precheck(args)
     options.check_in_dir(args.dir)
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax.stages.features import add_features
 
     tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch), "seed": ("--seed", args.seed)})
     with options.cluster(args, args.dir) as client:  # the same stage function reproduce runs
@@ -77,7 +78,7 @@ def cmd_show(args) -> int:
     out = args.out or Path("action.gif" if args.rollout else "scene.png")
     check_out_file(out)
     tree = options.config(args)
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.data.show import show_sample
 
     bars = options.PhaseBars("show") if args.rollout else None

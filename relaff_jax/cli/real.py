@@ -152,7 +152,7 @@ def cmd_segment(args) -> int:
     _check_inputs(args)
     if args.out:
         check_out_file(args.out)  # before the segmentation (about a minute)
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_segment
 
     run_segment(tree, args.scenes, args.out, seed=args.seed, known_count=args.known_count)
@@ -164,7 +164,7 @@ def cmd_show(args) -> int:
     tree = real_config(args)
     check_in_file(args.scene, f"scene file {args.scene} does not exist")
     check_out_file(args.out)
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_show
 
     run_show(tree, args.scene, args.out, seed=args.seed, pair=args.pair, source=args.source)
@@ -177,7 +177,7 @@ def cmd_propose(args) -> int:
     check_out_file(args.out)
     if args.pictures is not None:
         check_out_dir(args.pictures, "--pictures")
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_propose
 
     run_propose(tree, args.scenes, args.out, pictures=args.pictures, corrections=args.corrections)
@@ -186,7 +186,7 @@ def cmd_propose(args) -> int:
 
 def cmd_check(args) -> int:
     _check_inputs(args)
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_check
 
     run_check(args.scenes, args.labels, only_present=args.only_present, write_checksums=args.write_checksums)
@@ -209,7 +209,7 @@ def cmd_study(args) -> int:
         check_in_file(args.test_labels, f"labels file {args.test_labels} does not exist")
     elif args.test_labels is not None:
         raise UserError("--test-labels needs --test (the test folder)")
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_study
 
     run_study(cfg, args.scenes, args.labels, args.out, tuple(args.spaces), args.sim, args.test, args.test_labels,

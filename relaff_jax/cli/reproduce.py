@@ -9,10 +9,7 @@ from relaff_jax.constants import SIM_ENGINES, STAGES
 from relaff_jax.errors import UserError
 from relaff_jax.config import precheck, PRESETS
 from relaff_jax import io as rio
-from relaff_jax.reproduce.progress import human_time
 from relaff_jax.sim.actions.registry import action_id
-from relaff_jax import reproduce as R
-from relaff_jax.report.folder import html
 
 
 def register(sub) -> None:
@@ -65,6 +62,9 @@ def _print_log_summary(root: Path) -> dict:
     stage check then says why)."""
     import sys
 
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax.reproduce.progress import human_time
+
     try:
         log = rio.read_json(root / "run.json")
         runs, timings = list(log["runs"]), dict(log.get("timings", {}))
@@ -104,6 +104,10 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         action_id(a)
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax import reproduce as R
+    from relaff_jax.report.folder import html
+    from relaff_jax.reproduce.progress import human_time
 
     if args.status:
         timings = _print_log_summary(Path(args.out))  # from the run log at once; the stages' check reads their files

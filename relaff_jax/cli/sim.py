@@ -14,12 +14,8 @@ from relaff_jax.cli import options
 from relaff_jax.constants import ACTIONS, RELATIONS, SIM_ENGINES
 from relaff_jax.errors import UserError
 from relaff_jax.config.dataset import DatasetConfig
-from relaff_jax.sim import object_library as ol
-from relaff_jax.sim import objects as lib
 from relaff_jax.sim.actions.registry import action_id
 from relaff_jax import data as ds
-from relaff_jax.stages.generate import generate_one
-from relaff_jax.reproduce.progress import sample_bound
 from relaff_jax.data.validate import check_dataset_dir
 
 
@@ -82,6 +78,10 @@ def _add_objects(p) -> None:
 
 
 def cmd_objects(args) -> int:
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax.sim import object_library as ol
+    from relaff_jax.sim import objects as lib
+
     specs = ol.select(ol.load_library(args.library), ()).specs if args.library else lib.OBJECTS.values()
     rows = [s.to_json() for s in specs]
     if args.json:
@@ -102,7 +102,7 @@ def cmd_scenes(args) -> int:
     if args.n < 1 or args.batch < 1:
         raise UserError(f"N and --batch are counts >= 1, got {args.n} and {args.batch}")
     options.precheck(args)
-    # loaded when the command runs, so that --help and the --set checks import no JAX or MuJoCo
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.sim import scenes as sc
     from relaff_jax.sim import world as wd
 
@@ -136,7 +136,11 @@ def cmd_generate(args) -> int:
         "action.scene.library": ("--objects", args.objects), "seed": ("--seed", args.seed)})
     n, batch = tree.dataset.n_samples, tree.dataset.rollout_batch  # checked by DatasetConfig itself
 
+    # loaded when the command runs: every command's parser (--help) imports this module
+    from relaff_jax.stages.generate import generate_one
+
     engine = tree.dataset.engine
+    from relaff_jax.reproduce.progress import sample_bound
 
     bound = sample_bound(n, tree.dataset.max_rollouts, batch, engine,
                          names=("--samples", "--max-rollouts (dataset.max_rollouts)"))
