@@ -28,7 +28,6 @@ if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
 
 from relaff_jax import quiet as _quiet  # noqa: E402
-from .data import load_dataset as _load
 
 _quiet.install()  # MJX's "Failed to import warp" lines are noise on a CPU-only project
 
@@ -40,4 +39,6 @@ __all__ = ["load_dataset", "__version__"]
 
 def load_dataset(path):
     """Load a dataset directory as named numpy arrays (see ``relaff_jax.data.load_dataset``)."""
+    from .data import load_dataset as _load  # here: ``import relaff_jax`` sets the XLA flags, nothing more
+
     return _load(path)
