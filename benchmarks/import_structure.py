@@ -3,7 +3,7 @@
 Usage: python benchmarks/import_structure.py [--against SRC] [--repeats 5]
 
 For this checkout and, with ``--against SRC`` (another source tree of the project, e.g. an
-exported earlier commit), for that tree too, in the same run:
+exported earlier commit), for that tree too, in the same run (the cold starts of the two trees alternate):
 
 - imports inside function bodies (the ``ast`` of every module): all of them, and those of the
   project's own modules (``relaff_jax...`` or relative);
@@ -71,29 +71,36 @@ def lazy_faces(root: Path) -> list[str]:
     return out
 
 
-def cold_start(root: Path, argv: list[str], repeats: int) -> tuple[float, str]:
-    """Best wall time of a fresh ``cli.main(argv)`` with ``root`` first on the path, and the
-    heavy modules it imported."""
-    env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    best, heavy = float("inf"), ""
+def cold_start(roots: list[Path], argv: list[str], repeats: int) -> list[tuple[float, str]]:
+    """Best wall time of a fresh ``cli.main(argv)`` with each root first on the path, and the heavy
+    modules it imported. The roots take turns in every repeat, so that a machine's changing load
+    falls on both alike."""
+    best, heavy = [float("inf")] * len(roots), [""] * len(roots)
     for _ in range(repeats):
-        t0 = time.perf_counter()
-        r = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, env=env,
-                           cwd=tempfile.gettempdir())
-        best = min(best, time.perf_counter() - t0)
-        heavy = r.stdout.split()[-1] if r.stdout.split() else f"failed: {r.stderr[-200:]}"
-    return best, heavy
+        for i, root in enumerate(roots):
+            env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+            t0 = time.perf_counter()
+            r = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True, env=env,
+                               cwd=tempfile.gettempdir())
+            best[i] = min(best[i], time.perf_counter() - t0)
+            heavy[i] = r.stdout.split()[-1] if r.stdout.split() else f"failed: {r.stderr[-200:]}"
+    return list(zip(best, heavy))
 
 
-def measure(root: Path, repeats: int, tmp: Path) -> dict:
-    total, own = imports_in_functions(root)
-    faces = lazy_faces(root)
-    help_s, help_heavy = cold_start(root, ["--help"], repeats)
-    set_s, set_heavy = cold_start(root, ["generate", "lift", "--samples", "10", "--out", str(tmp / "d"),
-                                         "--set", "foo=1"], repeats)
-    return {"imports inside functions": total, "  of the project's modules": own,
-            "lazy package faces": len(faces), "relaff --help (s)": help_s, "--set refusal (s)": set_s,
-            "_faces": faces, "_heavy": f"--help: {help_heavy}; --set: {set_heavy}"}
+def measure(roots: dict[str, Path], repeats: int, tmp: Path) -> dict[str, dict]:
+    rows = {}
+    for name, root in roots.items():
+        total, own = imports_in_functions(root)
+        faces = lazy_faces(root)
+        rows[name] = {"imports inside functions": total, "  of the project's modules": own,
+                      "lazy package faces": len(faces), "_faces": faces}
+    paths = list(roots.values())
+    helps = cold_start(paths, ["--help"], repeats)
+    sets = cold_start(paths, ["generate", "lift", "--samples", "10", "--out", str(tmp / "d"), "--set", "foo=1"], repeats)
+    for (name, row), (help_s, help_heavy), (set_s, set_heavy) in zip(rows.items(), helps, sets):
+        row.update({"relaff --help (s)": help_s, "--set refusal (s)": set_s,
+                    "_heavy": f"--help: {help_heavy}; --set: {set_heavy}"})
+    return rows
 
 
 def main(argv=None) -> int:
@@ -105,9 +112,8 @@ def main(argv=None) -> int:
         print(f"benchmarks/import_structure.py: error: {a.against} holds no relaff_jax package", file=sys.stderr)
         return 2
     with tempfile.TemporaryDirectory() as tmp:
-        rows = {"this tree": measure(HERE, a.repeats, Path(tmp))}
-        if a.against is not None:
-            rows["reference"] = measure(a.against.resolve(), a.repeats, Path(tmp))
+        roots = {"this tree": HERE} | ({"reference": a.against.resolve()} if a.against is not None else {})
+        rows = measure(roots, a.repeats, Path(tmp))
     print(f"python {sys.version.split()[0]}, cold starts best of {a.repeats}")
     cols = list(rows)
     print(f"{'measure':28s}" + "".join(f"{c:>12s}" for c in cols) + ("       ratio" if len(cols) == 2 else ""))

@@ -33,7 +33,7 @@ _quiet.install()  # MJX's "Failed to import warp" lines are noise on a CPU-only 
 
 __version__ = "0.1.0"
 
-# Light re-exports; heavy modules (JAX, MuJoCo) load on first use.
+# No subpackage is imported here: a command checks its input before JAX or MuJoCo load.
 __all__ = ["load_dataset", "__version__"]
 
 
