@@ -11,7 +11,7 @@ and compiled its programs, timed apart as ``compile``):
 - generate: ``--chunks`` dataset chunks of ``--batch`` rollouts of one action, the real
   simulation with ``--engine`` (``data.tasks.rollout_chunk``, as ``generate_dataset`` runs
   them; ``native`` runs MuJoCo C on the process's CPUs without a cluster, on the worker's one
-  task thread in a worker, ``native_batch.default_threads``);
+  task thread in a worker, ``native.batch.default_threads``);
 - features: the real perception (Kinect, voxels, PCA, RHF) of those scenes in chunks of
   ``--feature-batch`` (``data.tasks.feature_chunk``);
 - sweep: the quick experiment's PCA sweep on synthetic data (``learn.run_experiment``: one

@@ -55,10 +55,11 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from relaff_jax.constants import ACTIONS, action_id  # noqa: E402
-from relaff_jax.sim import native_settle, rollouts, templates  # noqa: E402
+from relaff_jax.sim import rollouts, templates  # noqa: E402
+from relaff_jax.sim.native import settle as native_settle
 from relaff_jax.sim import scenes as sc  # noqa: E402
 from relaff_jax.sim import world as wd  # noqa: E402
-from relaff_jax.sim.native_batch import default_threads, execute_native  # noqa: E402
+from relaff_jax.sim.native.batch import default_threads, execute_native  # noqa: E402
 from relaff_jax.sim.planning import Plan  # noqa: E402
 
 # The paper preset as run on this machine (docs/journal/2026-12-03.md, "The paper preset, run": seed 0,

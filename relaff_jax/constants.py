@@ -26,7 +26,7 @@ OBJECT_SEGMENTS = (SEG_TOY, SEG_OTHER)
 
 # State spaces of the learning experiment (paper V-A).
 # Executors of the planned motor programs (sim/rollouts.py): MJX (default; also runs on an
-# accelerator) and MuJoCo C batches on a thread pool (sim/native_batch.py).
+# accelerator) and MuJoCo C batches on a thread pool (sim/native/batch.py).
 SIM_ENGINES = ("mjx", "native")
 
 SPACES = ("pca", "rhf")

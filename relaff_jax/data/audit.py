@@ -8,9 +8,9 @@ How a stored rollout is re-simulated: the dataset's sidecar records its ``Action
 (``config.action_config``), engine and settle; every rollout records its pair, placement
 (``qpos0``) and settled state (``qpos_settled``). The audit plans the sampled scenes with the
 same jitted planner and batch shape as generation (``rollouts.make_batch_prepare_fn``), and
-replays the programs one ``MjData`` per scene (``native.replay_native``, the reference the
-native engine equals bit for bit) with ``physics_probe.Probe`` reading every step. A native
-dataset's scenes are re-settled in MuJoCo C from ``qpos0`` (``native_settle.settle_batch``,
+replays the programs one ``MjData`` per scene (``native.reference.replay_native``, the reference the
+native engine equals bit for bit) with ``native.probe.Probe`` reading every step. A native
+dataset's scenes are re-settled in MuJoCo C from ``qpos0`` (``native.settle.settle_batch``,
 what generation ran) for the settled velocities, which are not stored; the settled positions
 are checked against the stored ones. An MJX dataset is replayed in C from its stored settled
 positions at rest: C and MJX agree on about 98 % of labels (docs/actions.md), so its label
@@ -100,8 +100,8 @@ def settled_velocities(cfg: Any, meta: Mapping[str, Any], r: Mapping[str, np.nda
         return np.zeros((n, 12), np.float32), np.zeros(n, bool)
     # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
     from relaff_jax.sim import world as wd
-    from relaff_jax.sim.native_batch import default_threads
-    from relaff_jax.sim.native_settle import settle_batch
+    from relaff_jax.sim.native.batch import default_threads
+    from relaff_jax.sim.native.settle import settle_batch
 
     s = settle_batch(wd.build_world(cfg.phys), r["pair"], r["qpos0"], r["intended"], cfg.scene,
                      default_threads() if nthread is None else nthread)
@@ -122,8 +122,8 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
     """Replay ``sample`` rollouts of the dataset ``path`` in MuJoCo C with the physics probe;
     the per-rollout readings and their summary (``summarise``)."""
     # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
-    from relaff_jax.sim.native import replay_native
-    from relaff_jax.sim.physics_probe import Probe
+    from relaff_jax.sim.native.reference import replay_native
+    from relaff_jax.sim.native.probe import Probe
     from relaff_jax.sim.planning import setup
     from relaff_jax.sim.actions.tables import spec_tables
 

@@ -21,7 +21,8 @@ Modules, in pipeline order:
 - ``labels``: the outcome rules of Table I (``goals``).
 - ``simulate``: planned programs executed in MJX with grasp locks, then labelled.
 - ``rollouts``: ``make_action_fn`` / ``jitted_action_fn`` and ``make_rollout_fn`` (datasets).
-- ``native``: MuJoCo C references (``settle_native``, ``replay_native``) for cross-checks.
+- ``native/``: the native engine, the motor programs and the settle in MuJoCo C batches, and the
+  one-scene C references (``settle_native``, ``replay_native``) for cross-checks (``native/__init__.py``).
 
 Nothing is imported here: ``sim.actions.registry`` and ``sim.object_library``, which the command
 line reads to check its arguments, come without JAX and MuJoCo. Import a name from the module that

@@ -1,7 +1,7 @@
 """A sample's motor program as an animation: why its label is what it is.
 
 Takes one settled scene (pair, object state) and an action; plans the program with the JAX
-planner (``planning.make_plan_fn``), replays it in MuJoCo C (``native.replay_native``,
+planner (``planning.make_plan_fn``), replays it in MuJoCo C (``native.reference.replay_native``,
 recording every geom's pose), and draws each recorded frame with the project's ray caster
 (``perception.rollout_view``: every primitive as it is, spheres round, shaded, coloured by
 geom, from a camera framed on the two objects) under a title that names the engines and
@@ -17,7 +17,7 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 from relaff_jax.sim.actions.registry import action_id
-from relaff_jax.sim.native import replay_native
+from relaff_jax.sim.native.reference import replay_native
 from relaff_jax.sim.planning import make_plan_fn, setup
 from relaff_jax.sim.templates import ActionConfig
 from relaff_jax.io import atomic_write_bytes
