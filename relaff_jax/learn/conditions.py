@@ -30,6 +30,7 @@ import numpy as np
 from relaff_jax.constants import ACTIONS, FAMILIES, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn.correlation import categories_above, category_pairs
+from relaff_jax.plugins import load_file
 
 ENTRY_POINTS = "relaff_jax.conditions"
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -84,7 +85,6 @@ class Condition:
 _REGISTRY: dict[str, Condition] = {}
 from relaff_jax.plugins import LOADING as _loading  # noqa: E402 (the plugin file being loaded)
 from relaff_jax.plugins import source_hash as _source_hash  # noqa: E402 (one hash for every plugin kind)
-from relaff_jax.plugins import load_file
 _entry_points_loaded = False
 
 
