@@ -38,7 +38,8 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.sim import arm as A
-from relaff_jax.sim import native, planning, rollouts, simulate, templates
+from relaff_jax.sim import planning, rollouts, simulate, templates
+from relaff_jax.sim.native import reference as native
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 from relaff_jax.io import atomic_write_json, read_json

@@ -27,9 +27,9 @@ from relaff_jax.data import audit as A
 from relaff_jax.data import audit_replay as AR
 from relaff_jax.data.load import load_rollouts
 from relaff_jax.data.store import read_sidecar
-from relaff_jax.sim import native
-from relaff_jax.sim.native import replay_native
-from relaff_jax.sim.physics_probe import Probe
+from relaff_jax.sim.native import reference as native
+from relaff_jax.sim.native.reference import replay_native
+from relaff_jax.sim.native.probe import Probe
 from relaff_jax.sim.planning import setup
 
 NEED = ("pair", "qpos0", "qpos_settled", "intended", "label", "feasible")

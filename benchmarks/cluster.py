@@ -11,7 +11,7 @@ and compiled its programs, timed apart as ``compile``):
 - generate: ``--chunks`` dataset chunks of ``--batch`` rollouts of one action, the real
   simulation with ``--engine`` (``data.tasks.rollout_chunk``, as ``generate_dataset`` runs
   them; ``native`` runs MuJoCo C on the process's CPUs without a cluster, on the worker's one
-  task thread in a worker, ``native_batch.default_threads``);
+  task thread in a worker, ``native.batch.default_threads``);
 - features: the real perception (Kinect, voxels, PCA, RHF) of those scenes in chunks of
   ``--feature-batch`` (``data.tasks.feature_chunk``);
 - sweep: the quick experiment's PCA sweep on synthetic data (``learn.run_experiment``: one
@@ -94,7 +94,8 @@ def run_mode(mode, args, work: Path) -> dict:
     from relaff_jax.data.store import chunk_path, read_chunk
     from relaff_jax.data.tasks import feature_chunk, rollout_chunk
     from relaff_jax.config.experiment import experiment_preset
-    from relaff_jax.learn import run_experiment, synthetic_datasets
+    from relaff_jax.learn import synthetic_datasets
+    from relaff_jax.learn.sweep import run_experiment
     from relaff_jax.stages.features import default_feature_factory
     from relaff_jax.stages.generate import default_rollout_factory
 

@@ -76,7 +76,8 @@ def measure(engine: str, args, work: Path) -> list[dict]:
     from relaff_jax.config import override
     from relaff_jax.constants import ACTIONS
     from relaff_jax.config.experiment import experiment_preset
-    from relaff_jax.learn import run_experiment, synthetic_datasets
+    from relaff_jax.learn import synthetic_datasets
+    from relaff_jax.learn.sweep import run_experiment
     from relaff_jax.stages.features import default_feature_factory
     from relaff_jax.stages.generate import default_rollout_factory
 

@@ -28,7 +28,7 @@ import numpy as np
 from relaff_jax.constants import action_id
 from relaff_jax.io import read_json
 from relaff_jax.sim import rollouts, templates
-from relaff_jax.sim.native_batch import execute_native
+from relaff_jax.sim.native.batch import execute_native
 from relaff_jax.sim.planning import Plan
 
 # executor name -> (engine, tuned?): the names of benchmarks/actions.py's EXECUTORS

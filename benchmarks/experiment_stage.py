@@ -49,7 +49,7 @@ def worker(out: str, spaces: list[str], samples: int, reps: int, wall: bool = Fa
     clock = time.perf_counter if wall else time.process_time
     from relaff_jax.config import override
     from relaff_jax.learn import blocks, sweep
-    from relaff_jax.learn.compiled import forest as cf
+    from relaff_jax.learn.forest.compiled import forest as cf
     from relaff_jax.config.experiment import experiment_preset
     from relaff_jax.learn.synthetic import synthetic_datasets
 

@@ -26,8 +26,8 @@ import numpy as np
 
 from relaff_jax import learn as L
 from relaff_jax.config.experiment import ExperimentConfig, ForestConfig
-from relaff_jax.learn import compiled
-from relaff_jax.learn import engine as G
+from relaff_jax.learn.forest import compiled
+from relaff_jax.learn.forest import engine as G
 
 DIMS = {"pca": 18, "rhf": 318}
 ENGINES = ("compiled", "fast", "sklearn")

@@ -33,7 +33,7 @@ def worker(cells: list[tuple[str, int]], k: int, reps: int) -> None:
 
     from relaff_jax import learn as L
     from relaff_jax.config.experiment import ForestConfig
-    from relaff_jax.learn.compiled import forest as cf
+    from relaff_jax.learn.forest.compiled import forest as cf
 
     kern = cf.kernels()
     build = kern["build_forests"]

@@ -9,8 +9,9 @@ e.g. ``python benchmarks/ik_solvers.py 2000 250`` (all nine actions, ~40 min on 
 """
 import time, sys, dataclasses, json
 import jax, jax.numpy as jnp, numpy as np
-from relaff_jax.sim import rollouts, templates, native_settle
-from relaff_jax.sim.native_batch import execute_native
+from relaff_jax.sim import rollouts, templates
+from relaff_jax.sim.native import settle as native_settle
+from relaff_jax.sim.native.batch import execute_native
 from relaff_jax.sim.planning import Plan
 from relaff_jax.sim import scenes as sc, world as wd
 from relaff_jax.constants import ACTIONS, action_id

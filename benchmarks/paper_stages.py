@@ -12,7 +12,7 @@ its reference in the same run, and the paper preset's wall time, measured and pr
   batches interleaved, every field checked equal but the screened scenes' ``ik_error``. ``--parts``: the batch part by part (place, settle in MJX and in C, plan by L-BFGS
   and by LM, C execution of each plan; the rates "today" = MJX settle, "C settle" = the
   engine now, "C settle + LM" = ``--set action.arm.ik_solver=lm``, other plans).
-- forests: the compiled engine (``learn/compiled``, the sweep's) against the fast one
+- forests: the compiled engine (``learn/forest/compiled``, the sweep's) against the fast one
   (scikit-learn's builder per tree + one JAX evaluation), fit + evaluation on 4,000 rows at
   n = 25 and 100, wall and CPU seconds (the experiment runs one worker per core, so CPU).
 - features: the stage's feature function (``from_sim.make_feature_fn``: capacities sized per
@@ -55,10 +55,11 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from relaff_jax.constants import ACTIONS, action_id  # noqa: E402
-from relaff_jax.sim import native_settle, rollouts, templates  # noqa: E402
+from relaff_jax.sim import rollouts, templates  # noqa: E402
+from relaff_jax.sim.native import settle as native_settle
 from relaff_jax.sim import scenes as sc  # noqa: E402
 from relaff_jax.sim import world as wd  # noqa: E402
-from relaff_jax.sim.native_batch import default_threads, execute_native  # noqa: E402
+from relaff_jax.sim.native.batch import default_threads, execute_native  # noqa: E402
 from relaff_jax.sim.planning import Plan  # noqa: E402
 
 # The paper preset as run on this machine (docs/journal/2026-12-03.md, "The paper preset, run": seed 0,
@@ -185,7 +186,7 @@ def _forest_times(space: str, n: int, k: int, engine: str) -> tuple[float, float
 
     from relaff_jax import learn as E
     from relaff_jax.config.experiment import ExperimentConfig
-    from relaff_jax.learn import engine as G
+    from relaff_jax.learn.forest import engine as G
 
     cfg = ExperimentConfig()
     rep = cfg.repeats(space)

@@ -28,10 +28,11 @@ import relaff_jax  # noqa: F401  (XLA flags before JAX work)
 from relaff_jax import perception as pc
 from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.perception import from_sim
-from relaff_jax.sim import native_settle, rollouts, templates
+from relaff_jax.sim import rollouts, templates
+from relaff_jax.sim.native import settle as native_settle
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
-from relaff_jax.sim.native_batch import default_threads
+from relaff_jax.sim.native.batch import default_threads
 
 
 def settled_chunks(sw, action: str, n: int, seed: int, first_id: int) -> list[dict]:

@@ -4,7 +4,7 @@ Usage: python benchmarks/program_forces.py N [ACTION ...] [--seed S] [--programs
 Each ``--programs`` entry is a version, optionally with ActionConfig fields after a colon:
 ``v2:tilt_lean=robot,guard_depth=0.001``.
 Per action and version: N scenes (native settle, one key for every version), the feasible
-programs replayed scene by scene with ``native_forces.physics``; prints the largest summed
+programs replayed scene by scene with ``native.forces.physics``; prints the largest summed
 contact force on an object held for 0.1 s (press) and in one step (peak), both also as a
 multiple of the heavier object's weight, the deepest penetration, and the programs with a
 palm contact on an object, in all and per relation (beside / on top / inside), and the
@@ -21,7 +21,7 @@ import jax
 import numpy as np
 
 from relaff_jax.constants import ACTIONS
-from relaff_jax.sim import native_forces
+from relaff_jax.sim.native import forces as native_forces
 from relaff_jax.sim import rollouts as R
 from relaff_jax.config.action import ActionConfig
 from relaff_jax.sim.scenes import RELATIONS

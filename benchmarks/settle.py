@@ -7,9 +7,9 @@ Native reference: ``mujoco.rollout.rollout`` with one MjModel per scene (its pai
 on a thread pool of ``--threads`` threads (default: all cores). The held rake is not
 pinned in the native throughput run (rollout is open loop); the cost per step is the same.
 The cross-check (``--crosscheck N``) settles N mixed scenes in MJX and with
-``native.settle_native`` (mj_step, rake pinned exactly as in MJX) and reports the relation
+``native.reference.settle_native`` (mj_step, rake pinned exactly as in MJX) and reports the relation
 agreement and position differences. ``--agreement N`` settles the same N placements per
-pairing group in MJX and with the native engine's settle (``native_settle.settle_batch``) and
+pairing group in MJX and with the native engine's settle (``native.settle.settle_batch``) and
 reports relation agreement and pose differences per group (docs/scenes.md, "Native settle").
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ import numpy as np
 from mujoco import rollout
 
 from relaff_jax import config
-from relaff_jax.sim import native, native_settle
+from relaff_jax.sim.native import reference as native, settle as native_settle
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 

@@ -8,7 +8,7 @@ Then projects the full paper protocol (sizes 2..100, 50 PCA / 25 RHF repetitions
 condition) and the quick preset from the measured all-core rates, plus the one-off source
 predictors and categories.
 
-Before that, per forest and in the same run, the two forest engines (``relaff_jax.learn.engine``):
+Before that, per forest and in the same run, the two forest engines (``relaff_jax.learn.forest.engine``):
 ``sklearn`` (``RandomForestClassifier`` fit + ``predict`` on 4000 rows, one forest at a time)
 and ``fast`` (scikit-learn's Cython builder called directly + all forests of a block evaluated
 in one jitted program), their ratio, and the paper protocol's sweep projected on 2 cores from
@@ -29,10 +29,11 @@ import time
 import numpy as np
 
 from relaff_jax import learn as E
+from relaff_jax.learn.blocks import run_block
 from relaff_jax.config.experiment import ExperimentConfig, experiment_preset
 from relaff_jax.learn.checks import check_config
 from relaff_jax import learn as L
-from relaff_jax.learn import engine as G
+from relaff_jax.learn.forest import engine as G
 
 SIZES = (4, 25, 100)
 DIMS = {"pca": 18, "rhf": 318}
@@ -55,7 +56,7 @@ def _one_call(space: str, n: int, k: int, seed: int, engine: str = "fast") -> tu
     X, y, boot, test_idx, order = _block_inputs(space, seed=seed)
     plan = [(1 + s, (s,)) for s in range(k)]
     c = time.process_time()
-    E.run_block(X, y, boot, plan, order, test_idx, [n], cfg.repeats(space), 1 + k, cfg.forest, (seed, n))
+    run_block(X, y, boot, plan, order, test_idx, [n], cfg.repeats(space), 1 + k, cfg.forest, (seed, n))
     return k, time.process_time() - c
 
 

@@ -6,11 +6,12 @@ to the base (so it rode along: on top or inside, not beside). Use it with
   relaff generate drag --plugins tenth_action.py --samples 8 --out DRAG --engine native
   relaff reproduce --preset tiny --plugins tenth_action.py \\
       --set 'reproduce.actions=["lift","move","pull","push","rake","take","pour","slide","unobstruct","drag"]'
-Written against the public API only (relaff_jax.sim.actions).
+Written against the public API only (relaff_jax.sim.actions and its rule helpers, relaff_jax.sim.actions.rules).
 """
 import jax.numpy as jnp
 
-from relaff_jax.sim.actions import ActionSpec, Reading, Settled, carry, register_action, unit_xy
+from relaff_jax.sim.actions import ActionSpec, register_action
+from relaff_jax.sim.actions.rules import Reading, Settled, carry, unit_xy
 
 # (control steps of 4 ms, the planned target the segment ends at, fingers closed): above the
 # base (0), down (1), dwell, close, settle the grip, raise 1 cm (2), drag (3), lower (4), open,

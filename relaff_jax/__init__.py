@@ -33,12 +33,12 @@ _quiet.install()  # MJX's "Failed to import warp" lines are noise on a CPU-only 
 
 __version__ = "0.1.0"
 
-# Light re-exports; heavy modules (JAX, MuJoCo) load on first use.
+# No subpackage is imported here: a command checks its input before JAX or MuJoCo load.
 __all__ = ["load_dataset", "__version__"]
 
 
 def load_dataset(path):
     """Load a dataset directory as named numpy arrays (see ``relaff_jax.data.load_dataset``)."""
-    from .data import load_dataset as _load
+    from .data import load_dataset as _load  # here: ``import relaff_jax`` sets the XLA flags, nothing more
 
     return _load(path)

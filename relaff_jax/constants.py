@@ -4,6 +4,7 @@ The order of each tuple is part of the stored formats: datasets store relation a
 codes as indices into these tuples, and result arrays are laid out in ``ACTIONS`` order.
 """
 from __future__ import annotations
+from relaff_jax.errors import UserError
 
 # The nine actions of the paper's Table I, in the order of every result array.
 ACTIONS = ("lift", "move", "pull", "push", "rake", "take", "pour", "slide", "unobstruct")
@@ -28,7 +29,7 @@ OBJECT_SEGMENTS = (SEG_TOY, SEG_OTHER)
 
 # State spaces of the learning experiment (paper V-A).
 # Executors of the planned motor programs (sim/rollouts.py): MJX (default; also runs on an
-# accelerator) and MuJoCo C batches on a thread pool (sim/native_batch.py).
+# accelerator) and MuJoCo C batches on a thread pool (sim/native/batch.py).
 SIM_ENGINES = ("mjx", "native")
 
 SPACES = ("pca", "rhf")
@@ -45,8 +46,6 @@ STAGES = ("generate", "features", "experiment", "report")
 def action_id(action: str) -> int:
     """Index of ``action`` in ``ACTIONS``; an unknown name is a ``UserError`` listing the valid ones.
     (The run's list, with a user's actions after the nine: ``sim.actions.registry.action_id``.)"""
-    from relaff_jax.errors import UserError
-
     if action not in ACTIONS:
         raise UserError(f"unknown action {action!r}; valid actions: {', '.join(ACTIONS)}")
     return ACTIONS.index(action)

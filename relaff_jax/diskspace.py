@@ -6,6 +6,7 @@ from __future__ import annotations
 import errno
 import os
 from pathlib import Path
+from relaff_jax.errors import DiskFullError
 
 NO_SPACE = (errno.ENOSPC, errno.EDQUOT)
 
@@ -29,8 +30,6 @@ def _mb(n: float) -> str:
 
 def disk_full(e: OSError, folder: str | os.PathLike, needed: int | None = None) -> "DiskFullError":
     """The one-line error of a write that found no space in ``folder``'s file system."""
-    from relaff_jax.errors import DiskFullError
-
     free = free_bytes(folder)
     need = f"; this write needed {_mb(needed)}" if needed else ""
     have = f" ({_mb(free)} free)" if free is not None else ""

@@ -22,6 +22,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from relaff_jax.diskspace import NO_SPACE, disk_full, free_bytes, is_no_space  # noqa: F401  (rio.disk_full, ...)
+from relaff_jax.errors import CorruptFileError, UserError
 
 
 def _umask() -> int:
@@ -113,8 +114,6 @@ def atomic_write_json(path: str | os.PathLike, obj: Any) -> None:
 def read_json(path: str | os.PathLike) -> Any:
     """Read JSON, turning a corrupt file (bad JSON, not UTF-8) into a ``CorruptFileError``
     (a ``UserError``, so a ``ValueError``) that names it."""
-    from relaff_jax.errors import CorruptFileError
-
     path = Path(path)
     try:
         return json.loads(path.read_text(encoding="utf-8"))
@@ -132,8 +131,6 @@ def load_npz(path: str | os.PathLike, keys: Any = None) -> dict[str, np.ndarray]
     half a dozen types, depending on where the damage lies)."""
     import zipfile
     import zlib
-
-    from relaff_jax.errors import CorruptFileError
 
     path = Path(path)
     try:
@@ -185,8 +182,6 @@ def folder_lock(path: str | os.PathLike, busy: str, name: str = ".relaff.lock") 
     The lock file stays (readers ignore it); the lock goes with the process, even on kill -9."""
     import fcntl
 
-    from relaff_jax.errors import UserError
-
     lock = Path(path) / name
     try:  # never through a link: a planted .relaff.lock symlink must not create or lock its target
         fd = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
@@ -234,8 +229,6 @@ def lock_is_held(path: str | os.PathLike) -> bool | None:
 def remove_tree(path: str | os.PathLike) -> None:
     """Delete a folder so that a kill leaves no half-deleted output under its name: it is
     renamed to a hidden ``.NAME.old.tmp`` first (``clean_leftovers`` removes those)."""
-    from relaff_jax.errors import UserError
-
     path = Path(path)
     if path.is_symlink():
         raise UserError(f"{path} is a symbolic link (to {os.readlink(path)}); relaff does not delete through "
@@ -266,8 +259,6 @@ def check_path_length(path: str | os.PathLike, what: str = "--out") -> None:
     """Fail at once (``UserError``) if ``path`` or one of its parts is longer than its file
     system allows (NAME_MAX, usually 255 bytes; PATH_MAX, usually 4096), leaving room for
     the hidden temporary siblings the atomic writes make (``.NAME.xxxxxxxx.tmp``)."""
-    from relaff_jax.errors import UserError
-
     path = Path(path)
     probe = path.absolute()
     while not _exists(probe) and probe.parent != probe:
@@ -293,8 +284,6 @@ def check_writable_dir(path: str | os.PathLike, what: str = "--out") -> None:
     """Fail at once (``UserError``) if ``path`` cannot be an output folder: it is a file, lies
     under a file, or its nearest existing ancestor cannot be written. Called before any
     simulation or learning, so a typo costs no minutes."""
-    from relaff_jax.errors import UserError
-
     path = Path(path)
     check_path_length(path, what)
     if path.exists() and not path.is_dir():
@@ -314,8 +303,6 @@ def check_writable_dir(path: str | os.PathLike, what: str = "--out") -> None:
 def check_writable_file(path: str | os.PathLike, what: str = "--out") -> None:
     """Fail at once (``UserError``) if ``path`` cannot be an output file: it is a folder, or
     its folder cannot be made or written (``check_writable_dir``)."""
-    from relaff_jax.errors import UserError
-
     path = Path(path)
     check_path_length(path, what)
     if path.is_dir():

@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from relaff_jax import io as rio
+from relaff_jax.config import to_dict
 
 PACKAGES = ("relaff_jax", "jax", "jaxlib", "mujoco", "mujoco-mjx", "numpy", "scikit-learn",
             "orbax-checkpoint", "matplotlib")
@@ -117,9 +119,6 @@ def record_config(folder: str | os.PathLike, cfg: Any, command: str, argv: list[
     (atomically, after the stage finished): ``{"command", "argv", "config", "versions"}``, one
     shape for every stage and route. The stage's own sidecars record the settings that decide
     its output and its resume checks; this file says how the folder was made in full."""
-    from relaff_jax import io as rio
-    from relaff_jax.config import to_dict
-
     path = Path(folder) / CONFIG_RECORD
     rio.atomic_write_json(path, {"command": command, "argv": argv, "config": to_dict(cfg), "versions": versions()})
     return path

@@ -148,6 +148,7 @@ def _run(argv: list[str] | None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     name = command_name(args)
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax import compile_cache
 
     compile_cache.configure(disable=args.no_compile_cache)  # before any JAX work (docs/reproduce.md)

@@ -11,15 +11,15 @@ import json
 
 from relaff_jax import data as D
 from relaff_jax.data import export as X
+from relaff_jax.constants import ACTIONS
+from relaff_jax.errors import UserError
+from relaff_jax.cli import options
 
 
 def _not_a_run_folder(path) -> None:
     """``relaff info RUN_FOLDER`` (a ``relaff reproduce`` folder, not a dataset): name the
     datasets it holds instead of "not a relaff dataset"."""
     from pathlib import Path
-
-    from relaff_jax.constants import ACTIONS
-    from relaff_jax.errors import UserError
 
     root = Path(path)
     if (root / "run.json").is_file() and not (root / "relaff_dataset.json").exists():
@@ -56,8 +56,8 @@ def _cmd_export(args) -> int:
 
 
 def _cmd_audit(args) -> int:
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.data import audit as A
-    from relaff_jax.errors import UserError
 
     if args.sample < 1:
         raise UserError(f"--sample must be >= 1, got {args.sample}")
@@ -65,7 +65,6 @@ def _cmd_audit(args) -> int:
         raise UserError(f"--seed must be >= 0, got {args.seed}")
     if args.jobs is not None and args.jobs < 1:
         raise UserError(f"--jobs must be >= 1, got {args.jobs}")
-    from relaff_jax.cli import options
 
     options.load_plugins(args)  # a user action's datasets replay with its spec (checked against the record)
     folders = A.dataset_folders(args.dir)  # one-line errors before any work
@@ -121,7 +120,6 @@ def register(subparsers) -> None:
     p.add_argument("--jobs", type=int, default=None,
                    help="processes replaying the rollouts (default: the cores; the same audit at any value)")
     p.add_argument("--json", action="store_true", help="print JSON (a list for a run folder) instead of a table")
-    from relaff_jax.cli import options
 
     options.add_plugins(p)
     p.set_defaults(func=_cmd_audit)

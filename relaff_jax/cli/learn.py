@@ -18,6 +18,9 @@ from relaff_jax.cli import options
 from relaff_jax.constants import SPACES
 from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
+from relaff_jax.config.experiment import experiment_preset
+from relaff_jax.config import RunConfig
+from relaff_jax.data.store import read_sidecar
 
 EXPERIMENT_DESCRIPTION = "The evaluation protocol of paper section V: sweeps, bootstrap factors and Table II."
 
@@ -31,12 +34,11 @@ def cmd_experiment(args: argparse.Namespace) -> int:
         raise UserError(f"--synthetic N takes a number of samples per action >= 1, got {args.synthetic}")
     options.check_counts(args, seed="--seed", jobs="--jobs")
     options.precheck(args)
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax import learn
-    from relaff_jax.config.experiment import experiment_preset
 
     for path in args.plugins or ():  # the user's conditions, registered before the config names them
         learn.load_plugin_file(path)
-    from relaff_jax.config import RunConfig
 
     spaces = {None: None, "both": tuple(SPACES)}.get(args.space, (args.space,))
     tree = options.config(args, base=RunConfig(experiment=experiment_preset(args.preset)),
@@ -56,8 +58,6 @@ def cmd_report(args: argparse.Namespace) -> int:
     tree = options.config(args)
     data_dirs = None
     if args.data:  # each folder's action from its sidecar, as the experiment read them
-        from relaff_jax.data.store import read_sidecar
-
         data_dirs = {}
         for folder in args.data:
             action = read_sidecar(Path(folder))["action"]
@@ -68,6 +68,7 @@ def cmd_report(args: argparse.Namespace) -> int:
                 raise UserError(f"--data: {data_dirs[action]} and {folder} are both {action} datasets; give one")
             data_dirs[action] = folder
         data_dirs = {a: data_dirs[a] for a in names() if a in data_dirs}  # the run's order
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.stages.report import report_folder
 
     # the same stage function reproduce runs
@@ -76,6 +77,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.report.readings import compare
 
     if args.size < 1:

@@ -9,6 +9,12 @@ from typing import Any
 from relaff_jax.config import parse_set
 from relaff_jax.io import check_writable_dir, check_writable_file
 from relaff_jax.errors import UserError
+from relaff_jax.config import precheck as check
+from relaff_jax.plugins import load_file
+from relaff_jax.constants import ACTIONS
+from relaff_jax.sim.actions.registry import action_id
+from relaff_jax.config.action import ActionConfig
+from relaff_jax import cluster as C
 
 
 def add_set(p: argparse.ArgumentParser, example: str = "perception.voxel.size=0.02") -> None:
@@ -20,8 +26,6 @@ def add_set(p: argparse.ArgumentParser, example: str = "perception.voxel.size=0.
 def precheck(args: argparse.Namespace, extra: list[str] = ()) -> None:
     """The ``--set`` keys that can be checked without importing JAX (``config.precheck``):
     called first by the commands that import their stage before resolving the config."""
-    from relaff_jax.config import precheck as check
-
     check({**parse_set(extra), **parse_set(args.set or [])})
 
 
@@ -33,6 +37,7 @@ def config(args: argparse.Namespace, base: Any = None, extra: list[str] = (),
     ``flags``: the command's options that are aliases of tree keys, ``{key: (flag, value)}``
     (``{"dataset.n_samples": ("--samples", 100)}``; a value of None: not given). A flag and a
     ``--set`` of its key that disagree are an error, so what runs is what is recorded."""
+    # not at the top: this module's own precheck() would shadow config.precheck
     from relaff_jax.config import check_tree, precheck, resolve
 
     overrides = {**parse_set(extra), **overrides_of(args, flags)}
@@ -115,27 +120,23 @@ def add_plugins(p: argparse.ArgumentParser) -> None:
 
 def load_plugins(args: argparse.Namespace) -> None:
     """Execute the ``--plugins`` files (one loader for actions and conditions, ``relaff_jax.plugins``)."""
-    from relaff_jax.plugins import load_file
-
     for path in getattr(args, "plugins", None) or ():
         load_file(path)
 
 
 def check_action(args: argparse.Namespace, action: str, cfg: Any = None) -> None:
     """``action`` is built-in or registered (after ``load_plugins``); a user action's rules are
-    traced once on a dummy scene (``sim.actions.check_actions``): one line before any simulation.
+    traced once on a dummy scene (``sim.actions.check.check_actions``): one line before any simulation.
     A user action cannot run on a cluster: the workers would not have its plugin."""
-    from relaff_jax.constants import ACTIONS
-    from relaff_jax.sim.actions.registry import action_id
-
     action_id(action)
     if action in ACTIONS:
         return
     if getattr(args, "cluster", None):
         raise UserError(f"--cluster: the user action {action!r} runs only here (the cluster's workers do not "
                         "load --plugins files)")
-    from relaff_jax.sim.actions import check_actions
-    from relaff_jax.config.action import ActionConfig
+
+    # the trace imports JAX: loaded for a user action only, not by --help or a --set check
+    from relaff_jax.sim.actions.check import check_actions
 
     check_actions([action], cfg if cfg is not None else ActionConfig())
 
@@ -158,7 +159,6 @@ def cluster(args: argparse.Namespace, folder: Path):
     address = getattr(args, "cluster", None)
     if address is None:
         return contextlib.nullcontext(None)
-    from relaff_jax import cluster as C
 
     addr = C.parse_address(address)
 

@@ -16,12 +16,11 @@ from pathlib import Path
 
 from relaff_jax.cli import options
 from relaff_jax.cli.options import check_out_file
+from relaff_jax.config.dataset import DatasetConfig
 
 
 def register(subparsers) -> None:
     """Add ``features`` and ``show`` to an ``argparse`` subparsers object."""
-    from relaff_jax.config.dataset import DatasetConfig  # the tree's default, shown in --help (no JAX)
-
     p = subparsers.add_parser(
         "features", help="add PCA and RHF features to a dataset (resumable)",
         description="Render every selected sample of a finished dataset with the simulated Kinect, voxelise "
@@ -59,6 +58,7 @@ def cmd_features(args) -> int:
     options.check_counts(args, seed="--seed")
     options.precheck(args)
     options.check_in_dir(args.dir)
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.stages.features import add_features
 
     tree = options.config(args, flags={"dataset.feature_batch": ("--batch", args.batch), "seed": ("--seed", args.seed)})
@@ -78,6 +78,7 @@ def cmd_show(args) -> int:
     out = args.out or Path("action.gif" if args.rollout else "scene.png")
     check_out_file(out)
     tree = options.config(args)
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.data.show import show_sample
 
     bars = options.PhaseBars("show") if args.rollout else None

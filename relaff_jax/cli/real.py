@@ -28,7 +28,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from relaff_jax.cli.options import add_set, check_counts, check_in_dir, check_in_file, check_out_dir, check_out_file
+from relaff_jax.cli.options import (add_set, check_counts, check_in_dir, check_in_file, check_out_dir, check_out_file,
+                                    config)
 from relaff_jax.errors import UserError
 
 SET_EXAMPLE = "real.pipeline.kmeans.background=false"
@@ -135,8 +136,6 @@ def real_config(args, flags: dict | None = None):
     and a ``--set`` of its key that disagree are refused. Its real settings (and the
     perception they share) are checked with the whole tree before any work, without importing
     JAX (``options.config``)."""
-    from relaff_jax.cli.options import config
-
     return config(args, flags={f"real.{k}": v for k, v in (flags or {}).items()})
 
 
@@ -153,6 +152,7 @@ def cmd_segment(args) -> int:
     _check_inputs(args)
     if args.out:
         check_out_file(args.out)  # before the segmentation (about a minute)
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_segment
 
     run_segment(tree, args.scenes, args.out, seed=args.seed, known_count=args.known_count)
@@ -164,6 +164,7 @@ def cmd_show(args) -> int:
     tree = real_config(args)
     check_in_file(args.scene, f"scene file {args.scene} does not exist")
     check_out_file(args.out)
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_show
 
     run_show(tree, args.scene, args.out, seed=args.seed, pair=args.pair, source=args.source)
@@ -176,6 +177,7 @@ def cmd_propose(args) -> int:
     check_out_file(args.out)
     if args.pictures is not None:
         check_out_dir(args.pictures, "--pictures")
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_propose
 
     run_propose(tree, args.scenes, args.out, pictures=args.pictures, corrections=args.corrections)
@@ -184,6 +186,7 @@ def cmd_propose(args) -> int:
 
 def cmd_check(args) -> int:
     _check_inputs(args)
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_check
 
     run_check(args.scenes, args.labels, only_present=args.only_present, write_checksums=args.write_checksums)
@@ -206,6 +209,7 @@ def cmd_study(args) -> int:
         check_in_file(args.test_labels, f"labels file {args.test_labels} does not exist")
     elif args.test_labels is not None:
         raise UserError("--test-labels needs --test (the test folder)")
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.real.stages import run_study
 
     run_study(cfg, args.scenes, args.labels, args.out, tuple(args.spaces), args.sim, args.test, args.test_labels,

@@ -7,7 +7,9 @@ from pathlib import Path
 from relaff_jax.cli import options
 from relaff_jax.constants import SIM_ENGINES, STAGES
 from relaff_jax.errors import UserError
-from relaff_jax.config import PRESETS
+from relaff_jax.config import precheck, PRESETS
+from relaff_jax import io as rio
+from relaff_jax.sim.actions.registry import action_id
 
 
 def register(sub) -> None:
@@ -60,7 +62,7 @@ def _print_log_summary(root: Path) -> dict:
     stage check then says why)."""
     import sys
 
-    from relaff_jax import io as rio
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.reproduce.progress import human_time
 
     try:
@@ -85,8 +87,6 @@ def _print_log_summary(root: Path) -> dict:
 
 
 def cmd_reproduce(args: argparse.Namespace) -> int:
-    from relaff_jax.config import precheck
-
     if args.dir is not None and args.out is not None and args.dir != args.out:
         raise UserError(f"two run folders given: {args.dir} and --out {args.out}")
     if args.dir is not None and not args.status:
@@ -99,12 +99,12 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
                                             "action.scene.library": ("--objects", args.objects)})
     seed = overrides.get("seed", 0)
     options.load_plugins(args)  # user actions registered before reproduce.actions names them
-    from relaff_jax.sim.actions.registry import action_id
 
     for a in args.redo_dataset or ():  # one of the nine or a registered user action
         action_id(a)
     if not args.status:
         precheck(overrides)  # a mistyped key is reported before the stages (JAX) are imported
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax import reproduce as R
     from relaff_jax.report.folder import html
     from relaff_jax.reproduce.progress import human_time
@@ -117,6 +117,7 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         return 0
     options.check_out_dir(args.out)
     if args.plugins:  # the user's conditions, registered before the study's config is checked
+        # the learning package loads only when plugin files are given, not for --help
         from relaff_jax.learn import load_plugin_file
 
         for path in args.plugins:

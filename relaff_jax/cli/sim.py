@@ -13,12 +13,14 @@ from pathlib import Path
 from relaff_jax.cli import options
 from relaff_jax.constants import ACTIONS, RELATIONS, SIM_ENGINES
 from relaff_jax.errors import UserError
+from relaff_jax.config.dataset import DatasetConfig
+from relaff_jax.sim.actions.registry import action_id
+from relaff_jax import data as ds
+from relaff_jax.data.validate import check_dataset_dir
 
 
 def register(subparsers) -> None:
     """Add ``objects``, ``scenes`` and ``generate`` to ``subparsers``."""
-    from relaff_jax.config.dataset import DatasetConfig  # the tree's defaults, shown in --help (no JAX)
-
     d = DatasetConfig()
     p = subparsers.add_parser("objects", help="list the 29 built-in objects, and a library file's",
                               description="List the 29 built-in objects (sim.objects) and, with --library, "
@@ -76,6 +78,7 @@ def _add_objects(p) -> None:
 
 
 def cmd_objects(args) -> int:
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.sim import object_library as ol
     from relaff_jax.sim import objects as lib
 
@@ -99,6 +102,7 @@ def cmd_scenes(args) -> int:
     if args.n < 1 or args.batch < 1:
         raise UserError(f"N and --batch are counts >= 1, got {args.n} and {args.batch}")
     options.precheck(args)
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.sim import scenes as sc
     from relaff_jax.sim import world as wd
 
@@ -121,7 +125,6 @@ def cmd_scenes(args) -> int:
 
 def cmd_generate(args) -> int:
     options.load_plugins(args)  # a user action is registered before its name is checked
-    from relaff_jax.sim.actions.registry import action_id
 
     action_id(args.action)
     options.check_counts(args, seed="--seed")
@@ -133,7 +136,7 @@ def cmd_generate(args) -> int:
         "action.scene.library": ("--objects", args.objects), "seed": ("--seed", args.seed)})
     n, batch = tree.dataset.n_samples, tree.dataset.rollout_batch  # checked by DatasetConfig itself
 
-    from relaff_jax import data as ds
+    # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax.stages.generate import generate_one
 
     engine = tree.dataset.engine
@@ -144,7 +147,6 @@ def cmd_generate(args) -> int:
     if bound:
         raise UserError(bound)
     options.check_action(args, args.action, tree.action)  # a user action's rules traced once, before any work
-    from relaff_jax.data.validate import check_dataset_dir
 
     # a foreign folder, or a dataset of other settings, refused before the motor programs compile
     check_dataset_dir(Path(args.out), {"action": args.action, "n_samples": n, "seed": tree.seed, "batch": batch,

@@ -24,6 +24,7 @@ from typing import Any, Iterator
 
 from relaff_jax.cluster.address import Address, parse_address
 from relaff_jax.errors import UserError
+import relaff_jax
 
 
 def _distributed():
@@ -115,8 +116,6 @@ def probe_folder(folder: str, tag: str, remove: bool) -> dict:
 
     import jax
 
-    import relaff_jax
-
     name = f"{tag}-{socket.gethostname()}-{os.getpid()}.tmp"
     out = {"relaff_jax": relaff_jax.__version__, "jax": jax.__version__, "error": None, "name": name}
     path = Path(folder) / name
@@ -142,8 +141,6 @@ def check_workers(client: Any, folder: str | os.PathLike) -> None:
     """``UserError`` unless every worker has our versions and can write ``folder`` (or its
     nearest existing ancestor) on a file system the driver sees."""
     import jax
-
-    import relaff_jax
 
     where = _existing_ancestor(Path(folder))
     tag = f".relaff-probe-{uuid.uuid4().hex[:12]}"

@@ -23,6 +23,7 @@ import weakref
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from relaff_jax.cluster.client import nthreads
 
 SCATTER_BYTES = 64 * 1024  # shared arguments at least this large are sent to the cluster once
 _LIVE: "weakref.WeakSet[Ordered]" = weakref.WeakSet()  # runners with tasks on a cluster
@@ -34,8 +35,6 @@ class Ordered:
     def __init__(self, client: Any, task: Callable[[int], tuple], limit: int, window: int | None = None):
         self.client, self.task, self.limit = client, task, int(limit)
         if client is not None and window is None:
-            from relaff_jax.cluster.client import nthreads
-
             window = nthreads(client)
         self.window = max(1, int(window or 1))
         self.futures: dict[int, Any] = {}

@@ -14,6 +14,8 @@ from relaff_jax.config.constraints import (FRACTION, NULL, AnyOf, Boolean, Check
 from relaff_jax.config.node import Node
 from relaff_jax.constants import FAMILIES
 from relaff_jax.errors import UserError
+from relaff_jax import io as rio
+from relaff_jax.config.override import differences, to_dict
 
 # the forest builders (ForestConfig.engine)
 ENGINES = ("fast", "sklearn", "compiled")
@@ -89,10 +91,10 @@ class ForestConfig(Node):
     # of the samples without replacement (``forests.subsample_weights``), the other reading of III-B
     per_tree: str = "bootstrap"
     # "fast": the same trees built by scikit-learn's Cython builder without the estimator and
-    # evaluated in one jitted program (learn/engine.py), bit-identical to "sklearn", the
+    # evaluated in one jitted program (learn/forest/engine.py), bit-identical to "sklearn", the
     # RandomForestClassifier reference (tests/learn); "compiled": the same trees and
     # predictions from scikit-learn's builder re-expressed in numba, many forests per call
-    # (learn/compiled/, docs/learning.md)
+    # (learn/forest/compiled/, docs/learning.md)
     engine: str = "fast"
 
     _path = "experiment.forest"
@@ -303,9 +305,6 @@ def result_differences(stored: Any, cfg: Any) -> list[str]:
     and ``cfg`` (an ``ExperimentConfig`` or its JSON tree) would make different results:
     every key but ``SPEED_ONLY``, and ``ANALYSIS_ONLY`` only where ``stored`` has it. The one
     rule ``learn.status`` and the sweep's resume check share."""
-    from relaff_jax import io as rio
-    from relaff_jax.config.override import differences, to_dict
-
     now = rio.jsonable(cfg if isinstance(cfg, dict) else to_dict(cfg))
     old = stored if isinstance(stored, dict) else {}
     return [k for k, was, new in differences(old, now)

@@ -8,6 +8,7 @@ import math
 
 from relaff_jax.config.constraints import Interval, Options, Rule, Seq, count
 from relaff_jax.config.node import Node
+from relaff_jax.config.override import to_dict
 
 PCA_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "eig_major", "eig_middle", "eig_minor")
 RHF_NAMES = ("dx", "dy", "dz", "dist", "angle_na_nb", "angle_na_d")
@@ -173,8 +174,6 @@ def stored_config(cfg: PerceptionConfig) -> dict:
     every feature folder written before the option existed, so that those stay valid and
     resumable: a folder whose config has no ``normals`` used ``source="ray"``.
     """
-    from relaff_jax.config.override import to_dict
-
     d = to_dict(cfg)
     if cfg.normals == NormalsConfig():
         d.pop("normals")

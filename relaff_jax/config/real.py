@@ -9,7 +9,7 @@ from __future__ import annotations
 import dataclasses
 
 from relaff_jax.config.constraints import (FRACTION, Boolean, Interval, Options, Rule, Seq, count, length)
-from relaff_jax.config.experiment import ENGINES
+from relaff_jax.config.experiment import ENGINES, ForestConfig
 from relaff_jax.config.node import Node
 from relaff_jax.config.perception import (MAX_IMAGE, NOISE_MODEL_NAMES, NORMAL_SOURCES, ODD_WINDOW,
                                           PerceptionConfig, odd)
@@ -254,8 +254,6 @@ class RealExperimentConfig(Node):
     }
 
     def forest(self):
-        from relaff_jax.config.experiment import ForestConfig
-
         return ForestConfig(base_trees=self.trees, max_trees=self.trees, engine=self.engine)
 
     def repeats(self, space: str) -> int:

@@ -6,6 +6,7 @@ import dataclasses
 from relaff_jax.config.constraints import Check, Options, Rule, Seq, count
 from relaff_jax.config.node import Node
 from relaff_jax.constants import ACTIONS, SPACES
+from relaff_jax.sim.actions.registry import names
 
 
 @dataclasses.dataclass(frozen=True)
@@ -34,6 +35,4 @@ class ReproduceConfig(Node):
 
 def _names() -> tuple[str, ...]:
     """The run's actions: ``ACTIONS``, then the registered user actions (the registry loads no JAX)."""
-    from relaff_jax.sim.actions.registry import names
-
     return tuple(names())

@@ -35,6 +35,7 @@ from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.config.real import SEED, SHADOWED, RealRunConfig, pipeline_config, real_experiment
 from relaff_jax.config.reproduce import ReproduceConfig
 from relaff_jax.errors import UserError
+from relaff_jax.sim.object_library import use_scene
 
 PRESETS = ("tiny", "quick", "study", "paper")
 
@@ -146,8 +147,6 @@ def check_tree(tree: RunConfig) -> RunConfig:
     capacity, the real experiments with the keys they take from ``experiment``, and the object
     library (``action.scene.library``/``objects``, read and checked by ``sim.object_library``,
     which loads no JAX). Returns ``tree``; raises ``UserError`` naming the setting."""
-    from relaff_jax.sim.object_library import use_scene
-
     # the object library is read and checked, and its set made the active one, before any stage
     try:
         use_scene(tree.action.scene, tree.action.grip_margin)

@@ -8,11 +8,11 @@ How a stored rollout is re-simulated: the dataset's sidecar records its ``Action
 (``config.action_config``), engine and settle; every rollout records its pair, placement
 (``qpos0``) and settled state (``qpos_settled``). The audit plans the sampled scenes with the
 same jitted planner and batch shape as generation (``rollouts.make_batch_prepare_fn``), and
-replays the programs one ``MjData`` per scene (``native.replay_native``, the reference the
-native engine equals bit for bit) with ``probe_arrays.ArrayProbe`` (``physics_probe.Probe``'s
+replays the programs one ``MjData`` per scene (``native.reference.replay_native``, the reference
+the native engine equals bit for bit) with ``native.probe_arrays.ArrayProbe`` (``native.probe.Probe``'s
 readings from the contact arrays) reading every step, in ``jobs`` processes
 (``audit_replay``: the same audit at any count). A native
-dataset's scenes are re-settled in MuJoCo C from ``qpos0`` (``native_settle.settle_batch``,
+dataset's scenes are re-settled in MuJoCo C from ``qpos0`` (``native.settle.settle_batch``,
 what generation ran) for the settled velocities, which are not stored; the settled positions
 are checked against the stored ones. An MJX dataset is replayed in C from its stored settled
 positions at rest: C and MJX agree on about 98 % of labels (docs/actions.md), so its label
@@ -37,6 +37,11 @@ from relaff_jax.data.errors import DatasetError
 from relaff_jax.data.load import load_rollouts
 from relaff_jax.data.store import read_sidecar
 from relaff_jax.sim import physics_bounds as bounds
+from relaff_jax.config import from_dict
+from relaff_jax.sim.object_library import use_recorded
+from relaff_jax.sim.actions.registry import action_id, check_recorded, names, registry
+from relaff_jax.data.layout import SIDECAR
+from relaff_jax.config.action import ActionConfig
 
 AUDIT_FILE = "audit.json"
 AUDIT_VERSION = 5  # 5: a press under PRESS_FLOOR_N newtons passes; 4: penetration held 0.1 s (was one step's); 3: force = the press held 0.1 s, penetration 3 mm
@@ -58,16 +63,11 @@ THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "press_weights": FORCE_WEIGHT
 
 
 def action_config(meta: Mapping[str, Any]):
-    from relaff_jax.config import from_dict
-    from relaff_jax.sim.templates import ActionConfig
-
     record = meta.get("config")
     if not isinstance(record, dict) or not isinstance(record.get("action_config"), dict):
         raise DatasetError(f"{meta.get('action')}: the sidecar records no action_config; cannot replay")
-    from relaff_jax.sim.object_library import use_recorded
 
     use_recorded(meta)  # the objects its pair indices refer to (the built-ins if it records none)
-    from relaff_jax.sim.actions.registry import check_recorded
 
     check_recorded(str(meta.get("action")), record.get("action_spec"))  # a user action: the spec that made it
     return from_dict(ActionConfig, record["action_config"])
@@ -76,7 +76,7 @@ def action_config(meta: Mapping[str, Any]):
 def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int) -> dict[str, np.ndarray]:
     """The plans of the scenes, by generation's jitted planner in calls of the dataset's batch
     (the last padded with repeats: a plan does not depend on the other rows of its call)."""
-    from relaff_jax.sim.actions.registry import action_id
+    # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
     from relaff_jax.sim.reach_screen import prepare_screened
     from relaff_jax.sim.rollouts import jitted_stage_fns
 
@@ -103,9 +103,10 @@ def settled_velocities(cfg: Any, meta: Mapping[str, Any], r: Mapping[str, np.nda
     n = len(r["pair"])
     if meta.get("engine") != "native":
         return np.zeros((n, 12), np.float32), np.zeros(n, bool)
+    # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
     from relaff_jax.sim import world as wd
-    from relaff_jax.sim.native_batch import default_threads
-    from relaff_jax.sim.native_settle import settle_batch
+    from relaff_jax.sim.native.batch import default_threads
+    from relaff_jax.sim.native.settle import settle_batch
 
     s = settle_batch(wd.build_world(cfg.phys), r["pair"], r["qpos0"], r["intended"], cfg.scene,
                      default_threads() if nthread is None else nthread)
@@ -126,10 +127,9 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
     """Replay ``sample`` rollouts of the dataset ``path`` in MuJoCo C with the physics probe
     (in ``jobs`` processes, default the cores: ``audit_replay``); the per-rollout readings and
     their summary (``summarise``)."""
+    # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
     from relaff_jax.data.audit_replay import default_jobs, replay_probed
-    from relaff_jax.sim.actions.registry import action_id
     from relaff_jax.sim.actions.tables import spec_tables
-    from relaff_jax.sim.actions.registry import registry
 
     TPL_MEASURE = spec_tables(registry()).measure  # the run's actions' (the nine's: templates.TPL_MEASURE)
 
@@ -281,9 +281,6 @@ def dataset_folders(path: str | os.PathLike) -> list[Path]:
     """The dataset folders of ``path``: itself if it is a dataset (has a sidecar), else the
     ``data/<action>/`` datasets of a run folder, in ``ACTIONS`` order. One-line errors for a
     missing folder, a file, or a folder that is neither."""
-    from relaff_jax.data.layout import SIDECAR
-    from relaff_jax.sim.actions.registry import names
-
     p = Path(path)
     if not p.exists():
         raise DatasetError(f"{p}: no such dataset or run folder")

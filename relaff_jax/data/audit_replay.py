@@ -1,8 +1,8 @@
 """The audit's replay with its probe, in this process or in ``jobs`` worker processes.
 
 Takes a dataset's sidecar, its ``ActionConfig``, the audited scenes (pair, settled qpos and qvel)
-and their plans; gives ``replay_probed``: ``native.replay_native``'s outputs and
-``probe_arrays.ArrayProbe``'s readings for every scene, in scene order.
+and their plans; gives ``replay_probed``: ``native.reference.replay_native``'s outputs and
+``native.probe_arrays.ArrayProbe``'s readings for every scene, in scene order.
 
 Each scene's replay is independent (one ``MjData``; the JAX parts, program inputs and labels,
 are computed row by row on padded batches), so the scenes are split into contiguous chunks,
@@ -66,9 +66,9 @@ def replay_probed(meta: Mapping[str, Any], cfg: Any, action: str, pair: np.ndarr
 
 def _replay(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
             plan: Mapping[str, np.ndarray], measure: int) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    from relaff_jax.sim.native import replay_native
+    from relaff_jax.sim.native.reference import replay_native
     from relaff_jax.sim.planning import setup
-    from relaff_jax.sim.probe_arrays import ArrayProbe
+    from relaff_jax.sim.native.probe_arrays import ArrayProbe
 
     world = setup(cfg).world
     probe = ArrayProbe(len(pair), world.toy_body, world.obj_body, cfg.phys.timestep)

@@ -36,6 +36,7 @@ from relaff_jax.data.errors import DatasetError
 from relaff_jax.data.load import load_dataset, read_features_sidecar
 from relaff_jax.data.store import read_sidecar
 from relaff_jax.errors import UserError
+from relaff_jax.config.perception import PCA_NAMES, RHF_NAMES
 
 FORMATS = ("parquet",)
 OBJECTS = ("toy", "other")
@@ -178,8 +179,6 @@ def _parquet_bytes(table, meta: Mapping[str, Any], fmeta: Mapping[str, Any] | No
 
 def _rhf_elements(fmeta: Mapping[str, Any] | None, length: int) -> tuple[list[str] | None, list | None]:
     """RHF element names and per-histogram (lo, hi, bins) from the features sidecar config."""
-    from relaff_jax.config.perception import RHF_NAMES
-
     rhf = ((fmeta or {}).get("config") or {}).get("perception", {}).get("rhf")
     if not rhf or length != len(RHF_NAMES) * int(rhf["bins"]):
         bins = length // len(RHF_NAMES) if length % len(RHF_NAMES) == 0 else None
@@ -198,8 +197,6 @@ def feature_schema(data: Mapping[str, Any], meta: Mapping[str, Any], fmeta: Mapp
     """A JSON Schema (draft 2020-12) of one exported row, with ``x-dtype``, ``x-shape``,
     ``x-feature`` (an attached feature, not a stored rollout field) and ``x-names`` (the
     meaning of each element of a vector column, in order)."""
-    from relaff_jax.config.perception import PCA_NAMES
-
     feature_names = set(((fmeta or {}).get("features") or {}))
     props: dict[str, Any] = {}
     for k in columns(data):

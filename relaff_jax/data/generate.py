@@ -54,7 +54,7 @@ from relaff_jax.data.tasks import PENDING, discard_pending, promote, rollout_chu
 from relaff_jax.data.validate import check_schema, schema_of
 
 # The settle each engine's rollout_fn uses, recorded in the sidecar and compared on resume
-# (the native name is ``relaff_jax.sim.native_settle.SETTLE_NAME``; tests check they match).
+# (the native name is ``relaff_jax.sim.native.settle.SETTLE_NAME``; tests check they match).
 SETTLE_OF_ENGINE = {"mjx": "mjx", "native": "mujoco_c_batch/1"}
 
 

@@ -16,6 +16,7 @@ from relaff_jax import io as rio
 from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.constants import ACTIONS
 from relaff_jax.data.errors import DatasetError
+from relaff_jax.sim.actions.registry import names
 
 REQUIRED_FIELDS = ("label", "relation", "cog_distance", "toy", "other")
 RESERVED_FIELDS = ("rollout", "selected", "action")
@@ -31,8 +32,6 @@ LOCK = ".relaff.lock"
 
 
 def check_action(action: Any) -> str:
-    from relaff_jax.sim.actions.registry import names
-
     if action not in names():  # the nine, then the user's registered actions
         raise DatasetError(f"unknown action {action!r}; valid actions: {', '.join(names())}")
     return action

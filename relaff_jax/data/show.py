@@ -13,6 +13,14 @@ from pathlib import Path
 from typing import Any
 
 from relaff_jax.errors import UserError
+from relaff_jax.data.load import load_dataset
+from relaff_jax.data.store import read_sidecar
+from relaff_jax.sim.object_library import use_recorded
+from relaff_jax.perception import from_sim
+from relaff_jax.sim import world as wd
+from relaff_jax.config import override_under
+from relaff_jax.data import audit as A
+from relaff_jax.sim.animate import animate_sample
 
 
 def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.PathLike, *,
@@ -24,13 +32,9 @@ def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.
     change the recorded action config of the GIF's replay.
     ``say(text)``: told what the PNG's silent part does (building the world, compiling).
     ``progress``: the GIF's phase bars (``sim.animate.animate_sample``)."""
-    from relaff_jax.data.load import load_dataset
-
     out = Path(out)
     if rollout and out.suffix.lower() != ".gif":
         raise UserError(f"--rollout writes a GIF; give --out a .gif name, not {out.name}")
-    from relaff_jax.data.store import read_sidecar
-    from relaff_jax.sim.object_library import use_recorded
 
     ds = load_dataset(folder, features=False)
     use_recorded(read_sidecar(Path(folder)))  # its pair indices index the pairs of the objects it was made of
@@ -45,8 +49,6 @@ def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.
         return _rollout_gif(folder, ds, index, out, progress, action_overrides or {})
     if say is not None:  # the inputs are checked; what follows compiles for tens of seconds: say so
         say(f"sample {index}: building the world and compiling the camera (tens of seconds the first time)...")
-    from relaff_jax.perception import from_sim
-    from relaff_jax.sim import world as wd
 
     if "feasible" in ds:  # whether the arm could run the program: a negative label may be reach, not relation
         title += f", program {'feasible' if bool(ds['feasible'][index]) else 'infeasible (out of reach)'}"
@@ -65,11 +67,6 @@ def _rollout_gif(folder: Any, ds: dict, index: int, out: Path, progress: Any, ov
     a native dataset, its re-settled velocities (``data.audit``), so that the replay is the
     engine's reference and its label the stored one."""
     import numpy as np
-
-    from relaff_jax.config import override_under
-    from relaff_jax.data import audit as A
-    from relaff_jax.data.store import read_sidecar
-    from relaff_jax.sim.animate import animate_sample
 
     meta = read_sidecar(Path(folder))
     cfg = override_under(A.action_config(meta), overrides, "action.")

@@ -18,6 +18,7 @@ import numpy as np
 from relaff_jax.constants import RELATIONS
 from relaff_jax.data.layout import CHUNKS, LOCK, REQUIRED_FIELDS, RESERVED_FIELDS, SELECTION, SIDECAR
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, ForeignDirectoryError
+from relaff_jax.data.store import mismatch, read_sidecar
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
@@ -138,7 +139,6 @@ def check_dataset_dir(path: Path, expected: Mapping[str, Any]) -> None:
             raise CorruptDatasetError(f"{path}: dataset sidecar {SIDECAR} is missing (truncated dataset)")
         raise ForeignDirectoryError(f"{path}: exists, is not empty and is not a relaff dataset; give a new or "
                                     "empty folder")
-    from relaff_jax.data.store import mismatch, read_sidecar
 
     meta = read_sidecar(path)
     diff = mismatch(meta, dict(expected), sorted(expected))

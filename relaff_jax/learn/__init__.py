@@ -6,12 +6,12 @@ and gives, per state space, the accuracies of every bootstrapping condition on d
 
 Files, in pipeline order:
 
-- ``forests.py``: ``ForestConfig``, ``n_trees``, ``make_forest``, ``fit_forest``, ``predict_class``;
-- ``engine_fit.py``: the same forests built by scikit-learn's Cython tree builder directly;
-- ``engine_eval.py``: their exact predictions, many forests at once in one jitted program;
-- ``compiled/``: the same forests and predictions from scikit-learn's builder in numba, many
-  forests per kernel call (issue 26);
-- ``engine.py``: the engine the sweep and prep use (``ForestConfig.engine``: fast | compiled | sklearn);
+- ``forest/``: the paper's forests and the engines that build them (``forest/__init__.py``):
+  ``estimator.py`` (``ForestConfig``'s forests as scikit-learn estimators: ``n_trees``,
+  ``make_forest``, ``fit_forest``, ``predict_class``), ``fit.py`` (the same trees from
+  scikit-learn's Cython builder directly), ``evaluate.py`` (their exact predictions, many forests
+  in one jitted program), ``compiled/`` (trees and predictions in numba), ``engine.py`` (the
+  engine the sweep and prep use: ``ForestConfig.engine``: fast | compiled | sklearn);
 - ``learners.py``: the learner of every forest: the paper's (default) or a scikit-learn classifier
   by import path (``ExperimentConfig.learner``, ``learner_params``);
 - ``conditions.py``: conditions as registered functions (``register_condition``, ``Knowledge``),
@@ -44,90 +44,40 @@ report, the stages or the command line.
 """
 from __future__ import annotations
 
-from relaff_jax.lazy import lazy_attributes
-
 from relaff_jax.constants import (
     ACTIONS,
     FAMILIES,
     SPACES,
 )
-from relaff_jax.learn.table2 import PAPER_TABLE2, TABLE2_ROWS, ORACLE, paper_row
+from relaff_jax.learn.analysis import (analyse, average_bf, categories_per_threshold, curves, select_at, select_best,
+                                       threshold_study)
 from relaff_jax.learn.checks import check_config
 from relaff_jax.learn.conditions import (Knowledge, load_plugin_file, register_condition, registered as registered_conditions)
-from relaff_jax.learn.forests import check_forest_config, fit_forest, make_forest, n_trees, predict_class
+from relaff_jax.learn.correlation import categories_above, category_pairs, correlation_matrix
+from relaff_jax.learn.datasets import check_datasets, fingerprint, load_datasets
+from relaff_jax.learn.draws import draw_rep, draw_test, draw_train
+from relaff_jax.learn.forest.estimator import check_forest_config, fit_forest, make_forest, n_trees, predict_class
+from relaff_jax.learn.intervals import bc_interval, half_sizes, percentile_interval, resampled_means, scene_halves, whole
+from relaff_jax.learn.measures import (bootstrap_factor, chance_tolerance, min_defined, size_mask, summarise,
+                                       table2_rows, tie_weights, window_mean)
+from relaff_jax.learn.online import extend, online_weights
+from relaff_jax.learn.prep import prepare
+from relaff_jax.learn.protocol import (block_fits, category_allowed, category_masks, condition_names, condition_plan,
+                                       forests_per_space, layout, pool_sizes, split_pools)
 from relaff_jax.learn.states import TOY_MANIPULATED, augment, check_action, manipulated_first_order, state_features
+from relaff_jax.learn.synthetic import synthetic_datasets
+from relaff_jax.learn.table2 import PAPER_TABLE2, TABLE2_ROWS, ORACLE, paper_row
 
-# Everything else loads on first use (PEP 562), so that the command line checks
-# --set experiment.* without scikit-learn and JAX: name -> submodule.
-_LAZY = {
-    "analyse": "analysis",
-    "average_bf": "analysis",
-    "categories_per_threshold": "analysis",
-    "curves": "analysis",
-    "select_at": "analysis",
-    "select_best": "analysis",
-    "threshold_study": "analysis",
-    "block_outcomes": "blocks",
-    "read_block": "blocks",
-    "run_block": "blocks",
-    "run_block_to_file": "blocks",
-    "categories_above": "correlation",
-    "category_pairs": "correlation",
-    "correlation_matrix": "correlation",
-    "check_datasets": "datasets",
-    "fingerprint": "datasets",
-    "load_datasets": "datasets",
-    "draw_rep": "draws",
-    "draw_test": "draws",
-    "draw_train": "draws",
-    "bc_interval": "intervals",
-    "half_sizes": "intervals",
-    "percentile_interval": "intervals",
-    "resampled_means": "intervals",
-    "scene_halves": "intervals",
-    "whole": "intervals",
-    "bootstrap_factor": "measures",
-    "chance_tolerance": "measures",
-    "min_defined": "measures",
-    "size_mask": "measures",
-    "summarise": "measures",
-    "table2_rows": "measures",
-    "tie_weights": "measures",
-    "window_mean": "measures",
-    "extend": "online",
-    "online_weights": "online",
-    "prepare": "prep",
-    "pool_sizes": "protocol",
-    "block_fits": "protocol",
-    "category_allowed": "protocol",
-    "category_masks": "protocol",
-    "condition_names": "protocol",
-    "condition_plan": "protocol",
-    "forests_per_space": "protocol",
-    "layout": "protocol",
-    "split_pools": "protocol",
-    "FORMAT_VERSION": "results",
-    "Results": "results",
-    "ResultsNotFound": "results",
-    "SpaceResults": "results",
-    "is_complete": "results",
-    "load_results": "results",
-    "run_experiment": "sweep",
-    "run_space": "sweep",
-    "synthetic_datasets": "synthetic",
-}
-
-
-__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
+# Not re-exported: the modules that import scikit-learn or JAX (``blocks``: ``run_block``,
+# ``read_block``; ``results``: ``load_results``, ``is_complete``, ``Results``; ``sweep``:
+# ``run_experiment``), so that ``relaff reproduce --status``, which reads ``learn.status``,
+# imports neither. Import those names from their modules.
 
 __all__ = [
-    "ACTIONS", "FAMILIES", "SPACES", "FORMAT_VERSION", "PAPER_TABLE2", "TABLE2_ROWS", "TOY_MANIPULATED", "Knowledge", "Results", "ResultsNotFound", "SpaceResults",
+    "ACTIONS", "FAMILIES", "SPACES", "PAPER_TABLE2", "TABLE2_ROWS", "TOY_MANIPULATED", "Knowledge",
     "analyse", "augment", "average_bf", "block_fits", "bootstrap_factor", "categories_above", "categories_per_threshold",
     "category_allowed", "category_masks", "category_pairs", "check_action", "check_config", "check_datasets",
-    "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep", "fingerprint", "fit_forest", "forests_per_space", "is_complete", "layout", "load_datasets",
-    "load_results", "make_forest", "manipulated_first_order", "n_trees", "predict_class", "prepare", "read_block",
-    "run_block", "run_block_to_file", "run_experiment", "run_space", "select_at", "select_best", "size_mask",
-    "split_pools", "state_features", "synthetic_datasets", "threshold_study",
-    "block_outcomes", "draw_test", "draw_train", "extend", "online_weights", "paper_row", "percentile_interval",
+    "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep", "fingerprint", "fit_forest", "forests_per_space", "layout", "load_datasets", "make_forest", "manipulated_first_order", "n_trees", "predict_class", "prepare", "select_at", "select_best", "size_mask",
+    "split_pools", "state_features", "synthetic_datasets", "threshold_study", "draw_test", "draw_train", "extend", "online_weights", "paper_row", "percentile_interval",
     "resampled_means", "summarise", "register_condition", "registered_conditions", "load_plugin_file", "pool_sizes", "bc_interval", "half_sizes", "scene_halves", "whole", "chance_tolerance", "min_defined", "ORACLE", "table2_rows", "tie_weights", "window_mean",
 ]

@@ -22,7 +22,7 @@ from typing import Any, Mapping, NamedTuple, Sequence
 import numpy as np
 
 from relaff_jax import io as rio
-from relaff_jax.learn.engine import predict_many
+from relaff_jax.learn.forest.engine import predict_many
 from relaff_jax.learn.learners import fit_many
 from relaff_jax.config.experiment import ForestConfig
 from relaff_jax.learn.states import augment

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.conditions import check_conditions
-from relaff_jax.learn.forests import check_forest_config
+from relaff_jax.learn.forest.estimator import check_forest_config
 from relaff_jax.learn.learners import check_learner
 
 

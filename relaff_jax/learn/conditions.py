@@ -27,9 +27,10 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from relaff_jax.constants import ACTIONS, FAMILIES
+from relaff_jax.constants import ACTIONS, FAMILIES, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn.correlation import categories_above, category_pairs
+from relaff_jax.plugins import load_file
 
 ENTRY_POINTS = "relaff_jax.conditions"
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -111,8 +112,6 @@ def load_plugin_file(path: str | Path) -> list[str]:
     """Execute a Python file that registers conditions (and/or actions: one loader for both,
     ``relaff_jax.plugins.load_file``); returns what it registered. A missing file, an error
     while executing it or a file that registers nothing is a ``UserError``."""
-    from relaff_jax.plugins import load_file
-
     return load_file(path)
 
 
@@ -150,8 +149,6 @@ def custom_names(cfg: Any, space: str) -> list[str]:
 def check_conditions(cfg: Any) -> None:
     """Every user condition ``cfg`` names is registered and gives valid columns on a small
     synthetic knowledge (shape, finite, row by row): one ``UserError`` before any work."""
-    from relaff_jax.constants import SPACES
-
     names = dict.fromkeys(n for s in SPACES for n in custom_names(cfg, s))
     if not names:
         return

@@ -15,6 +15,7 @@ import numpy as np
 
 from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
+from relaff_jax.data import load_dataset
 
 
 def check_datasets(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[str]) -> list[str]:
@@ -56,8 +57,6 @@ def fingerprint(datasets: Mapping[str, Mapping[str, Any]], spaces: Sequence[str]
 
 def load_datasets(dirs: Sequence[str | os.PathLike]) -> dict[str, dict]:
     """``{action: load_dataset(DIR)}`` for the given dataset directories."""
-    from relaff_jax.data import load_dataset
-
     out: dict[str, dict] = {}
     for d in dirs:
         data = load_dataset(d)

@@ -22,7 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
-from relaff_jax.learn.measures import size_mask
+from relaff_jax.learn.measures import _score, size_mask, tie_weights
 
 
 def window_area(gain: np.ndarray, sizes: Sequence[int], lo: int, hi: int) -> np.ndarray:
@@ -134,8 +134,6 @@ def method_weights(mean: np.ndarray, lay: dict, cfg, sizes: Sequence[int], cbn_o
     """``(M, A, C + 2)`` weights over the conditions (and the two online learners) of each of
     ``METHODS`` per target, from the mean curves ``mean (A, C + 2, S)`` (ties share); all 0
     where a method did not run for a target."""
-    from relaff_jax.learn.measures import _score, tie_weights
-
     a, c2, _ = mean.shape
     w = np.zeros((len(METHODS), a, c2))
     ran = np.isfinite(mean).any(-1)  # (A, C + 2)

@@ -24,7 +24,7 @@ import numpy as np
 
 from relaff_jax.errors import UserError
 from relaff_jax.config.experiment import FOREST, ForestConfig
-from relaff_jax.learn.forests import _fast, checked_inputs
+from relaff_jax.learn.forest.estimator import _fast, checked_inputs
 
 
 
@@ -82,7 +82,8 @@ def fit_many(Xs: Sequence[np.ndarray], ys: Sequence[np.ndarray], seeds: Sequence
     """F fitted models, model f on ``Xs[f]: (N_f, D_f)``, ``ys[f]: (N_f,)`` bool, seed
     ``seeds[f]`` (forests: ``engine.fit_many``)."""
     if isinstance(learner, ForestConfig):
-        from relaff_jax.learn import engine  # here: the config imports this module without JAX
+        # scikit-learn loads with the first fit: reproduce --status reads this module
+        from relaff_jax.learn.forest import engine  # here: the config imports this module without JAX
 
         return engine.fit_many(Xs, ys, seeds, learner)
     from threadpoolctl import threadpool_limits
@@ -105,7 +106,8 @@ def fit(X: np.ndarray, y: np.ndarray, seed: int, learner: ForestConfig | Sklearn
 def predict(model, X: np.ndarray) -> np.ndarray:
     """0/1 float32 ``(N,)`` predictions of a model from ``fit`` (``engine.predict`` for every
     kind: a model that is no forest is asked for ``predict``)."""
-    from relaff_jax.learn import engine
+    # scikit-learn loads with the first fit: reproduce --status reads this module
+    from relaff_jax.learn.forest import engine
 
     return engine.predict(model, X)
 

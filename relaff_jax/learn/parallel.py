@@ -24,6 +24,10 @@ import os
 import threading
 import time
 from typing import Any
+from relaff_jax.io import held_locks, lock_is_held
+from relaff_jax import io as rio
+from relaff_jax.cluster.tasks import map_calls
+from relaff_jax.plugins import load_files, loaded_files
 
 WATCH_SECONDS = 0.5
 _watching: list[int] = []  # the driver pid this worker process watches (set once)
@@ -44,8 +48,6 @@ def run_parallel(calls: list, jobs: int, progress: bool, total: int, desc: str, 
 
     try:
         if client is not None and calls:
-            from relaff_jax.cluster.tasks import map_calls
-
             map_calls(client, calls, done)
         elif jobs == 1:
             for i, c in enumerate(calls):
@@ -53,10 +55,6 @@ def run_parallel(calls: list, jobs: int, progress: bool, total: int, desc: str, 
                 done(i, fn(*args, **kwargs))
         else:
             from joblib import Parallel
-
-            from relaff_jax.io import held_locks
-
-            from relaff_jax.plugins import loaded_files
 
             driver = (os.getpid(), held_locks())  # the workers' fence: this pid, and the folder locks it holds
             files = loaded_files()  # the driver's --plugins files: a worker registers the same actions
@@ -72,8 +70,6 @@ def driver_alive(driver: int, locks=()) -> bool:
     """Whether process ``driver`` still runs (a worker's parent: its pid is the parent's, until
     the parent dies and the worker is handed to init or a subreaper) and still holds the
     folder ``locks`` it held when it started the worker (they go first when it dies)."""
-    from relaff_jax.io import lock_is_held
-
     if any(lock_is_held(x) is False for x in locks):
         return False
     if os.getppid() == driver:
@@ -99,7 +95,6 @@ def _watch(driver: int, locks=()) -> None:
     """In a worker process: end it when the driver is gone; fence its writes meanwhile."""
     if _watching or driver == os.getpid():
         return
-    from relaff_jax import io as rio
 
     locks = tuple(locks)
     _watching.append(driver)
@@ -116,7 +111,6 @@ def _watch(driver: int, locks=()) -> None:
 def _indexed(i: int, call, driver: tuple | None = None, files: tuple = ()):
     if driver is not None:
         _watch(*driver)
-    from relaff_jax.plugins import load_files
 
     load_files(files)  # the driver's plugin files, and only those (a reused worker forgets others)
     fn, args, kwargs = call

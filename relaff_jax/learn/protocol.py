@@ -123,6 +123,7 @@ def block_fits(plan: Sequence[tuple[int, tuple[int, ...]]], n_sizes: int, loo_si
     ``blocks.learner_key``) in ``plan`` and size (conditions with the same learner share it,
     ``blocks.block_outcomes``), plus, when the block holds the selection size, ``loo_size``
     leave-one-out forests per distinct learner among ``loo_conditions``."""
+    # scikit-learn loads with the first fit: reproduce --status reads this module
     from relaff_jax.learn.blocks import learner_key
 
     key = lambda c, rows: learner_key(rows, repeats, c)  # noqa: E731

@@ -17,6 +17,7 @@ import numpy as np
 from relaff_jax.constants import PCA_PER_OBJECT, RHF_BINS, SPACES, TOY_MANIPULATED  # noqa: F401 (re-exported)
 from relaff_jax.config.experiment import EXTRAS, RHF_PARTS, StateConfig
 from relaff_jax.errors import UserError
+from relaff_jax.sim.actions.registry import names
 
 
 
@@ -90,8 +91,6 @@ def state_features(pca: np.ndarray, rhf: np.ndarray | None, action: str | None, 
 
 
 def check_action(action: str) -> None:
-    from relaff_jax.sim.actions.registry import names  # the nine, then the user's (no JAX)
-
     if action not in names():
         raise UserError(f"unknown action {action!r}; expected one of {names()}")
 

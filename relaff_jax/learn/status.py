@@ -16,7 +16,10 @@ from relaff_jax import io as rio
 from relaff_jax.config.experiment import result_differences
 
 from relaff_jax.learn import folder as L
-from relaff_jax.learn.folder import META  # noqa: F401 (re-exported)
+from relaff_jax.learn.folder import is_complete, META  # noqa: F401 (re-exported)
+from relaff_jax.learn.datasets import fingerprint
+from relaff_jax.learn import forests_per_space
+from relaff_jax.learn.states import state_width
 
 
 def experiment_status(out: str | os.PathLike, datasets: Mapping[str, Mapping[str, Any]], cfg: Any, seed: int,
@@ -26,9 +29,6 @@ def experiment_status(out: str | os.PathLike, datasets: Mapping[str, Mapping[str
     dataset with features), ``cfg`` (``ExperimentConfig``), ``seed``, ``actions``, ``spaces``.
     ``fingerprints``: ``fingerprint(datasets, spaces)`` already known (then ``datasets`` is
     not read and may be None)."""
-    from relaff_jax.learn.datasets import fingerprint
-    from relaff_jax.learn.folder import is_complete
-
     out = Path(out)
     if not (out / META).exists():
         return ("partial", "sweep started, no experiment.json yet") if out.exists() else ("absent", "no folder")
@@ -67,9 +67,6 @@ def sweep_progress(out: str | os.PathLike, cfg: Any, n_actions: int, spaces: Seq
     ``results.npz`` exists, else 0.1 for the preparation (source predictors, correlations) and
     0.9 x the blocks written, each block weighted by its sizes' ``forest_cost_ms``; spaces
     weighted by their number of forests (``forests_per_space``) times their mean forest cost."""
-    from relaff_jax.learn import forests_per_space
-    from relaff_jax.learn.states import state_width
-
     out = Path(out)
     sizes = list(cfg.sizes)  # the sweep's own chunking (sweep.run_space)
     chunks = [sizes[i:i + cfg.sizes_per_block] for i in range(0, len(sizes), cfg.sizes_per_block)]

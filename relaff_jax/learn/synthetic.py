@@ -13,6 +13,8 @@ import numpy as np
 from relaff_jax.constants import ACTIONS, PCA_PER_OBJECT, RHF_BINS
 from relaff_jax.learn.states import check_action
 from relaff_jax.config import streams
+from relaff_jax.learn.correlation import category_pairs
+from relaff_jax.learn.protocol import layout
 
 
 def synthetic_datasets(
@@ -84,9 +86,6 @@ def synthetic_outcomes(a: int, sizes: int, reps: int, n_test: Sequence[int], see
     the families in ``not_run`` (RHF: DBn, CB1, CBn); conditions that did not run have NaN
     accuracies and leave-one-out and all-False outcomes; a target of ``n_test`` 0 keeps no
     outcomes, only accuracies. Not a simulation."""
-    from relaff_jax.learn.correlation import category_pairs  # noqa: PLC0415
-    from relaff_jax.learn.protocol import layout  # noqa: PLC0415
-
     lay = layout(a, n_thresholds)
     targets = list(range(a)) if targets is None else [int(t) for t in targets]
     n_test = np.asarray(n_test, int)[targets]

@@ -13,6 +13,7 @@ import numpy as np
 
 from relaff_jax.learn.conditions import Knowledge, columns, custom_names, registered
 from relaff_jax.learn.correlation import category_pairs
+from relaff_jax.constants import SPACES
 
 
 def knowledge(target: str, actions: list[str], state: np.ndarray, boot: np.ndarray, corr: np.ndarray,
@@ -82,8 +83,6 @@ def extend(states: Mapping[str, np.ndarray], prep: Mapping[str, np.ndarray], act
 def record(cfg: Any) -> dict[str, dict[str, str]]:
     """``{name: {"origin", "sha256"}}`` of the user's conditions ``cfg`` runs (for experiment.json:
     a folder never silently changes what a condition name meant)."""
-    from relaff_jax.constants import SPACES
-
     names = dict.fromkeys(n for s in SPACES for n in custom_names(cfg, s))
     if not names:
         return {}

@@ -48,100 +48,32 @@ Files, in dependency order (this module re-exports their public names):
 - ``culled.py``: ``make_culled_features`` (the batched chain with capacities sized per call, same bits);
 - ``plots.py``: ``scene_view`` and ``render_scene_png`` (pyplot-free);
 - ``from_sim.py``: dataset samples -> features (``make_feature_fn``,
-  ``show_scene``); not imported here (it needs MJX and the world).
+  ``show_scene``); not imported here (it needs MJX and the world);
+- ``rollout_view.py``: frames of a replayed rollout (``relaff show --gif``); not imported here.
+
+Importing this package imports JAX (every stage above is JAX code); the settings live in
+``relaff_jax.config.perception`` so that the command line checks them without it.
 """
+
 from __future__ import annotations
 
-import sys
-import types
-
 from relaff_jax.constants import OBJECT_SEGMENTS, SEG_BACKGROUND, SEG_NONE, SEG_OTHER, SEG_TOY
-
-
-# Everything else loads on first use (PEP 562), so that the config, which the CLI reads to
-# check --set before any work, comes without JAX: name -> submodule.
-_LAZY = {
-    'camera_frame': 'camera',
-    'camera_rays': 'camera',
-    'intrinsics': 'camera',
-    'tile_rays': 'camera',
-    'fast_arccos': 'descriptors',
-    'pca_frame': 'descriptors',
-    'pca_object': 'descriptors',
-    'rhf_bin': 'descriptors',
-    'rhf_histograms': 'descriptors',
-    'rhf_pair_values': 'descriptors',
-    'rotation_to_rpy': 'descriptors',
-    'NOISE_MODELS': 'noise',
-    'add_depth_noise': 'noise',
-    'depth_noise_sigma': 'noise',
-    'pixel_radius': 'noise',
-    'pixel_normals': 'normals',
-    'smallest_eigenvector': 'normals',
-    'window_normals': 'normals',
-    'TILE_BUCKETS': 'culled',
-    'capacity_config': 'culled',
-    'make_culled_features': 'culled',
-    'make_tile_counter': 'culled',
-    'tile_capacity': 'culled',
-    'SceneFeatures': 'pipeline',
-    'features': 'pipeline',
-    'features_from_voxels': 'pipeline',
-    'make_batched_features': 'pipeline',
-    'point_cloud': 'pipeline',
-    'object_crop': 'plots',
-    'render_scene_png': 'plots',
-    'scene_view': 'plots',
-    'cast_rays': 'raycast',
-    'surface_normals': 'raycast',
-    'active_tiles': 'render',
-    'compact_objects': 'render',
-    'render': 'render',
-    'render_objects': 'render',
-    'GEOM_BOX': 'scene',
-    'GEOM_CAPSULE': 'scene',
-    'GEOM_PLANE': 'scene',
-    'GEOM_SPHERE': 'scene',
-    'SUPPORTED_GEOMS': 'scene',
-    'SceneGeoms': 'scene',
-    'bounding_radius': 'scene',
-    'make_scene': 'scene',
-    'scene_from_mujoco': 'scene',
-    'voxel_downsample': 'voxels',
-}
-
-
-def __getattr__(name: str):
-    import importlib
-
-    if name in _LAZY:
-        value = getattr(importlib.import_module(f"{__name__}.{_LAZY[name]}"), name)
-        globals()[name] = value
-        return value
-    try:  # a submodule reached as an attribute, e.g. relaff_jax.perception.from_sim
-        return importlib.import_module(f"{__name__}.{name}")
-    except ModuleNotFoundError as e:
-        if e.name != f"{__name__}.{name}":
-            raise
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_LAZY))
-
-
-class _Package(types.ModuleType):
-    """Importing the submodule ``render`` binds it on the package; the function ``render`` it
-    exports keeps the name, as it did when this package imported everything eagerly."""
-
-    def __setattr__(self, name, value):
-        if name in _LAZY and isinstance(value, types.ModuleType) and hasattr(value, name):
-            value = getattr(value, name)
-        super().__setattr__(name, value)
-
-
-sys.modules[__name__].__class__ = _Package
-
+from relaff_jax.perception.camera import camera_frame, camera_rays, intrinsics, tile_rays
+from relaff_jax.perception.culled import (TILE_BUCKETS, capacity_config, make_culled_features, make_tile_counter,
+                                          tile_capacity)
+from relaff_jax.perception.descriptors import (fast_arccos, pca_frame, pca_object, rhf_bin, rhf_histograms,
+                                               rhf_pair_values, rotation_to_rpy)
+from relaff_jax.perception.noise import NOISE_MODELS, add_depth_noise, depth_noise_sigma, pixel_radius
+from relaff_jax.perception.normals import pixel_normals, smallest_eigenvector, window_normals
+from relaff_jax.perception.pipeline import (SceneFeatures, features, features_from_voxels, make_batched_features,
+                                            point_cloud)
+from relaff_jax.perception.plots import object_crop, render_scene_png, scene_view
+from relaff_jax.perception.raycast import cast_rays, surface_normals
+# the function ``render`` shadows its submodule's name on the package (the import binds it last)
+from relaff_jax.perception.render import active_tiles, compact_objects, render, render_objects
+from relaff_jax.perception.scene import (GEOM_BOX, GEOM_CAPSULE, GEOM_PLANE, GEOM_SPHERE, SUPPORTED_GEOMS,
+                                         SceneGeoms, bounding_radius, make_scene, scene_from_mujoco)
+from relaff_jax.perception.voxels import voxel_downsample
 
 __all__ = [
     "OBJECT_SEGMENTS", "SEG_BACKGROUND", "SEG_NONE", "SEG_OTHER", "SEG_TOY",

@@ -21,7 +21,10 @@ import jax.numpy as jnp
 import numpy as np
 from mujoco import mjx
 
-from relaff_jax import perception as pc
+from relaff_jax.perception.culled import make_culled_features
+from relaff_jax.perception.pipeline import make_batched_features
+from relaff_jax.perception.plots import render_scene_png
+from relaff_jax.perception.scene import make_scene
 from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.errors import UserError
 from relaff_jax.sim import world as wd
@@ -111,8 +114,8 @@ def make_feature_fn(world: wd.World, cfg: PerceptionConfig = PerceptionConfig(),
     """
     if int(sub_batch) < 1:
         raise UserError(f"sub_batch must be >= 1, got {sub_batch}")
-    feats = pc.make_batched_features(world.mj_model.geom_type, world.geom_seg, cfg)
-    sized = pc.make_culled_features(world.mj_model.geom_type, world.geom_seg, cfg, sub_batch=sub_batch)
+    feats = make_batched_features(world.mj_model.geom_type, world.geom_seg, cfg)
+    sized = make_culled_features(world.mj_model.geom_type, world.geom_seg, cfg, sub_batch=sub_batch)
     geoms = jitted_geoms(world)
     root = jax.random.PRNGKey(seed)
 
@@ -157,7 +160,7 @@ def show_scene(world: wd.World, pair: int, qpos: np.ndarray, out: str | Path, ke
     key = jax.random.PRNGKey(0) if key is None else key
     size, xpos, xmat = jax.device_get(jitted_geoms(world)(
         jnp.asarray([pair], jnp.int32), jnp.asarray(qpos, jnp.float32)[None]))
-    scene = pc.make_scene(world.mj_model.geom_type, world.geom_seg, size[0], xpos[0], xmat[0])
+    scene = make_scene(world.mj_model.geom_type, world.geom_seg, size[0], xpos[0], xmat[0])
     toy, other = world.pairs[pair][:2]
-    pc.render_scene_png(scene, key, out, cfg, title=title or f"{toy} + {other}")
+    render_scene_png(scene, key, out, cfg, title=title or f"{toy} + {other}")
     return Path(out)

@@ -40,7 +40,7 @@ import numpy as np
 from relaff_jax.constants import BESIDE, ON_TOP, RELATIONS, SPACES
 from relaff_jax.errors import UserError
 from relaff_jax.learn.analysis import bootstrap_factor
-from relaff_jax.learn.engine import fit, predict
+from relaff_jax.learn.forest.engine import fit, predict
 from relaff_jax.learn.states import augment, state_features
 from relaff_jax.data.progress import progress_bar
 from relaff_jax.provenance import derive_seed

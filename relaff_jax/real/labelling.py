@@ -18,6 +18,7 @@ from .labels import REAL_RELATIONS, Label, file_sha256
 from relaff_jax.config.real import RuleConfig
 from .propose import propose_scene
 from .scene_source import load, scene_files
+from .pictures import scene_pictures
 
 
 def propose_folder(folder: str | Path, pictures: str | Path | None = None,
@@ -32,8 +33,6 @@ def propose_folder(folder: str | Path, pictures: str | Path | None = None,
         scene = load(path)
         props = propose_scene(scene.objects, cfg)
         if pictures is not None:
-            from .pictures import scene_pictures
-
             scene_pictures(scene, props, pictures)
         digest = file_sha256(path)
         for p in props:

@@ -28,7 +28,7 @@ from relaff_jax.errors import UserError
 
 from . import labels as lab
 from .cloud_features import object_pair_features
-from relaff_jax.config.real import RealConfig
+from relaff_jax.config.real import RealConfig, SimSensor
 from .frame import camera_pose, table_frame
 from .readers import read_cloud
 from .scene_source import TARGET, object_ids, table_plane
@@ -114,8 +114,6 @@ def real_features(folder: str | Path, labels, cfg: RealConfig = RealConfig(),
 
 def sensor(data: dict):
     """Mean camera height, tilt and vertical field of view of the real scenes as a ``SimSensor``."""
-    from relaff_jax.config.real import SimSensor
-
     vfov = np.asarray(data["vfov_deg"], float)
     return SimSensor(height=round(float(np.mean(data["height"])), 4),
                      tilt_deg=round(float(np.mean(data["tilt_deg"])), 3),

@@ -22,7 +22,7 @@ from relaff_jax.errors import UserError
 
 from . import frame as rframe
 from .readers import FORMATS, read_cloud
-from .segment import hand_segmentation
+from .segment import hand_segmentation, SEG_TABLE
 from .segment import object_ids as seg_object_ids
 
 # Where the camera's optical axis meets the table, in the simulation's robot frame. With the
@@ -59,8 +59,6 @@ class RealScene:
 
 def table_plane(xyz: np.ndarray, seg: np.ndarray) -> np.ndarray:
     """Least-squares plane (4,) (unit normal towards the camera) of the hand-labelled table."""
-    from .segment import SEG_TABLE
-
     pts = xyz[(seg == SEG_TABLE) & np.all(np.isfinite(xyz), axis=-1)].astype(np.float64)
     if len(pts) < MIN_TABLE_POINTS:
         raise UserError(f"{len(pts)} hand-labelled table points (labels 1-9); a table plane needs "

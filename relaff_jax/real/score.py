@@ -20,6 +20,7 @@ from .cloud import SEG_TABLE
 from relaff_jax.config.real import RealConfig
 from .readers import read_cloud
 from .segment import hand_segmentation, object_ids, segment_scene
+from relaff_jax.data.progress import progress_bar
 
 
 def iou(a, b) -> float:
@@ -77,7 +78,6 @@ def score_scenes(paths, seed: int = 0, cfg: RealConfig = RealConfig(), known_cou
     paths = list(paths)
     if not paths:
         raise UserError("no scenes to score")
-    from relaff_jax.data.progress import progress_bar
 
     base = jax.random.key(seed)
     rows = []

@@ -45,6 +45,11 @@ from . import frame as rframe
 from relaff_jax.config.real import SensorTolerance, SimRelationConfig, SimSensor, sensor_mismatch
 from .scene_source import TARGET
 from relaff_jax.config import streams
+from relaff_jax.config.perception import CameraConfig, NoiseConfig, NormalsConfig, PerceptionConfig
+from relaff_jax.perception import make_batched_features
+from relaff_jax.perception.from_sim import jitted_geoms, rollout_keys
+from relaff_jax.sim import scenes as sc
+from relaff_jax.sim import world as wd
 
 # Settings that change what a chunk holds: a folder's chunks must share them (the others, e.g.
 # per_relation or feature_batch, only say how many chunks or how they are computed).
@@ -56,8 +61,6 @@ def perception_config(sensor: SimSensor, cfg: SimRelationConfig, perception=None
     """The tree's ``perception`` settings (default: the default tree's; voxel grid, RHF,
     ``min_points``) seen by the simulated sensor: its camera pose and fov, and the simulated
     relation data's noise model, normals source and capacities (``real.sim.*``)."""
-    from relaff_jax.config.perception import CameraConfig, NoiseConfig, PerceptionConfig
-
     p = PerceptionConfig() if perception is None else perception
     cam = rframe.sim_camera(sensor.height, sensor.tilt_deg, TARGET, CameraConfig(vfov_deg=sensor.vfov_deg))
     return dataclasses.replace(p, camera=cam, noise=NoiseConfig(cfg.noise),
@@ -68,18 +71,12 @@ def perception_config(sensor: SimSensor, cfg: SimRelationConfig, perception=None
 
 def features_record(perception) -> dict:
     """What of the tree's perception decides a chunk's features (voxel grid, RHF): the guard holds it."""
-    from relaff_jax.config.perception import PerceptionConfig
-
     p = PerceptionConfig() if perception is None else perception
     return rio.jsonable(dict(voxel_size=p.voxel.size, max_voxels=p.voxel.max_voxels, rhf=dataclasses.asdict(p.rhf)))
 
 
 def _chunk_fn(world, sensor: SimSensor, cfg: SimRelationConfig, perception=None):
     """``run(c) -> dict of arrays`` for chunk ``c``: settle, perceive, filter."""
-    from relaff_jax.perception import make_batched_features
-    from relaff_jax.perception.from_sim import jitted_geoms, rollout_keys
-    from relaff_jax.sim import scenes as sc
-
     pcfg = perception_config(sensor, cfg, perception)
     feats = make_batched_features(world.mj_model.geom_type, world.geom_seg, pcfg)
     geoms = jitted_geoms(world)
@@ -181,8 +178,6 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
             raise UserError(f"{c} chunks ({c * cfg.chunk} scenes) gave only {dict(zip(RELATIONS, counts.tolist()))}; "
                             "raise max_chunks or lower per_relation")
         if run is None:
-            from relaff_jax.sim import world as wd
-
             bar.set_description("sim relations: compiling, first chunk")
             run = _chunk_fn(wd.build_world(), sensor, cfg, perception)
         t0 = time.perf_counter()
@@ -208,8 +203,6 @@ def build_sim_relations(folder: str | Path, sensor: SimSensor, cfg: SimRelationC
 
 def normals_note(cfg: SimRelationConfig, real_cfg) -> str:
     """Which RHF normals each side of a study used (one line for ``results.md``)."""
-    from relaff_jax.config.perception import NormalsConfig
-
     w = NormalsConfig()
     sim = ("the renderer's ray-hit normals" if cfg.normals == "ray" else
            f"from the noisy cloud (PCA over a {w.window} x {w.window} pixel window within {w.radius} m)")

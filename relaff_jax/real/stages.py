@@ -23,16 +23,18 @@ from relaff_jax.errors import UserError
 
 from relaff_jax.config.real import pipeline_config
 from .study import run_study
+from relaff_jax.io import atomic_write_json
+from .scene_source import object_ids, scene_files
+from .score import score_scenes
+from .readers import read_cloud
+from .show import render_real_scene_png
+from . import labels as lab
+from .labelling import propose_folder
 
 
 def run_segment(tree, scenes: str | Path, out: str | Path | None = None, *, seed: int = 0,
                 known_count: bool = False, progress: bool = True, say=print) -> dict:
     """Score the paper's segmentation of every scene of ``scenes`` against the hand one."""
-    from relaff_jax.io import atomic_write_json
-
-    from .scene_source import scene_files
-    from .score import score_scenes
-
     res = score_scenes(scene_files(scenes), seed=seed, cfg=pipeline_config(tree), known_count=known_count,
                        progress=progress)
     for s in res["scenes"]:
@@ -53,9 +55,6 @@ def run_show(tree, scene: str | Path, out: str | Path, *, seed: int = 0, pair=No
     """Draw one real scene (colour, segmentations, voxel clouds, PCA frames) into ``out``."""
     import jax
 
-    from .readers import read_cloud
-    from .show import render_real_scene_png
-
     render_real_scene_png(read_cloud(scene), jax.random.PRNGKey(seed), out, pipeline_config(tree), pair=pair,
                           source=source)
     say(str(out))
@@ -66,9 +65,6 @@ def run_propose(tree, scenes: str | Path, out: str | Path, *, pictures: str | Pa
                 corrections: str | Path | None = None, say=print) -> list:
     """Propose a relation for every pair of ``scenes`` by ``tree.real.rule``, apply the
     ``corrections`` CSV, write the labels file ``out`` (and the pictures); returns the labels."""
-    from . import labels as lab
-    from .labelling import propose_folder
-
     fixes = read_corrections(corrections, scenes)  # every row checked before any proposal
     labels, record = propose_folder(scenes, pictures, fixes, tree.real.rule)
     lab.write_labels(out, labels)
@@ -84,9 +80,6 @@ def run_check(scenes: str | Path, labels_path: str | Path, *, only_present: bool
     """Validate a labels file against its scenes and count the pairs (no settings).
     ``write_checksums``: first (re)write its ``sha256`` column from the scene files (the file
     may lack the column), atomically in place."""
-    from . import labels as lab
-    from .scene_source import object_ids
-
     if write_checksums:
         rows = lab.with_checksums(lab.read_labels(labels_path, need_sha256=False), scenes)
         lab.write_labels(labels_path, rows)
@@ -107,8 +100,6 @@ def read_corrections(path: str | Path | None, folder: str | Path | None = None) 
     """The corrections CSV (scene,object_a,object_b,relation) as {(scene, a, b): relation}; {} for None.
     Every row is checked before any proposal is computed: its relation (beside, on_top or
     none), its ids, and with ``folder`` that the scene file is there and holds both objects."""
-    from . import labels as lab
-
     if path is None:
         return {}
     if not Path(path).is_file():
@@ -135,8 +126,6 @@ def read_corrections(path: str | Path | None, folder: str | Path | None = None) 
         if (scene, a, b) in out or (scene, b, a) in out:
             raise UserError(f"{where}: pair {a},{b} of {scene} corrected twice")
         if folder is not None:
-            from .scene_source import object_ids
-
             if scene not in ids:
                 if not (Path(folder) / scene).is_file():
                     raise UserError(f"{where}: no scene {scene!r} in {folder}")

@@ -40,6 +40,14 @@ from relaff_jax.errors import UserError
 from . import labels as lab
 from . import folder as layout
 from relaff_jax.config.real import pipeline_config, real_experiment, sensor_difference
+from relaff_jax.constants import RELATIONS, SPACES
+from . import splits
+from .scene_source import object_ids
+from .sim_relations import _counts, features_record
+from . import experiments as ex
+from . import real_data, report
+from . import sim_relations as sr
+from relaff_jax.provenance import record_config
 
 
 SUMMARY_ONLY = ("bf_sizes", "n_boot")  # RealExperimentConfig keys only the summary reads: no refit
@@ -72,12 +80,6 @@ def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | P
     """Raise ``UserError`` for any problem ``run_study`` would otherwise meet only after minutes
     of work; return ``dict(train=rows, test=rows or None, skipped_train=[names], skipped_test=[names])``.
     Reads the labels files and the scenes' object ids only."""
-    from relaff_jax.constants import RELATIONS, SPACES
-
-    from . import splits
-    from .scene_source import object_ids
-    from .sim_relations import _counts
-
     rio.check_writable_dir(out, "--out")
     if sim_folder is not None:
         rio.check_writable_dir(sim_folder, "--sim")
@@ -118,8 +120,6 @@ def check_inputs(tree, scenes: str | Path, labels_path: str | Path, out: str | P
 def perception_key(perception) -> str:
     """The experiments' resume key part of the shared perception (voxel grid, RHF): empty for
     the default, so the folders made before the tree's perception reached the study keep theirs."""
-    from .sim_relations import features_record
-
     rec = features_record(perception)
     return "" if rec == features_record(None) else json.dumps(rec, sort_keys=True)
 
@@ -144,10 +144,6 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
               only_present: bool = False, progress: bool = True, say=print) -> dict:
     """Run (or resume) the study with the ``RunConfig`` ``tree`` (its ``real`` node and its
     ``perception``, shared by the real and simulated features); see the module docstring."""
-    from . import experiments as ex
-    from . import real_data, report
-    from . import sim_relations as sr
-
     out = Path(out)
     rows = check_inputs(tree, scenes, labels_path, out, spaces, sim_folder, test, test_labels, only_present)
     cfg, pipeline = tree.real, pipeline_config(tree)
@@ -191,7 +187,6 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
     report.write_report(out, raw, summary, context, craw or None, cross or None)
     for line in report.terminal_lines(summary, cross or None):
         say(line)
-    from relaff_jax.provenance import record_config
 
     record_config(out, tree, "real study")  # the tree that ran, as every stage's folder holds it
     return dict(within=summary, cross=cross or None)
@@ -199,8 +194,6 @@ def run_study(tree, scenes: str | Path, labels_path: str | Path, out: str | Path
 
 def _context(rows, real, real_t, sensor, simulated, test_poses, sim_summary, cfg, scenes, test, exp_cfg) -> dict:
     """The ``results.md`` header: the data, the sensor (where it came from), the costs."""
-    from . import sim_relations as sr
-
     def pairs(rs, data, skipped, folder):
         c = lab.relation_counts(rs)
         extra = f"; {len(skipped)} labelled scenes not in the folder skipped (--only-present)" if skipped else ""

@@ -23,7 +23,6 @@ Files:
 - ``status.py``: the inputs' stamp of a report folder (its status for ``relaff reproduce``);
 - ``formatting.py``: number formatting shared by the above.
 """
-from relaff_jax.lazy import lazy_attributes
 from relaff_jax.report.document import render_html, render_markdown
 from relaff_jax.report.findings import (
     VERDICTS,
@@ -37,14 +36,11 @@ from relaff_jax.report.findings import (
 from relaff_jax.report.formatting import finite, fmt
 from relaff_jax.report.tables import CSV_COLUMNS, summary, table2_csv, table2_markdown
 
-# The figures (matplotlib) and the writer (the learning stage's results, JAX) load on first use
-# (PEP 562), so that ``relaff report`` checks its arguments before those imports run.
-_LAZY = {"dataset_figure": "figures", "write_figures": "figures", "write_report": "write"}
-
-__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
+# Not re-exported: the figures (``figures.dataset_figure``, ``write_figures``: matplotlib) and the
+# writer (``write.write_report``: the learning stage's results, JAX), so that ``relaff report`` and
+# ``relaff reproduce --status`` (``report.status``) check their inputs before those imports run.
 
 __all__ = [
-    "CSV_COLUMNS", "FindingRules", "correlation_clusters", "dataset_figure", "findings", "finite", "fmt",
-    "render_html", "render_markdown", "summary", "table2_csv", "table2_markdown", "verdict", "write_figures", "VERDICTS", "combine", "judge",
-    "write_report",
+    "CSV_COLUMNS", "FindingRules", "correlation_clusters", "findings", "finite", "fmt",
+    "render_html", "render_markdown", "summary", "table2_csv", "table2_markdown", "verdict", "VERDICTS", "combine", "judge",
 ]

@@ -20,6 +20,7 @@ from relaff_jax import io as rio
 from relaff_jax.data import audit as A
 from relaff_jax.report import folder as F
 from relaff_jax.report.figures import save_png
+from relaff_jax.data.store import read_sidecar
 
 CHECKS = (("palm_contact", "palm on an object"),
           ("force", f"press > {A.FORCE_WEIGHTS:g} weights and {A.FORCE_FLOOR_N:g} N"),
@@ -30,8 +31,6 @@ CHECKS = (("palm_contact", "palm on an object"),
 def stored_audits(data_dirs: Mapping[str, str | os.PathLike]) -> tuple[dict[str, Any], dict[str, str]]:
     """``({action: audit}, {action: why missing})`` from each folder's ``audit.json`` of the
     current schema made for its current selection (any sample size and seed)."""
-    from relaff_jax.data.store import read_sidecar
-
     found, missing = {}, {}
     for act, d in data_dirs.items():
         try:

@@ -14,6 +14,11 @@ from typing import Mapping
 import numpy as np
 
 from relaff_jax.report import folder as F
+from relaff_jax.data import load_dataset
+from relaff_jax.perception import from_sim
+from relaff_jax.sim import world as wd
+from relaff_jax.data.store import read_sidecar
+from relaff_jax.sim.object_library import use_recorded
 
 
 def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_action: int) -> list[tuple[str, str, str]]:
@@ -23,13 +28,6 @@ def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_ac
     if per_action < 1:
         return []
     import jax
-
-    from relaff_jax.data import load_dataset
-    from relaff_jax.perception import from_sim
-    from relaff_jax.sim import world as wd
-
-    from relaff_jax.data.store import read_sidecar
-    from relaff_jax.sim.object_library import use_recorded
 
     shown: list[tuple[str, str, str]] = []
     for action, d in data_dirs.items():

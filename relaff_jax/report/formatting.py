@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from relaff_jax.learn import average_bf
+from relaff_jax.learn import average_bf, TABLE2_ROWS
 
 SHORT = {"unobstruct": "unob"}
 
@@ -32,8 +32,6 @@ def interval(lo: float, hi: float, nd: int = 3) -> str:
 
 def rows_run(cfg: Any, space: str) -> list[int]:
     """Indices of the Table II rows whose condition family the space ran (RHF: NB and DB1)."""
-    from relaff_jax.learn import TABLE2_ROWS
-
     return [i for i, name in enumerate(TABLE2_ROWS) if name.split()[0] in cfg.conditions(space)]
 
 
@@ -48,8 +46,6 @@ def ci_text(a: Any, key: str, i: int, nd: int = 3) -> str:
 def row_cells(a: Any, i: int, nd: int = 3) -> list[str]:
     """avg / min / max of Table II row ``i`` as text; a row without a single target reads
     "not measurable: <reason>" (``analyse``'s ``unmeasurable``), never a number."""
-    from relaff_jax.learn import TABLE2_ROWS
-
     why = (a.get("unmeasurable") or {}).get(TABLE2_ROWS[i])
     if why:
         return [f"not measurable: {why}", "-", "-"]

@@ -14,14 +14,13 @@ import dataclasses
 from typing import Any, Mapping, Sequence
 
 from relaff_jax.report.formatting import fmt
+from relaff_jax.config.experiment import AFTER_TEN
+from relaff_jax.report.findings import findings
 
 
 def by_reading(an: Mapping[str, Any], cfg: Any, rules: Any) -> dict[str, list[dict[str, Any]]]:
     """``{"after_ten=R": findings}`` for every reading R of ``after_ten`` (no refit: the same
     analysis, only the rows the finding reads differ)."""
-    from relaff_jax.config.experiment import AFTER_TEN
-    from relaff_jax.report.findings import findings
-
     return {f"after_ten={r}": findings(an, dataclasses.replace(cfg, after_ten=r), rules) for r in AFTER_TEN}
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from relaff_jax.constants import ACTIONS, RELATIONS
 from relaff_jax.report import folder as F
 from relaff_jax.report import user as U
-from relaff_jax.learn import TABLE2_ROWS, categories_per_threshold, layout, paper_row
+from relaff_jax.learn import categories_per_threshold, layout, paper_row, pool_sizes, TABLE2_ROWS
 from relaff_jax.report.findings import VERDICTS, correlation_clusters
 from relaff_jax.report.formatting import (
     SHORT,
@@ -30,6 +30,7 @@ from relaff_jax.report.formatting import (
     rows_run,
     span,
 )
+from relaff_jax.report.robustness import robustness_table
 
 
 def fig_block(out: Path, name: str, caption: str) -> list[tuple]:
@@ -69,8 +70,6 @@ def findings_blocks(found: Sequence[Mapping[str, Any]]) -> list[tuple]:
 
 def robustness_blocks(readings: Mapping[str, Sequence[Mapping[str, Any]]], cfg: Any) -> list[tuple]:
     """Every finding in each analysis-only reading of the same results (``robustness.by_reading``)."""
-    from relaff_jax.report.robustness import robustness_table
-
     header, rows = robustness_table(readings)
     return [("h", 3, "Each finding in every reading of the stored results"),
             ("p", f"The findings above read 'best after ten' as `after_ten={cfg.after_ten}`. The paper leaves open "
@@ -314,8 +313,6 @@ def protocol_blocks(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]],
                     n_samples: Mapping[str, int] | None = None) -> list[tuple]:
     """The size of every part of the protocol beside the paper's (``n_samples``: samples per
     action, for the pools a preset shrinks to the data)."""
-    from relaff_jax.learn import pool_sizes
-
     def rng(vals) -> str:
         vals = [int(v) for v in vals]
         return f"{min(vals)}" if min(vals) == max(vals) else f"{min(vals)}-{max(vals)}"

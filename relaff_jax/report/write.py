@@ -23,7 +23,8 @@ from typing import Any, Mapping
 
 from relaff_jax import io as rio
 from relaff_jax import provenance
-from relaff_jax.learn import analyse, load_results
+from relaff_jax.learn import analyse
+from relaff_jax.learn.results import load_results
 from relaff_jax.learn.user_rows import user_rows
 from relaff_jax.report import folder as F
 from relaff_jax.report.audit import audit_blocks, stored_audits
@@ -37,6 +38,8 @@ from relaff_jax.report.formatting import finite
 from relaff_jax.report.borrow import borrow_blocks, borrow_rows
 from relaff_jax.report.reach import predictor_blocks, reach_blocks, reach_figure, reach_json, subset_blocks
 from relaff_jax.report.tables import summary, table2_csv, table2_markdown
+from relaff_jax.data import DatasetError, anatomy
+from relaff_jax.data import info as dataset_info
 
 
 def _load() -> tuple[float, float, float] | None:
@@ -71,9 +74,6 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     anat: dict[str, Any] = {}
     missing: dict[str, str] = {}
     if data_dirs:  # every input read before the first file is written: a damaged dataset writes nothing
-        from relaff_jax.data import DatasetError, anatomy
-        from relaff_jax.data import info as dataset_info
-
         infos = {act: dataset_info(d) for act, d in data_dirs.items()}
         for act, d in data_dirs.items():
             try:

@@ -20,12 +20,14 @@ from pathlib import Path
 from typing import Any
 
 from relaff_jax import io as rio
-from relaff_jax.config import differences, to_dict
+from relaff_jax.config import differences, RunConfig, streams, to_dict
 from relaff_jax.sim.actions.registry import names
 from relaff_jax.errors import UserError
 from relaff_jax.provenance import derive_seed, machine, versions
-from relaff_jax.config import streams
 from relaff_jax.stages.protocol import RUN_LOG, Paths, ReproduceError
+from relaff_jax.config.real import SHADOWED
+from relaff_jax.config.tree import shadow_matches
+from relaff_jax.config.experiment import SPEED_ONLY
 
 FORMAT = "relaff_jax.reproduce"
 FORMAT_VERSION = 2  # 2: the config is the whole RunConfig tree
@@ -49,7 +51,6 @@ def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
     """A config key absent from a stored run log and requested at the code's default."""
     if stored != "<absent>" or not key.startswith("config."):
         return False
-    from relaff_jax.config import RunConfig
 
     node: Any = json.loads(json.dumps(to_dict(RunConfig()), default=rio.json_default))
     for part in key.split(".")[1:]:
@@ -62,9 +63,6 @@ def _added_at_default(key: str, stored: Any, wanted: Any) -> bool:
 def _shadow_removed(key: str, stored: Any, wanted: Any, want: dict) -> bool:
     """A ``real.experiment`` key a stored run log has and the tree no longer has (it is taken
     from ``experiment`` now, ``config.real.SHADOWED``), stored at the value the tree gives."""
-    from relaff_jax.config.real import SHADOWED
-    from relaff_jax.config.tree import shadow_matches
-
     name = key.removeprefix("config.real.experiment.")
     return wanted == "<absent>" and name in SHADOWED and key == f"config.real.experiment.{name}" \
         and shadow_matches(name, stored, want.get("config", {}))
@@ -72,8 +70,6 @@ def _shadow_removed(key: str, stored: Any, wanted: Any, want: dict) -> bool:
 
 def _speed_only(key: str) -> bool:
     """A run log key of a setting that changes no result (``config.experiment.SPEED_ONLY``)."""
-    from relaff_jax.config.experiment import SPEED_ONLY
-
     return key.startswith("config.experiment.") and key.removeprefix("config.experiment.") in SPEED_ONLY
 
 

@@ -16,6 +16,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from relaff_jax.constants import STAGES
+from relaff_jax.learn import forests_per_space
 
 COST = {
     "sim_compile": 150.0,  # first rollout call: place, settle, plan and simulate programs (all actions)
@@ -56,8 +57,6 @@ def fmt_time(s: float | None) -> str:
 
 def estimate_seconds(cfg: Any, jobs: int, cpus: int) -> dict[str, float]:
     """Rough wall time per stage of a ``RunConfig`` from ``COST``."""
-    from relaff_jax.learn import forests_per_space
-
     n, a = cfg.dataset.n_samples, len(cfg.reproduce.actions)
     rate = COST["rollouts_per_s_native" if cfg.dataset.engine == "native" else "rollouts_per_s"]
     per_sample = COST["rollouts_per_sample_feasible" if cfg.dataset.population == "feasible" else "rollouts_per_sample"]

@@ -21,7 +21,7 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.cluster import nthreads
-from relaff_jax.config import override
+from relaff_jax.config import check_tree, from_json, override, preset, PRESETS, RunConfig
 from relaff_jax.constants import STAGES
 from relaff_jax.sim.actions.registry import names
 from relaff_jax.errors import UserError
@@ -30,7 +30,8 @@ from relaff_jax.reproduce.folder import ReproduceError, damaged_log_hint, now, o
 from relaff_jax.reproduce.progress import Progress, estimate_seconds, sample_bound
 from relaff_jax.stages import experiment, features, generate, report
 from relaff_jax.stages.protocol import Hooks, Paths, Run, Silent, Stage, Status
-from relaff_jax.config import PRESETS, RunConfig, check_tree, from_json, preset
+from relaff_jax.learn.checks import check_config as check_experiment
+from relaff_jax.learn import split_pools
 
 STAGE_MODULES: dict[str, Stage] = {m.NAME: m for m in (generate, features, experiment, report)}
 assert tuple(STAGE_MODULES) == STAGES
@@ -40,9 +41,6 @@ def check_config(cfg: RunConfig, seed: int) -> None:
     """Fail before any simulation if the config cannot give a complete study: the whole tree's
     check (``config.check_tree``; each node checked its own values when it was made), then
     what a study needs of several nodes at once."""
-    from relaff_jax.learn.checks import check_config as check_experiment
-    from relaff_jax.learn import split_pools
-
     try:
         check_tree(cfg)
         check_experiment(cfg.experiment)  # the learner and the user's conditions tried once, before any simulation

@@ -21,26 +21,11 @@ Modules, in pipeline order:
 - ``labels``: the outcome rules of Table I (``goals``).
 - ``simulate``: planned programs executed in MJX with grasp locks, then labelled.
 - ``rollouts``: ``make_action_fn`` / ``jitted_action_fn`` and ``make_rollout_fn`` (datasets).
-- ``native``: MuJoCo C references (``settle_native``, ``replay_native``) for cross-checks.
+- ``native/``: the native engine, the motor programs and the settle in MuJoCo C batches, and the
+  one-scene C references (``settle_native``, ``replay_native``) for cross-checks (``native/__init__.py``).
 
-The entry-point names other stages use are re-exported here and load on first use; the
-settings are ``relaff_jax.config.action``.
+Nothing is imported here: ``sim.actions.registry`` and ``sim.object_library``, which the command
+line reads to check its arguments, come without JAX and MuJoCo. Import a name from the module that
+defines it (``from relaff_jax.sim.rollouts import make_rollout_fn``); the settings are
+``relaff_jax.config.action``.
 """
-from __future__ import annotations
-
-from relaff_jax.lazy import lazy_attributes
-
-# Everything else loads on first use (PEP 562), so that the command line checks --set action.*
-# before JAX and MJX are imported: name -> submodule.
-_LAZY = {
-    "allowed_pairs": "rollouts", "jitted_action_fn": "rollouts", "make_action_fn": "rollouts",
-    "make_rollout_fn": "rollouts", "replay_native": "native", "settle_native": "native",
-    "build_world": "world",
-}
-
-
-__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
-
-__all__ = [ "allowed_pairs", "build_world",
-    "jitted_action_fn", "make_action_fn", "make_rollout_fn", "replay_native", "settle_native",
-]

@@ -1,7 +1,7 @@
 """A sample's motor program as an animation: why its label is what it is.
 
 Takes one settled scene (pair, object state) and an action; plans the program with the JAX
-planner (``planning.make_plan_fn``), replays it in MuJoCo C (``native.replay_native``,
+planner (``planning.make_plan_fn``), replays it in MuJoCo C (``native.reference.replay_native``,
 recording every geom's pose), and draws each recorded frame with the project's ray caster
 (``perception.rollout_view``: every primitive as it is, spheres round, shaded, coloured by
 geom, from a camera framed on the two objects) under a title that names the engines and
@@ -16,6 +16,12 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+from relaff_jax.sim.actions.registry import action_id
+from relaff_jax.sim.native.reference import replay_native
+from relaff_jax.sim.planning import make_plan_fn, setup
+from relaff_jax.sim.templates import ActionConfig
+from relaff_jax.io import atomic_write_bytes
+from relaff_jax.perception import rollout_view as rv
 
 STEP_SECONDS = 0.004  # PhysicsConfig's default timestep: frames are shown at real time
 
@@ -41,11 +47,6 @@ def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, ev
     """
     import jax
     import jax.numpy as jnp
-
-    from relaff_jax.sim.actions.registry import action_id
-    from relaff_jax.sim.native import replay_native
-    from relaff_jax.sim.planning import make_plan_fn, setup
-    from relaff_jax.sim.templates import ActionConfig
 
     cfg = cfg if cfg is not None else ActionConfig()
     q = np.asarray(qpos, np.float32)[None]
@@ -75,9 +76,6 @@ def write_gif(frames: dict[str, Any], out: str | Path, title: str = "", fps: flo
     import time
 
     from PIL import Image, ImageDraw, ImageFont
-
-    from relaff_jax.io import atomic_write_bytes
-    from relaff_jax.perception import rollout_view as rv
 
     t0 = time.perf_counter()
     model = frames["model"]

@@ -4,7 +4,7 @@ Takes an ``ActionConfig`` and, per control step, a scene's contacts and arm join
 where a program is guarded (``guard_tables``), the landing test (``pad_landing`` on MJX
 contacts, ``pad_landing_np`` on C contact distances and normals, the same rule) and the
 waypoints after a stop (``stopped_way``). Used by the three executors (MJX
-``simulate.run_program_locked``, C ``native.replay_native`` and ``native_batch``).
+``simulate.run_program_locked``, C ``native.reference.replay_native`` and ``native.batch``).
 
 Why: the fingers and the palm go down by position servo (about 4 kN/m at the tcp). A pad that
 comes down on an object the plan's boxes did not exclude (take's fixed 10 cm opening over a
@@ -78,7 +78,7 @@ def pad_landing_np(dist: np.ndarray, normal: np.ndarray, axis: np.ndarray, valid
                    cfg: ActionConfig) -> np.ndarray:
     """``pad_landing``'s rule on C contacts of one pad: dist (..., K), normal (..., K, 3), axis
     (..., 3) the pad's closing axis, valid (..., K) bool; returns (...) bool. The dot product
-    is summed in ``native_program.pad_hit``'s order."""
+    is summed in ``native.program.pad_hit``'s order."""
     a = axis[..., None, :]
     dot = normal[..., 0] * a[..., 0] + normal[..., 1] * a[..., 1] + normal[..., 2] * a[..., 2]
     return np.any(valid & (dist < -cfg.guard_depth) & (np.abs(dot) < cfg.arm.contact_face_cos), axis=-1)

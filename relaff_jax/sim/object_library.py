@@ -24,6 +24,7 @@ from typing import Any, Iterable, Mapping
 from relaff_jax.errors import UserError
 
 from . import objects as lib
+from relaff_jax.config.action import SceneConfig
 
 OBJECT_KEYS = ("name", "groups", "mass", "friction", "colour", "parts", "sphere_radius", "inner")
 PART_KEYS = ("size", "centre")
@@ -193,8 +194,6 @@ def read_file(path: str | Path) -> list[Any]:
 def load_library(path: str | Path, scene: Any = None, grip_margin: float = 0.02) -> tuple[lib.ObjectSpec, ...]:
     """The checked objects of a library file (every refusal a ``UserError`` naming the object and
     field). A name of a built-in is refused: a library adds objects, it never redefines one."""
-    from relaff_jax.config.action import SceneConfig
-
     where = f"object library {path}"
     colours = {s.name: s.colour for s in lib.OBJECTS.values()}
     out = []

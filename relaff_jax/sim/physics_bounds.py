@@ -2,7 +2,7 @@
 
 The programs (v2) promise them and their reasoning is in docs/arm.md, "Bounded forces"; the
 audit (``data/audit.py``, ``relaff audit``) checks them on a dataset's rollouts and
-tests/sim/test_programs_v2.py on replayed scenes. All are read by ``physics_probe.Probe``.
+tests/sim/test_programs_v2.py on replayed scenes. All are read by ``native.probe.Probe``.
 """
 SUSTAIN_STEPS = 25  # control steps (0.1 s at 4 ms): a force held this long is a press, not an impact
 PRESS_WEIGHTS = 10.0  # the force on an object held over SUSTAIN_STEPS <= this x the heavier object's weight ...

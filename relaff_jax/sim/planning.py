@@ -21,6 +21,8 @@ from . import world as wd
 from .bodies import Geometry, geometry
 from .actions.tables import tables
 from .templates import N_TARGETS, ActionConfig
+from .actions.registry import registry
+from .actions.rules import plan_program
 
 
 class Setup(NamedTuple):
@@ -66,9 +68,6 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     """``plan_fn(action_id (), pair (B,), qpos (B, nq)) -> Plan`` for any of the run's actions
     (``action_id`` indexes ``actions.names()``; traced, so one compile serves all; the target
     rules are the specs'). Pure; caller jits."""
-    from .actions.registry import registry
-    from .actions.rules import plan_program
-
     st = setup(cfg)
     tb = tables(cfg)
     q_home = jnp.asarray(st.q_home, jnp.float32)

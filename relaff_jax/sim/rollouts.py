@@ -8,9 +8,9 @@ traced) and ``make_rollout_fn(action, batch, config, engine=...)``, the sampler 
 and settle them (``scenes.py`` on the arm-less world), plan, simulate the feasible programs,
 label (``make_batch_prepare_fn`` then ``execute_batch``, also usable apart: the benchmark
 executes one prepared batch with several engines). Two engines execute the programs (``ENGINES``): ``"mjx"`` (default; it also runs on an
-accelerator) and ``"native"`` (MuJoCo C on a thread pool, ``native_batch.execute_native``);
+accelerator) and ``"native"`` (MuJoCo C on a thread pool, ``native.batch.execute_native``);
 sampling and planning are the same JAX code for both; the native engine also settles the
-scenes in MuJoCo C (``native_settle``), so its scenes are C's (docs/scenes.md, "Native settle").
+scenes in MuJoCo C (``native.settle``), so its scenes are C's (docs/scenes.md, "Native settle").
 
 Pipeline of one batch: ``planning.make_plan_fn`` (tcp waypoints from the settled poses, batched
 IK; infeasible programs keep the arm home), ``simulate.make_simulate_fn`` (MJX, ``lax.scan``
@@ -30,8 +30,8 @@ from . import scenes as sc
 from . import world as wd
 from .actions.registry import action_id, on_change, spec
 from .bodies import geometry
-from .native_batch import default_threads, execute_native
-from .native_settle import settle_batch
+from .native.batch import default_threads, execute_native
+from .native.settle import settle_batch
 from .planning import Plan
 from .reach_screen import prepare_screened
 from .simulate import make_prepare_fn, make_simulate_fn
@@ -39,6 +39,7 @@ from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config:
 
 from relaff_jax.constants import SIM_ENGINES
 from relaff_jax.errors import UserError
+from .object_library import use_scene
 
 ENGINES = SIM_ENGINES  # executors of the planned programs in make_rollout_fn
 
@@ -150,7 +151,7 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     if nthread is not None and int(nthread) < 1:
         raise UserError(f"nthread must be >= 1, got {nthread}")
     cfg = config or ActionConfig()
-    # the native engine settles in C too (native_settle); MJX's settle stays MJX's, bit for bit
+    # the native engine settles in C too (native.settle); MJX's settle stays MJX's, bit for bit
     prepare = make_batch_prepare_fn(action, cfg, settle="native" if engine == "native" else "mjx", nthread=nthread)
 
     def rollout_fn(key, batch_size: int) -> dict[str, np.ndarray]:
@@ -181,12 +182,11 @@ def make_batch_prepare_fn(action: str, cfg: ActionConfig, settle: str = "mjx",
     the arm's kinematics.
 
     ``settle``: ``"mjx"`` (the jitted ``scenes.make_settle_fn``) or ``"native"`` (MuJoCo C,
-    ``native_settle.settle_batch`` on ``nthread`` threads, default every CPU): the same
+    ``native.settle.settle_batch`` on ``nthread`` threads, default every CPU): the same
     placements, settled by another simulator (agreement: docs/scenes.md, "Native settle")."""
     if settle not in ENGINES:
         raise UserError(f"unknown settle {settle!r}; valid: {', '.join(ENGINES)}")
     aid = action_id(action)
-    from .object_library import use_scene
 
     use_scene(cfg.scene, cfg.grip_margin)  # the objects cfg selects (a Dask worker's first call reads them here)
     scene_world = wd.build_world(cfg.phys)

@@ -5,7 +5,7 @@ unobstruct's reachability before the action) and ``make_simulate_fn`` (the waypo
 actuator commands, ``arm.program_ctrl``, executed with ``lax.scan`` over ``N_STEPS`` control
 steps, vmapped over scenes with per-pair models; then the outcome rules of ``labels.py``).
 Also ``initial_data`` (the action world's data of one settled scene, arm at home) and
-``welds`` (the hand's equality rows), shared with the MuJoCo C replay (``native.py``).
+``welds`` (the hand's equality rows), shared with the MuJoCo C replay (``native/reference.py``).
 
 Settled scenes map into the action world one to one: both worlds put the toy's and the other
 object's free joints first (qpos 0..13), the arm's joints follow. The arm starts at its home

@@ -18,7 +18,8 @@ from . import scenes as sc
 from . import world as wd
 
 from relaff_jax.constants import ACTIONS
-from relaff_jax.config.action import ActionConfig
+from relaff_jax.config.action import ActionConfig, V2_FIELDS
+from relaff_jax.config import to_dict
 
 
 class Template(NamedTuple):
@@ -153,10 +154,6 @@ def stored_config(cfg: ActionConfig) -> dict:
 
     ``scene.objects`` and ``scene.library`` are recorded only when set (the built-ins are
     recorded by their absence); the objects they resolve to go beside, ``config.objects``."""
-    from relaff_jax.config import to_dict
-
-    from relaff_jax.config.action import V2_FIELDS
-
     d = to_dict(cfg)
     if cfg.programs == "v1":  # as every dataset written before the option existed
         for k in ("programs",) + V2_FIELDS:

@@ -32,6 +32,7 @@ from . import objects as lib
 from relaff_jax.constants import SEG_BACKGROUND, SEG_HIDDEN, SEG_OTHER, SEG_TOY  # noqa: F401
 from relaff_jax.errors import UserError
 from relaff_jax.config.action import PALM_MODES, PhysicsConfig
+from .arm import world_mjcf
 
 
 def _box_geom(name: str, size, pos, mass: float, rgba, extra: str = "") -> str:
@@ -109,8 +110,6 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
     if arm:
         # The arm's sections go at the top level, with inactive hand welds switched on per
         # scene by the action stage: the held rake, and grasp locks on `obj` / `toy`.
-        from .arm import world_mjcf
-
         arm_xml = world_mjcf(tool_body="obj", grasp_bodies=("obj", "toy"),
                              palm_attrs=PALM_MODES[phys.arm_palm_objects])
         excludes = []

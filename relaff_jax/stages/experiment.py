@@ -1,5 +1,5 @@
 """Stage 3, ``experiment``: the learning and bootstrapping sweeps in every state space
-(``relaff_jax.learn.run_experiment``), in ``DIR/results/``.
+(``relaff_jax.learn.sweep.run_experiment``), in ``DIR/results/``.
 
 ``experiment_folder(tree, data, out, seed=...)`` runs (or resumes) the experiment of one
 results folder and writes its config record: what ``relaff experiment`` calls, and what
@@ -18,6 +18,14 @@ from relaff_jax import io as rio
 from relaff_jax.sim.actions.registry import names  # the run's actions (no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.stages.protocol import Run, ReproduceError, Status
+from relaff_jax.io import check_writable_dir
+from relaff_jax.provenance import record_config
+from relaff_jax.config import override
+from relaff_jax.learn.checks import check_config
+from relaff_jax.data import load_dataset
+from relaff_jax.learn.status import experiment_status, sweep_progress
+from relaff_jax.data.status import manifest_fingerprint
+from relaff_jax.learn.synthetic import synthetic_datasets
 
 NAME = "experiment"
 COMMAND = "experiment"  # the command the folder's config record names
@@ -43,9 +51,6 @@ def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str
     Mistakes a user can fix (a missing folder, an output that cannot be written) are
     ``UserError``s raised before any dataset is read or any forest fitted.
     """
-    from relaff_jax.io import check_writable_dir
-    from relaff_jax.provenance import record_config
-
     if isinstance(data, (str, os.PathLike)):
         data = [data]  # one folder, not its name's characters
     folders = None if isinstance(data, (int, Mapping)) else list(data)
@@ -53,11 +58,10 @@ def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str
         if not Path(d).is_dir():
             raise UserError(f"{d}: no such dataset directory")
     check_writable_dir(Path(out), "--out")
-    from relaff_jax.config import override
-    from relaff_jax.learn.checks import check_config
+    # by name here: this module's own load_datasets would shadow it at the top
     from relaff_jax.learn.datasets import load_datasets
+    # loaded when the stage runs: reproduce --status and the command's checks read this module
     from relaff_jax.learn.sweep import run_experiment
-    from relaff_jax.learn.synthetic import synthetic_datasets
 
     check_config(tree.experiment)  # the learner and the user's conditions tried once, before the data are read
     if isinstance(data, Mapping):
@@ -76,8 +80,6 @@ def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str
 
 def load_datasets(run: Run) -> dict[str, dict]:
     """``{action: dataset}`` of the run folder, each with its features."""
-    from relaff_jax.data import load_dataset
-
     out = {}
     for a in run.cfg.reproduce.actions:
         d = load_dataset(run.paths.dataset(a))
@@ -88,8 +90,6 @@ def load_datasets(run: Run) -> dict[str, dict]:
 
 
 def status(run: Run, datasets: dict | None = None) -> Status:
-    from relaff_jax.learn.status import experiment_status
-
     res = run.paths.results
     if not res.exists():
         return Status("absent", "no results folder")
@@ -105,8 +105,6 @@ def recorded_fingerprints(run: Run) -> dict[str, dict[str, str]] | None:
     """``{space: {action: sha256}}`` of the run's datasets from their status manifests
     (``data.status.manifest_fingerprint``, recorded when their features finished), without
     loading them; None if any dataset's cannot be vouched for (then the datasets are loaded)."""
-    from relaff_jax.data.status import manifest_fingerprint
-
     spaces, out = run.cfg.reproduce.spaces, {}
     for a in run.cfg.reproduce.actions:
         fp = manifest_fingerprint(run.paths.dataset(a))
@@ -117,8 +115,6 @@ def recorded_fingerprints(run: Run) -> dict[str, dict[str, str]] | None:
 
 
 def progress(run: Run) -> float:
-    from relaff_jax.learn.status import sweep_progress
-
     c = run.cfg
     return sweep_progress(run.paths.results, c.experiment, len(c.reproduce.actions), c.reproduce.spaces)
 

@@ -16,6 +16,12 @@ from relaff_jax import data as D
 from relaff_jax.config.perception import PerceptionConfig, stored_config
 from relaff_jax.provenance import record_config
 from relaff_jax.stages.protocol import Run, Status
+from relaff_jax.sim import objects as lib
+from relaff_jax.data.status import write_manifest
+from relaff_jax.learn.datasets import fingerprint
+from relaff_jax.sim.object_library import use_recorded, use_scene
+from relaff_jax.data.store import read_sidecar
+from relaff_jax.cluster import Remote
 
 NAME = "features"
 
@@ -25,15 +31,13 @@ def default_feature_factory(seed: int, config: Any = None, objects: Any = None, 
     The object set the datasets' pairs come from is made active first (a cluster worker has
     only the built-ins active): ``objects`` (a ``sim.objects.ObjectSet``, e.g. a dataset's
     record) or the one ``action`` (an ``ActionConfig``) selects; neither: the active set."""
+    # loaded when the stage runs: reproduce --status and the command's checks read this module
     from relaff_jax.perception import from_sim
-    from relaff_jax.sim import build_world
-    from relaff_jax.sim import objects as lib
+    from relaff_jax.sim.world import build_world
 
     if objects is not None:
         lib.activate(objects)
     elif action is not None:
-        from relaff_jax.sim.object_library import use_scene
-
         use_scene(action.scene, action.grip_margin)
     cfg = config if config is not None else PerceptionConfig()
     return from_sim.make_feature_fn(build_world(), cfg, seed), feature_config(seed, cfg)
@@ -54,15 +58,10 @@ def add_features(tree: Any, path: Any, seed: int = 0, *, progress: bool = True, 
     builds it once for every action, or takes a test's factory); default: the perception's."""
     objects = None
     if compute is None:  # the objects the dataset's pair indices refer to (the built-ins if it records none)
-        from relaff_jax.data.store import read_sidecar
-        from relaff_jax.sim.object_library import use_recorded
-
         objects = use_recorded(read_sidecar(Path(path)))
     if compute is None and client is None:
         compute = default_feature_factory(seed, tree.perception)
     elif compute is None:
-        from relaff_jax.cluster import Remote
-
         compute = Remote(default_feature_factory, seed, config=tree.perception, objects=objects, pick=0), \
             feature_config(seed, tree.perception)
     fn, config_dict = compute
@@ -78,9 +77,6 @@ def record_fingerprint(path: Any) -> None:
     fingerprinted as the experiment fingerprints its inputs (``learn.datasets.fingerprint``),
     recorded in its status manifest (``data.status.write_manifest``): a later status of the
     experiment reads the fingerprint instead of loading the dataset again."""
-    from relaff_jax.data.status import write_manifest
-    from relaff_jax.learn.datasets import fingerprint
-
     d = D.load_dataset(path)
     if "pca" not in d:  # features not finished: nothing to fingerprint yet
         return

@@ -19,6 +19,12 @@ from relaff_jax.data.status import write_manifest
 from relaff_jax.data.store import read_sidecar
 from relaff_jax.provenance import record_config
 from relaff_jax.stages.protocol import Run, ReproduceError, Status
+from relaff_jax.config.action import ActionConfig
+from relaff_jax.sim import object_library as ol
+from relaff_jax.sim.actions import record as spec_record
+from relaff_jax.data import audit as A
+from relaff_jax.sim.actions import record
+from relaff_jax.cluster import cancel_all, nthreads, Remote
 
 NAME = "generate"
 
@@ -35,9 +41,6 @@ def default_rollout_factory(action: str, batch: int, config: Any = None, engine:
                 "the generate stage needs relaff_jax.sim.rollouts (the arm's nine motor programs that label the "
                 "rollouts), which this installation does not have; the datasets cannot be generated") from e
         raise
-    from relaff_jax.config.action import ActionConfig
-    from relaff_jax.sim import object_library as ol
-    from relaff_jax.sim.actions import record as spec_record
 
     cfg = config if config is not None else ActionConfig()
     stored = {"action": action, "action_config": sim.stored_config(cfg)}
@@ -84,8 +87,6 @@ def generate_one(tree: Any, action: str, out: Any, seed: int, *, client: Any = N
     batch = tree.dataset.rollout_batch
     fn, config_dict, names = factory(action, batch)
     if client is not None:
-        from relaff_jax.cluster import Remote
-
         fn = Remote(factory, action, batch, pick=0)
     summary = D.generate_dataset(out, action, tree.dataset.n_samples, fn, seed, batch, config_dict, progress=progress,
                                  dataset_config=tree.dataset, object_names=names, client=client, window=window)
@@ -123,8 +124,6 @@ def audit_one(run: Run, action: str) -> dict:
     reused), right after its generation, whose compiled planner it shares; what the run log
     records of it. A dataset the audit cannot replay (no recorded action config or simulation
     fields) is recorded as not audited."""
-    from relaff_jax.data import audit as A
-
     t0 = time.perf_counter()
     try:
         a = A.ensure_audit(run.paths.dataset(action), A.DEFAULT_SAMPLE, 0)
@@ -148,7 +147,8 @@ def run(run: Run, forced: bool) -> dict:
     if forced:
         rio.remove_tree(paths.data)
     acts = cfg.reproduce.actions
-    from relaff_jax.sim.actions import check_actions, record
+    # loaded when the stage runs: reproduce --status and the command's checks read this module
+    from relaff_jax.sim.actions.check import check_actions
 
     check_actions(acts, cfg.action)  # a user action's rules traced once, before any simulation
     users = [a for a in acts if record(a) is not None]
@@ -172,8 +172,6 @@ def run(run: Run, forced: bool) -> dict:
             items[action] = _one(run, action, None)
         return dict(sorted(items.items(), key=lambda kv: acts.index(kv[0])))
     from concurrent.futures import ThreadPoolExecutor
-
-    from relaff_jax.cluster import cancel_all, nthreads
 
     window = max(1, -(-nthreads(run.client) // len(todo)))
     run.progress.set(f"{len(todo)} actions at once on the cluster")

@@ -26,6 +26,7 @@ from typing import Any, Callable, Protocol, TextIO, runtime_checkable
 
 from relaff_jax import io as rio
 from relaff_jax.errors import UserError
+from relaff_jax.cluster import Remote
 
 STATES = ("absent", "partial", "complete", "stale", "corrupt")
 RUN_LOG = "run.json"
@@ -149,8 +150,6 @@ class Run:
     def remote(self, factory: Callable, *args: Any) -> Callable:
         """The function ``factory(*args)[0]`` shipped to the cluster's workers as its recipe
         (``cluster.Remote``: each worker builds and compiles it once)."""
-        from relaff_jax.cluster import Remote
-
         return Remote(factory, *args, pick=0)
 
     def save(self) -> None:

@@ -1,5 +1,5 @@
 """Stage 4, ``report``: Table II beside the paper's, findings, figures and example scenes
-(``relaff_jax.report.write_report``), in ``DIR/report/``.
+(``relaff_jax.report.write.write_report``), in ``DIR/report/``.
 
 ``report_folder(tree, results, out, data_dirs=...)`` writes the report of one experiment
 folder, its config record and, last, the inputs' stamp (``report.status``), so a killed writer
@@ -18,6 +18,14 @@ from typing import Any, Mapping
 from relaff_jax import io as rio
 from relaff_jax.errors import UserError
 from relaff_jax.stages.protocol import Run, Status
+from relaff_jax.data.audit import AUDIT_FILE, DEFAULT_SAMPLE, stored_audit
+from relaff_jax.data.layout import FEATURES_SIDECAR, SIDECAR
+from relaff_jax.learn import folder as L
+from relaff_jax.report.status import clear_stamp, inputs_stamp, report_status, write_stamp
+from relaff_jax.io import check_writable_dir
+from relaff_jax.provenance import record_config
+from relaff_jax.stages.generate import audit_one
+from relaff_jax.report import folder as R
 
 NAME = "report"
 COMMAND = "report"  # the command the folder's config record names
@@ -25,10 +33,6 @@ COMMAND = "report"  # the command the folder's config record names
 
 def inputs(tree: Any, results: str | os.PathLike, data_dirs: Mapping[str, str | os.PathLike] | None = None) -> list[Path]:
     """The files a report of ``results`` (and the datasets ``data_dirs``) is made from."""
-    from relaff_jax.data.audit import AUDIT_FILE
-    from relaff_jax.data.layout import FEATURES_SIDECAR, SIDECAR
-    from relaff_jax.learn import folder as L
-
     files = [L.meta(results)] + [L.results(results, s) for s in tree.reproduce.spaces]
     for d in (data_dirs or {}).values():
         files += [Path(d) / SIDECAR, Path(d) / FEATURES_SIDECAR]
@@ -40,8 +44,6 @@ def inputs(tree: Any, results: str | os.PathLike, data_dirs: Mapping[str, str | 
 
 def stamp(tree: Any, results: str | os.PathLike, data_dirs: Mapping[str, str | os.PathLike] | None = None) -> dict:
     """The stamp of a report of ``results`` made with ``tree``'s settings (``report.status.inputs_stamp``)."""
-    from relaff_jax.report.status import inputs_stamp
-
     return inputs_stamp(inputs(tree, results, data_dirs), {"examples_per_action": tree.reproduce.examples_per_action})
 
 
@@ -57,14 +59,10 @@ def report_folder(tree: Any, results: str | os.PathLike, out: str | os.PathLike,
     A folder that is not an experiment folder and an ``out`` that cannot be written are
     ``UserError``s raised before anything is read.
     """
-    from relaff_jax.io import check_writable_dir
-    from relaff_jax.learn import folder as L
-
     if not L.meta(results).is_file():
         raise UserError(f"{results} is not an experiment folder (no {L.META})")
     check_writable_dir(Path(out), "--out")
-    from relaff_jax.provenance import record_config
-    from relaff_jax.report.status import clear_stamp, write_stamp
+    # loaded when the stage runs: reproduce --status and the command's checks read this module
     from relaff_jax.report.write import write_report
 
     clear_stamp(out)
@@ -80,8 +78,6 @@ def _data_dirs(run: Run) -> dict[str, Path]:
 
 
 def status(run: Run) -> Status:
-    from relaff_jax.report.status import report_status
-
     return Status(*report_status(run.paths.report, stamp(run.cfg, run.paths.results, _data_dirs(run))))
 
 
@@ -93,9 +89,6 @@ def _audits(run: Run) -> None:
     """Every dataset's physics audit (``generate.audit_one``): stored ones are reused, a run
     whose datasets predate the audit gets them here (one that cannot be replayed is said so at
     once, ``generate.audit_one``)."""
-    from relaff_jax.data.audit import DEFAULT_SAMPLE, stored_audit
-    from relaff_jax.stages.generate import audit_one
-
     todo = [a for a, d in _data_dirs(run).items() if stored_audit(d, DEFAULT_SAMPLE, 0) is None]
     for k, action in enumerate(todo):
         run.progress.set(f"physics audit of {action} ({k + 1}/{len(todo)})")
@@ -103,8 +96,6 @@ def _audits(run: Run) -> None:
 
 
 def run(run: Run, forced: bool) -> dict:
-    from relaff_jax.report import folder as R
-
     out = run.paths.report
     if forced:
         rio.remove_tree(out)

@@ -217,10 +217,10 @@ def _snapshot(out: Path) -> set:
 
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_bad_input_is_one_line_before_any_work(name, tmp_path, results, capsys, monkeypatch):
-    import relaff_jax.real.labelling
+    import relaff_jax.real.stages
     import relaff_jax.stages.generate
 
-    monkeypatch.setattr(relaff_jax.real.labelling, "propose_folder", no_work)
+    monkeypatch.setattr(relaff_jax.real.stages, "propose_folder", no_work)  # where real propose calls it
     monkeypatch.setattr(relaff_jax.stages.generate, "generate_one", no_work)
     argv, expect = CASES[name](tmp_path, results)
     out = tmp_path / "out"

@@ -35,17 +35,17 @@ def a_file(tmp_path):
 
 
 def test_real_segment_unwritable_out_fails_before_segmenting(monkeypatch, capsys, a_file):
-    import relaff_jax.real
+    import relaff_jax.real.stages
 
-    monkeypatch.setattr(relaff_jax.real, "score_scenes", no_work)
+    monkeypatch.setattr(relaff_jax.real.stages, "score_scenes", no_work)
     assert cli.main(["real", "segment", str(OSD), "--out", f"{a_file}/iou.json"]) == 2
     assert "is a file" in one_line_error(capsys, "real segment")
 
 
 def test_real_show_unwritable_out_fails_before_reading(monkeypatch, capsys, a_file):
-    import relaff_jax.real
+    import relaff_jax.real.stages
 
-    monkeypatch.setattr(relaff_jax.real, "read_cloud", no_work)
+    monkeypatch.setattr(relaff_jax.real.stages, "read_cloud", no_work)
     assert cli.main(["real", "show", str(OSD / "learn0.pcd"), "--out", f"{a_file}/scene.png"]) == 2
     one_line_error(capsys, "real show")
     assert cli.main(["real", "show", str(OSD / "learn0.pcd"), "--out", str(a_file.parent)]) == 2
@@ -55,9 +55,9 @@ def test_real_show_unwritable_out_fails_before_reading(monkeypatch, capsys, a_fi
 @pytest.mark.parametrize("where", ["--out", "--pictures"])
 def test_real_propose_unwritable_out_or_pictures_fails_before_proposing(monkeypatch, capsys, tmp_path, a_file,
                                                                         where):
-    import relaff_jax.real.labelling
+    import relaff_jax.real.stages
 
-    monkeypatch.setattr(relaff_jax.real.labelling, "propose_folder", no_work)
+    monkeypatch.setattr(relaff_jax.real.stages, "propose_folder", no_work)
     out = f"{a_file}/labels.csv" if where == "--out" else str(tmp_path / "labels.csv")
     argv = ["real", "propose", str(OSD), "--out", out]
     if where == "--pictures":

@@ -129,7 +129,7 @@ def test_the_forest_node_refuses_what_scikit_learn_refuses(key):
     it accepts exactly the values RandomForestClassifier's own parameter validation accepts
     (the tree counts reach scikit-learn as n_estimators = min(max_trees, base_trees + ...))."""
     from relaff_jax.config.experiment import ForestConfig
-    from relaff_jax.learn.forests import make_forest
+    from relaff_jax.learn.forest.estimator import make_forest
 
     for value in FOREST_GRID[key]:
         base = ForestConfig(engine="sklearn")  # the only engine that builds every criterion

@@ -1,4 +1,4 @@
-"""The physics audit (``relaff audit``, ``data/audit.py``, ``sim/physics_probe.py``): the probe's
+"""The physics audit (``relaff audit``, ``data/audit.py``, ``sim/native/probe.py``): the probe's
 readings on hand-built MuJoCo C scenes with known answers, the checks and their JSON, the
 command's one-line errors, and (slow) the replay of a generated native dataset."""
 import json
@@ -11,7 +11,7 @@ import pytest
 
 from relaff_jax.data import audit as A
 from relaff_jax.sim import physics_bounds as bounds
-from relaff_jax.sim.physics_probe import Probe, held_peak
+from relaff_jax.sim.native.probe import Probe, held_peak
 
 # A 1 kg box on the table; above it a "hand" body (the probe's arm_hand) on a vertical slide,
 # weightless (gravcomp), pushed down by a motor with a known force.

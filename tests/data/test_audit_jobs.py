@@ -9,9 +9,9 @@ import pytest
 
 from relaff_jax.data import audit as A
 from relaff_jax.data import audit_replay as AR
-from relaff_jax.sim import native
-from relaff_jax.sim import probe_arrays
-from relaff_jax.sim.physics_probe import Probe
+from relaff_jax.sim.native import reference as native
+from relaff_jax.sim.native import probe_arrays
+from relaff_jax.sim.native.probe import Probe
 
 
 def _former_pad_contacts(d, pad, geoms):

@@ -849,7 +849,7 @@ def test_native_settle_recorded_and_old_native_refused(tmp_path):
     import dataclasses
 
     from relaff_jax.io import atomic_write_json, read_json
-    from relaff_jax.sim.native_settle import SETTLE_NAME
+    from relaff_jax.sim.native.settle import SETTLE_NAME
 
     assert generate.SETTLE_OF_ENGINE["native"] == SETTLE_NAME
     native = dataclasses.replace(EXACT, engine="native")

@@ -16,6 +16,7 @@ import pytest
 
 from relaff_jax import data as D
 from relaff_jax import learn as E
+from relaff_jax.learn.results import is_complete, load_results
 from relaff_jax import reproduce as R
 from relaff_jax.config import preset
 from relaff_jax.cli import reproduce as cli_reproduce
@@ -58,8 +59,8 @@ def test_tiny_end_to_end(tmp_path):
         info = D.info(out / "data" / a)
         assert info["status"] == "complete"
         assert info["features"]["status"] == "complete"
-    assert E.is_complete(out / "results", R.SPACES)
-    res = E.load_results(out / "results")
+    assert is_complete(out / "results", R.SPACES)
+    res = load_results(out / "results")
     assert res["meta"]["actions"] == list(R.ACTIONS)
     assert res["pca"]["acc"].shape == (9, E.layout(9, 3)["n"], len(cfg.experiment.sizes), 2)
     rep = out / "report"
@@ -108,7 +109,7 @@ def test_tiny_end_to_end(tmp_path):
     a, b = D.load_dataset(out / "data" / "take"), D.load_dataset(out2 / "data" / "take")
     for k in ("rollout", "label", "qpos_settled", "pca", "rhf"):
         np.testing.assert_array_equal(a[k], b[k])
-    r1, r2 = E.load_results(out / "results"), E.load_results(out2 / "results")
+    r1, r2 = load_results(out / "results"), load_results(out2 / "results")
     for s in R.SPACES:
         np.testing.assert_array_equal(r1[s]["acc"], r2[s]["acc"])
     assert json.loads((out / "report" / "findings.json").read_text()) == \

@@ -1,4 +1,4 @@
-"""The compiled engine's evaluation (learn/compiled/evaluate.py) against a numpy oracle of
+"""The compiled engine's evaluation (learn/forest/compiled/evaluate.py) against a numpy oracle of
 scikit-learn's summation: every path (one leaf, <= 32 leaves with float32 compares, <= 64,
 the node walk; forests of pure leaves counted as integer votes, others summed in tree
 order) gives the same float64 sums, bit for bit, on rows placed at the thresholds' float32
@@ -6,9 +6,9 @@ neighbours."""
 import numpy as np
 import pytest
 
-from relaff_jax.learn import compiled
-from relaff_jax.learn.compiled import forest as cf
-from relaff_jax.learn.engine_eval import round_down_f32
+from relaff_jax.learn.forest import compiled
+from relaff_jax.learn.forest.compiled import forest as cf
+from relaff_jax.learn.forest.evaluate import round_down_f32
 
 
 def oracle_sums(forest: compiled.Forest, ZT: np.ndarray, colmap: np.ndarray) -> np.ndarray:

@@ -1,6 +1,6 @@
 """The fast and compiled forest engines against RandomForestClassifier: the same trees,
-bit-identical predict_proba and classes (relaff_jax.learn.engine, engine_fit, engine_eval,
-relaff_jax.learn.compiled)."""
+bit-identical predict_proba and classes (relaff_jax.learn.forest: engine, fit, evaluate,
+relaff_jax.learn.forest.compiled)."""
 import contextlib
 import inspect
 
@@ -13,9 +13,10 @@ from relaff_jax import learn as L
 from relaff_jax.config.experiment import ForestConfig
 from relaff_jax.config import override
 from relaff_jax.errors import UserError
-from relaff_jax.learn import blocks, compiled, engine
-from relaff_jax.learn.engine_eval import pack_forest, predict_block, predict_labels, predict_proba, round_down_f32
-from relaff_jax.learn.engine_fit import fit_trees
+from relaff_jax.learn import blocks
+from relaff_jax.learn.forest import compiled, engine
+from relaff_jax.learn.forest.evaluate import pack_forest, predict_block, predict_labels, predict_proba, round_down_f32
+from relaff_jax.learn.forest.fit import fit_trees
 
 SKLEARN_PIN = "1.9.1"
 
@@ -24,7 +25,7 @@ def test_scikit_learn_is_the_pinned_version_and_its_private_api_unchanged():
     """The engine calls scikit-learn's private tree API; an upgrade must fail here first."""
     assert sklearn.__version__ == SKLEARN_PIN, (
         f"scikit-learn {sklearn.__version__} is installed, the engine was checked against {SKLEARN_PIN}: "
-        "re-read sklearn/ensemble/_forest.py and sklearn/tree/_classes.py, update engine_fit.py and the pin")
+        "re-read sklearn/ensemble/_forest.py and sklearn/tree/_classes.py, update learn/forest/fit.py and the pin")
     from sklearn.ensemble import _base, _bootstrap, _forest
     from sklearn.tree import _classes
     from sklearn.tree._criterion import Gini
@@ -41,7 +42,7 @@ def test_scikit_learn_is_the_pinned_version_and_its_private_api_unchanged():
     src = inspect.getsource(_classes.BaseDecisionTree._fit)
     assert "DepthFirstTreeBuilder(" in src
     assert "min_samples_split = max(min_samples_split, 2 * min_samples_leaf)" in src
-    # the Cython constructors take what engine_fit passes
+    # the Cython constructors take what forest.fit passes
     crit = Gini(1, np.array([2], dtype=np.intp))
     split = BestSplitter(crit, 1, 1, 0.0, np.random.RandomState(0), None)
     DepthFirstTreeBuilder(split, 2, 1, 0.0, 200, 0.0).build(
@@ -296,7 +297,7 @@ def test_compiled_random_streams_are_numpys_and_sklearns():
     scikit-learn's our_rand_r, the splitter seed peeked without a second seeding."""
     from sklearn.utils._random import _our_rand_r_py
 
-    from relaff_jax.learn.compiled import rng
+    from relaff_jax.learn.forest.compiled import rng
 
     mt = np.zeros(625, np.int64)
     for seed in (0, 1, 12345, 2**31 - 2, 2**32 - 1):
@@ -333,7 +334,7 @@ def test_compiled_gini_filter_passes_every_candidate_that_wins():
     """split.may_win (a candidate's Gini divisions are skipped when it cannot beat the best)
     never skips a candidate whose computed proxy is above the best one, checked against the
     closest such best: one float64 step below the candidate's own proxy."""
-    from relaff_jax.learn.compiled import split
+    from relaff_jax.learn.forest.compiled import split
 
     rng = np.random.default_rng(0)
     counts = np.concatenate([rng.integers(0, 120, (3000, 4)), rng.integers(0, 20000, (3000, 4))]).astype(float)

@@ -6,6 +6,9 @@ import numpy as np
 import pytest
 
 from relaff_jax import learn as E
+from relaff_jax.learn.blocks import read_block, run_block
+from relaff_jax.learn.results import is_complete, load_results
+from relaff_jax.learn.sweep import run_experiment
 from relaff_jax.config.experiment import ExperimentConfig, experiment_preset
 from relaff_jax.learn.checks import check_config
 from relaff_jax import learn as L
@@ -123,7 +126,7 @@ def test_informative_source_bootstraps_and_noise_does_not():
     acc = np.full((3, lay["n"], len(cfg.sizes), reps), np.nan)
     for r in range(reps):
         test_idx, order = E.draw_rep(y, test, max(cfg.sizes), 0, 0, r)
-        acc[0, :, :, r] = E.run_block(X, y, boot, plan, order, test_idx, cfg.sizes, 6, lay["n"], cfg.forest, (0, r))
+        acc[0, :, :, r] = run_block(X, y, boot, plan, order, test_idx, cfg.sizes, 6, lay["n"], cfg.forest, (0, r))
     res = {"acc": acc, "sizes": np.array(cfg.sizes), "actions": np.array(acts),
            "conditions": np.array(E.condition_names(acts, cfg.thresholds)),
            "category_masks": E.category_masks(np.eye(3), acts, cfg)}
@@ -217,7 +220,8 @@ def test_forests_per_space_hand_worked():
 
 
 def _count_fits(monkeypatch):
-    from relaff_jax.learn import blocks, engine, prep
+    from relaff_jax.learn import blocks, prep
+    from relaff_jax.learn.forest import engine
 
     n = {"fits": 0}
     real, real_many = engine.fit, engine.fit_many  # what prep and the sweep fit with (any engine)
@@ -240,7 +244,7 @@ def test_forests_per_space_is_the_number_of_fits_a_run_makes(data3, tmp_path, mo
     for space, online in (("pca", True), ("rhf", False)):  # with and without the leave-one-out forests
         cfg = tiny_cfg(sizes=(2, 4, 10), conditions_rhf=("NB", "DB1", "CBn"), online_select=online, reps_pca=1)
         n["fits"] = 0
-        path = E.run_experiment(data3, tmp_path / space, cfg, [space], seed=1, jobs=1, progress=False)[space]
+        path = run_experiment(data3, tmp_path / space, cfg, [space], seed=1, jobs=1, progress=False)[space]
         res = np.load(path)
         exact = E.forests_per_space(cfg, 3, space, res["corr"])
         assert n["fits"] == exact == int(res["new_fits"]) + 3 + 3  # sweep + 3 sources + 3 categories
@@ -253,7 +257,7 @@ def test_forests_per_space_is_the_number_of_fits_a_run_makes(data3, tmp_path, mo
 
 def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monkeypatch):
     cfg = tiny_cfg()
-    full = E.run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"]
+    full = run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"]
     a = np.load(full)
     acc = a["acc"]
     assert acc.shape == (3, E.layout(3, 3)["n"], 4, 2)
@@ -276,13 +280,13 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
 
     monkeypatch.setattr(sweep, "run_block_job", flaky)
     with pytest.raises(KeyboardInterrupt):
-        E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
+        run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
     blocks = sorted((tmp_path / "b" / "pca" / "blocks").glob("*.npz"))
     assert len(blocks) == 2
     assert not (tmp_path / "b" / "pca" / "results.npz").exists()
     monkeypatch.setattr(sweep, "run_block_job", real)
     done = {p.name: p.stat().st_mtime_ns for p in blocks}
-    b = np.load(E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
+    b = np.load(run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
     np.testing.assert_array_equal(b["acc"], acc)
     assert {p.name: p.stat().st_mtime_ns for p in blocks} == done  # finished blocks were not redone
     assert int(b["new_fits"]) < int(a["new_fits"])
@@ -292,28 +296,28 @@ def test_sweep_reproducible_and_resumes_after_interruption(data3, tmp_path, monk
     sorted(bdir.glob("*.npz"))[0].write_bytes(b"garbage")
     sorted(bdir.glob("*.npz"))[-1].unlink()
     (tmp_path / "b" / "pca" / "results.npz").unlink()
-    c = np.load(E.run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
+    c = np.load(run_experiment(data3, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)["pca"])
     np.testing.assert_array_equal(c["acc"], acc)
 
     # another seed gives other draws; another config in the same folder is refused
-    other = np.load(E.run_experiment(data3, tmp_path / "c", cfg, ["pca"], seed=3, jobs=1, progress=False)["pca"])
+    other = np.load(run_experiment(data3, tmp_path / "c", cfg, ["pca"], seed=3, jobs=1, progress=False)["pca"])
     assert not np.array_equal(other["acc"], acc, equal_nan=True)
     with pytest.raises(ValueError, match=r"different \['config.reps_pca'\]"):
-        E.run_experiment(data3, tmp_path / "b", override(cfg, {"reps_pca": 3}), ["pca"], seed=2, jobs=1, progress=False)
+        run_experiment(data3, tmp_path / "b", override(cfg, {"reps_pca": 3}), ["pca"], seed=2, jobs=1, progress=False)
     # the forest engine changes no result: the finished folder is the same experiment
-    d = np.load(E.run_experiment(data3, tmp_path / "b", override(cfg, {"forest.engine": "sklearn"}), ["pca"], seed=2,
+    d = np.load(run_experiment(data3, tmp_path / "b", override(cfg, {"forest.engine": "sklearn"}), ["pca"], seed=2,
                                  jobs=1, progress=False)["pca"])
     np.testing.assert_array_equal(d["acc"], acc)
     changed = {a: dict(data3[a]) for a in ACTS3}
     changed["take"]["label"] = ~changed["take"]["label"]
     with pytest.raises(ValueError, match=r"different \['pca data'\]"):
-        E.run_experiment(changed, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
+        run_experiment(changed, tmp_path / "b", cfg, ["pca"], seed=2, jobs=1, progress=False)
     # a finished PCA experiment can be extended by the RHF space
-    assert E.is_complete(tmp_path / "b", ["pca"])
-    assert not E.is_complete(tmp_path / "b", ["pca", "rhf"])
-    E.run_experiment(data3, tmp_path / "b", cfg, ["rhf"], seed=2, jobs=1, progress=False)
-    assert E.is_complete(tmp_path / "b")
-    assert E.load_results(tmp_path / "b")["meta"]["spaces"] == ["pca", "rhf"]
+    assert is_complete(tmp_path / "b", ["pca"])
+    assert not is_complete(tmp_path / "b", ["pca", "rhf"])
+    run_experiment(data3, tmp_path / "b", cfg, ["rhf"], seed=2, jobs=1, progress=False)
+    assert is_complete(tmp_path / "b")
+    assert load_results(tmp_path / "b")["meta"]["spaces"] == ["pca", "rhf"]
 
 
 def test_results_outcomes_are_the_blocks_bits(data3, tmp_path):
@@ -321,7 +325,7 @@ def test_results_outcomes_are_the_blocks_bits(data3, tmp_path):
     is what packing the whole bool array once gave (every block unpacked, zero-padded to
     the most test scenes), from fresh blocks and from blocks read back on a resume."""
     cfg = tiny_cfg(test_size=21, keep_outcomes=True)  # 20 scenes: a partial last byte
-    path = E.run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=5, jobs=1, progress=False)["pca"]
+    path = run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=5, jobs=1, progress=False)["pca"]
     res = dict(np.load(path))
     n_cond, sizes, chunk = E.layout(3, 3)["n"], list(cfg.sizes), cfg.sizes_per_block
     n_test = res["n_test"]
@@ -329,14 +333,14 @@ def test_results_outcomes_are_the_blocks_bits(data3, tmp_path):
     for ti, t in enumerate(ACTS3):
         for r in range(cfg.reps_pca):
             for ci in range(0, len(sizes), chunk):
-                got = E.read_block(folder.block(tmp_path / "a" / "pca", t, r, ci // chunk), n_cond, sizes[ci : ci + chunk])
+                got = read_block(folder.block(tmp_path / "a" / "pca", t, r, ci // chunk), n_cond, sizes[ci : ci + chunk])
                 whole[ti, :, ci : ci + chunk, r, : n_test[ti]] = got["correct"]
     np.testing.assert_array_equal(res["correct"], np.packbits(whole, axis=-1))
     assert res["correct"].shape[-1] == 3 and list(n_test) == [20, 20, 20]
     ran = np.isfinite(res["acc"])
     np.testing.assert_array_equal(whole.mean(-1)[ran], res["acc"][ran])
     (tmp_path / "a" / "pca" / "results.npz").unlink()  # resumed from the block files alone
-    again = np.load(E.run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=5, jobs=1, progress=False)["pca"])
+    again = np.load(run_experiment(data3, tmp_path / "a", cfg, ["pca"], seed=5, jobs=1, progress=False)["pca"])
     for k in res:
         if k not in ("seconds", "seconds_prep", "new_fits"):
             np.testing.assert_array_equal(again[k], res[k])
@@ -344,8 +348,8 @@ def test_results_outcomes_are_the_blocks_bits(data3, tmp_path):
 
 def test_two_processes_give_the_same_bits_as_one(data3, tmp_path):
     cfg = tiny_cfg(sizes=(2, 10), reps_pca=1, reps_rhf=1)
-    one = E.run_experiment(data3, tmp_path / "one", cfg, ["pca", "rhf"], seed=4, jobs=1, progress=False)
-    two = E.run_experiment(data3, tmp_path / "two", cfg, ["pca", "rhf"], seed=4, jobs=2, progress=False)
+    one = run_experiment(data3, tmp_path / "one", cfg, ["pca", "rhf"], seed=4, jobs=1, progress=False)
+    two = run_experiment(data3, tmp_path / "two", cfg, ["pca", "rhf"], seed=4, jobs=2, progress=False)
     for s in ("pca", "rhf"):
         x, y = np.load(one[s]), np.load(two[s])
         for k in ("acc", "corr", "correct", "n_test", "acc_subset", "loo"):  # the outcomes come back packed
@@ -357,14 +361,14 @@ def test_two_processes_give_the_same_bits_as_one(data3, tmp_path):
 
 def test_bad_inputs_are_clear_errors(data3, tmp_path):
     with pytest.raises(ValueError, match="at least two actions"):
-        E.run_experiment({"lift": data3["lift"]}, tmp_path / "x", tiny_cfg(), ["pca"])
+        run_experiment({"lift": data3["lift"]}, tmp_path / "x", tiny_cfg(), ["pca"])
     bad = {a: dict(data3[a]) for a in ACTS3}
     bad["pull"]["pca"] = bad["pull"]["pca"][:, :17]
     with pytest.raises(ValueError, match=r"pull: pca must be \(N, 18\)"):
-        E.run_experiment(bad, tmp_path / "x", tiny_cfg(), ["pca"])
+        run_experiment(bad, tmp_path / "x", tiny_cfg(), ["pca"])
     nofeat = {a: {k: v for k, v in data3[a].items() if k != "rhf"} for a in ACTS3}
     with pytest.raises(ValueError, match="no 'rhf' array"):
-        E.run_experiment(nofeat, tmp_path / "x", tiny_cfg(), ["rhf"])
+        run_experiment(nofeat, tmp_path / "x", tiny_cfg(), ["rhf"])
     with pytest.raises(ValueError, match=r"'experiment.select_size' \(with 'experiment.sizes'\) \(10, 'best after ten'\) must be one of sizes"):
         check_config(tiny_cfg(sizes=(2, 4, 25)))
     with pytest.raises(ValueError, match="unknown preset"):
@@ -385,7 +389,7 @@ def test_cli_experiment_and_report(tmp_path):
     args = parser.parse_args(["experiment", "--synthetic", "150", "--out", str(tmp_path / "res"), "--space", "both",
                               "--jobs", "1", "--seed", "1", "--no-progress"] + sets)
     assert args.func(args) == 0
-    res = E.load_results(tmp_path / "res")
+    res = load_results(tmp_path / "res")
     assert res["config"].sizes == (2, 10)
     assert res["pca"]["acc"].shape == (9, 50, 2, 1)
     args = parser.parse_args(["report", str(tmp_path / "res"), "--out", str(tmp_path / "rep")])
@@ -408,7 +412,7 @@ def test_cli_experiment_and_report(tmp_path):
                 "fig10_average_bf", "fig11_correlation", "fig12_thresholds"):
         assert (tmp_path / "rep" / f"{fig}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(FileNotFoundError, match="not an experiment folder"):
-        E.load_results(tmp_path / "rep")
+        load_results(tmp_path / "rep")
 
 
 def test_cli_out_paths_are_checked_before_any_work(tmp_path):

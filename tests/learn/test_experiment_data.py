@@ -11,6 +11,7 @@ import pytest
 from relaff_jax import data as ds
 from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax import learn as E
+from relaff_jax.learn.results import load_results
 from relaff_jax.cli import learn as cli_learn
 
 from helpers import standins
@@ -36,7 +37,7 @@ def test_experiment_reads_dataset_folders(tmp_path):
     args = parser.parse_args(["experiment", "--data", *dirs, "--out", str(tmp_path / "res"), "--jobs", "1",
                               "--no-progress"] + sets)
     assert args.func(args) == 0
-    res = E.load_results(tmp_path / "res")
+    res = load_results(tmp_path / "res")
     assert res["meta"]["actions"] == ["lift", "take", "pour"]
     acc = res["pca"]["acc"]
     assert acc.shape == (3, E.layout(3, 3)["n"], 2, 1)

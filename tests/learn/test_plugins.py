@@ -13,6 +13,8 @@ import numpy as np
 import pytest
 
 from relaff_jax import learn as L
+from relaff_jax.learn.results import load_results
+from relaff_jax.learn.sweep import run_experiment
 from relaff_jax.config.experiment import experiment_preset, result_differences
 from relaff_jax.cli import main
 from relaff_jax.config import override
@@ -58,7 +60,7 @@ def test_sklearn_learner_curves_equal_scikit_learns_own_fits(data, tmp_path):
 
     seed = 4
     cfg = override(experiment_preset("quick"), dict(SMALL, learner=ET, learner_params={"n_estimators": 7}))
-    path = L.run_experiment(data, tmp_path / "r", cfg, ["pca"], seed=seed, jobs=1, progress=False)["pca"]
+    path = run_experiment(data, tmp_path / "r", cfg, ["pca"], seed=seed, jobs=1, progress=False)["pca"]
     res, prep = np.load(path), np.load(tmp_path / "r" / "pca" / "prep.npz")
     conds = list(res["conditions"])
     assert json.loads((tmp_path / "r" / "experiment.json").read_text())["config"]["learner"] == ET
@@ -211,7 +213,7 @@ def test_a_condition_from_a_file_outside_the_package_runs_through_the_sweep(tmp_
     pred = L.predict_class(forest, np.concatenate([X, share], 1)[test]).astype(bool)
     assert res["acc"][ti, c, si, r] == np.mean(pred == y[test])
     # the report reads the built-ins as before (the user's conditions follow them on the axis)
-    a = L.analyse(L.load_results(out)["pca"], L.load_results(out).config, intervals=False)
+    a = L.analyse(load_results(out)["pca"], load_results(out).config, intervals=False)
     assert len(a["conditions"]) == L.layout(3, 3)["n"] + 2
     # the same folder with a changed plugin is another experiment
     plugin.write_text(PLUGIN.replace("s.max(0)", "s.min(0)"))

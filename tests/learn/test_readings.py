@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import learn as L
+from relaff_jax.learn.sweep import run_experiment
 from relaff_jax.config.experiment import ForestConfig, experiment_preset
 from relaff_jax.config import override
 
@@ -28,7 +29,7 @@ def test_dbn_repeats_changes_dbn_and_nothing_else(data3, tmp_path):
     runs = {}
     for reading in ("same", "once"):
         cfg = tiny_cfg(dbn_repeats=reading)
-        runs[reading] = np.load(L.run_experiment(data3, tmp_path / reading, cfg, ["pca"], seed=2, jobs=1,
+        runs[reading] = np.load(run_experiment(data3, tmp_path / reading, cfg, ["pca"], seed=2, jobs=1,
                                                  progress=False)["pca"])
     lay = L.layout(3, len(tiny_cfg().thresholds))
     dbn = lay["DBn"]
@@ -131,7 +132,7 @@ def test_category_labels_changes_the_categories_only(data3, tmp_path):
     runs = {}
     for reading in ("union", "both"):
         cfg = tiny_cfg(category_labels=reading)
-        runs[reading] = np.load(L.run_experiment(data3, tmp_path / reading, cfg, ["pca"], seed=2, jobs=1,
+        runs[reading] = np.load(run_experiment(data3, tmp_path / reading, cfg, ["pca"], seed=2, jobs=1,
                                                  progress=False)["pca"])
     lay = L.layout(3, len(tiny_cfg().thresholds))
     cats = set(lay["CB1"].tolist()) | set(lay["CBn"].tolist())
@@ -149,7 +150,7 @@ def test_subsample_trees_are_sklearns_on_the_subsample_alone(n):
     other rows out of the tree entirely."""
     from sklearn.tree import DecisionTreeClassifier
 
-    from relaff_jax.learn.forests import subsample_size, subsample_weights
+    from relaff_jax.learn.forest.estimator import subsample_size, subsample_weights
 
     rng = np.random.default_rng(n)
     X = rng.normal(size=(n, 18)).astype(np.float32)

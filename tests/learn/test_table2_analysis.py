@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import learn as E
+from relaff_jax.learn.blocks import block_outcomes
 from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.config import override
 from relaff_jax.report import table2_csv
@@ -139,7 +140,7 @@ def test_online_choice_differs_from_the_offline_one_in_the_known_way():
 
 def test_leave_one_out_accuracy_matches_sklearn_forests_on_nine_samples():
     from relaff_jax.config.experiment import ForestConfig
-    from relaff_jax.learn.forests import fit_forest, predict_class
+    from relaff_jax.learn.forest.estimator import fit_forest, predict_class
     from relaff_jax.provenance import derive_seed
 
     rng = np.random.default_rng(0)
@@ -149,7 +150,7 @@ def test_leave_one_out_accuracy_matches_sklearn_forests_on_nine_samples():
     fc = ForestConfig(base_trees=5, max_trees=5)
     plan = [(0, ()), (1, (0,))]
     order, test = np.arange(10), np.arange(10, 40)
-    got = E.block_outcomes(X, y, boot, plan, order, test, [4, 10], 6, 2, fc, (3,), loo_size=10, loo_conditions=(1,))
+    got = block_outcomes(X, y, boot, plan, order, test, [4, 10], 6, 2, fc, (3,), loo_size=10, loo_conditions=(1,))
     hits = []
     for i in range(10):
         keep = np.delete(order, i)

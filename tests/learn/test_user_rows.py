@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from relaff_jax.config.experiment import ExperimentConfig
-from relaff_jax.learn import TABLE2_ROWS, analyse, layout, load_results
+from relaff_jax.learn import TABLE2_ROWS, analyse, layout
+from relaff_jax.learn.results import load_results
 from relaff_jax.learn.synthetic_results import write_synthetic_results
 from relaff_jax.learn.user_rows import groups, user_rows
 

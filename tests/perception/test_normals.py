@@ -189,7 +189,9 @@ def test_sim_cloud_normals_agree_with_ray_knn_and_open3d():
 
 @pytest.mark.slow  # compiles the window rule for two buffer sizes (~10 s)
 def test_real_window_normals_agree_with_knn_and_open3d():
-    from relaff_jax.real import cloud_normals, hand_segmentation, read_cloud
+    from relaff_jax.real.cloud_features import cloud_normals
+    from relaff_jax.real.segment import hand_segmentation
+    from relaff_jax.real.readers import read_cloud
     from relaff_jax.real.cloud_features import window_cloud_normals
 
     c = read_cloud(DATA / "learn17.pcd")

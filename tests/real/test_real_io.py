@@ -5,7 +5,10 @@ import numpy as np
 import pytest
 
 from relaff_jax.errors import UserError
-from relaff_jax.real import estimate_intrinsics, make_cloud, read_cloud, read_pcd, write_npz, write_pcd, write_ply
+from relaff_jax.real.cloud import estimate_intrinsics, make_cloud
+from relaff_jax.real.readers import read_cloud, write_npz
+from relaff_jax.real.pcd import read_pcd, write_pcd
+from relaff_jax.real.ply import write_ply
 from relaff_jax.real import lzf
 from relaff_jax.real.cloud import pack_rgb, unpack_rgb
 

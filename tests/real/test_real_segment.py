@@ -8,7 +8,13 @@ import pytest
 
 from relaff_jax.errors import UserError
 from relaff_jax.config.real import RealConfig
-from relaff_jax.real import (camera_pose, camera_pose_stats, cloud_normals, fit_table_plane, hand_segmentation, make_cloud, object_ious, pair_features, read_cloud, render_real_scene_png, score_scene, segment_scene, sim_camera, table_frame, to_table, vectors_to_table)
+from relaff_jax.real.frame import camera_pose, camera_pose_stats, sim_camera, table_frame, to_table, vectors_to_table
+from relaff_jax.real.cloud_features import cloud_normals, pair_features
+from relaff_jax.real.segment import fit_table_plane, hand_segmentation, segment_scene
+from relaff_jax.real.cloud import make_cloud
+from relaff_jax.real.score import object_ious, score_scene
+from relaff_jax.real.readers import read_cloud
+from relaff_jax.real.show import render_real_scene_png
 from relaff_jax.real.ransac import kmeans_from, kmeans_pp_init
 
 from helpers import OSD

@@ -10,7 +10,10 @@ import pytest
 
 from relaff_jax.cli import real as cli_real
 from relaff_jax.errors import UserError
-from relaff_jax.real import (cloud_normals, fit_table_plane, hand_segmentation, pair_features, read_cloud, table_frame, to_table, vectors_to_table)
+from relaff_jax.real.cloud_features import cloud_normals, pair_features
+from relaff_jax.real.segment import fit_table_plane, hand_segmentation
+from relaff_jax.real.readers import read_cloud
+from relaff_jax.real.frame import table_frame, to_table, vectors_to_table
 from relaff_jax.config.real import REAL_MAX_OBJECT_PIXELS, RealConfig, pipeline_config
 
 from helpers import OSD

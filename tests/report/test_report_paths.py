@@ -6,7 +6,8 @@ running NB and DB1 only, ties in the online choices and conditions that did not 
 import numpy as np
 import pytest
 
-from relaff_jax.learn import analyse, load_results
+from relaff_jax.learn import analyse
+from relaff_jax.learn.results import load_results
 from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.synthetic_results import write_synthetic_results
 from relaff_jax.report.write import write_report

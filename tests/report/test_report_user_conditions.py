@@ -13,7 +13,7 @@ import pytest
 from relaff_jax.config import RunConfig, override
 from relaff_jax.config.experiment import experiment_preset
 from relaff_jax.learn import conditions as C
-from relaff_jax.learn import load_results
+from relaff_jax.learn.results import load_results
 from relaff_jax.learn.measures import size_mask
 from relaff_jax.learn.user_rows import user_rows
 from relaff_jax.report.write import write_report

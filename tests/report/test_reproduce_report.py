@@ -17,8 +17,10 @@ from relaff_jax import cli
 from relaff_jax.config import override
 from relaff_jax import data as dataset
 from relaff_jax import learn as E
+from relaff_jax.learn.results import load_results
 from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax import report as R
+from relaff_jax.report.write import write_report
 
 # ------------------------------------------------------------------- findings, by hand
 
@@ -173,9 +175,9 @@ def test_figures_leave_the_matplotlib_backend_alone(tmp_path):
     script = f"""
 import sys, matplotlib
 matplotlib.use("svg")
-import relaff_jax.report as R
+from relaff_jax.report.figures import dataset_figure
 infos = {{"lift": {{"rollouts_positive_rate_by_relation": {{"beside": 0.1, "on_top": 0.8, "inside": None}}}}}}
-p = R.dataset_figure(infos, __import__("pathlib").Path({str(tmp_path / "f.png")!r}))
+p = dataset_figure(infos, __import__("pathlib").Path({str(tmp_path / "f.png")!r}))
 assert p.read_bytes()[:8] == b"\\x89PNG\\r\\n\\x1a\\n"
 assert matplotlib.get_backend() == "svg", matplotlib.get_backend()
 assert "matplotlib.pyplot" not in sys.modules
@@ -191,7 +193,7 @@ def test_full_report(scene_run, tmp_path):
     data_dirs = {"lift": scene_run / "data" / "lift", "take": scene_run / "data" / "take"}
     info = {"preset": "tiny", "seed": 0, "timings": {"generate": 12.5, "report": None},
             "versions": {"jax": jax.__version__}}
-    R.write_report(scene_run / "results", out, data_dirs, info, examples_per_action=2)
+    write_report(scene_run / "results", out, data_dirs, info, examples_per_action=2)
     for f in ("report.md", "report.html", "findings.json", "summary.json", "table2.csv", "fig_datasets.png",
               "fig06_nb_learning.png", "fig11_correlation.png", "fig12_thresholds.png"):
         assert (out / f).stat().st_size > 0, f
@@ -225,7 +227,7 @@ def test_full_report(scene_run, tmp_path):
         assert f"| {action} | {i['n']} | {i['rollouts']} | {100 * i['rollouts_positive_rate']:.0f} % | {rates} |" in md
 
     # Table II, findings and clusters are the experiment's numbers
-    res = E.load_results(scene_run / "results")
+    res = load_results(scene_run / "results")
     an = {s: E.analyse(res[s], res["config"]) for s in ("pca", "rhf")}
     t2 = an["pca"]["table2"]
     from relaff_jax.report.formatting import row_cells  # a row without a value reads "not measurable: why"

@@ -21,6 +21,7 @@ import pytest
 
 from relaff_jax import data as D
 from relaff_jax import learn as E
+from relaff_jax.learn.results import is_complete, load_results
 from relaff_jax.config.experiment import experiment_preset
 from relaff_jax import reproduce as R
 from relaff_jax.config import PRESETS, preset
@@ -49,7 +50,7 @@ def statuses(log):
 
 
 def results_of(out):
-    res = E.load_results(out / "results")
+    res = load_results(out / "results")
     return {s: res[s]["acc"] for s in res["meta"]["spaces"]}
 
 
@@ -82,7 +83,7 @@ def test_run_writes_every_expected_file(base):
         assert len(d["label"]) == 32
         assert d["label"].sum() == 16
         assert d["pca"].shape == (32, 18)
-    res = E.load_results(out / "results")
+    res = load_results(out / "results")
     assert res["meta"]["actions"] == list(ACTS)
     assert res["meta"]["spaces"] == ["pca", "rhf"]
     assert res["pca"]["acc"].shape == (3, E.layout(3, 3)["n"], 2, 2)
@@ -248,7 +249,7 @@ def test_interrupted_and_killed_run_continues_to_the_same_results(base, tmp_path
         time.sleep(0.02)
     proc.wait()
     assert proc.returncode == -signal.SIGKILL, "the run finished before it could be killed"
-    assert not E.is_complete(out / "results")
+    assert not is_complete(out / "results")
     log = json.loads((out / R.RUN_LOG).read_text())
     gen = log["runs"][1]["stages"]["generate"]["actions"]
     assert gen["lift"]["status"] == "skipped"

@@ -156,7 +156,7 @@ def test_the_tenth_action_generates_labels_from_its_rule(tmp_path):
     assert rec["origin"] == f"file {EXAMPLE.resolve()}" and len(rec["spec_sha256"]) == 64
 
     from relaff_jax.data import load_rollouts
-    from relaff_jax.sim import build_world
+    from relaff_jax.sim.world import build_world
     from relaff_jax.config.action import ActionConfig
 
     r = load_rollouts(out)

@@ -10,7 +10,8 @@ import pytest
 from relaff_jax.cli import sim as cli_sim
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.errors import UserError
-from relaff_jax.sim import bodies, geometry, labels, native, planning, programs, rollouts, templates
+from relaff_jax.sim import bodies, geometry, labels, planning, programs, rollouts, templates
+from relaff_jax.sim.native import reference as native
 from relaff_jax.sim import scenes as sc
 
 from helpers.scenes import BASE_ROWS, OBST_ROWS, RAKE_ROWS, hand_built, quat

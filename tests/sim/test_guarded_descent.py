@@ -10,8 +10,9 @@ import pytest
 
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.sim import arm as A
-from relaff_jax.sim import guard, native, planning, templates
-from relaff_jax.sim.physics_probe import Probe
+from relaff_jax.sim import guard, planning, templates
+from relaff_jax.sim.native import reference as native
+from relaff_jax.sim.native.probe import Probe
 from relaff_jax.sim import world as wd
 from relaff_jax.config.action import ActionConfig
 
@@ -80,7 +81,7 @@ def _cup_take(cfg):
     """A 9 cm cup turned 45 degrees on a book, taken: its diagonal (12.7 cm) is wider than
     take's fixed 10 cm opening, so the pads come down on its walls. Settled in C, planned by
     JAX, replayed in C; returns the plan's tcp height at the grasp, the tcp height per step
-    and the physics readings (``native_forces``)."""
+    and the physics readings (``native.forces``)."""
     st = planning.setup(cfg)
     w = st.world
     q = np.array(w.mj_model.qpos0, np.float64)[:14]

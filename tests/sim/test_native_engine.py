@@ -1,5 +1,5 @@
-"""The native engine (``sim/native_batch.py``): planned programs executed by ``mujoco.batch``
-equal the scene-by-scene MuJoCo C replay (``native.replay_native``) bit for bit, for every
+"""The native engine (``sim/native/batch.py``): planned programs executed by ``mujoco.batch``
+equal the scene-by-scene MuJoCo C replay (``native.reference.replay_native``) bit for bit, for every
 action, at any thread count and chunk size; its pieces checked by hand; the rollout sampler's
 ``engine`` argument."""
 import jax
@@ -12,7 +12,9 @@ import pytest
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.errors import UserError
 from relaff_jax.sim import arm as A
-from relaff_jax.sim import native, native_batch, native_program, native_settle, rollouts, templates
+from relaff_jax.sim import rollouts, templates
+from relaff_jax.sim.native import batch as native_batch, program as native_program, reference as native
+from relaff_jax.sim.native import settle as native_settle
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
@@ -86,7 +88,7 @@ def planned():
 
 @pytest.mark.slow  # shares the plan compile of the replay test
 def test_sensors_read_the_pad_contacts(planned):
-    """The grasp test on the contact sensors (``native_batch._touching``) equals the one on C
+    """The grasp test on the contact sensors (``native.batch._touching``) equals the one on C
     contacts (``native.both_pads``) at every step of a lift that squeezes the base and of a
     take that grips the toy (without the lock, so the pads keep pressing)."""
     world = wd.build_world(CFG.phys, arm=True)

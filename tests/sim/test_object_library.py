@@ -304,7 +304,7 @@ def test_user_object_scenes_settle_by_the_relation_rule():
     4.5 and 3.5 cm up) inside the 5 cm rim, the toy can (7 cm) on top; beside it on the table,
     beside."""
     from relaff_jax.sim import scenes as sc
-    from relaff_jax.sim.native_settle import settle_batch
+    from relaff_jax.sim.native.settle import settle_batch
 
     world = _dish_world()
     toys = ("ball", "block", "toy_can")
@@ -328,7 +328,7 @@ def test_user_object_scenes_sample_and_settle():
     import jax
 
     from relaff_jax.sim import scenes as sc
-    from relaff_jax.sim.native_settle import settle_batch
+    from relaff_jax.sim.native.settle import settle_batch
 
     world = _dish_world()
     d = world.pair_id("ball", "dish")

@@ -6,9 +6,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from relaff_jax.sim import native
-from relaff_jax.sim.physics_probe import Probe
-from relaff_jax.sim.probe_arrays import ArrayProbe
+from relaff_jax.sim.native import reference as native
+from relaff_jax.sim.native.probe import Probe
+from relaff_jax.sim.native.probe_arrays import ArrayProbe
 
 # A box and a ball; above them a weightless "hand" (the probes' arm_hand) on a slide, pushed down;
 # the ball falls onto the box's edge and rolls off; a weld between the hand and the ball that

@@ -1,6 +1,6 @@
 """Motor programs v2: grasps that keep the palm off the objects, a squeeze from the
 held weight, goals read at rest; v1 one ``--set`` away. Fast tests build programs without
-simulating; the slow ones replay them in MuJoCo C and read the contacts (``native_forces``)."""
+simulating; the slow ones replay them in MuJoCo C and read the contacts (``native.forces``)."""
 import dataclasses
 
 import jax
@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from relaff_jax.errors import UserError
-from relaff_jax.sim import bodies, labels, native, planning, programs, templates
+from relaff_jax.sim import bodies, labels, planning, programs, templates
+from relaff_jax.sim.native import reference as native
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import world as wd
 from relaff_jax.config.action import ActionConfig
@@ -138,7 +139,7 @@ def test_versions_config_and_sidecar():
 
 def _replay(action, cfg, rows):
     """Settle hand-built scenes in C, plan them (JAX) and measure their replay in C."""
-    from relaff_jax.sim import native_forces
+    from relaff_jax.sim.native import forces as native_forces
 
     st = planning.setup(cfg)
     w = st.world
@@ -181,7 +182,8 @@ def test_toy_sliding_off_a_tilted_placemat_is_labelled_where_it_rests():
 @pytest.mark.slow  # settles, plans and replays 16 scenes per action in C (~5 min)
 @pytest.mark.parametrize("action", ["lift", "unobstruct"])
 def test_forces_and_penetration_within_bounds(action):
-    from relaff_jax.sim import native_forces, rollouts
+    from relaff_jax.sim import rollouts
+    from relaff_jax.sim.native import forces as native_forces
     from relaff_jax.sim.physics_bounds import PALM_CONTACT_STEPS, PENETRATION_M, press_ok
 
     # 16 scenes in two batches of 8: the place, screen and plan programs of batch 8 are the

@@ -8,7 +8,8 @@ import pytest
 
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.sim import arm as A
-from relaff_jax.sim import native_settle, rollouts, templates
+from relaff_jax.sim import rollouts, templates
+from relaff_jax.sim.native import settle as native_settle
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 from relaff_jax.sim.planning import setup

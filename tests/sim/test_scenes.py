@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from relaff_jax import cli, config
-from relaff_jax.sim import native
+from relaff_jax.sim.native import reference as native
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
 

@@ -7,25 +7,14 @@ same way (``builtin.py``); a user's are registered with ``register_action`` in a
 programs are built from ``registry()`` (``tables.tables``, ``planning.make_plan_fn``,
 ``simulate.make_simulate_fn``) and index it with the traced action id. docs/extending.md, "Actions".
 
-The spec and registry names load without JAX; the rule helpers on first use.
+Only the spec and the registry are imported here (no JAX: the command line's checks read them);
+a plugin's rule helpers (``Settled``, ``Reading``, ``carry``, ``lift``, ``top_down``, ...) are in
+``rules.py`` and the compiled check of a spec is ``check.check_actions`` (both import JAX).
 """
 from __future__ import annotations
-
-from relaff_jax.lazy import lazy_attributes
 
 from .registry import ENTRY_POINTS, names, record, register_action, registry, spec, spec_hash
 from .spec import GRASP_KINDS, READINGS, ActionSpec
 
-_LAZY = {
-    "Settled": "rules", "Reading": "rules", "Program": "rules", "IKTarget": "rules", "base_grasp": "rules",
-    "carry": "rules", "lift": "rules", "transit_z": "rules", "top_down": "_api", "stack_targets": "_api",
-    "unit_xy": "_api", "perp": "_api", "check_actions": "check",
-}
-
-__getattr__, __dir__ = lazy_attributes(__name__, _LAZY, globals())
-
-__all__ = [
-    "ActionSpec", "ENTRY_POINTS", "GRASP_KINDS", "IKTarget", "Program", "READINGS", "Reading", "Settled",
-    "base_grasp", "carry", "check_actions", "lift", "names", "perp", "record", "register_action", "registry",
-    "spec", "spec_hash", "stack_targets", "top_down", "transit_z", "unit_xy",
-]
+__all__ = ["ActionSpec", "ENTRY_POINTS", "GRASP_KINDS", "READINGS", "names", "record", "register_action", "registry",
+           "spec", "spec_hash"]

@@ -14,17 +14,15 @@ from relaff_jax.sim import templates as T
 
 from .rules import Reading, Settled, as_outcome
 from .spec import ActionSpec
+from relaff_jax.sim.programs import program
+from relaff_jax.sim.labels import goals
 
 
 def _targets(name: str, s: Settled):
-    from relaff_jax.sim.programs import program
-
     return program(name, s.arm, s.cfg, s.geo, s.pair, s.qpos)
 
 
 def _goal(name: str, cfg, r: Reading):
-    from relaff_jax.sim.labels import goals
-
     return goals(cfg, as_outcome(r))[ACTIONS.index(name)]
 
 

@@ -14,6 +14,7 @@ from relaff_jax.sim.templates import N_TARGETS, ActionConfig
 from .registry import is_builtin, spec
 from .rules import Reading, Settled
 from .spec import ActionSpec
+from relaff_jax.sim.planning import setup
 
 _SCALAR, _VEC = (), (3,)
 
@@ -72,7 +73,6 @@ def check_actions(names: Iterable[str], cfg: ActionConfig = ActionConfig()) -> N
     users = [spec(n) for n in names if not is_builtin(n)]
     if not users:
         return
-    from relaff_jax.sim.planning import setup
 
     st = setup(cfg)
     for s in users:

@@ -109,6 +109,7 @@ def names() -> tuple[str, ...]:
 
 def registry() -> tuple[ActionSpec, ...]:
     """The ordered specs of ``names()`` (ids = positions; the built-ins first)."""
+    # the built-ins' rules import JAX: the command line's checks read this module
     from .builtin import BUILTINS
 
     _load_entry_points()

@@ -4,7 +4,8 @@
 what a goal rule sees; ``plan_program`` (a spec's target rule, padded to ``N_TARGETS``) and
 ``goal_row`` (every action's goal on one outcome) are what the compiled programs call. The
 helpers (``base_grasp``, ``carry``, ``lift``, ``transit_z``) are the built-in programs' own
-pieces (``programs.py``), wrapped, so a user's target rule can reuse them.
+pieces (``programs.py``), wrapped, so a user's target rule can reuse them; the geometry helpers
+(``top_down``, ``stack_targets``, ``unit_xy``, ``perp``) are ``bodies.py``'s, imported here for it.
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ import jax.numpy as jnp
 from relaff_jax.sim import arm as A
 from relaff_jax.sim import programs as P
 from relaff_jax.sim.bodies import Body, Geometry, Grasp
+from relaff_jax.sim.bodies import perp, stack_targets, top_down, unit_xy  # noqa: F401 (a plugin's helpers)
 from relaff_jax.sim.labels import Outcome
 from relaff_jax.sim.templates import N_TARGETS, ActionConfig
 

@@ -90,6 +90,7 @@ def check_fields(spec: Any) -> None:
     """The fields' types and ranges (no JAX); a ``UserError`` naming the field."""
     import re
 
+    # the built-ins' rules import JAX: the command line's checks read this module
     from relaff_jax.sim.templates import N_SEGMENTS, N_STEPS, N_TARGETS
 
     if not isinstance(spec, ActionSpec):

@@ -1,8 +1,8 @@
 """What the MuJoCo C executions of planned programs share: inputs, the weld relpose, labels.
 
 Takes an ``ActionConfig``, an action id and a batch of settled scenes with their plans; gives
-the pieces that both C executions (``native.replay_native``, one ``MjData`` per scene, and
-``native_batch.execute_native``, ``mujoco.batch``) use, so that they differ only in how they
+the pieces that both C executions (``native.reference.replay_native``, one ``MjData`` per scene, and
+``native.batch.execute_native``, ``mujoco.batch``) use, so that they differ only in how they
 step and read contacts:
 
 - ``program_inputs``: initial state (objects settled, arm at home) and the actuator command of
@@ -23,16 +23,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from . import arm as A
-from .actions.registry import on_change, registry
-from .actions.rules import goal_row
-from .labels import Outcome, read_at_rest
-from .planning import setup
-from .programs import toy_reachable
-from .guard import guard_tables, stopped_way
-from .simulate import initial_data
-from .actions.tables import run_steps, tables
-from .templates import ActionConfig
+from relaff_jax.sim import arm as A
+from relaff_jax.sim.actions.registry import on_change, registry
+from relaff_jax.sim.actions.rules import goal_row
+from relaff_jax.sim.labels import Outcome, read_at_rest
+from relaff_jax.sim.planning import setup
+from relaff_jax.sim.programs import toy_reachable
+from relaff_jax.sim.guard import guard_tables, stopped_way
+from relaff_jax.sim.simulate import initial_data
+from relaff_jax.sim.actions.tables import run_steps, tables
+from relaff_jax.sim.templates import ActionConfig
 
 
 class ProgramInputs(NamedTuple):

@@ -18,6 +18,6 @@ is one pip dependency with wheels for every platform the project supports, and i
 read like scikit-learn's Cython, which they are checked against line by line. Importing
 this package does not import numba; ``kernels()`` does (and compiles or loads the cache).
 """
-from relaff_jax.learn.compiled.forest import Forest, fit, fit_many, kernels, predict_block, predict_labels, predict_proba
+from relaff_jax.learn.forest.compiled.forest import Forest, fit, fit_many, kernels, predict_block, predict_labels, predict_proba
 
 __all__ = ["Forest", "fit", "fit_many", "kernels", "predict_block", "predict_labels", "predict_proba"]

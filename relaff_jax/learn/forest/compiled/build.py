@@ -24,9 +24,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from relaff_jax.learn.compiled.rng import (MAX_INT, RAND_R_MAX, draw_bootstrap, draw_subsample, first_randint, mt_seed,
+from relaff_jax.learn.forest.compiled.rng import (MAX_INT, RAND_R_MAX, draw_bootstrap, draw_subsample, first_randint, mt_seed,
                                            mt_seed4, randint)
-from relaff_jax.learn.compiled.split import best_split, node_impurity
+from relaff_jax.learn.forest.compiled.split import best_split, node_impurity
 
 EPSILON = np.finfo(np.float64).eps  # sklearn/tree/_tree.pyx
 LEAF = -1  # _TREE_LEAF

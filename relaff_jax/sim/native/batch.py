@@ -5,13 +5,13 @@ Takes an ``ActionConfig``, an action name, settled scenes (the arm-less layout o
 before the action; gives ``execute_native``, the same per-scene fields as MJX's
 ``simulate.make_simulate_fn`` (labels, centres of mass, final states), computed by MuJoCo C
 (``mj_step``, float64) with the same grasp-lock rule, weld relpose, measuring step and outcome
-rules. It equals ``native.replay_native`` (one ``MjData`` per scene) bit for bit, at any
+rules. It equals ``native.reference.replay_native`` (one ``MjData`` per scene) bit for bit, at any
 thread count and chunk size (``tests/sim/test_native_engine.py``).
 
 How the grasp lock is read: ``mujoco.batch`` cannot bind contacts, so every scene's model
 carries four contact sensors (``sensor_models``: each finger pad against the toy body and
 against the other body, every matching contact's distance and normal, ``reduce="none"``) and
-the lock test (``native_program.pad_hit``) reads ``sensordata``. The weld's relative pose is
+the lock test (``native.program.pad_hit``) reads ``sensordata``. The weld's relative pose is
 written into the scene's own copy of its pair's model (``set_models`` forbids ``expand``), at
 the step the lock engages.
 """
@@ -26,14 +26,15 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from .actions.registry import action_id  # the run's list: the nine, then a user's
-from . import objects as lib
-from . import world as wd
-from .guard import hold_joints, pad_landing_np
-from .native_program import RestReader, native_labels, pad_hit, program_inputs, stop_descent, weld_relpose_np
-from .planning import Plan, setup
-from .simulate import welds
-from .templates import ActionConfig
+from relaff_jax.sim.actions.registry import action_id  # the run's list: the nine, then a user's
+from relaff_jax.sim import objects as lib
+from relaff_jax.sim import world as wd
+from relaff_jax.sim.guard import hold_joints, pad_landing_np
+from relaff_jax.sim.native.program import (RestReader, native_labels, pad_hit, program_inputs, stop_descent,
+                                           weld_relpose_np)
+from relaff_jax.sim.planning import Plan, setup
+from relaff_jax.sim.simulate import welds
+from relaff_jax.sim.templates import ActionConfig
 
 from relaff_jax.errors import UserError
 
@@ -110,7 +111,7 @@ def _landing(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel, cfg: ActionCo
 
 
 def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: int, nqo: int) -> dict:
-    """Execute programs ``rows`` of ``inp`` (``native_program.ProgramInputs``) in one batch."""
+    """Execute programs ``rows`` of ``inp`` (``native.program.ProgramInputs``) in one batch."""
     world = setup(cfg).world
     wl = welds(world)
     bodies = [world.toy_body, world.obj_body]

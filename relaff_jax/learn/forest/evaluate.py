@@ -1,4 +1,4 @@
-"""Predictions of fitted forests (``engine_fit.Trees``), bit-identical to scikit-learn's.
+"""Predictions of fitted forests (``fit.Trees``), bit-identical to scikit-learn's.
 
 Takes forests and test rows; gives ``predict_proba`` ``(N, K)`` float64 and predicted
 classes. Two exact paths:
@@ -31,7 +31,7 @@ from typing import Sequence
 
 import numpy as np
 
-from relaff_jax.learn.engine_fit import Trees
+from relaff_jax.learn.forest.fit import Trees
 
 WORD = 32  # leaves per bitmask word; deeper trees take the scikit-learn path
 FULL = np.uint32(0xFFFFFFFF)

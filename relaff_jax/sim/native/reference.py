@@ -4,8 +4,8 @@ Takes the same per-pair models (``World.mj_models``) and placements / plans as t
 gives, computed by ``mujoco.mj_step`` (float64) and C contacts: settled states and relation
 labels (``settle_native``, no JAX involved) and the replay of planned motor programs with their
 labels (``replay_native``: the actuator commands, initial data and rules come from the JAX
-code, ``native_program``), so tests and benchmarks can compare the implementations; the
-replay is the reference of the batched native engine (``native_batch``).
+code, ``native.program``), so tests and benchmarks can compare the implementations; the
+replay is the reference of the batched native engine (``native.batch``).
 """
 from __future__ import annotations
 
@@ -17,18 +17,18 @@ import jax.numpy as jnp
 import mujoco
 import numpy as np
 
-from . import arm as A
-from . import objects as lib
-from . import scenes as sc
-from . import world as wd
-from .guard import hold_joints, pad_landing_np
-from .native_program import (RestReader, native_labels, pad_hit, program_inputs, reachable, stop_descent,
+from relaff_jax.sim import arm as A
+from relaff_jax.sim import objects as lib
+from relaff_jax.sim import scenes as sc
+from relaff_jax.sim import world as wd
+from relaff_jax.sim.guard import hold_joints, pad_landing_np
+from relaff_jax.sim.native.program import (RestReader, native_labels, pad_hit, program_inputs, reachable, stop_descent,
                              weld_relpose_np)
-from .actions.registry import action_id, on_change
-from .planning import make_plan_fn, setup
-from .simulate import welds
-from .actions.tables import tables
-from .templates import ActionConfig
+from relaff_jax.sim.actions.registry import action_id, on_change
+from relaff_jax.sim.planning import make_plan_fn, setup
+from relaff_jax.sim.simulate import welds
+from relaff_jax.sim.actions.tables import tables
+from relaff_jax.sim.templates import ActionConfig
 
 
 
@@ -96,7 +96,7 @@ def _pad_contacts(d: mujoco.MjData, pad: int, geoms: set) -> tuple[np.ndarray, n
 
 def both_pads(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bool:
     """Do both finger pads touch one of ``geoms`` with their gripping face (C contacts, the
-    rule of ``arm.finger_contacts`` as ``native_program.pad_hit`` writes it)?"""
+    rule of ``arm.finger_contacts`` as ``native.program.pad_hit`` writes it)?"""
     for pad in arm.pad_geoms:
         dist, normal = _pad_contacts(d, pad, geoms)
         if not len(dist):
@@ -135,15 +135,15 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     """Replay the planned programs of an ``action_fn`` result in native MuJoCo C (``mj_step``,
     float64), scene by scene, with the same actuator commands; label them with the same rules.
 
-    The reference of the native engine (``native_batch.execute_native``), which must give the
-    same results bit for bit. Inputs, weld relpose and labels: ``native_program``.
+    The reference of the native engine (``native.batch.execute_native``), which must give the
+    same results bit for bit. Inputs, weld relpose and labels: ``native.program``.
 
     Args: pair (B,), qpos (B, 14), qvel (B, 12) settled object states; ``result``: the action
     fn's output for these scenes (uses ``q_way``, ``grip_way``, ``feasible``, and
     ``direction`` if present, else a re-plan gives it). ``record_every`` > 0 also records
     every geom's pose before the first step and after every ``record_every``-th step (for
     animations). ``observe(b, t, m, d)``, if given, is called after every step t of scene b
-    (the audit's ``physics_probe.Probe``, ``native_forces``; it must not change ``d``).
+    (the audit's ``native.probe.Probe``, ``native.forces``; it must not change ``d``).
     Returns ``label``, ``com_m``, ``com_end``, ``qpos_final``, ``reach_after`` as numpy arrays,
     and with ``record_every`` ``frames_xpos`` (B, F, G, 3) and ``frames_xmat`` (B, F, G, 9).
     """

@@ -1,7 +1,7 @@
 """What a rollout's physics does, step by step, read from MuJoCo C contacts (the audit's probe).
 
 Takes a pair's arm-world ``MjModel`` and its ``MjData`` after each ``mj_step`` of a motor
-program (``native.replay_native``'s ``observe`` hook); gives ``Probe``, which records per
+program (``native.reference.replay_native``'s ``observe`` hook); gives ``Probe``, which records per
 rollout:
 
 - palm contacts: contacts between a geom of the hand body (``arm_hand``: the palm block, not
@@ -36,7 +36,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from .physics_bounds import SUSTAIN_STEPS
+from relaff_jax.sim.physics_bounds import SUSTAIN_STEPS
 
 HAND_BODY = "arm_hand"  # the palm block's body; the pads are on the finger bodies
 

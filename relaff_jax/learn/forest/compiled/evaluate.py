@@ -15,7 +15,7 @@ all bits set and, at every internal node where it goes right, clears the bits of
 node's left subtree; its exit leaf is the lowest remaining bit. The loop over rows has no
 branch and vectorises. Larger trees are walked node by node. Trees of <= 32 leaves use
 32-bit masks and float32 compares (twice the rows per vector): ``x > t`` iff ``x > t32``
-for float32 ``x``, t32 the largest float32 <= t (``round_down_f32``; as ``engine_eval``).
+for float32 ``x``, t32 the largest float32 <= t (``round_down_f32``; as ``evaluate``).
 
 A forest whose leaves are all pure (values exactly (1, 0) or (0, 1), the usual fully grown
 tree) adds exactly 0.0 or 1.0 per tree, so its float64 sums are the integer vote counts c

@@ -16,9 +16,9 @@ from typing import Sequence
 
 import numpy as np
 
-from relaff_jax.learn.engine_fit import check_engine_config, max_features_of, n_bootstrap
+from relaff_jax.learn.forest.fit import check_engine_config, max_features_of, n_bootstrap
 from relaff_jax.config.experiment import ForestConfig
-from relaff_jax.learn.forests import checked_states, n_trees, subsample_size
+from relaff_jax.learn.forest.estimator import checked_states, n_trees, subsample_size
 
 MAX_DEPTH = np.iinfo(np.int32).max  # max_depth=None, as BaseDecisionTree._fit
 SEED_LIMIT = 2**32  # RandomState seeds are in [0, 2**32)
@@ -67,7 +67,8 @@ def kernels() -> dict:
     sources clears the cache when any of them changed (a development concern only)."""
     if not _KERNELS:
         _clear_stale_cache()
-        from relaff_jax.learn.compiled import build, evaluate
+        # numba loads (and compiles) on the first call, not with the package
+        from relaff_jax.learn.forest.compiled import build, evaluate
 
         _KERNELS.update(build_forests=build.build_forests, block_sums=evaluate.block_sums)
     return _KERNELS

@@ -4,7 +4,7 @@ Takes the arm-less ``World`` (``World.mj_models``, one model per pair), placemen
 (``scenes.place``) and a ``SceneConfig``; gives ``settle_batch``, the ``scenes.Scenes`` of
 ``scenes.make_settle_fn`` (settled state, relation, COG distance, at rest) computed by
 ``mj_step`` in float64, with a held rake pinned after every step exactly as MJX and
-``native.settle_native`` pin it. It equals ``settle_native`` (one ``MjData`` per scene) bit
+``native.reference.settle_native`` pin it. It equals ``settle_native`` (one ``MjData`` per scene) bit
 for bit at any thread count (``tests/sim/test_native_engine.py``); how far it agrees with MJX's
 settle is measured in ``docs/scenes.md`` ("Native settle").
 """
@@ -14,9 +14,9 @@ import mujoco
 import mujoco.batch
 import numpy as np
 
-from . import scenes as sc
-from . import world as wd
-from .native import relation_native
+from relaff_jax.sim import scenes as sc
+from relaff_jax.sim import world as wd
+from relaff_jax.sim.native.reference import relation_native
 
 # What a native dataset records as its settle (sidecar ``settle``): bump when it changes.
 SETTLE_NAME = "mujoco_c_batch/1"

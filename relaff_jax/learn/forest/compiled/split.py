@@ -56,7 +56,7 @@ import numpy as np
 from numba import njit
 from numba.cpython.unsafe.numbers import leading_zeros, trailing_zeros
 
-from relaff_jax.learn.compiled.rng import rand_int
+from relaff_jax.learn.forest.compiled.rng import rand_int
 
 FEATURE_THRESHOLD = np.float32(1e-7)  # sklearn/tree/_partitioner.pxd
 COUNT_SORT = 256  # presort: ranks by counting up to this N (keys are distinct), else a sort

@@ -4,11 +4,11 @@ Takes states ``X: (N, D)`` float32 and labels ``y: (N,)`` bool; gives fitted for
 (``fit``) and their 0/1 predictions, one forest (``predict``) or a block of forests on
 shared test columns (``predict_many``). All three engines give bit-identical forests and
 predictions (``tests/learn/test_engine.py``): ``fast`` builds the trees with scikit-learn's own
-Cython builder without the estimator (``engine_fit``) and evaluates many forests in one
-jitted program (``engine_eval``); ``sklearn`` is ``RandomForestClassifier``
-(``forests.fit_forest`` / ``predict_class``); ``compiled`` builds the same trees with
+Cython builder without the estimator (``fit``) and evaluates many forests in one
+jitted program (``evaluate``); ``sklearn`` is ``RandomForestClassifier``
+(``estimator.fit_forest`` / ``predict_class``); ``compiled`` builds the same trees with
 scikit-learn's algorithm re-expressed in numba, many forests per kernel call
-(``fit_many``), and predicts them in one compiled call (``learn/compiled/``).
+(``fit_many``), and predicts them in one compiled call (``learn/forest/compiled/``).
 
 The engine is ``ForestConfig.engine`` (``--set experiment.forest.engine=sklearn``), part of
 the config tree like every setting, although it changes no result.
@@ -20,11 +20,11 @@ from typing import Sequence
 import numpy as np
 
 from relaff_jax.errors import UserError
-from relaff_jax.learn import compiled
-from relaff_jax.learn.engine_eval import predict_block
-from relaff_jax.learn.engine_fit import Trees, fit_trees
+from relaff_jax.learn.forest import compiled
+from relaff_jax.learn.forest.evaluate import predict_block
+from relaff_jax.learn.forest.fit import Trees, fit_trees
 from relaff_jax.config.experiment import ENGINES, ForestConfig
-from relaff_jax.learn.forests import checked_inputs, checked_states, fit_checked, predict_checked
+from relaff_jax.learn.forest.estimator import checked_inputs, checked_states, fit_checked, predict_checked
 
 __all__ = ["ENGINES", "Trees", "fit", "fit_many", "predict", "predict_many"]
 

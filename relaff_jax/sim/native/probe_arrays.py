@@ -1,6 +1,6 @@
-"""The audit's probe read from MuJoCo's contact arrays: ``physics_probe.Probe``'s readings, bit for bit, faster.
+"""The audit's probe read from MuJoCo's contact arrays: ``probe.Probe``'s readings, bit for bit, faster.
 
-Takes the same calls as ``physics_probe.Probe`` (``probe(b, t, m, d)`` after each ``mj_step`` of
+Takes the same calls as ``probe.Probe`` (``probe(b, t, m, d)`` after each ``mj_step`` of
 rollout b, ``result(measure)``); gives the same (B,) arrays, every value equal to ``Probe``'s
 (``tests/sim/test_probe_arrays.py``). What it does differently, and why the bits stay the same:
 
@@ -15,7 +15,7 @@ rollout b, ``result(measure)``); gives the same (B,) arrays, every value equal t
   contact order from 0 as ``Probe``'s loop does; the peak is the first (step, pair) in ``Probe``'s
   dict order with the largest ratio, which is the one its strict ``>`` update keeps;
 - ``mj_objectVelocity`` is called every step (the C function ``Probe`` calls) but the norm and
-  the held test (``physics_probe.held_bodies``'s rule on the step's ``eq_active``) only at the
+  the held test (``probe.held_bodies``'s rule on the step's ``eq_active``) only at the
   steps ``result`` reads.
 """
 from __future__ import annotations
@@ -25,8 +25,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from .physics_bounds import SUSTAIN_STEPS
-from .physics_probe import HAND_BODY, body_names, held_peak, welded_to
+from relaff_jax.sim.physics_bounds import SUSTAIN_STEPS
+from .probe import HAND_BODY, body_names, held_peak, welded_to
 
 
 class _Model:
@@ -60,7 +60,7 @@ class _Rollout:
 
 
 class ArrayProbe:
-    """``physics_probe.Probe`` from contact arrays: ``ArrayProbe(n, toy_body, obj_body,
+    """``probe.Probe`` from contact arrays: ``ArrayProbe(n, toy_body, obj_body,
     timestep)``, ``probe(b, t, m, d)`` after step t of rollout b, ``result(measure)``: the
     same dict of (B,) arrays as ``Probe.result``."""
 
@@ -185,7 +185,7 @@ class ArrayProbe:
                     press_n=press, weight_n=weight_n, press_weights=press / weight_n if weight_n > 0 else 0.0)
 
     def _held(self, mm: _Model, eq_active: np.ndarray) -> tuple[bool, bool]:
-        """``physics_probe.held_bodies``'s rule on a recorded ``eq_active``."""
+        """``probe.held_bodies``'s rule on a recorded ``eq_active``."""
         out = welded_to(mm.m, eq_active, mm.hand)
         return self.objects[0] in out, self.objects[1] in out
 

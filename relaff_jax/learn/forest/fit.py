@@ -37,7 +37,7 @@ from sklearn.tree._splitter import BestSplitter
 from sklearn.tree._tree import DepthFirstTreeBuilder, Tree
 
 from relaff_jax.config.experiment import ForestConfig, max_features_value
-from relaff_jax.learn.forests import n_trees, subsample_weights
+from relaff_jax.learn.forest.estimator import n_trees, subsample_weights
 
 MAX_INT = np.iinfo(np.int32).max  # sklearn.ensemble._forest.MAX_INT
 _RS = np.random.RandomState(0)  # reseeded per tree: constructing one costs ~100 us

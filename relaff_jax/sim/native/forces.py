@@ -1,7 +1,7 @@
 """The physics of executed programs in the keys of the programs' tests and force benchmark.
 
 Takes an action, an ``ActionConfig`` and executed programs (the inputs and result of a native
-replay, ``native.replay_native``); gives ``physics``: the replay with ``physics_probe.Probe``
+replay, ``native.reference.replay_native``); gives ``physics``: the replay with ``native.probe.Probe``
 as its ``observe`` hook (the audit's probe), its force, penetration and palm readings renamed
 (``peak``, ``press``, ``depth``, ``palm``, ``weight``) beside the replay's label. The bounds
 the programs keep: ``physics_bounds``; their reasoning: docs/arm.md, "Bounded forces".
@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .native import replay_native
-from .physics_probe import Probe
-from .planning import setup
-from .templates import ActionConfig
+from relaff_jax.sim.native.reference import replay_native
+from relaff_jax.sim.native.probe import Probe
+from relaff_jax.sim.planning import setup
+from relaff_jax.sim.templates import ActionConfig
 
 
 def physics(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
