@@ -14,7 +14,7 @@ from relaff_jax.config.node import Node
 PROGRAMS = ("v1", "v2")
 # ActionConfig fields only v2 reads; a v1 dataset's sidecar leaves them out (templates.stored_config)
 V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window",
-             "guard_depth", "tilt_lean", "tilt_sweep")
+             "guard_depth", "tilt_lean", "tilt_sweep", "straight_pieces")
 
 # PhysicsConfig.arm_palm_objects -> the palm geom's extra MJCF attributes
 PALM_MODES = {"contact": "", "frictionless": 'priority="1" condim="1"', "exclude_other": ""}
@@ -227,6 +227,8 @@ class ActionConfig(Node):
     # on the near side then slides under the palm)
     tilt_sweep: bool = True  # v2, pour/slide: the palm also clears the toy's diagonal, the height
     # a toy tipping over in or on its base reaches (False: its height, as the other programs)
+    straight_pieces: int = 8  # v2: a tcp move between two poses of the same orientation follows the
+    # straight line, corrected at this many pieces (sim/straight.py); 1: linear in the joints (it sags)
     arm: ArmConfig = ArmConfig()
     phys: PhysicsConfig = PhysicsConfig()
     scene: SceneConfig = SceneConfig()
@@ -246,6 +248,7 @@ class ActionConfig(Node):
         "rest_window": STEPS,
         "tilt_lean": Options(("toy", "robot")),
         "tilt_sweep": Boolean(),
+        "straight_pieces": count(1, 64),
         "guard_depth": length(1.0),  # 1 m: no contact is that deep, the guard never stops
         ("squeeze_min", "squeeze_max"): Rule(
             lambda c: c.squeeze_min <= c.squeeze_max,

@@ -33,6 +33,7 @@ from .arm_model import (  # noqa: F401 (re-exported)
     arm_xml_path, scenes_dir,
 )
 from .contacts import contacts
+from .straight import ctrl_q
 from relaff_jax.config.action import ArmConfig
 from .kinematics import (  # noqa: F401 (re-exported)
     IKResult, IKTarget, analytic_seed, fk_chain, fk_tcp, solve_ik, solve_ik_path, task_sigma,
@@ -148,7 +149,8 @@ def _smoothstep(x: jax.Array) -> jax.Array:
 
 
 def program_ctrl(
-    arm: Arm, q_way: jax.Array, grip_way: jax.Array, seg_steps: Sequence[int] | jax.Array, t: jax.Array
+    arm: Arm, q_way: jax.Array, grip_way: jax.Array, seg_steps: Sequence[int] | jax.Array, t: jax.Array,
+    corr: jax.Array | None = None,
 ) -> jax.Array:
     """Actuator command (nu,) at control step ``t`` of a waypoint program.
 
@@ -156,7 +158,9 @@ def program_ctrl(
     waypoint k to k + 1 in ``seg_steps[k]`` control steps (length W - 1; a static tuple, or a
     traced int array so one compiled program serves programs of different timing) with a
     smoothstep profile (zero velocity at the waypoints, no jerk into the contacts). After the
-    last segment the command holds the last waypoint.
+    last segment the command holds the last waypoint. ``corr`` (W - 1, P - 1, 6) (programs v2,
+    ``straight.corrections``): joint corrections that keep the tcp on the straight line of a
+    segment; ``None`` (v1): the joints are linear in the fraction, as ever.
     """
     if isinstance(seg_steps, (tuple, list)):
         seg_steps = tuple(int(s) for s in seg_steps)
@@ -167,7 +171,10 @@ def program_ctrl(
     k = segment_index(seg, t)
     frac = jnp.clip((t - (ends[k] - seg[k])) / jnp.maximum(seg[k], 1).astype(jnp.float32), 0.0, 1.0)
     s = _smoothstep(frac)
-    q = q_way[k] + s * (q_way[k + 1] - q_way[k])
+    if corr is None:
+        q = q_way[k] + s * (q_way[k + 1] - q_way[k])
+    else:
+        q = ctrl_q(q_way[k], q_way[k + 1], corr[k], s)
     g = grip_way[k] + s * (grip_way[k + 1] - grip_way[k])
     return make_ctrl(arm, q, g)
 

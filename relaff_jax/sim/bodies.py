@@ -178,6 +178,19 @@ def squeeze_command(arm: A.Arm, cfg: ActionConfig, half: jax.Array, mass: jax.Ar
     return jnp.maximum(half - force / arm.finger_kp, 0.0)
 
 
+HANDLE_HALF = 0.0125  # half the held rake handle's 2.5 cm cross-section (objects._rake)
+
+
+def tool_squeeze(arm: A.Arm, cfg: ActionConfig) -> float:
+    """The fingers' command (half opening, m) on the held rake's handle: v1 ``grip_closed`` (the
+    actuator's force limit squeezes, 17 N per pad); v2 ``squeeze_min`` per pad, since the
+    ``tool_grip`` weld carries the tool and the pads only keep their hold (17 N per pad was
+    14 weights of a 0.25 kg rake)."""
+    if cfg.programs == "v1":
+        return float(cfg.arm.grip_closed)
+    return max(HANDLE_HALF - cfg.squeeze_min / arm.finger_kp, 0.0)
+
+
 def clear_grasp(arm: A.Arm, cfg: ActionConfig, g: Grasp, body: Body, other: Body, inner: jax.Array) -> Grasp:
     """v2: a grasp that keeps the palm off every object (docs/actions.md, "Programs v1 and v2").
 

@@ -5,7 +5,8 @@ pairs' geometry and the arm's home pose; built once and cached) and
 ``make_plan_fn(cfg) -> plan_fn(action_id (), pair (B,), qpos (B, 14)) -> Plan``: the tcp
 targets of ``programs.program`` solved by the batched IK (``arm.solve_ik_path``) from the home
 pose. If any waypoint is unreachable or badly conditioned, or the object does not fit the
-gripper, the action is *infeasible*: the arm stays home and the label is False.
+gripper, or (v2) the tcp cannot follow a straight segment's line (``straight.py``), the action is
+*infeasible*: the arm stays home and the label is False.
 """
 from __future__ import annotations
 
@@ -18,11 +19,12 @@ import numpy as np
 
 from . import arm as A
 from . import world as wd
-from .bodies import Geometry, geometry
+from .bodies import Geometry, geometry, tool_squeeze
 from .actions.tables import tables
 from .templates import N_TARGETS, ActionConfig
 from .actions.registry import registry
 from .actions.rules import plan_program
+from .straight import corrections, straight_rows
 
 
 class Setup(NamedTuple):
@@ -47,8 +49,9 @@ def setup(cfg: ActionConfig = ActionConfig()) -> Setup:
 
 
 def home_grip(cfg: ActionConfig) -> np.ndarray:
-    """(A,) finger command at the start: closed on the held rake's handle, else half open."""
-    return np.where(tables(cfg).held, cfg.arm.grip_closed, 0.06).astype(np.float32)
+    """(A,) finger command at the start: closed on the held rake's handle
+    (``bodies.tool_squeeze``), else half open."""
+    return np.where(tables(cfg).held, tool_squeeze(setup(cfg).arm, cfg), 0.06).astype(np.float32)
 
 
 class Plan(NamedTuple):
@@ -73,6 +76,7 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     q_home = jnp.asarray(st.q_home, jnp.float32)
     grip_home = jnp.asarray(home_grip(cfg))
     branches = [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
+    straight = straight_rows(cfg, tb.target)
 
     def one(action_id, pair, qpos):
         prog = jax.lax.switch(action_id, branches, pair, qpos)
@@ -83,6 +87,9 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         used = jnp.arange(N_TARGETS) < n_used
         feasible = jnp.all(res.reachable | ~used) & prog.ok
         q_way = jnp.concatenate([q_home[None], res.q[jnp.asarray(tb.target)[action_id]]])
+        # v2: a straight segment whose line the arm cannot follow makes the program infeasible
+        _, line_err = corrections(st.arm, cfg, q_way, jnp.asarray(straight)[action_id])
+        feasible = feasible & (line_err < cfg.arm.ik_pos_tol)
         opening = jnp.clip(prog.opening, 0.0, float(st.arm.finger_range[1]))
         # closing: v1 commands grip_closed (the 60 N limit squeezes); v2 a squeeze from the
         # held weight (programs.squeeze_command)
@@ -92,7 +99,7 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         # an infeasible program is not executed: the arm holds its home pose
         q_way = jnp.where(feasible, q_way, q_home[None])
         grip_way = jnp.where(feasible, grip_way, g0)
-        return q_way, grip_way, feasible, prog.direction, jnp.max(jnp.where(used, res.pos_err, 0.0))
+        return q_way, grip_way, feasible, prog.direction, jnp.maximum(jnp.max(jnp.where(used, res.pos_err, 0.0)), line_err)
 
     def plan_fn(action_id, pair, qpos):
         action_id = jnp.asarray(action_id, jnp.int32)

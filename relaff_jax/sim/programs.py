@@ -16,7 +16,7 @@ import jax.numpy as jnp
 
 from . import arm as A
 from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, perp, squeeze_command, stack_targets,
-                     top_down, top_down_grasp, unit_xy)
+                     tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
 from .templates import N_TARGETS, ActionConfig
 
@@ -203,7 +203,13 @@ def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     y_t = handle_half + cfg.rake_gap + toy.half_width(side)
     c = toy.centre
     origin = jnp.array([c[0], c[1], 0.0]) - radial * x_t - side * y_t
-    low = origin + jnp.array([0.0, 0.0, 0.003])
+    # the head's bottom 3 mm above the table (v1); v2 also keeps the fingertips, which reach
+    # below the handle's underside (tip_below_tcp past the handle's centre line), tip_clearance
+    # above it: at 3 mm they were 4.5 mm into the table and levered the rake at 100-275 N
+    low_z = 0.003
+    if cfg.programs == "v2":
+        low_z = max(low_z, arm.tip_below_tcp - float(A.TOOL_GRIP_POS[2]) + cfg.tip_clearance)
+    low = origin + jnp.array([0.0, 0.0, low_z])
     above = origin + jnp.array([0.0, 0.0, toy.z_range()[1] + cfg.clearance])
     pulled = low - radial * cfg.rake_pull
     raised = pulled + jnp.array([0.0, 0.0, 0.10])
@@ -211,7 +217,7 @@ def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     # the toy must lie within the head's lateral extent to be caught at all
     covers = y_t - toy.half_width(side) < geo_head_y[1]
     return Program(stack_targets(targets), jnp.asarray(0.0), covers, -radial,
-                   jnp.asarray(cfg.arm.grip_closed, jnp.float32))
+                   jnp.asarray(tool_squeeze(arm, cfg), jnp.float32))
 
 
 def _corridor_blocked(cfg: ActionConfig, toy: Body, obst: Body, min_radius: float) -> jax.Array:

@@ -33,6 +33,7 @@ from .actions.rules import goal_row
 from .labels import Outcome, read_at_rest
 from .planning import Setup, home_grip, make_plan_fn, setup
 from .programs import toy_reachable
+from .straight import corrections, stopped_corrections, straight_rows
 from .actions.tables import run_steps, tables
 from .templates import N_STEPS, ActionConfig
 
@@ -78,7 +79,7 @@ def welds(world: wd.World) -> Welds:
 
 
 def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array, mx, d, q_way, grip_way,
-              seg_steps, closed, observe, n_run=None, n_steps=N_STEPS, guard=None):
+              seg_steps, closed, observe, n_run=None, n_steps=N_STEPS, guard=None, corr=None):
     """Run a program on one scene (``lax.scan`` over ``N_STEPS`` control steps) with grasp locks.
 
     With ``n_run`` (scalar, may be traced but not batched) only the first ``n_run`` steps are
@@ -96,6 +97,8 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
     ``guard`` (v2): (S,) bool guarded segments and (W,) bool waypoints of this action
     (``guard.guard_tables``): at the first guarded step where a pad lands on an object
     (``guard.pad_landing``) the waypoints become ``guard.stopped_way`` of the arm's joints.
+    ``corr`` (v2): the straight segments' joint corrections (S, P - 1, 6)
+    (``straight.corrections``); a stop zeroes those of the segments it holds still.
     """
     arm = st.arm
     toy_b, obj_b = st.world.toy_body, st.world.obj_body
@@ -104,12 +107,13 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
     def control_step(carry, t):
         d, eq_data = carry[:2]
         if guard is not None:  # v2: the descent stops where a pad lands (v1 traces as before)
-            q_w, stopped = carry[2:]
+            q_w, stopped, c_w = carry[2:]
             stop = ~stopped & jnp.asarray(guard[0])[A.segment_index(seg_steps, t)] & G.pad_landing(arm, cfg, d, both)
             q_w = jnp.where(stop, G.stopped_way(q_w, jnp.asarray(guard[1]), G.hold_joints(d.qpos[arm.qpos_arm], d.qvel[arm.qvel_arm])), q_w)
+            c_w = jnp.where(stop, stopped_corrections(c_w, jnp.asarray(guard[1])), c_w)
             stopped = stopped | stop
         else:
-            q_w = q_way
+            q_w, c_w = q_way, corr
         closing = jnp.asarray(closed)[A.segment_index(seg_steps, t)]
         touch_obj = jnp.all(A.finger_contacts(arm, cfg.arm, d, w.obj_geoms))
         touch_toy = jnp.all(A.finger_contacts(arm, cfg.arm, d, w.toy_geoms))
@@ -123,9 +127,9 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
         eq_data = eq_data.at[w.obj, 3:10].set(jnp.where(new_obj, rel_obj, eq_data[w.obj, 3:10]))
         eq_data = eq_data.at[w.toy, 3:10].set(jnp.where(new_toy, rel_toy, eq_data[w.toy, 3:10]))
         active = active.at[w.obj].set(lock_obj).at[w.toy].set(lock_toy)
-        d = d.replace(ctrl=A.program_ctrl(arm, q_w, grip_way, seg_steps, t), eq_active=active)
+        d = d.replace(ctrl=A.program_ctrl(arm, q_w, grip_way, seg_steps, t, c_w), eq_active=active)
         d = mjx.step(mx.replace(eq_data=eq_data), d)
-        out = (d, eq_data) if guard is None else (d, eq_data, q_w, stopped)
+        out = (d, eq_data) if guard is None else (d, eq_data, q_w, stopped, c_w)
         return out, observe(d)
 
     def step_or_hold(carry, t):
@@ -134,7 +138,7 @@ def run_program_locked(st: Setup, cfg: ActionConfig, w: Welds, grasp: jax.Array,
     body = control_step if n_run is None else step_or_hold
     init = (d, jnp.asarray(mx.eq_data))
     if guard is not None:
-        init = init + (jnp.asarray(q_way, jnp.float32), jnp.asarray(False))
+        init = init + (jnp.asarray(q_way, jnp.float32), jnp.asarray(False), corr)
     carry, trace = jax.lax.scan(body, init, jnp.arange(n_steps))
     return carry[0], trace
 
@@ -178,6 +182,7 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     wl = welds(world)
     specs = registry()
     g_seg, g_rows = G.guard_tables(cfg)
+    straight = straight_rows(cfg, tb.target)
 
     def simulate_fn(action_id, pair, qpos, qvel, plan, before):
         action_id = jnp.asarray(action_id, jnp.int32)
@@ -190,8 +195,11 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         # one value for the whole batch, so the cond stays a branch under vmap
         n_run = jnp.asarray(run_steps(cfg))[action_id] if cfg.stop_at_program_end else None
         guard = (jnp.asarray(g_seg)[action_id], jnp.asarray(g_rows)[action_id]) if v2 else None
+        srow = jnp.asarray(straight)[action_id]
+        # v2: the straight segments' corrections, from the planned waypoints (as the C engines)
+        corr_of = lambda qw: corrections(arm, cfg, qw, srow)[0] if v2 else None
         run = lambda mx, d, qw, gw: run_program_locked(st, cfg, wl, grasp, mx, d, qw, gw, plan.seg_steps,
-                                                         closed, observe, n_run, tb.n_steps, guard)
+                                                         closed, observe, n_run, tb.n_steps, guard, corr_of(qw))
         final, trace = jax.vmap(run, in_axes=(world.model_axes, 0, 0, 0))(
             models, data, plan.q_way, plan.grip_way)
         measure = jnp.asarray(tb.measure)[action_id]

@@ -31,6 +31,7 @@ from relaff_jax.sim.planning import setup
 from relaff_jax.sim.programs import toy_reachable
 from relaff_jax.sim.guard import guard_tables, stopped_way
 from relaff_jax.sim.simulate import initial_data
+from relaff_jax.sim.straight import corrections, stopped_corrections, straight_rows
 from relaff_jax.sim.actions.tables import run_steps, tables
 from relaff_jax.sim.templates import ActionConfig
 
@@ -46,7 +47,9 @@ class ProgramInputs(NamedTuple):
     (``actions.tables.run_steps``); v2: whether goals are read at rest (``labels.read_at_rest``);
     guard (T,) bool: may a landing pad stop the descent at step t (``guard.guard_tables``),
     guard_rows (W,) bool the waypoints a stop replaces, aid the action id, q_way (B, W, 6) and
-    grip_way (B, W) the plan's waypoints (float32; ``stop_descent`` recomputes ``ctrl``).
+    grip_way (B, W) the plan's waypoints (float32; ``stop_descent`` recomputes ``ctrl``); corr
+    (B, S, P - 1, 6) float32 the straight segments' joint corrections (``straight.corrections``;
+    v1: P - 1 = 0, unused).
     """
 
     qpos: np.ndarray
@@ -63,6 +66,7 @@ class ProgramInputs(NamedTuple):
     aid: int
     q_way: np.ndarray
     grip_way: np.ndarray
+    corr: np.ndarray
 
 
 @functools.lru_cache(maxsize=4)
@@ -75,15 +79,22 @@ def _jitted(cfg: ActionConfig):
         d = jax.vmap(lambda q, v: initial_data(st, cfg, aid, q, v))(qpos, qvel)
         return d.qpos, d.eq_active
 
-    def ctrl(aid, q_way, grip_way):
+    v2 = cfg.programs == "v2"
+    srows = jnp.asarray(straight_rows(cfg, tb.target))
+
+    def corr(aid, q_way):  # (B, S, P - 1, 6): as simulate.make_simulate_fn's, from the plan
+        return jax.vmap(lambda qw: corrections(st.arm, cfg, qw, srows[aid])[0])(q_way)
+
+    def ctrl(aid, q_way, grip_way, c):
         seg = jnp.asarray(tb.steps)[aid]
-        one = lambda qw, gw: jax.vmap(lambda t: A.program_ctrl(st.arm, qw, gw, seg, t))(jnp.arange(tb.n_steps))
-        return jax.vmap(one)(q_way, grip_way)
+        one = lambda qw, gw, cc: jax.vmap(lambda t: A.program_ctrl(st.arm, qw, gw, seg, t, cc if v2 else None))(
+            jnp.arange(tb.n_steps))
+        return jax.vmap(one)(q_way, grip_way, c)
 
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
     specs = registry()
     rules = jax.vmap(lambda o: goal_row(specs, cfg, o))
-    return jax.jit(init), jax.jit(ctrl), jax.jit(reach), jax.jit(rules)
+    return jax.jit(init), jax.jit(ctrl), jax.jit(reach), jax.jit(rules), jax.jit(corr)
 
 
 on_change(_jitted.cache_clear)
@@ -107,7 +118,7 @@ def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarr
     grip_way (B, W) the plan's waypoints. The objects start at ``qpos``/``qvel`` exactly (in
     float64), the arm and the hand welds as ``simulate.initial_data`` sets them.
     """
-    init, ctrl, _, _ = _jitted(cfg)
+    init, ctrl, _, _, corr = _jitted(cfg)
     a = jnp.int32(aid)
     qpos = np.asarray(qpos, np.float64)
     qvel = np.asarray(qvel, np.float64)
@@ -117,24 +128,28 @@ def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarr
     nv = setup(cfg).world.mj_model.nv
     full_v = np.zeros((len(qpos), nv))
     full_v[:, :nvo] = qvel
-    u = np.asarray(_padded(lambda qw, gw: ctrl(a, qw, gw), q_way, grip_way), np.float64)
+    c = np.asarray(_padded(lambda qw: corr(a, qw), q_way), np.float32)
+    u = np.asarray(_padded(lambda qw, gw, cc: ctrl(a, qw, gw, cc), q_way, grip_way, c), np.float64)
     tb = tables(cfg)
     seg = np.asarray(A.segment_index(tb.steps[aid], jnp.arange(tb.n_steps)))
     g_seg, g_rows = guard_tables(cfg)
     return ProgramInputs(full_q, full_v, np.asarray(eq0, np.float64), u, np.asarray(tb.closed[aid])[seg],
                          int(tb.grasp[aid]), int(tb.measure[aid]), int(run_steps(cfg)[aid]), cfg.programs == "v2",
                          g_seg[aid][seg], g_rows[aid], int(aid), np.array(q_way, np.float32),
-                         np.array(grip_way, np.float32))
+                         np.array(grip_way, np.float32), c)
 
 
 def stop_descent(cfg: ActionConfig, inp: ProgramInputs, b: int, t: int, q_arm: np.ndarray) -> None:
     """A pad of program ``b`` landed at step ``t`` (``guard.pad_landing_np``): its waypoints
     become ``guard.stopped_way`` of the arm's joints ``q_arm`` (6,) (float64, read as float32
     like MJX's) and ``inp.ctrl[b, t:]`` the commands of those waypoints (the same jitted
-    ``arm.program_ctrl`` as ``program_inputs``, one row: both C executors get the same bits)."""
+    ``arm.program_ctrl`` as ``program_inputs``, one row: both C executors get the same bits); the
+    straight segments' corrections as ``straight.stopped_corrections`` (as MJX's)."""
     q_way = stopped_way(inp.q_way[b], inp.guard_rows, np.asarray(q_arm, np.float32))
     inp.q_way[b] = q_way
-    u = _padded(lambda qw, gw: _jitted(cfg)[1](jnp.int32(inp.aid), qw, gw), q_way[None], inp.grip_way[b][None])
+    inp.corr[b] = stopped_corrections(inp.corr[b], inp.guard_rows)
+    u = _padded(lambda qw, gw, cc: _jitted(cfg)[1](jnp.int32(inp.aid), qw, gw, cc), q_way[None],
+                inp.grip_way[b][None], inp.corr[b][None])
     inp.ctrl[b, t:] = np.asarray(u[0], np.float64)[t:]
 
 
