@@ -175,7 +175,14 @@ def _program_move(arm, cfg, toy, oth) -> Program:
     d = jnp.where(jnp.dot(d, c) > 0, -d, d)  # the end nearer the robot
     tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
     half = lambda b: arm.pad_thickness  # half the closed fingers' footprint along d
-    if cfg.programs == "v2":  # ... or the palm's (5 cm) where a body reaches up to the palm
+    if cfg.programs == "v2":
+        # a toy whose top is within palm_margin of the palm's underside is pinned under the
+        # palm's edge as the fingers push its foot and it tips (a 12 cm can: 70 N into the
+        # table for 1.5 s): the hand then sweeps higher, the palm palm_margin above the top
+        top = toy.z_range()[1]
+        palm = cfg.tip_clearance + 0.005 + arm.palm_above_tip
+        tcp_z = tcp_z + jnp.where(jnp.abs(top - palm) < cfg.palm_margin, top + cfg.palm_margin - palm, 0.0)
+        # ... and the hand's footprint is the palm's (5 cm) where a body reaches up to the palm
         palm_z = tcp_z - arm.tip_below_tcp + arm.palm_above_tip - cfg.palm_margin
         half = lambda b: jnp.where(b.z_range()[1] > palm_z, float(arm.palm_half[1]), arm.pad_thickness)
     reach = toy.half_width(d) + half(toy) + cfg.rake_gap
