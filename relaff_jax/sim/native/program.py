@@ -128,7 +128,7 @@ def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarr
     nv = setup(cfg).world.mj_model.nv
     full_v = np.zeros((len(qpos), nv))
     full_v[:, :nvo] = qvel
-    c = np.asarray(_padded(lambda qw: corr(a, qw), q_way), np.float32)
+    c = np.array(_padded(lambda qw: corr(a, qw), q_way), np.float32)  # writable: a stop zeroes rows
     u = np.asarray(_padded(lambda qw, gw, cc: ctrl(a, qw, gw, cc), q_way, grip_way, c), np.float64)
     tb = tables(cfg)
     seg = np.asarray(A.segment_index(tb.steps[aid], jnp.arange(tb.n_steps)))
