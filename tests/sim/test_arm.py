@@ -15,16 +15,6 @@ from relaff_jax.config.action import ArmConfig
 
 
 @pytest.fixture(scope="module")
-def model():
-    return mujoco.MjModel.from_xml_path(str(A.arm_test_xml_path()))
-
-
-@pytest.fixture(scope="module")
-def arm(model):
-    return A.arm_from_model(model)
-
-
-@pytest.fixture(scope="module")
 def ik(arm):
     cfg = ArmConfig()
     return jax.jit(jax.vmap(lambda t, q: A.solve_ik(arm, cfg, t, q)))

@@ -6,23 +6,12 @@ import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-import pytest
 
 from relaff_jax.config.action import ActionConfig, ArmConfig
 from relaff_jax.constants import ACTIONS
 from relaff_jax.sim import arm as A
 from relaff_jax.sim import straight as S
 from relaff_jax.sim.templates import TPL_TARGET
-
-
-@pytest.fixture(scope="module")
-def model():
-    return mujoco.MjModel.from_xml_path(str(A.arm_test_xml_path()))
-
-
-@pytest.fixture(scope="module")
-def arm(model):
-    return A.arm_from_model(model)
 
 
 def c_tcp_pos(model, arm, q):
