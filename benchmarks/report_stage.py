@@ -191,7 +191,7 @@ def main() -> None:
     if args.child:
         return child(args.out / "results", Path(args.child[1]), args.child[0], args.profile, data)
     print(f"{platform.machine()} {os.cpu_count()} cores, load average {os.getloadavg()}")
-    results = build(args.out, args.sizes, args.resamples)
+    build(args.out, args.sizes, args.resamples)
     if args.data:
         t = time.perf_counter()
         build_data(args.out, args.data)
