@@ -96,8 +96,11 @@ def build_data(root: Path, n: int) -> dict[str, str]:
     world's, so no example pictures (``examples_per_action`` 0). Reused when there."""
     import numpy as np
 
+    from relaff_jax.config.dataset import DatasetConfig
     from relaff_jax.constants import ACTIONS, RELATIONS
     from relaff_jax.data import generate_dataset, info
+
+    sizes = DatasetConfig(n_samples=n, rollout_batch=4096)
 
     def rollout(key, batch):
         rng = np.random.default_rng(int(np.asarray(key).astype(np.int64).sum()))
@@ -118,7 +121,7 @@ def build_data(root: Path, n: int) -> dict[str, str]:
         except Exception:  # noqa: BLE001 (absent or partial: write it)
             done = False
         if not done:
-            generate_dataset(d, act, n, rollout, seed=i, batch=4096, progress=False)
+            generate_dataset(d, act, rollout, seed=i, progress=False, dataset_config=sizes)
         dirs[act] = str(d)
     return dirs
 
