@@ -31,7 +31,6 @@ def worker(cells: list[tuple[str, int]], k: int, reps: int) -> None:
     sys.path.insert(0, str(HERE))
     from forest_engines import inputs
 
-    from relaff_jax import learn as L
     from relaff_jax.config.experiment import ForestConfig
     from relaff_jax.learn.forest.compiled import forest as cf
 

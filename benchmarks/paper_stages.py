@@ -224,7 +224,6 @@ def features_stage(n: int) -> dict:
     (``culled=False``, the stage before issue 47), on the same n C-settled lift scenes in chunks
     of 32 (the paper preset's feature_batch), after an untimed pass over every chunk (compiles),
     chunks alternating which goes first; checks every output equal."""
-    from relaff_jax import perception as pc
     from relaff_jax.config.perception import PerceptionConfig
     from relaff_jax.perception import from_sim
 

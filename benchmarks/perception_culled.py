@@ -3,9 +3,9 @@ capacities sized per call (``perception.culled``, the default) against every cal
 config's capacities (``make_feature_fn(..., culled=False)``: 65,536 rays, 32,768 pixel slots,
 RHF tiles of 256 per scene, the stage before), on the same scenes in the same run.
 
-Scenes: ``--scenes`` per action of ``--actions``, sampled and settled as the generate stage
-does (``scenes.sample_pairs`` + place, MuJoCo C settle), in chunks of 32 (the paper preset's
-``feature_batch``) with rollout ids as in a dataset. One untimed pass of each function over
+Scenes: ``--scenes`` per action of ``--actions`` (``settled_scenes.load_scenes``: sampled and
+settled as the generate stage does, in chunks of 32, the paper preset's ``feature_batch``,
+with rollout ids as in a dataset). One untimed pass of each function over
 every chunk (compiles: the sized path compiles one program per capacity it meets), then a
 timed pass, chunk by chunk, the two functions alternating first. Asserts that every output
 (PCA, RHF, unseen, voxel counts, overflow) is equal, bit for bit, and prints scenes/s of both
@@ -17,50 +17,21 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import time
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
-import relaff_jax  # noqa: F401  (XLA flags before JAX work)
+from settled_scenes import add_scene_args, load_scenes, machine_line  # first: XLA flags before JAX work
 from relaff_jax import perception as pc
 from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.perception import from_sim
-from relaff_jax.sim import rollouts, templates
-from relaff_jax.sim.native import settle as native_settle
-from relaff_jax.sim import scenes as sc
-from relaff_jax.sim import world as wd
-from relaff_jax.sim.native.batch import default_threads
-
-
-def settled_chunks(sw, action: str, n: int, seed: int, first_id: int) -> list[dict]:
-    """n settled scenes of ``action``'s pairs in chunks of 32 (``pair``, ``qpos_settled``, ``rollout_id``)."""
-    cfg = templates.ActionConfig()
-    place_fn, _, _ = sc.jitted_scene_fns(sw, cfg.scene)
-    kp, kq = jax.random.split(jax.random.PRNGKey(seed))
-    pair = np.asarray(sc.sample_pairs(kp, rollouts.allowed_pairs(sw, action), sw, n))
-    q0, it = jax.device_get(place_fn(kq, jnp.asarray(pair)))
-    s = native_settle.settle_batch(sw, pair, q0, it, cfg.scene, default_threads())
-    ids = np.arange(n, dtype=np.int64) + first_id
-    q = np.asarray(s.qpos)
-    return [{"pair": pair[lo:lo + 32], "qpos_settled": q[lo:lo + 32], "rollout_id": ids[lo:lo + 32]}
-            for lo in range(0, n, 32)]
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--actions", nargs="+", default=["lift", "take", "pour"])
-    ap.add_argument("--scenes", type=int, default=256, help="scenes per action (a multiple of 32)")
-    ap.add_argument("--seed", type=int, default=0)
-    args = ap.parse_args()
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}; load average before "
-          f"{os.getloadavg()[0]:.2f}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
-    sw = wd.build_world(templates.ActionConfig().phys)
-    chunks = []
-    for i, a in enumerate(args.actions):
-        chunks += settled_chunks(sw, a, args.scenes, args.seed + 10 * i, 2**33 + i * args.scenes)
+    args = add_scene_args(argparse.ArgumentParser(description=__doc__.split("\n\n")[0]), scenes=256).parse_args()
+    print(machine_line(), flush=True)
+    sw, chunks = load_scenes(args)
     n = sum(len(c["pair"]) for c in chunks)
     cfg = PerceptionConfig()
     fns = {"full": from_sim.make_feature_fn(sw, cfg, args.seed, culled=False),

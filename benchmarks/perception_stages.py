@@ -1,6 +1,6 @@
 """Where the features stage's time goes, stage by stage, at the capacities it runs.
 
-Scenes: ``--scenes`` settled scenes per action (``perception_culled.settled_chunks``), sorted
+Scenes: ``--scenes`` settled scenes per action (``settled_scenes.load_scenes``), sorted
 by active tiles and cut into calls of ``from_sim.SUB_BATCH`` (4) as ``make_culled_features``
 does; each call runs at its ``tile_capacity``. Every stage of the chain is jitted on its own
 (vmapped over the call's scenes, inputs computed by the stage before, untimed) and timed
@@ -17,22 +17,18 @@ machine the CPU figure is the steadier one).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
-import platform
-import sys
 import time
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-import relaff_jax  # noqa: F401  (XLA flags before JAX work)
+from settled_scenes import add_scene_args, load_scenes, machine_line  # first: XLA flags before JAX work
 from relaff_jax import perception as pc
 from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.perception import from_sim
-import contextlib
-
 from relaff_jax.perception import pipeline
 from relaff_jax.perception.descriptors import pca_object, rhf_histograms, rhf_histograms_fused
 from relaff_jax.perception.noise import add_depth_noise
@@ -40,11 +36,6 @@ from relaff_jax.perception.raycast import surface_normals
 from relaff_jax.perception.render import active_tiles, compact_objects, render_objects
 from relaff_jax.perception.scene import SceneGeoms, make_scene
 from relaff_jax.perception.voxels import voxel_downsample
-from relaff_jax.sim import templates
-from relaff_jax.sim import world as wd
-
-sys.path.insert(0, str(Path(__file__).parent))
-from perception_culled import settled_chunks  # noqa: E402
 
 
 def stage_fns(geom_type, geom_seg, cfg):
@@ -88,7 +79,7 @@ def fused_rhf():
 
 def run_stages(fns, s, x, m, k):
     """Each stage once on one call's inputs; returns {name: seconds} (blocking after each)."""
-    t, out = {}, {}
+    t = {}
 
     def go(name, *args):
         t0 = time.process_time()
@@ -109,18 +100,11 @@ def run_stages(fns, s, x, m, k):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--actions", nargs="+", default=["lift", "take", "pour"])
-    ap.add_argument("--scenes", type=int, default=64, help="scenes per action (a multiple of 32)")
+    ap = add_scene_args(argparse.ArgumentParser(description=__doc__.split("\n\n")[0]), scenes=64)
     ap.add_argument("--rounds", type=int, default=3, help="timed passes (the best per stage is kept)")
-    ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}; load average before "
-          f"{os.getloadavg()[0]:.2f}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
-    sw = wd.build_world(templates.ActionConfig().phys)
-    chunks = []
-    for i, a in enumerate(args.actions):
-        chunks += settled_chunks(sw, a, args.scenes, args.seed + 10 * i, 2**33 + i * args.scenes)
+    print(machine_line(), flush=True)
+    sw, chunks = load_scenes(args)
     geoms, root = from_sim.jitted_geoms(sw), jax.random.PRNGKey(args.seed)
     parts = [jax.device_get(geoms(jnp.asarray(c["pair"], jnp.int32), jnp.asarray(c["qpos_settled"], jnp.float32)))
              for c in chunks]

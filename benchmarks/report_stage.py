@@ -96,8 +96,11 @@ def build_data(root: Path, n: int) -> dict[str, str]:
     world's, so no example pictures (``examples_per_action`` 0). Reused when there."""
     import numpy as np
 
+    from relaff_jax.config.dataset import DatasetConfig
     from relaff_jax.constants import ACTIONS, RELATIONS
     from relaff_jax.data import generate_dataset, info
+
+    sizes = DatasetConfig(n_samples=n, rollout_batch=4096)
 
     def rollout(key, batch):
         rng = np.random.default_rng(int(np.asarray(key).astype(np.int64).sum()))
@@ -118,7 +121,7 @@ def build_data(root: Path, n: int) -> dict[str, str]:
         except Exception:  # noqa: BLE001 (absent or partial: write it)
             done = False
         if not done:
-            generate_dataset(d, act, n, rollout, seed=i, batch=4096, progress=False)
+            generate_dataset(d, act, rollout, seed=i, progress=False, dataset_config=sizes)
         dirs[act] = str(d)
     return dirs
 
@@ -191,7 +194,7 @@ def main() -> None:
     if args.child:
         return child(args.out / "results", Path(args.child[1]), args.child[0], args.profile, data)
     print(f"{platform.machine()} {os.cpu_count()} cores, load average {os.getloadavg()}")
-    results = build(args.out, args.sizes, args.resamples)
+    build(args.out, args.sizes, args.resamples)
     if args.data:
         t = time.perf_counter()
         build_data(args.out, args.data)

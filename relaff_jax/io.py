@@ -21,7 +21,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from relaff_jax.diskspace import NO_SPACE, disk_full, free_bytes, is_no_space  # noqa: F401  (rio.disk_full, ...)
+from relaff_jax.diskspace import NO_SPACE, disk_full, is_no_space  # noqa: F401  (re-exported: rio.disk_full, rio.is_no_space)
 from relaff_jax.errors import CorruptFileError, UserError
 
 

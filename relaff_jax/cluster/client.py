@@ -38,7 +38,7 @@ def _distributed():
 
 def _has_bokeh() -> bool:
     try:
-        import bokeh  # noqa: F401
+        import bokeh  # noqa: F401  (only whether it is installed)
     except ModuleNotFoundError:
         return False
     return True

@@ -54,8 +54,3 @@ class Remote:
 
     def __repr__(self) -> str:
         return f"Remote({getattr(self.factory, '__name__', self.factory)!r}, key={self.key[:12]})"
-
-
-def builds_in_process() -> int:
-    """How many recipes this process has built and still keeps (tests: one per worker)."""
-    return len(_BUILT)

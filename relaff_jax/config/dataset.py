@@ -19,8 +19,8 @@ class DatasetConfig(Node):
     n_samples: balanced samples per action (N/2 positives, N/2 distance-matched negatives).
     rollout_batch: rollouts simulated per chunk (one ``rollout_fn`` call, one compile).
     feature_batch: samples per feature chunk (one perception call).
-        ``generate_dataset`` and ``add_features`` take these three as explicit arguments; the
-        fields let one config node hold them for the callers.
+        ``generate_dataset`` reads ``n_samples`` and ``rollout_batch`` from this node (their one
+        source); ``add_features`` takes its batch as an argument (its callers pass ``feature_batch``).
     max_rollouts: cap on simulated rollouts (rounded up to whole chunks); the paper's
         1.5M simulations over nine actions are ~170k per action. Not part of the resume
         check, so a run stopped by the cap can be rerun with a larger one.

@@ -3,7 +3,8 @@
 
 Public API::
 
-    generate_dataset(out_dir, action, n_samples, rollout_fn, seed, batch, config_dict) -> summary
+    generate_dataset(out_dir, action, rollout_fn, seed, config_dict, dataset_config=...) -> summary
+        (N and the chunk's batch: the node's ``n_samples`` and ``rollout_batch``)
     load_dataset(dir)  -> dict of (N, ...) arrays of the selected samples (+ features, + action)
     load_rollouts(dir) -> dict of (R, ...) arrays of every rollout (+ ``selected`` mask)
     add_features(dir, compute_fn, batch)  -> attaches (N, ...) feature arrays (pca, rhf, ...)

@@ -1,7 +1,8 @@
 """Generation of a balanced, resumable dataset of labelled rollouts for one action.
 
 Takes a *rollout function* ``rollout_fn(key, batch_size) -> dict[str, array]`` that simulates
-and labels one batch of scenes, an action, N, a seed and a batch size; gives a dataset
+and labels one batch of scenes, an action, a seed and the dataset node (``DatasetConfig``: N is
+its ``n_samples``, the batch size its ``rollout_batch``, with the selection's settings); gives a dataset
 directory holding every rollout (orbax chunks) and a balanced selection of N of them
 (``selection.py``), and returns a summary.
 
@@ -61,10 +62,8 @@ SETTLE_OF_ENGINE = {"mjx": "mjx", "native": "mujoco_c_batch/1"}
 def generate_dataset(
     out_dir: str | os.PathLike,
     action: str,
-    n_samples: int,
     rollout_fn: Callable[[Any, int], Mapping[str, Any]],
     seed: int,
-    batch: int,
     config_dict: Mapping[str, Any] | None = None,
     progress: bool = True,
     *,
@@ -73,13 +72,16 @@ def generate_dataset(
     client: Any = None,
     window: int | None = None,
 ) -> dict[str, Any]:
-    """Simulate rollouts in chunks until ``n_samples`` balanced samples exist; write the dataset.
+    """Simulate rollouts in chunks until ``dataset_config.n_samples`` balanced samples exist;
+    write the dataset.
 
     out_dir: new, empty or resumable dataset directory.
     rollout_fn(key, batch) -> dict of (batch, ...) arrays (see module docstring); called with
         ``jax.random.fold_in(jax.random.PRNGKey(seed), k)`` for chunk ``k``, always with
-        ``batch`` as its second argument (static shapes: one compile).
+        ``batch = dataset_config.rollout_batch`` as its second argument (static shapes: one compile).
     config_dict: the action/physics config, stored in the sidecar and compared on resume.
+    dataset_config: the dataset node (default ``DatasetConfig()``), the one source of the sizes
+        (``n_samples``, ``rollout_batch``) and of the selection's settings; recorded in the sidecar.
     object_names: table for int ``toy``/``other`` ids, if the rollout_fn returns ids.
     client: a ``distributed.Client`` to simulate chunks on (None: in this process); ``window``:
         chunks in flight at once (default: the cluster's task slots).
@@ -88,12 +90,12 @@ def generate_dataset(
     ``discarded_chunks`` simulated past the stopping point (with a cluster) and dropped.
     """
     check_action(action)
-    n_samples = check_int("n_samples", n_samples, 2)
-    batch = check_int("batch", batch, 1)
+    dcfg = dataset_config or DatasetConfig()
+    n_samples = int(dcfg.n_samples)  # the node checked both when it was built; int: JSON of a numpy int
+    batch = int(dcfg.rollout_batch)
     seed = check_int("seed", seed, 0, 2**32 - 1)
     if not callable(rollout_fn):
         raise DatasetError("rollout_fn must be callable")
-    dcfg = dataset_config or DatasetConfig()
     config = jsonable_config(config_dict)
     header = {
         "format": FORMAT,

@@ -14,7 +14,6 @@ import numpy as np
 
 from relaff_jax import io as rio
 from relaff_jax.config.dataset import DatasetConfig
-from relaff_jax.constants import ACTIONS
 from relaff_jax.data.errors import DatasetError
 from relaff_jax.sim.actions.registry import names
 

@@ -79,7 +79,7 @@ def resampled(bits: np.ndarray, on: np.ndarray, w: np.ndarray, v: np.ndarray, wo
     """``(B, C + 2, s)`` bootstrap means of the half: scene weights ``w (B, m)``, repetition
     weights ``v (B, R)``; the reference's products (``products``, of the rows read from the
     bits, ``Rows``) and einsum (``work``: arrays reused across calls)."""
-    c, (s, r, m) = bits.shape[0] + on.shape[0], bits.shape[1:]
+    c, (s, r, _) = bits.shape[0] + on.shape[0], bits.shape[1:]
     needed = np.concatenate([bits.any(-1), on.any(-1)]).reshape(-1)  # an all-zero row's product is +0 in any order
     per_rep = products(Rows(bits, on, work), w, needed, work)  # accuracy per repetition and resample
     return np.einsum("csrb,br->bcs", per_rep.reshape(c, s, r, len(w)), v)

@@ -75,12 +75,6 @@ def tie_weights(score: np.ndarray) -> np.ndarray:
     return win / np.maximum(win.sum(-1, keepdims=True), 1)
 
 
-def weighted(values: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """``sum_k w_k values_k`` over the last axis; NaN where the weights are all 0."""
-    v = np.where(w > 0, values, 0.0)
-    return np.where(w.sum(-1) > 0, (v * w).sum(-1), np.nan)
-
-
 def _curves(mean: np.ndarray, tol: np.ndarray, chance: float) -> tuple[np.ndarray, np.ndarray]:
     """Per size bf and gain cells ``(..., A, C + 2, S)`` against NB; ``tol (A,)`` at-chance tolerances."""
     nb = mean[..., :1, :]  # NB is condition 0

@@ -7,7 +7,6 @@ answers with a state in absent / partial / complete / stale / corrupt and a reas
 """
 from __future__ import annotations
 
-import math
 import os
 from pathlib import Path
 from typing import Any, Mapping, Sequence

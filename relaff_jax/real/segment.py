@@ -19,7 +19,6 @@ from __future__ import annotations
 import functools
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from relaff_jax.errors import UserError

@@ -12,7 +12,9 @@ Files:
 - ``findings.py``: which of the paper's findings a run reproduces; correlation clusters;
 - ``figures.py``: paper Figs. 6-12 and the dataset figure (``matplotlib.figure.Figure``, no pyplot);
 - ``examples.py``: example scenes drawn by ``relaff_jax.perception.from_sim.show_scene``;
-- ``sections.py``: the document's sections as blocks;
+- ``sections.py``: the document's sections as blocks (re-exporting the two below);
+- ``data_sections.py``: the datasets' statistics and the example scenes;
+- ``run_sections.py``: the introduction, the sizes of the protocol and the run;
 - ``document.py``: blocks rendered as ``report.md`` and a self-contained ``report.html``;
 - ``reach.py``: the "Reach or relation" section (what the labels consist of, ``reach.json``);
 - ``audit.py``: the "Physics audit" section from the datasets' stored audits (``fig_audit.png``);

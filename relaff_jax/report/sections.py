@@ -2,22 +2,22 @@
 
 Takes the experiment (``load_results``), its one analysis ``{space: analyse(...)}``, the
 findings and the report folder (a figure block is only added when its PNG was written);
-gives the blocks of: the introduction, the findings summary, the datasets and example scenes,
-the learning curves, Table II per space, best after ten, the correlation clusters, the
-threshold study and the run (preset, timings, versions).
+gives the blocks of: the findings summary, the learning curves, Table II per space, each
+method against NB, best after ten, the correlation clusters and the threshold study. The
+blocks about the datasets (``data_sections``: statistics, example scenes) and about the run
+(``run_sections``: introduction, sizes of the protocol, the run) are re-exported here.
 """
 from __future__ import annotations
 
-import time
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from relaff_jax.constants import ACTIONS, RELATIONS
+from relaff_jax.constants import ACTIONS
 from relaff_jax.report import folder as F
 from relaff_jax.report import user as U
-from relaff_jax.learn import categories_per_threshold, layout, paper_row, pool_sizes, TABLE2_ROWS
+from relaff_jax.learn import categories_per_threshold, layout, paper_row, TABLE2_ROWS
 from relaff_jax.report.findings import VERDICTS, correlation_clusters
 from relaff_jax.report.formatting import (
     SHORT,
@@ -31,28 +31,13 @@ from relaff_jax.report.formatting import (
     span,
 )
 from relaff_jax.report.robustness import robustness_table
+from relaff_jax.report.data_sections import dataset_blocks, example_blocks  # noqa: F401 (re-exported: write.py's S.*)
+from relaff_jax.report.run_sections import intro_blocks, protocol_blocks, run_blocks  # noqa: F401 (re-exported)
 
 
 def fig_block(out: Path, name: str, caption: str) -> list[tuple]:
     """An image block if ``out/name`` was written, else nothing."""
     return [("img", name, caption)] if (out / name).exists() else []
-
-
-def intro_blocks(res: Mapping[str, Any], results_dir: str | Path, run_info: Mapping[str, Any] | None) -> list[tuple]:
-    cfg = res["config"]
-    spaces = list(res["meta"]["spaces"])
-    blocks: list[tuple] = [("h", 1, "Bootstrapping relational affordances: reproduction report")]
-    intro = (f"Generated {time.strftime('%Y-%m-%d %H:%M')} from `{Path(results_dir)}`: actions {', '.join(res['meta']['actions'])}; "
-             f"spaces {', '.join(s.upper() for s in spaces)}; seed {res['meta']['seed']}; training sizes "
-             f"{', '.join(map(str, cfg.sizes)) if len(cfg.sizes) <= 12 else f'{min(cfg.sizes)}..{max(cfg.sizes)}'}; "
-             f"repetitions PCA {cfg.reps_pca}, RHF {cfg.reps_rhf}.")
-    if run_info:
-        intro += f" Preset `{run_info.get('preset')}`."
-    blocks += [("p", intro)]
-    if any(str(d).startswith("synthetic") for d in res["meta"].get("data", [])):
-        blocks.append(("p", "**These results come from synthetic features** (`relaff experiment --synthetic`): they test "
-                            "the pipeline and say nothing about the paper."))
-    return blocks
 
 
 def findings_blocks(found: Sequence[Mapping[str, Any]]) -> list[tuple]:
@@ -110,45 +95,6 @@ def methods_blocks(a: Mapping[str, Any], cfg: Any, space: str) -> list[tuple]:
                   "the methods. 'best' and 'after ten' are the in-sample choices; 'after ten' the whole curve of the "
                   "learner kept."),
             ("table", ["method", "area", "samples saved", "P(improvement)", "Holm p", "significant"], rows)]
-
-
-def _rate(r) -> str:
-    return "-" if r is None else f"{100 * r:.0f} %"
-
-
-def dataset_blocks(infos: Mapping[str, Mapping[str, Any]], fig: str | None) -> list[tuple]:
-    """Dataset statistics per action from ``relaff_jax.data.info`` dicts."""
-    blocks: list[tuple] = [("h", 2, "Datasets"), (
-        "p", "Per action: the balanced selection (half positive; negatives matched to the positives' distribution of the "
-        "distance between the objects' centres of gravity) and every rollout simulated to find it. Positive rates by "
-        "the settled spatial relation, over all rollouts (what the action does in each relation) and, with counts, "
-        "over the selected samples. `unseen`: samples in which an object has fewer voxels than a PCA frame needs "
-        "(occluded, out of view or too small); its nine PCA values are then zeros, a centroid at the robot base that no "
-        "seen object has, and all 300 RHF values are zeros (docs/perception.md, 'Unseen objects').")]
-    header = ["action", "samples", "rollouts", "rollout pos. rate"] + [f"rollouts {r}" for r in RELATIONS] \
-        + [f"selected {r} (n)" for r in RELATIONS] + ["borrowed", "unseen"]
-    rows = []
-    for action, d in infos.items():
-        sel = [f"{_rate(d['positive_rate_by_relation'][r])} ({d['count_by_relation'][r]['n']})" for r in RELATIONS]
-        feats = d.get("features") or {}
-        rows.append([action, d["n"], d["rollouts"], _rate(d["rollouts_positive_rate"])]
-                    + [_rate(d["rollouts_positive_rate_by_relation"][r]) for r in RELATIONS] + sel
-                    + [d.get("borrowed"), feats.get("unseen_samples", "-")])
-    blocks.append(("table", header, rows))
-    if fig:
-        blocks.append(("img", fig, "Positive rate of every rollout by spatial relation, per action"))
-    return blocks
-
-
-def example_blocks(shown: Sequence[tuple[str, str, str]]) -> list[tuple]:
-    """The example scenes ``[(action, relative path, caption)]`` of ``examples.example_scenes``."""
-    if not shown:
-        return []
-    blocks: list[tuple] = [("h", 2, "Example scenes"),
-                           ("p", "What the robot saw (`perception.from_sim.show_scene`): the simulated Kinect depth image, its "
-                                 "colour segmentation into the toy and the other object, and the two objects' voxel clouds "
-                                 "with their PCA frames.")]
-    return blocks + [("img", path, cap) for _, path, cap in shown]
 
 
 def learning_blocks(out: Path, main: str) -> list[tuple]:
@@ -303,68 +249,3 @@ def threshold_blocks(corr: np.ndarray, a: Mapping[str, Any], cfg: Any, main: str
                            ("table", ["T", f"categories built (of {k})", "best category avg bf", "interval",
                                       "in-sample oracle", "CBn avg bf"], rows)]
     return blocks + fig_block(out, F.FIG_THRESHOLDS, "Best category above each threshold, paper Fig. 12")
-
-
-PAPER_SIZES = {"source": 2000, "category": 2000, "corr": 500, "test": 4000, "reps": "50 (PCA) / 25 (RHF)",
-               "sizes": "2..100 (99 sizes)"}
-
-
-def protocol_blocks(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], cfg: Any,
-                    n_samples: Mapping[str, int] | None = None) -> list[tuple]:
-    """The size of every part of the protocol beside the paper's (``n_samples``: samples per
-    action, for the pools a preset shrinks to the data)."""
-    def rng(vals) -> str:
-        vals = [int(v) for v in vals]
-        return f"{min(vals)}" if min(vals) == max(vals) else f"{min(vals)}-{max(vals)}"
-
-    recorded = res["meta"].get("pool_sizes")  # written by the sweep
-    if recorded:
-        src, corr = rng(p["source"] for p in recorded.values()), rng(p["corr"] for p in recorded.values())
-    elif n_samples:
-        pools = [pool_sizes(int(n), cfg) for n in n_samples.values()]
-        src, corr = rng(p[0] for p in pools), rng(p[1] for p in pools)
-    else:
-        shrunk = " (or fewer: shrunk to the data)" if cfg.shrink_to_data else ""
-        src, corr = f"{cfg.source_size}{shrunk}", f"{cfg.corr_scenes}{shrunk}"
-    tests = [int(v) for x in an.values() if x.get("test_size") is not None for v in x["test_size"]]
-    k = len(res["meta"]["actions"])
-    rows = [["source predictors (training samples each)", src, PAPER_SIZES["source"]],
-            ["category sets (samples per half of a category)", src, PAPER_SIZES["category"]],
-            [f"correlation scenes (per action, shown to all {k} predictors)", corr, PAPER_SIZES["corr"]],
-            ["test scenes (per affordance)", rng(tests) if tests else str(cfg.test_size), PAPER_SIZES["test"]],
-            ["repetitions", f"{cfg.reps_pca} (PCA) / {cfg.reps_rhf} (RHF)", PAPER_SIZES["reps"]],
-            ["training sizes n", f"{min(cfg.sizes)}..{max(cfg.sizes)} ({len(cfg.sizes)} sizes)", PAPER_SIZES["sizes"]],
-            ["window of the average bf", f"n = {span(cfg.sizes, *cfg.bf_sizes)}", "n = 4..25"],
-            ["bootstrap resamples of the intervals", cfg.ci_resamples, "- (no intervals)"]]
-    return [("h", 2, "Sizes of the protocol"), ("table", ["part", "this run", "paper"], rows)]
-
-
-def run_blocks(run_info: Mapping[str, Any] | None, report_s: float | None = None,
-               load: tuple[float, float, float] | None = None, machine: Mapping[str, Any] | None = None) -> list[tuple]:
-    """The run's preset, seed, stage times, machine, load and versions.
-
-    report_s: seconds this report has taken up to its writing (the run log's own ``report``
-      timing, when there, is of an earlier report); load: the 1/5/15-minute load averages
-      as the report is written (a loaded machine makes every timing above slower).
-    """
-    info = dict(run_info or {})
-    items = [f"preset `{info.get('preset')}`, seed {info.get('seed')}"] if run_info else []
-    timings = dict(info.get("timings") or {})
-    if report_s is not None:
-        timings["report"] = f"{report_s:.0f} s (this document)"
-    for st, t in timings.items():
-        items.append(f"{st}: {t:.0f} s" if isinstance(t, (int, float)) else f"{st}: {t}")
-    m = info.get("machine") or machine
-    if m:
-        isa = ", ".join(m.get("isa") or []) or "-"
-        items.append(f"machine: {m.get('cpu_model')}, {m.get('cpus')} cores, {m.get('machine')} ({isa}); {m.get('platform')}")
-        if m.get("blas"):  # the kernels the PCA features' eigen-solver ran on (older logs lack them)
-            items.append("BLAS kernels: " + ", ".join(f"{b.get('internal_api')} {b.get('version')} {b.get('architecture')}"
-                                                      for b in m["blas"]))
-    if load is not None:
-        items.append("load average as the report was written: " + " / ".join(f"{x:.2f}" for x in load)
-                     + " (1 / 5 / 15 min)")
-    v = info.get("versions") or {}
-    if v:
-        items.append("versions: " + ", ".join(f"{k} {val}" for k, val in v.items() if val))
-    return [("h", 2, "The run"), ("ul", items)] if items else []

@@ -13,10 +13,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from . import arm as A
-from . import scenes as sc
-from . import world as wd
-
 from relaff_jax.constants import ACTIONS
 from relaff_jax.config.action import ActionConfig, V2_FIELDS
 from relaff_jax.config import to_dict

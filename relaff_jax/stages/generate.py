@@ -88,7 +88,7 @@ def generate_one(tree: Any, action: str, out: Any, seed: int, *, client: Any = N
     fn, config_dict, names = factory(action, batch)
     if client is not None:
         fn = Remote(factory, action, batch, pick=0)
-    summary = D.generate_dataset(out, action, tree.dataset.n_samples, fn, seed, batch, config_dict, progress=progress,
+    summary = D.generate_dataset(out, action, fn, seed, config_dict, progress=progress,  # sizes: tree.dataset's
                                  dataset_config=tree.dataset, object_names=names, client=client, window=window)
     record_config(out, tree, "generate")  # the tree that made the folder, as every stage's folder holds it
     if read_sidecar(Path(out)).get("status") == "complete":

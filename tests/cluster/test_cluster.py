@@ -24,6 +24,7 @@ import pytest
 from relaff_jax import cluster as C
 from relaff_jax import data as D
 from relaff_jax.cli import main
+from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.errors import UserError
 from relaff_jax.learn.parallel import run_parallel
 
@@ -124,8 +125,10 @@ def test_local2_is_bit_identical(client, baseline, tmp_path):
 @pytest.mark.slow
 def test_generation_overshoot_is_discarded_and_said(client, tmp_path):
     fn = C.Remote(rollout_factory, "lift", 4, pick=0)
-    serial = D.generate_dataset(tmp_path / "a", "lift", 8, rollout_factory("lift", 4)[0], 5, 4, progress=False)
-    par = D.generate_dataset(tmp_path / "b", "lift", 8, fn, 5, 4, progress=False, client=client)
+    sizes = DatasetConfig(n_samples=8, rollout_batch=4)
+    serial = D.generate_dataset(tmp_path / "a", "lift", rollout_factory("lift", 4)[0], 5, progress=False,
+                                dataset_config=sizes)
+    par = D.generate_dataset(tmp_path / "b", "lift", fn, 5, progress=False, client=client, dataset_config=sizes)
     assert par["chunks"] == serial["chunks"]
     assert par["discarded_chunks"] >= 1
     assert serial["discarded_chunks"] == 0

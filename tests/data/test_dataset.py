@@ -7,6 +7,7 @@ close and mostly positive, which is the regime the paper's distance matching is 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shutil
 from pathlib import Path
@@ -18,6 +19,7 @@ from relaff_jax import data as ds
 from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.cli import data as cli_data
 from relaff_jax.data import generate, store
+from relaff_jax.config.constraints import ConfigError
 from relaff_jax.errors import UserError
 
 from helpers import ROOT, TESTS
@@ -25,6 +27,8 @@ from helpers.standins import ACTION_CFG as CFG
 from helpers.standins import DATASET_OTHERS as OTHERS
 from helpers.standins import DATASET_TOYS as TOYS
 from helpers.standins import EXACT, Killed, feature_fn, gen, synthetic_rollout_fn
+
+EXACT40 = dataclasses.replace(EXACT, n_samples=40, rollout_batch=16)  # what gen() builds by default
 
 
 @pytest.fixture(scope="module")
@@ -221,21 +225,47 @@ def test_int_codes_and_object_ids(tmp_path):
 
 
 @pytest.mark.parametrize(
-    "kw, match",
+    "kw, error, match",
     [
-        ({"action": "fly"}, "unknown action 'fly'"),
-        ({"n": 1}, "n_samples must be >= 2"),
-        ({"n": 2.5}, "n_samples must be an integer"),
-        ({"batch": 0}, "batch must be >= 1"),
-        ({"seed": -1}, "seed must be in"),
+        ({"action": "fly"}, ds.DatasetError, "unknown action 'fly'"),
+        ({"n": 1}, ConfigError, r"'dataset.n_samples' must be an integer in \[2, "),
+        ({"n": 2.5}, ConfigError, r"'dataset.n_samples' must be an integer .*got 2.5"),
+        ({"batch": 0}, ConfigError, r"'dataset.rollout_batch' must be an integer in \[1, "),
+        ({"seed": -1}, ds.DatasetError, "seed must be in"),
     ],
 )
-def test_bad_arguments(tmp_path, kw, match):
+def test_bad_arguments(tmp_path, kw, error, match):
+    """Bad sizes are the dataset node's to refuse (when it is built), the rest generate_dataset's:
+    one error naming the value, and no folder."""
     action = kw.pop("action", "lift")
     args = dict(n=10, seed=0, batch=4) | kw
-    with pytest.raises(ds.DatasetError, match=match):
-        ds.generate_dataset(tmp_path / "x", action, args["n"], synthetic_rollout_fn(), args["seed"], args["batch"], progress=False)
+    with pytest.raises(error, match=match):
+        sizes = DatasetConfig(n_samples=args["n"], rollout_batch=args["batch"])
+        ds.generate_dataset(tmp_path / "x", action, synthetic_rollout_fn(), args["seed"], progress=False,
+                            dataset_config=sizes)
     assert not (tmp_path / "x").exists()
+
+
+def test_the_sizes_come_from_the_dataset_node(tmp_path):
+    """``n_samples`` and ``rollout_batch`` are read from the node: the rollout function is
+    called with the node's batch, the selection has its n, and the sidecar's header and its
+    recorded node say the same."""
+    from relaff_jax.io import read_json
+
+    seen = []
+
+    def fn(key, batch):
+        seen.append(batch)
+        return synthetic_rollout_fn()(key, batch)
+
+    node = dataclasses.replace(EXACT, n_samples=12, rollout_batch=8)
+    res = ds.generate_dataset(tmp_path / "d", "lift", fn, 3, CFG, progress=False, dataset_config=node)
+    assert set(seen) == {8} and res["rollouts"] == 8 * len(seen)
+    d = ds.load_dataset(tmp_path / "d")
+    assert len(d["label"]) == 12 and int(d["label"].sum()) == 6
+    meta = read_json(tmp_path / "d" / ds.SIDECAR)
+    assert (meta["n_samples"], meta["batch"]) == (12, 8)
+    assert (meta["dataset_config"]["n_samples"], meta["dataset_config"]["rollout_batch"]) == (12, 8)
 
 
 def test_unwritable_and_foreign_dirs(tmp_path):
@@ -307,9 +337,9 @@ def test_resume_mismatch(built, tmp_path):
         with pytest.raises(ds.DatasetMismatchError, match=what):
             gen(p, **kw)
     with pytest.raises(ds.DatasetMismatchError, match="action"):
-        ds.generate_dataset(p, "push", 40, synthetic_rollout_fn(), 3, 16, CFG, progress=False, dataset_config=EXACT)
+        ds.generate_dataset(p, "push", synthetic_rollout_fn(), 3, CFG, progress=False, dataset_config=EXACT40)
     with pytest.raises(ds.DatasetMismatchError, match="config"):
-        ds.generate_dataset(p, "lift", 40, synthetic_rollout_fn(), 3, 16, {"lift_height": 0.1}, progress=False, dataset_config=EXACT)
+        ds.generate_dataset(p, "lift", synthetic_rollout_fn(), 3, {"lift_height": 0.1}, progress=False, dataset_config=EXACT40)
     ds.load_dataset(p)  # untouched
 
 
@@ -483,18 +513,18 @@ def test_a_sidecar_of_the_old_generate_record_shape_resumes(tmp_path):
     new_shape = {"action": "lift", "action_config": CFG}
     p = tmp_path / "d"
     with pytest.raises(Killed):
-        ds.generate_dataset(p, "lift", 40, synthetic_rollout_fn(kill_after=2), 3, 16, new_shape, progress=False,
-                            dataset_config=EXACT)
+        ds.generate_dataset(p, "lift", synthetic_rollout_fn(kill_after=2), 3, new_shape, progress=False,
+                            dataset_config=EXACT40)
     meta = read_json(p / ds.SIDECAR)
     meta["config"] = {"action": CFG}  # what relaff generate wrote before
     atomic_write_json(p / ds.SIDECAR, meta)
     assert store.read_sidecar(p)["config"] == new_shape
-    res = ds.generate_dataset(p, "lift", 40, synthetic_rollout_fn(), 3, 16, new_shape, progress=False,
-                              dataset_config=EXACT)
+    res = ds.generate_dataset(p, "lift", synthetic_rollout_fn(), 3, new_shape, progress=False,
+                              dataset_config=EXACT40)
     assert res["new_chunks"] > 0
     with pytest.raises(ds.DatasetMismatchError, match="config"):
-        ds.generate_dataset(p, "lift", 40, synthetic_rollout_fn(), 3, 16, {"action": "lift", "action_config": {}},
-                            progress=False, dataset_config=EXACT)
+        ds.generate_dataset(p, "lift", synthetic_rollout_fn(), 3, {"action": "lift", "action_config": {}},
+                            progress=False, dataset_config=EXACT40)
 
 
 def test_add_features_round_trip_and_resume(built, tmp_path):
@@ -559,8 +589,8 @@ def test_add_features_bad_input(built, tmp_path):
 
 
 def test_progress_bar_and_report(tmp_path, capsys):
-    res = ds.generate_dataset(tmp_path / "p", "take", 6, synthetic_rollout_fn(), 0, 8, {}, progress=True,
-                              dataset_config=EXACT)
+    res = ds.generate_dataset(tmp_path / "p", "take", synthetic_rollout_fn(), 0, {}, progress=True,
+                              dataset_config=dataclasses.replace(EXACT, n_samples=6, rollout_batch=8))
     err = capsys.readouterr().err
     assert "take samples" in err  # the tqdm bar, after its compile phase
     assert f"6 samples selected from {res['rollouts']} rollouts" in err
@@ -802,8 +832,8 @@ def test_progress_bar_counts_samples_in_hand_and_ends_at_n(tmp_path, monkeypatch
         return bars[-1]
 
     monkeypatch.setattr(generate, "progress_bar", fake_bar)
-    res = ds.generate_dataset(tmp_path / "lift", "lift", 40, synthetic_rollout_fn(), 3, 16, CFG,
-                              progress=True, dataset_config=EXACT)
+    res = ds.generate_dataset(tmp_path / "lift", "lift", synthetic_rollout_fn(), 3, CFG,
+                              progress=True, dataset_config=EXACT40)
     (bar,) = bars
     assert bar.total == 40
     # the first chunk (the compile) is its own phase, then the bar counts samples

@@ -43,9 +43,9 @@ def reach_rollout_fn(feasible_close_negatives: bool = True, with_feasible: bool 
 
 
 def gen(path, n=40, fn=None, **cfg):
-    dcfg = DatasetConfig(**{"max_rollouts": 4000, "distance_bins": 4, "borrow_fraction": 0.0, **cfg})
-    return ds.generate_dataset(path, "lift", n, fn or reach_rollout_fn(), 5, 32, CFG, progress=False,
-                               dataset_config=dcfg)
+    dcfg = DatasetConfig(**{"max_rollouts": 4000, "distance_bins": 4, "borrow_fraction": 0.0, **cfg},
+                         n_samples=n, rollout_batch=32)
+    return ds.generate_dataset(path, "lift", fn or reach_rollout_fn(), 5, CFG, progress=False, dataset_config=dcfg)
 
 
 def test_select_eligible_and_uniform_hand_worked():

@@ -20,8 +20,8 @@ def scene_run(tmp_path_factory, scene_world, settle):
     root = tmp_path_factory.mktemp("scene_run")
     for seed, action in enumerate(("lift", "take")):
         path = root / "data" / action
-        dataset.generate_dataset(path, action, 16, scene_rollout_fn(scene_world, settle), seed=seed, batch=B,
-                                 progress=False, dataset_config=DatasetConfig(borrow_fraction=1.0))
+        dataset.generate_dataset(path, action, scene_rollout_fn(scene_world, settle), seed=seed, progress=False,
+                                 dataset_config=DatasetConfig(n_samples=16, rollout_batch=B, borrow_fraction=1.0))
         stage_features.add_features(override(runconfig.RunConfig(), {"dataset.feature_batch": B}), path,
                                     progress=False)
     argv = ["experiment", "--synthetic", "150", "--out", str(root / "results"), "--jobs", "2", "--no-progress",

@@ -120,10 +120,11 @@ EXACT = DatasetConfig(max_rollouts=2000, distance_bins=8, borrow_fraction=0.0)  
 
 
 def gen(path, n=40, seed=3, batch=16, fn=None, **kw):
-    """A lift dataset of ``n`` samples from ``synthetic_rollout_fn`` (exact matching by default)."""
-    kw.setdefault("dataset_config", EXACT)
-    return ds.generate_dataset(path, "lift", n, fn or synthetic_rollout_fn(), seed, batch, ACTION_CFG,
-                               progress=False, **kw)
+    """A lift dataset of ``n`` samples in chunks of ``batch`` from ``synthetic_rollout_fn`` (exact
+    matching by default): ``n`` and ``batch`` set the dataset node's ``n_samples`` and ``rollout_batch``."""
+    dcfg = dataclasses.replace(kw.pop("dataset_config", EXACT), n_samples=n, rollout_batch=batch)
+    return ds.generate_dataset(path, "lift", fn or synthetic_rollout_fn(), seed, ACTION_CFG,
+                               progress=False, dataset_config=dcfg, **kw)
 
 
 def feature_fn(kill_after: int | None = None, sizes: list | None = None):

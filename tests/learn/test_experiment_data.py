@@ -21,8 +21,9 @@ def test_experiment_reads_dataset_folders(tmp_path):
     dirs = []
     for i, action in enumerate(("lift", "take", "pour")):
         p = tmp_path / action
-        ds.generate_dataset(p, action, 120, standins.rollout_factory(action, 64)[0], seed=i, batch=64, progress=False,
-                            dataset_config=DatasetConfig(max_rollouts=4000, distance_bins=4, borrow_fraction=0.5))
+        ds.generate_dataset(p, action, standins.rollout_factory(action, 64)[0], seed=i, progress=False,
+                            dataset_config=DatasetConfig(max_rollouts=4000, distance_bins=4, borrow_fraction=0.5,
+                                                         n_samples=120, rollout_batch=64))
         ds.add_features(p, standins.feature_factory(i)[0], batch=64, progress=False)
         dirs.append(str(p))
     loaded = E.load_datasets(dirs)

@@ -6,7 +6,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from relaff_jax import learn as L
 from relaff_jax.config.experiment import ExperimentConfig, ForestConfig
 from relaff_jax.learn.checks import check_config
 from relaff_jax.config import override

@@ -7,7 +7,7 @@ import pytest
 from relaff_jax.learn import layout
 from relaff_jax.learn.analysis import half_curves
 from relaff_jax.learn.intervals import resampled_means, scene_halves
-from relaff_jax.learn.online import FAMILIES, Outcomes, _mix, extend, online_weights
+from relaff_jax.learn.online import FAMILIES, _mix, extend, online_weights
 
 
 def _whole(correct, loo, lay):

@@ -7,7 +7,6 @@ import hashlib
 import json
 import subprocess
 import sys
-import textwrap
 
 import numpy as np
 import pytest
@@ -23,7 +22,6 @@ from relaff_jax.errors import UserError
 from relaff_jax.learn import conditions as C
 from relaff_jax.learn import learners
 from relaff_jax.learn import user_conditions as U
-from relaff_jax.learn.correlation import category_pairs
 from relaff_jax.learn.draws import draw_rep
 from relaff_jax.learn.states import augment, state_features
 from relaff_jax.provenance import derive_seed

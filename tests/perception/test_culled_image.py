@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-import relaff_jax  # noqa: F401
+import relaff_jax  # noqa: F401  (XLA flags before JAX)
 from relaff_jax import perception as P
 from relaff_jax.config.perception import PerceptionConfig, RHFConfig
 from relaff_jax.perception.noise import add_depth_noise

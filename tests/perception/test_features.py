@@ -37,9 +37,8 @@ def test_scene_geoms_match_mujoco_c(scene_world, settle):
 @pytest.fixture(scope="module")
 def small_dataset(tmp_path_factory, scene_world, settle):
     path = tmp_path_factory.mktemp("ds") / "lift"
-    dataset.generate_dataset(path, "lift", 8, scene_rollout_fn(scene_world, settle), seed=1,
-                             batch=B, progress=False,
-                             dataset_config=DatasetConfig(borrow_fraction=1.0))
+    dataset.generate_dataset(path, "lift", scene_rollout_fn(scene_world, settle), seed=1, progress=False,
+                             dataset_config=DatasetConfig(n_samples=8, rollout_batch=B, borrow_fraction=1.0))
     return path
 
 

@@ -4,10 +4,9 @@ and batched, on random clouds with clipped values, empty objects and capacities 
 import dataclasses
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
-import relaff_jax  # noqa: F401
+import relaff_jax  # noqa: F401  (XLA flags before JAX)
 from relaff_jax.config.perception import PerceptionConfig
 from relaff_jax.perception.descriptors import rhf_histograms, rhf_histograms_fused
 

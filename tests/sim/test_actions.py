@@ -1,6 +1,5 @@
 """The nine actions on hand-built scenes whose outcome is obvious, at batch 8 (one compile
 serves every action), and a MuJoCo C replay of some of them."""
-import os
 import jax
 import mujoco
 import jax.numpy as jnp

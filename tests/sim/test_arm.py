@@ -1,5 +1,4 @@
 """Arm kinematics and IK, checked against MuJoCo C (mj_kinematics) on the arm's own model."""
-import os
 
 # MJX/XLA:CPU is ~100x slower on deep kinematic chains with the fusion emitters (docs/arm.md);
 # must be set before JAX creates its CPU client.

@@ -1,7 +1,6 @@
 """The arm in MJX: a waypoint program (reach, grasp, lift, tilt) on a free 1 kg box, checked by
 physics and replayed in native MuJoCo C (mj_step) with the same actuator commands."""
 import functools
-import os
 
 import chex
 import jax

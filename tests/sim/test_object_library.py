@@ -232,8 +232,8 @@ def test_recorded_objects_and_resume_with_a_changed_file_refused(tmp_path):
     assert rec["names"] == ["ball", "dish"] and [d["name"] for d in rec["specs"]] == ["dish"]
     config = {"action": "lift", "action_config": stored_config(cfg), "objects": rec}
     out = tmp_path / "ds"
-    dcfg = DatasetConfig(max_rollouts=64, distance_bins=2, borrow_fraction=1.0)
-    ds.generate_dataset(out, "lift", 4, _synthetic, 0, 16, config, progress=False, dataset_config=dcfg)
+    dcfg = DatasetConfig(max_rollouts=64, distance_bins=2, borrow_fraction=1.0, n_samples=4, rollout_batch=16)
+    ds.generate_dataset(out, "lift", _synthetic, 0, config, progress=False, dataset_config=dcfg)
     meta = read_json(out / ds.SIDECAR)
     assert meta["config"]["objects"]["sha256"] == ol.digest(lib.active().specs) == rec["sha256"]
 
@@ -243,11 +243,11 @@ def test_recorded_objects_and_resume_with_a_changed_file_refused(tmp_path):
     assert rec2["sha256"] != rec["sha256"]
     with pytest.raises(ds.DatasetMismatchError, match=r"was generated with objects [0-9a-f]{12} .*resuming would "
                                                        r"mix two object sets") as e:
-        ds.generate_dataset(out, "lift", 4, _synthetic, 0, 16, {**config, "objects": rec2}, progress=False,
+        ds.generate_dataset(out, "lift", _synthetic, 0, {**config, "objects": rec2}, progress=False,
                             dataset_config=dcfg)
     assert "\n" not in str(e.value)
     with pytest.raises(ds.DatasetMismatchError, match=r"this run resolves to the 29 built-in objects"):
-        ds.generate_dataset(out, "lift", 4, _synthetic, 0, 16, {k: v for k, v in config.items() if k != "objects"},
+        ds.generate_dataset(out, "lift", _synthetic, 0, {k: v for k, v in config.items() if k != "objects"},
                             progress=False, dataset_config=dcfg)
 
     libfile.unlink()

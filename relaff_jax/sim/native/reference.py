@@ -18,7 +18,6 @@ import mujoco
 import numpy as np
 
 from relaff_jax.sim import arm as A
-from relaff_jax.sim import objects as lib
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 from relaff_jax.sim.guard import hold_joints, pad_landing_np
