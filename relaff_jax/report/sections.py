@@ -97,18 +97,25 @@ def methods_blocks(a: Mapping[str, Any], cfg: Any, space: str) -> list[tuple]:
                      fmt(m["poi"][i], 3) + iv("poi_ci", i, 3), fmt(m["poi_holm_p"][i], 3),
                      "yes" if m["poi_holm_reject"][i] else "no"])
     level = 100 * float(cfg.ci_level)
+    paper = np.asarray(a.get("paper", [True] * len(a["actions"])), bool)
+    users = [t for t, p in zip(a["actions"], paper) if not p]
+    basis = (f" Every column rests on the paper's affordances only ({int(paper.sum())} of {len(paper)}; {a['reps']} "
+             f"repetitions; sizes n = {span(a['sizes'], lo, hi)}"
+             + (f"; {100 * float(a['ci_level']):g} % intervals from {a['ci_resamples']} resamples" if "ci_level" in a else "")
+             + ")" + (f"; {', '.join(users)} (not in the paper): its own row in 'Per affordance: does what the "
+                      "robot knows help it?'" if users else "") + ".")
     return [("h", 3, f"Each method against NB ({space.upper()}), beyond the paper's statistics"),
             ("p", f"Area: the gain curve P_bl(n) - P_NB(n) integrated over n = {lo}..{hi} (accuracy x samples; "
                   f"a method 0.1 above NB throughout has {0.1 * (hi - lo):.1f}). Saved: the training samples NB needs "
                   f"to reach the method's accuracy at n = {cfg.select_size} (interpolated between the sizes run), "
                   f"minus {cfg.select_size}; where NB never gets there the largest size counts (a lower bound, "
-                  "'censored'). Both are means over the affordances, with the bias-corrected interval of Table II's "
+                  "'censored'). Both are means over the paper's affordances, with the bias-corrected interval of Table II's "
                   "resamples. P(improvement): the probability that the method's mean window accuracy in a "
                   "repetition beats NB's in another, per affordance (Mann-Whitney U / (R x R)), averaged over the "
-                  "affordances, with its interval from stratified resamples of the repetitions (as rliable). "
+                  "paper's affordances, with its interval from stratified resamples of the repetitions (as rliable). "
                   f"Significant: P(improvement) differs from 0.5 at {100 - level:g} % after Holm's correction over "
                   "the methods. 'best' and 'after ten' are the in-sample choices; 'after ten' the whole curve of the "
-                  "learner kept."),
+                  "learner kept." + basis),
             ("table", ["method", "area", "samples saved", "P(improvement)", "Holm p", "significant"], rows)]
 
 
@@ -287,14 +294,15 @@ def threshold_blocks(corr: np.ndarray, a: Mapping[str, Any], cfg: Any, main: str
     lay = layout(len(a["actions"]), len(cfg.thresholds))
     k = len(a["actions"]) * (len(a["actions"]) - 1) // 2
     counts = categories_per_threshold(corr, cfg.thresholds)
+    paper = np.asarray(a.get("paper", [True] * len(a["actions"])), bool)  # the means: the paper's affordances
     rows = [[f"{t:g}", counts[f"{t:g}"]["built"], fmt(th["avg"][i]),
              ci_text(a, "threshold_ci", i) if "threshold_ci" in a else "-", fmt(th["avg_oracle"][i]),
-             fmt(nanmean(np.where(a["built"][i], a["avg_bf"][:, lay["CBn"][i]], np.nan)))]
+             fmt(nanmean(np.where(a["built"][i] & paper, a["avg_bf"][:, lay["CBn"][i]], np.nan)))]
             for i, t in enumerate(th["T"])]
     rows.append(["all categories (overall average)", k, fmt(curve_average(th["overall_curve"], a["sizes"], cfg)), "-", "-", "-"])
     blocks: list[tuple] = [("h", 2, "Threshold study"),
-                           ("p", f"Categories built at each correlation threshold T and the average bf ({main.upper()}, mean over "
-                                 "affordances) of each affordance's best category among them, aggregated as Table II (per "
+                           ("p", f"Categories built at each correlation threshold T and the average bf ({main.upper()}, mean over the "
+                                 "paper's affordances) of each affordance's best category among them, aggregated as Table II (per "
                                  "affordance over the window, then over the affordances with a value; at T = 0 this is "
                                  "Table II's 'CB1 best'): chosen on one half of the test scenes and scored on the other, "
                                  "and the in-sample oracle; and of CBn (all of them together; over the affordances with a "

@@ -19,6 +19,7 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS
 from relaff_jax.learn import PAPER_TABLE2, TABLE2_ROWS, categories_per_threshold, layout, paper_row
+from relaff_jax.report import affordances as A
 from relaff_jax.report import user as U
 from relaff_jax.report.formatting import (
     SHORT,
@@ -127,7 +128,8 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
 
 def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures: Sequence[str]) -> dict[str, Any]:
     """``summary.json``: Table II per space (avg/min/max, n_targets, intervals, the gain, per
-    affordance values and intervals, the window sizes with a bf per affordance), the chosen
+    affordance values and intervals, the window sizes with a bf per affordance), per affordance
+    whether DB1 helps it (``affordances``, ``report.affordances.summary``), the chosen
     sources, the correlation matrix and categories per threshold, the paper's Table II and
     the figure file names; NaN as None."""
     out = {
@@ -158,6 +160,7 @@ def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures
             "against_nb": {k: v for k, v in x.get("methods", {}).items() if k != "weights"},
             "categories_per_threshold": categories_per_threshold(res[s]["corr"], res["config"].thresholds),
             "user_conditions": U.summary(x),
+            "affordances": A.summary(x),
         }
         for s, x in an.items()
     }
