@@ -83,8 +83,8 @@ def rests_on(a: Any, cfg: Any) -> str:
     rows_n = f"{min(n)}-{max(n)}" if n and min(n) != max(n) else (str(n[0]) if n else "none")
     paper = np.asarray(a.get("paper", [True] * len(a["actions"])), bool)
     users = [t for t, p in zip(a["actions"], paper) if not p]
-    who = f"{int(paper.sum())} paper affordances run" + (f" ({', '.join(users)}: not in the paper, left out)" if users else "")
-    return (f"Rests on {rows_n} of the {who}, by row (column n); {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
+    who = f"{int(paper.sum())} affordances" + (f" (the paper's; {', '.join(users)}: not in the paper, left out)" if users else "")
+    return (f"Rests on {rows_n} of {who}, by row (column n); {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
             f"({', '.join(map(str, ran)) if len(ran) <= 6 else f'{ran[0]}..{ran[-1]}'}); {a['reps']} repetitions{t}. "
             "avg/min/max are over the affordances with a value (n); a bootstrap factor is averaged over the sizes "
             "where it is defined (NB above chance); the gain is the mean accuracy difference to NB over the same window."

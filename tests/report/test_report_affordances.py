@@ -70,7 +70,7 @@ def test_the_report_shows_the_tenth_apart_and_says_what_each_mean_rests_on(repor
     for t in ACTIONS:
         assert f"| {t} |" in sec
     assert "Every column rests on the paper's affordances only (9 of 10;" in md  # the methods block
-    assert md.count("of the 9 paper affordances run (drag: not in the paper, left out), by row") == 2  # Table II, per space
+    assert md.count("of 9 affordances (the paper's; drag: not in the paper, left out), by row") == 2  # Table II, per space
     # Table II's avg and the findings' DB1 best are the nine's means
     s = json.loads((out / "summary.json").read_text())["pca"]
     per = s["table2_per_affordance"]["DB1 best"]
