@@ -9,7 +9,9 @@ its sizes each target has a bf for, the chosen sources ("best", "best after ten"
 and online), Table II per target ``(rows, A)`` and as avg/min/max ``(rows, 3)`` with
 ``n_targets`` and bootstrap intervals (``intervals.py``), the same for the accuracy gain
 (``measures.py``), bootstrap intervals of every mean curve, and the threshold study (paper
-Fig. 12). ``categories_per_threshold`` counts the categories the heuristic builds.
+Fig. 12); every average over targets is over the paper's nine (``paper``), and per target the
+answers of ``per_target.py``. ``categories_per_threshold`` counts the categories the
+heuristic builds.
 """
 from __future__ import annotations
 
@@ -130,8 +132,9 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     ``table2_per_target (rows, A)``, ``table2 (rows, 3)`` avg/min/max, ``n_targets (rows,)``,
     ``unmeasurable {row: reason}``, the same for the accuracy gain (``gain_*``), and with
     ``intervals`` (``_intervals``) bias-corrected bootstrap intervals and the resampled values
-    behind them, and the threshold study. ``reference``: the reference paths (the same bits,
-    slower; kept to check the default ones against).
+    behind them, and the threshold study; ``paper (A,)`` the paper's targets (every average is
+    over them) and ``affordances`` (``per_target.answers``). ``reference``: the reference paths
+    (the same bits, slower; kept to check the default ones against).
     """
     # Table II reads the built-in conditions (a user's conditions follow them on the axis)
     res = builtin_results(res, layout(len(res["actions"]), len(cfg.thresholds))["n"])

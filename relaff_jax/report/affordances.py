@@ -52,6 +52,14 @@ def table(x: Mapping[str, Any]) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
+def markdown_lines(x: Mapping[str, Any]) -> list[str]:
+    """``table2.md``'s lines of one space's per-affordance table (none without it)."""
+    if "affordances" not in x:
+        return []
+    header, rows = table(x)
+    return ["| " + " | ".join(r) + " |" for r in [header, ["---"] * len(header)] + rows]
+
+
 def _ci(lohi, nd: int) -> str:
     text = interval(lohi[0], lohi[1], nd)
     return "" if text == "-" else " " + text

@@ -25,6 +25,7 @@ from relaff_jax.report.formatting import (
     curve_average,
     fmt,
     nanmean,
+    paper_basis,
     rests_on,
     row_cells,
     rows_run,
@@ -97,13 +98,6 @@ def methods_blocks(a: Mapping[str, Any], cfg: Any, space: str) -> list[tuple]:
                      fmt(m["poi"][i], 3) + iv("poi_ci", i, 3), fmt(m["poi_holm_p"][i], 3),
                      "yes" if m["poi_holm_reject"][i] else "no"])
     level = 100 * float(cfg.ci_level)
-    paper = np.asarray(a.get("paper", [True] * len(a["actions"])), bool)
-    users = [t for t, p in zip(a["actions"], paper) if not p]
-    basis = (f" Every column rests on the paper's affordances only ({int(paper.sum())} of {len(paper)}; {a['reps']} "
-             f"repetitions; sizes n = {span(a['sizes'], lo, hi)}"
-             + (f"; {100 * float(a['ci_level']):g} % intervals from {a['ci_resamples']} resamples" if "ci_level" in a else "")
-             + ")" + (f"; {', '.join(users)} (not in the paper): its own row in 'Per affordance: does what the "
-                      "robot knows help it?'" if users else "") + ".")
     return [("h", 3, f"Each method against NB ({space.upper()}), beyond the paper's statistics"),
             ("p", f"Area: the gain curve P_bl(n) - P_NB(n) integrated over n = {lo}..{hi} (accuracy x samples; "
                   f"a method 0.1 above NB throughout has {0.1 * (hi - lo):.1f}). Saved: the training samples NB needs "
@@ -115,7 +109,7 @@ def methods_blocks(a: Mapping[str, Any], cfg: Any, space: str) -> list[tuple]:
                   "paper's affordances, with its interval from stratified resamples of the repetitions (as rliable). "
                   f"Significant: P(improvement) differs from 0.5 at {100 - level:g} % after Holm's correction over "
                   "the methods. 'best' and 'after ten' are the in-sample choices; 'after ten' the whole curve of the "
-                  "learner kept." + basis),
+                  "learner kept. " + paper_basis(a, cfg)),
             ("table", ["method", "area", "samples saved", "P(improvement)", "Holm p", "significant"], rows)]
 
 

@@ -56,8 +56,8 @@ def table2_csv(a: Mapping[str, Any], paper: bool) -> str:
 
 def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]]) -> str:
     """``table2.md``: per space Table II (beside the paper's in PCA), the per-affordance average
-    bootstrap factors, the chosen sources, the correlation matrix, categories per threshold
-    and the threshold study."""
+    bootstrap factors, the chosen sources, the per-affordance answer (``affordances.py``), the
+    correlation matrix, categories per threshold and the threshold study."""
     cfg = res["config"]
     meta = res["meta"]
     lines = ["# Learning and bootstrapping results", ""]
@@ -106,6 +106,10 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
             ten = ", ".join(f"{t} <- ({conds[i].split(':')[1]})" for t, i in zip(acts, a[f"ten_{fam}"]))
             lines += [f"- {fam.upper()} best: {best}", f"- {fam.upper()} best after ten: {ten}"]
         lines += U.source_lines(a)
+        if "affordances" in a:
+            lines += ["", f"### Per affordance: does what the robot knows help it? ({space.upper()})", "",
+                      f"Gain of '{a['affordances']['best_row']}' over NB and its interval per affordance; verdict "
+                      "from it (report.md, 'Per affordance'):", ""] + A.markdown_lines(a)
         lines += ["", f"### Correlation of the nine predictors' outputs ({space.upper()}, paper Fig. 11)", ""]
         corr = r["corr"]
         lines += ["| | " + " | ".join(SHORT.get(x, x) for x in acts) + " |", "|---|" + "---|" * len(acts)]
