@@ -215,9 +215,8 @@ def against_nb(acc_x: np.ndarray, mean: np.ndarray, sizes: Sequence[int], cfg: E
         p.append(G.bootstrap_p(boot, 0.5))
     adj, rej = G.holm(p, 1 - cfg.ci_level)
     return {"names": list(G.METHODS), "weights": w, "area": st["area"], "saved": st["saved"],
-            "censored": st["censored"], "area_per_target": st["area_per_target"],
-            "saved_per_target": st["saved_per_target"], "censored_per_target": st["censored_per_target"], "poi": np.asarray(poi), "poi_ci": np.asarray(ci), "poi_p": np.asarray(p),
-            "poi_holm_p": adj, "poi_holm_reject": rej}
+            "censored": st["censored"], "poi": np.asarray(poi), "poi_ci": np.asarray(ci), "poi_p": np.asarray(p),
+            "poi_holm_p": adj, "poi_holm_reject": rej} | {k: st[k] for k in st if k.endswith("_per_target")}
 
 
 def unmeasurable(a: Mapping[str, Any], cfg: ExperimentConfig) -> dict[str, str]:
@@ -269,7 +268,7 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
         hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, streams.INTERVALS), halves, reference=reference)
     hs = half_sizes(n_test, halves)
     outcomes = bool(corr_x.shape[-1])
-    paper = np.isin(np.asarray(pt["actions"]), ACTIONS)  # Table II's rows: the paper's nine
+    paper = pt["paper"]  # every average: the paper's nine
     fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]) & paper, np.isfinite(pt["gain_per_target"]) & paper
     fixed_thr = np.isfinite(pt["thresholds"]["per_target"]) & paper
     boot: dict[str, list] = {k: [] for k in ("bf", "held", "gain", "per", "thr", "nb", "mean", "area", "saved")}
