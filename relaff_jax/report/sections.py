@@ -62,7 +62,8 @@ def findings_blocks(found: Sequence[Mapping[str, Any]]) -> list[tuple]:
                             [[f["finding"], f["paper"], f["numbers"], f"**{f['verdict']}**"] for f in found]),
                            ("p", "Rules: " + "; ".join(f"{f['finding']}: {f['rule']}" for f in found) + "."
                             + (f" Each verdict is {found[0]['decision']}; the interval is printed beside each number "
-                               "(estimate [low, high])." if found else ""))]
+                               "(estimate [low, high]). Every mean behind a verdict is over the paper's affordances only "
+                               "(a user action has its own rows); Table II's sentence says what it rests on." if found else ""))]
     count = {v: sum(f["verdict"] == v for f in found) for v in VERDICTS}
     blocks.append(("p", f"{count['reproduced']} of {len(found)} findings reproduced, {count['not reproduced']} not, "
                         f"{count['undecided at this scale']} undecided at this scale, {count['not measurable']} not measurable."))

@@ -70,6 +70,7 @@ def test_the_report_shows_the_tenth_apart_and_says_what_each_mean_rests_on(repor
     for t in ACTIONS:
         assert f"| {t} |" in sec
     assert "Every column rests on the paper's affordances only (9 of 10;" in md  # the methods block
+    assert "Every mean behind a verdict is over the paper's affordances only" in md  # the findings
     t2md = (out / "table2.md").read_text()
     assert t2md.count("| drag (not in the paper) |") >= 2 and "### Per affordance: does what the robot knows help it? (RHF)" in t2md
     assert md.count("of 9 affordances (the paper's; drag: not in the paper, left out), by row") == 2  # Table II, per space
