@@ -9,7 +9,9 @@ its sizes each target has a bf for, the chosen sources ("best", "best after ten"
 and online), Table II per target ``(rows, A)`` and as avg/min/max ``(rows, 3)`` with
 ``n_targets`` and bootstrap intervals (``intervals.py``), the same for the accuracy gain
 (``measures.py``), bootstrap intervals of every mean curve, and the threshold study (paper
-Fig. 12). ``categories_per_threshold`` counts the categories the heuristic builds.
+Fig. 12); every average over targets is over the paper's nine (``paper``), and per target the
+answers of ``per_target.py``. ``categories_per_threshold`` counts the categories the
+heuristic builds.
 """
 from __future__ import annotations
 
@@ -24,6 +26,7 @@ from relaff_jax.learn.user_conditions import builtin_results
 from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn import gains as G
 from relaff_jax.learn import halfrows
+from relaff_jax.learn import per_target
 from relaff_jax.learn.intervals import (bc_interval, fast_outcomes, half_sizes, resampled_means, scene_halves,
                                          target_blocks, whole)
 from relaff_jax.learn.measures import (
@@ -129,8 +132,9 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     ``table2_per_target (rows, A)``, ``table2 (rows, 3)`` avg/min/max, ``n_targets (rows,)``,
     ``unmeasurable {row: reason}``, the same for the accuracy gain (``gain_*``), and with
     ``intervals`` (``_intervals``) bias-corrected bootstrap intervals and the resampled values
-    behind them, and the threshold study. ``reference``: the reference paths (the same bits,
-    slower; kept to check the default ones against).
+    behind them, and the threshold study; ``paper (A,)`` the paper's targets (every average is
+    over them) and ``affordances`` (``per_target.answers``). ``reference``: the reference paths
+    (the same bits, slower; kept to check the default ones against).
     """
     # Table II reads the built-in conditions (a user's conditions follow them on the axis)
     res = builtin_results(res, layout(len(res["actions"]), len(cfg.thresholds))["n"])
@@ -175,28 +179,32 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
         out[f"ten_{fam.lower()}"] = idx[select_at(fam_mean, sizes, cfg.select_size)] if cfg.select_size in sizes else out[f"best_{fam.lower()}"]
         out[f"ties_{fam.lower()}"] = (tie_weights(best_score) > 0).sum(-1)
         out[f"online_{fam.lower()}"] = w_on[fam]
-    out["thresholds"] = threshold_study(mean[:, : lay["n"]], bf[:, : lay["n"]], masks, sizes, cfg, lay, t2)
-    out["methods"] = against_nb(acc_x, mean, sizes, cfg, lay, cbn_ok, seed)
+    out["paper"] = paper
+    out["thresholds"] = threshold_study(mean[:, : lay["n"]], bf[:, : lay["n"]], masks, sizes, cfg, lay, t2, paper)
+    out["methods"] = against_nb(acc_x, mean, sizes, cfg, lay, cbn_ok, seed, paper)
     if intervals:
         out.update(_intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, out, reference, hm))
+    out["affordances"] = per_target.answers(out)
     return out
 
 
 def against_nb(acc_x: np.ndarray, mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, lay: dict,
-               cbn_ok: np.ndarray, seed: int) -> dict[str, Any]:
+               cbn_ok: np.ndarray, seed: int, paper: np.ndarray | None = None) -> dict[str, Any]:
     """Each of ``gains.METHODS`` against NB (``gains.py``): the gain curve's area over the
-    window and the samples saved at ``select_size`` (mean over targets; intervals added by
-    ``_intervals`` from the same resamples as Table II's), and the probability of improvement
-    over NB of the per-repetition window accuracies across affordances and repetitions, its
+    window and the samples saved at ``select_size`` (mean over the targets ``paper (A,)``,
+    all where None; per target ``*_per_target (M, A)``; intervals added by ``_intervals``
+    from the same resamples as Table II's), and the probability of improvement over NB of
+    the per-repetition window accuracies across those affordances and repetitions, its
     interval from ``cfg.ci_resamples`` stratified resamples, its p-value against 0.5 and the
     Holm correction over the methods (``holm_reject`` at 1 - ``ci_level``)."""
     w = G.method_weights(mean, lay, cfg, sizes, cbn_ok)
-    st = G.curve_stats(mean, w, lay, sizes, cfg)
+    paper = np.ones(mean.shape[0], bool) if paper is None else np.asarray(paper, bool)
+    st = G.curve_stats(mean, w, lay, sizes, cfg, paper)
     x, y = G.rep_scores(acc_x, w, lay, sizes, cfg)
     rng = np.random.default_rng(derive_seed(seed, streams.IMPROVEMENT))
     poi, ci, p = [], [], []
     for k in range(len(G.METHODS)):
-        keep = np.isfinite(x[k]).any(-1) & np.isfinite(y).any(-1)  # the tasks the method ran for
+        keep = np.isfinite(x[k]).any(-1) & np.isfinite(y).any(-1) & paper  # the paper's tasks the method ran for
         if not keep.any():
             poi.append(np.nan), ci.append((np.nan, np.nan)), p.append(np.nan)
             continue
@@ -208,7 +216,7 @@ def against_nb(acc_x: np.ndarray, mean: np.ndarray, sizes: Sequence[int], cfg: E
     adj, rej = G.holm(p, 1 - cfg.ci_level)
     return {"names": list(G.METHODS), "weights": w, "area": st["area"], "saved": st["saved"],
             "censored": st["censored"], "poi": np.asarray(poi), "poi_ci": np.asarray(ci), "poi_p": np.asarray(p),
-            "poi_holm_p": adj, "poi_holm_reject": rej}
+            "poi_holm_p": adj, "poi_holm_reject": rej} | {k: st[k] for k in st if k.endswith("_per_target")}
 
 
 def unmeasurable(a: Mapping[str, Any], cfg: ExperimentConfig) -> dict[str, str]:
@@ -260,10 +268,11 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
         hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, streams.INTERVALS), halves, reference=reference)
     hs = half_sizes(n_test, halves)
     outcomes = bool(corr_x.shape[-1])
-    paper = np.isin(np.asarray(pt["actions"]), ACTIONS)  # Table II's rows: the paper's nine
+    paper = pt["paper"]  # every average: the paper's nine
     fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]) & paper, np.isfinite(pt["gain_per_target"]) & paper
-    fixed_thr = np.isfinite(pt["thresholds"]["per_target"])
+    fixed_thr = np.isfinite(pt["thresholds"]["per_target"]) & paper
     boot: dict[str, list] = {k: [] for k in ("bf", "held", "gain", "per", "thr", "nb", "mean", "area", "saved")}
+    boot.update({k: [] for k in per_target.BOOT})
     for b in range(0, len(hm), CI_CHUNK):
         h = hm[b : b + CI_CHUNK]
         m = whole(h, hs)
@@ -274,10 +283,13 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
         boot["per"].append(t2["bf"])
         boot["thr"].append(_fixed_mean(t2["thr_bf"], fixed_thr)[0])
         with _quiet():
-            boot["nb"].append(np.nanmean(m[:, :, lay["NB"]], 1))  # (b, S) mean NB over targets
+            boot["nb"].append(np.nanmean(m[:, paper, lay["NB"]], 1))  # (b, S) mean NB over the paper's targets
         boot["mean"].append(m)
-        st = G.curve_stats(m, pt["methods"]["weights"], lay, sizes, cfg)
+        st = G.curve_stats(m, pt["methods"]["weights"], lay, sizes, cfg, paper)
         boot["area"].append(st["area"]), boot["saved"].append(st["saved"])
+        choice = lay["DB1"][select_best(m[:, :, lay["DB1"]], sizes, *cfg.best_sizes)]  # (b, A) in-sample best source
+        for k, v in per_target.resampled(t2, st, choice).items():
+            boot[k].append(v)
     bt = {k: np.concatenate(v) for k, v in boot.items()}
     meth = pt["methods"]
     meth["area_ci"] = np.stack(bc_interval(bt["area"], meth["area"], cfg.ci_level), -1)
@@ -289,18 +301,21 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
             "threshold_ci": ci(bt["thr"], pt["thresholds"]["avg"]),
             "table2_boot": bt["bf"], "gain_boot": bt["gain"], "threshold_boot": bt["thr"], "nb_boot": bt["nb"],
             "table2_set_held": bt["held"].mean(0), "ci_level": level, "ci_resamples": int(cfg.ci_resamples),
-            "ci_method": "bias-corrected percentile (BC)"}
+            "ci_method": "bias-corrected percentile (BC)"} | per_target.intervals(bt, pt, level)
 
 
 def threshold_study(mean: np.ndarray, bf: np.ndarray, masks: np.ndarray, sizes: Sequence[int],
-                    cfg: ExperimentConfig, lay: dict, t2: Mapping[str, np.ndarray]) -> dict[str, Any]:
+                    cfg: ExperimentConfig, lay: dict, t2: Mapping[str, np.ndarray],
+                    paper: np.ndarray | None = None) -> dict[str, Any]:
     """Paper Fig. 12. Its numbers use Table II's aggregation (``t2 = table2_rows(..., masks)``):
     per threshold T, each target's best category among those built at T, chosen on one half
     of the test scenes and scored on the other (``per_target (T, A)``, ``avg (T,)``, over the
     targets with a value, ``n_targets (T,)``; at T = 0 it is Table II's "CB1 best"), and the
     in-sample oracle (``avg_oracle``). For the figure: per T the in-sample best category's bf
     curve ``best_curve (T, S)`` (tied ones share; mean over targets) and the average over all
-    usable categories ``overall_curve (S,)``; ``masks: (T, A, K)``."""
+    usable categories ``overall_curve (S,)``; ``masks: (T, A, K)``. Every mean is over the
+    targets ``paper (A,)`` (all where None); ``per_target`` holds every target."""
+    paper = np.ones(mean.shape[0], bool) if paper is None else np.asarray(paper, bool)
     idx = lay["CB1"]
     cb_mean, cb_bf = mean[:, idx], bf[:, idx]  # (A, K, S)
     ran = np.any(np.isfinite(cb_mean), axis=-1)  # (A, K)
@@ -315,13 +330,14 @@ def threshold_study(mean: np.ndarray, bf: np.ndarray, masks: np.ndarray, sizes: 
             w = tie_weights(np.nanmean(cand[..., mask if mask.any() else slice(None)], -1))  # ties share (A, K)
             mixed = np.einsum("ak,aks->as", w, np.nan_to_num(cb_bf))  # bf is NaN where NB is: same for every k
             curve = np.where(m.any(1)[:, None] & np.isfinite(cb_bf[t_idx, best]), mixed, np.nan)  # (A, S)
-            out["best_curve"].append(np.nanmean(curve, axis=0))
+            out["best_curve"].append(np.nanmean(np.where(paper[:, None], curve, np.nan), axis=0))
             out["best"].append(idx[best])
             out["count"].append(int(masks[ti].any(0).sum()))
-        out["overall_curve"] = np.nanmean(np.where(ran[..., None], cb_bf, np.nan), axis=(0, 1))
+        out["overall_curve"] = np.nanmean(np.where((ran & paper[:, None])[..., None], cb_bf, np.nan), axis=(0, 1))
         out["per_target"], out["per_target_oracle"] = t2["thr_bf"], t2["thr_oracle_bf"]
-        out["avg"], out["avg_oracle"] = np.nanmean(t2["thr_bf"], -1), np.nanmean(t2["thr_oracle_bf"], -1)
-    out["n_targets"] = np.isfinite(t2["thr_bf"]).sum(-1)
+        out["avg"] = np.nanmean(np.where(paper, t2["thr_bf"], np.nan), -1)
+        out["avg_oracle"] = np.nanmean(np.where(paper, t2["thr_oracle_bf"], np.nan), -1)
+    out["n_targets"] = (np.isfinite(t2["thr_bf"]) & paper).sum(-1)
     out["best_curve"] = np.stack(out["best_curve"])
     return out
 

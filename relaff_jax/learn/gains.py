@@ -160,11 +160,10 @@ def method_curves(mean: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.where(w.sum(-1)[..., None] > 0, out, np.nan)
 
 
-def curve_stats(mean: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg) -> dict[str, np.ndarray]:
-    """Per method, averaged over the targets it ran for: the gain curve's area over the window
-    ``area (..., M)`` and the samples saved at ``select_size`` ``saved (..., M)`` (a censored
-    target counts with the largest size: a lower bound) with ``censored (..., M)`` how many
-    targets were censored."""
+def per_target_stats(mean: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg) -> dict[str, np.ndarray]:
+    """Per method and target: the gain curve's area over the window ``area (..., M, A)``, the
+    samples saved at ``select_size`` ``saved (..., M, A)`` (a censored target counts with the
+    largest size: a lower bound) and ``censored (..., M, A)``; NaN where a method did not run."""
     curves = method_curves(mean, w)  # (..., M, A, S)
     nb = np.asarray(mean, float)[..., None, :, lay["NB"], :]  # (..., 1, A, S)
     area = window_area(curves - nb, sizes, *cfg.bf_sizes)
@@ -172,13 +171,26 @@ def curve_stats(mean: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int]
         saved, cens = samples_saved(curves, np.broadcast_to(nb, curves.shape), sizes, cfg.select_size)
     else:
         saved, cens = np.full(area.shape, np.nan), np.zeros(area.shape, bool)
+    return {"area": area, "saved": saved, "censored": cens & np.isfinite(saved)}
+
+
+def curve_stats(mean: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg,
+                keep: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """``per_target_stats`` averaged over the targets ``keep (A,)`` (all: None) a method ran
+    for: ``area (..., M)``, ``saved (..., M)`` and ``censored (..., M)`` how many of them were
+    censored; the per target values as ``*_per_target (..., M, A)``."""
+    st = per_target_stats(mean, w, lay, sizes, cfg)
+    k = np.ones(st["area"].shape[-1], bool) if keep is None else np.asarray(keep, bool)
     with np.errstate(invalid="ignore"):
         import warnings
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            return {"area": np.nanmean(area, -1), "saved": np.nanmean(saved, -1),
-                    "censored": (cens & np.isfinite(saved)).sum(-1)}
+            return {"area": np.nanmean(np.where(k, st["area"], np.nan), -1),
+                    "saved": np.nanmean(np.where(k, st["saved"], np.nan), -1),
+                    "censored": (st["censored"] & k).sum(-1),
+                    "area_per_target": st["area"], "saved_per_target": st["saved"],
+                    "censored_per_target": st["censored"]}
 
 
 def rep_scores(acc_x: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg) -> tuple[np.ndarray, np.ndarray]:

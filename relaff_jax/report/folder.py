@@ -1,6 +1,7 @@
 """The report folder's layout, named once (``relaff report --out``, ``DIR/report``)::
 
     OUT/table2.csv, table2_rhf.csv, table2.md   Table II beside the paper's (``tables.py``)
+    OUT/affordances.csv                         per affordance: does DB1 help it (``affordances.py``)
     OUT/summary.json                            Table II per space, the figures' names
     OUT/findings.json                           every finding's verdict (``findings.py``)
     OUT/reach.json                              what the labels consist of (``reach.py``)
@@ -20,6 +21,7 @@ from pathlib import Path
 TABLE2_CSV = "table2.csv"
 TABLE2_RHF_CSV = "table2_rhf.csv"
 TABLE2_MD = "table2.md"
+AFFORDANCES_CSV = "affordances.csv"
 SUMMARY = "summary.json"
 FINDINGS = "findings.json"
 REACH = "reach.json"

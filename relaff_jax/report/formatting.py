@@ -4,7 +4,8 @@
 None), ``curve_average`` (a bootstrap factor curve ``(S,)`` averaged over the config's bf
 interval), ``nanmean`` (mean of the finite values), ``ci_text`` (an interval as
 ``[lo, hi]``), ``rests_on`` (what a Table II rests on: affordances, sizes, repetitions, test
-scenes, how the intervals were made) and ``SHORT`` (short action names).
+scenes, how the intervals were made), ``paper_basis`` (the same for a block of means) and
+``SHORT`` (short action names).
 """
 from __future__ import annotations
 
@@ -81,11 +82,26 @@ def rests_on(a: Any, cfg: Any) -> str:
             if tol is not None and "min_defined" in a else "")
     n = [int(v) for v, row in zip(a["n_targets"], a["table2"]) if np.isfinite(row[0])] if "n_targets" in a else []
     rows_n = f"{min(n)}-{max(n)}" if n and min(n) != max(n) else (str(n[0]) if n else "none")
-    return (f"Rests on {rows_n} of {len(a['actions'])} affordances, by row (column n); {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
+    paper = np.asarray(a.get("paper", [True] * len(a["actions"])), bool)
+    users = [t for t, p in zip(a["actions"], paper) if not p]
+    who = f"{int(paper.sum())} affordances" + (f" (the paper's; {', '.join(users)}: not in the paper, left out)" if users else "")
+    return (f"Rests on {rows_n} of {who}, by row (column n); {len(ran)} of the {hi - lo + 1} sizes n = {lo}..{hi} run "
             f"({', '.join(map(str, ran)) if len(ran) <= 6 else f'{ran[0]}..{ran[-1]}'}); {a['reps']} repetitions{t}. "
             "avg/min/max are over the affordances with a value (n); a bootstrap factor is averaged over the sizes "
             "where it is defined (NB above chance); the gain is the mean accuracy difference to NB over the same window."
             + rule + ci)
+
+
+def paper_basis(a: Any, cfg: Any) -> str:
+    """One sentence: a block of means (the methods against NB) rests on the paper's affordances
+    of analysis ``a`` only, its repetitions, window and intervals; a user action is elsewhere."""
+    paper = np.asarray(a.get("paper", [True] * len(a["actions"])), bool)
+    users = [t for t, p in zip(a["actions"], paper) if not p]
+    return (f"Every column rests on the paper's affordances only ({int(paper.sum())} of {len(paper)}; {a['reps']} "
+            f"repetitions; sizes n = {span(a['sizes'], *cfg.bf_sizes)}"
+            + (f"; {100 * float(a['ci_level']):g} % intervals from {a['ci_resamples']} resamples" if "ci_level" in a else "")
+            + ")" + (f"; {', '.join(users)} (not in the paper): its own row in 'Per affordance: does what the "
+                     "robot knows help it?'" if users else "") + ".")
 
 
 def curve_average(curve: np.ndarray, sizes: Sequence[int], cfg: Any) -> float:

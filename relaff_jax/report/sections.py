@@ -25,6 +25,7 @@ from relaff_jax.report.formatting import (
     curve_average,
     fmt,
     nanmean,
+    paper_basis,
     rests_on,
     row_cells,
     rows_run,
@@ -46,7 +47,8 @@ def findings_blocks(found: Sequence[Mapping[str, Any]]) -> list[tuple]:
                             [[f["finding"], f["paper"], f["numbers"], f"**{f['verdict']}**"] for f in found]),
                            ("p", "Rules: " + "; ".join(f"{f['finding']}: {f['rule']}" for f in found) + "."
                             + (f" Each verdict is {found[0]['decision']}; the interval is printed beside each number "
-                               "(estimate [low, high])." if found else ""))]
+                               "(estimate [low, high]). Every mean behind a verdict is over the paper's affordances only "
+                               "(a user action has its own rows); Table II's sentence says what it rests on." if found else ""))]
     count = {v: sum(f["verdict"] == v for f in found) for v in VERDICTS}
     blocks.append(("p", f"{count['reproduced']} of {len(found)} findings reproduced, {count['not reproduced']} not, "
                         f"{count['undecided at this scale']} undecided at this scale, {count['not measurable']} not measurable."))
@@ -87,13 +89,13 @@ def methods_blocks(a: Mapping[str, Any], cfg: Any, space: str) -> list[tuple]:
                   f"a method 0.1 above NB throughout has {0.1 * (hi - lo):.1f}). Saved: the training samples NB needs "
                   f"to reach the method's accuracy at n = {cfg.select_size} (interpolated between the sizes run), "
                   f"minus {cfg.select_size}; where NB never gets there the largest size counts (a lower bound, "
-                  "'censored'). Both are means over the affordances, with the bias-corrected interval of Table II's "
+                  "'censored'). Both are means over the paper's affordances, with the bias-corrected interval of Table II's "
                   "resamples. P(improvement): the probability that the method's mean window accuracy in a "
                   "repetition beats NB's in another, per affordance (Mann-Whitney U / (R x R)), averaged over the "
-                  "affordances, with its interval from stratified resamples of the repetitions (as rliable). "
+                  "paper's affordances, with its interval from stratified resamples of the repetitions (as rliable). "
                   f"Significant: P(improvement) differs from 0.5 at {100 - level:g} % after Holm's correction over "
                   "the methods. 'best' and 'after ten' are the in-sample choices; 'after ten' the whole curve of the "
-                  "learner kept."),
+                  "learner kept. " + paper_basis(a, cfg)),
             ("table", ["method", "area", "samples saved", "P(improvement)", "Holm p", "significant"], rows)]
 
 
@@ -233,14 +235,15 @@ def threshold_blocks(corr: np.ndarray, a: Mapping[str, Any], cfg: Any, main: str
     lay = layout(len(a["actions"]), len(cfg.thresholds))
     k = len(a["actions"]) * (len(a["actions"]) - 1) // 2
     counts = categories_per_threshold(corr, cfg.thresholds)
+    paper = np.asarray(a.get("paper", [True] * len(a["actions"])), bool)  # the means: the paper's affordances
     rows = [[f"{t:g}", counts[f"{t:g}"]["built"], fmt(th["avg"][i]),
              ci_text(a, "threshold_ci", i) if "threshold_ci" in a else "-", fmt(th["avg_oracle"][i]),
-             fmt(nanmean(np.where(a["built"][i], a["avg_bf"][:, lay["CBn"][i]], np.nan)))]
+             fmt(nanmean(np.where(a["built"][i] & paper, a["avg_bf"][:, lay["CBn"][i]], np.nan)))]
             for i, t in enumerate(th["T"])]
     rows.append(["all categories (overall average)", k, fmt(curve_average(th["overall_curve"], a["sizes"], cfg)), "-", "-", "-"])
     blocks: list[tuple] = [("h", 2, "Threshold study"),
-                           ("p", f"Categories built at each correlation threshold T and the average bf ({main.upper()}, mean over "
-                                 "affordances) of each affordance's best category among them, aggregated as Table II (per "
+                           ("p", f"Categories built at each correlation threshold T and the average bf ({main.upper()}, mean over the "
+                                 "paper's affordances) of each affordance's best category among them, aggregated as Table II (per "
                                  "affordance over the window, then over the affordances with a value; at T = 0 this is "
                                  "Table II's 'CB1 best'): chosen on one half of the test scenes and scored on the other, "
                                  "and the in-sample oracle; and of CBn (all of them together; over the affordances with a "

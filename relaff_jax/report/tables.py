@@ -19,6 +19,7 @@ import numpy as np
 
 from relaff_jax.constants import ACTIONS
 from relaff_jax.learn import PAPER_TABLE2, TABLE2_ROWS, categories_per_threshold, layout, paper_row
+from relaff_jax.report import affordances as A
 from relaff_jax.report import user as U
 from relaff_jax.report.formatting import (
     SHORT,
@@ -55,8 +56,8 @@ def table2_csv(a: Mapping[str, Any], paper: bool) -> str:
 
 def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]]) -> str:
     """``table2.md``: per space Table II (beside the paper's in PCA), the per-affordance average
-    bootstrap factors, the chosen sources, the correlation matrix, categories per threshold
-    and the threshold study."""
+    bootstrap factors, the chosen sources, the per-affordance answer (``affordances.py``), the
+    correlation matrix, categories per threshold and the threshold study."""
     cfg = res["config"]
     meta = res["meta"]
     lines = ["# Learning and bootstrapping results", ""]
@@ -105,6 +106,10 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
             ten = ", ".join(f"{t} <- ({conds[i].split(':')[1]})" for t, i in zip(acts, a[f"ten_{fam}"]))
             lines += [f"- {fam.upper()} best: {best}", f"- {fam.upper()} best after ten: {ten}"]
         lines += U.source_lines(a)
+        if "affordances" in a:
+            lines += ["", f"### Per affordance: does what the robot knows help it? ({space.upper()})", "",
+                      f"Gain of '{a['affordances']['best_row']}' over NB and its interval per affordance; verdict "
+                      "from it (report.md, 'Per affordance'):", ""] + A.markdown_lines(a)
         lines += ["", f"### Correlation of the nine predictors' outputs ({space.upper()}, paper Fig. 11)", ""]
         corr = r["corr"]
         lines += ["| | " + " | ".join(SHORT.get(x, x) for x in acts) + " |", "|---|" + "---|" * len(acts)]
@@ -127,7 +132,8 @@ def table2_markdown(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]])
 
 def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures: Sequence[str]) -> dict[str, Any]:
     """``summary.json``: Table II per space (avg/min/max, n_targets, intervals, the gain, per
-    affordance values and intervals, the window sizes with a bf per affordance), the chosen
+    affordance values and intervals, the window sizes with a bf per affordance), per affordance
+    whether DB1 helps it (``affordances``, ``report.affordances.summary``), the chosen
     sources, the correlation matrix and categories per threshold, the paper's Table II and
     the figure file names; NaN as None."""
     out = {
@@ -158,6 +164,7 @@ def summary(res: Mapping[str, Any], an: Mapping[str, Mapping[str, Any]], figures
             "against_nb": {k: v for k, v in x.get("methods", {}).items() if k != "weights"},
             "categories_per_threshold": categories_per_threshold(res[s]["corr"], res["config"].thresholds),
             "user_conditions": U.summary(x),
+            "affordances": A.summary(x),
         }
         for s, x in an.items()
     }

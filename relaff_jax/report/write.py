@@ -4,6 +4,7 @@ Takes ``RESULTS`` written by ``relaff experiment`` (``experiment.json`` + ``<spa
 optionally the dataset folders ``{action: DIR}`` and a run log; analyses every space once
 (``relaff_jax.learn.analyse``) and writes, from that one analysis, to ``REPORT``:
 
+* ``affordances.csv``: per space and affordance whether DB1 helps it (``affordances.py``);
 * ``table2.csv`` (PCA, beside the paper's), ``table2_rhf.csv`` when RHF was run, ``table2.md``
   and ``summary.json`` (``tables.py``);
 * ``fig06_nb_learning.png`` ... ``fig12_thresholds.png`` (``figures.py``);
@@ -27,6 +28,7 @@ from relaff_jax.learn import analyse
 from relaff_jax.learn.results import load_results
 from relaff_jax.learn.user_rows import user_rows
 from relaff_jax.report import folder as F
+from relaff_jax.report.affordances import blocks as affordance_blocks, csv_text as affordance_csv
 from relaff_jax.report.audit import audit_blocks, stored_audits
 from relaff_jax.report import sections as S
 from relaff_jax.report.document import render_html, render_markdown
@@ -88,6 +90,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     if main == "pca" and "rhf" in an:
         rio.atomic_write_text(out / F.TABLE2_RHF_CSV, table2_csv(an["rhf"], paper=False))
     rio.atomic_write_text(out / F.TABLE2_MD, table2_markdown(res, an))
+    rio.atomic_write_text(out / F.AFFORDANCES_CSV, affordance_csv(an))
     figs = write_figures(res, an, out)
     lend = {s: borrow_rows(res[s], an[s], cfg) for s in spaces}
     rio.atomic_write_json(out / F.SUMMARY, summary(res, an, [p.name for p in figs]) | {"borrow": finite(lend)})
@@ -114,6 +117,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     blocks = (S.intro_blocks(res, results_dir, info) + top + S.robustness_blocks(readings, cfg)
               + S.protocol_blocks(res, an, cfg, n_samples) + data_blocks
               + S.learning_blocks(out, main) + S.table2_blocks(an, cfg, out, (info or {}).get("preset"))
+              + affordance_blocks(an, cfg)
               + [b for s in spaces for b in S.methods_blocks(an[s], cfg, s)]
               + [b for s in spaces for b in borrow_blocks(lend[s], s)] + S.best_after_ten_blocks(an[main], cfg, main)
               + S.correlation_blocks(res, an, cfg, out) + S.threshold_blocks(res[main]["corr"], an[main], cfg, main, out)
