@@ -6,7 +6,9 @@ rollout:
 
 - palm contacts: contacts between a geom of the hand body (``arm_hand``: the palm block, not
   the finger pads) and the toy or the other object, the steps they last and the largest sum of
-  their normal forces;
+  their normal forces; and the same split by the contact's normal (``from_above``): from above
+  (within ``physics_bounds.PALM_ABOVE_DEG`` of vertical: the palm on an object's top, a press)
+  and from the side (the palm pushing an object sideways);
 - contact forces: at every step, the normal forces (``mj_contactForce``) of all contacts
   between one body pair that involves an object summed per pair, divided by the weight of the
   heaviest object of the pair (a box resting on the table reads 1); the peak over steps and
@@ -36,7 +38,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from relaff_jax.sim.physics_bounds import SUSTAIN_STEPS
+from relaff_jax.sim.physics_bounds import PALM_ABOVE_COS, SUSTAIN_STEPS
 
 HAND_BODY = "arm_hand"  # the palm block's body; the pads are on the finger bodies
 
@@ -45,31 +47,38 @@ def body_names(m: mujoco.MjModel) -> list[str]:
     return [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_BODY, i) or f"body{i}" for i in range(m.nbody)]
 
 
+def from_above(normal_z: float | np.ndarray) -> bool | np.ndarray:
+    """Is a contact whose normal has z component ``normal_z`` from above (within
+    ``PALM_ABOVE_DEG`` of vertical)? ``|n_z|``: the normal's sign (which geom is first) does not matter."""
+    return np.abs(normal_z) >= PALM_ABOVE_COS
+
+
 def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, int], hand: int
-                  ) -> tuple[dict[tuple[int, int], float], np.ndarray, float, tuple[int, int], int]:
+                  ) -> tuple[dict[tuple[int, int], float], np.ndarray, float, tuple[int, int], np.ndarray]:
     """One step's contacts that involve an object.
 
     objects: body ids of the toy and the other object; hand: the hand body's id.
     Returns ``forces`` {(body a, body b) sorted: summed normal force (N)} over contacts with an
     object on one side, ``on`` (2,) the summed normal force on the toy and on the other object
     (N, in contact order), the deepest penetration (m, >= 0) among them and its body pair, and
-    the number of hand-object contacts.
+    ``palm`` (2, 2): per row, from above and from the side (``from_above``), the number of
+    hand-object contacts and their summed normal force (N, in contact order).
     """
     n = d.ncon
     forces: dict[tuple[int, int], float] = {}
     on = np.zeros(2)
+    palm = np.zeros((2, 2))
     if n == 0:
-        return forces, on, 0.0, (0, 0), 0
+        return forces, on, 0.0, (0, 0), palm
     bodies = np.asarray(m.geom_bodyid)[np.asarray(d.contact.geom[:n])]  # (n, 2)
     dist = np.asarray(d.contact.dist[:n])
     o0, o1 = objects
     rows = np.flatnonzero((bodies == o0).any(axis=1) | (bodies == o1).any(axis=1))
     if not len(rows):
-        return forces, on, 0.0, (0, 0), 0
+        return forces, on, 0.0, (0, 0), palm
     k = rows[int(np.argmin(dist[rows]))]
     deepest, where = float(max(0.0, -dist[k])), tuple(sorted(bodies[k].tolist()))
     f6 = np.zeros(6)
-    n_hand = 0
     for i in rows.tolist():
         mujoco.mj_contactForce(m, d, i, f6)
         a, b = bodies[i]
@@ -77,8 +86,11 @@ def step_contacts(m: mujoco.MjModel, d: mujoco.MjData, objects: tuple[int, int],
         forces[key] = forces.get(key, 0.0) + float(f6[0])
         for j, o in enumerate(objects):
             on[j] += float(f6[0]) if o in (a, b) else 0.0
-        n_hand += int(hand == a or hand == b)
-    return forces, on, deepest, where, n_hand
+        if hand == a or hand == b:
+            side = 0 if from_above(d.contact[i].frame[2]) else 1  # frame[:3]: the contact normal
+            palm[side, 0] += 1
+            palm[side, 1] += float(f6[0])
+    return forces, on, deepest, where, palm
 
 
 def held_bodies(m: mujoco.MjModel, d: mujoco.MjData, hand: int) -> set[int]:
@@ -103,7 +115,9 @@ class Probe:
     ``Probe(n, toy_body, obj_body, timestep)``; call ``probe(b, t, m, d)`` after step t of
     rollout b; ``result(measure)`` gives (B,) arrays: ``palm_contact`` bool, ``palm_steps``,
     ``palm_seconds``,
-    ``palm_force_n`` (largest summed hand-object normal force), ``peak_force_n``,
+    ``palm_force_n`` (largest summed hand-object normal force), ``palm_top_steps``,
+    ``palm_top_force_n``, ``palm_side_steps``, ``palm_side_force_n`` (the same for the
+    contacts from above and from the side: a step with both counts for both), ``peak_force_n``,
     ``peak_force_weights`` (peak over steps and pairs of the summed force / the pair's
     heaviest object's weight), ``peak_pair`` (str "a|b" body names), ``peak_step``,
     ``max_penetration_m``, ``penetration_pair``, ``held_penetration_m`` (the deepest held over
@@ -121,6 +135,8 @@ class Probe:
         self.timestep = float(timestep)
         self.palm_steps = np.zeros(n, np.int64)
         self.palm_force = np.zeros(n)
+        self.palm_split_steps = np.zeros((n, 2), np.int64)  # (top, side)
+        self.palm_split_force = np.zeros((n, 2))
         self.peak_n = np.zeros(n)
         self.peak_w = np.zeros(n)
         self.peak_pair = np.full(n, "", object)
@@ -144,7 +160,7 @@ class Probe:
             self._hand[key] = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, HAND_BODY)
             self._weight[key] = np.asarray(m.body_mass) * float(np.linalg.norm(m.opt.gravity))
         hand, names, weight = self._hand[key], self._names[key], self._weight[key]
-        forces, on, deepest, where, n_hand = step_contacts(m, d, self.objects, hand)
+        forces, on, deepest, where, split = step_contacts(m, d, self.objects, hand)
         self.load[b].append(float(on.max()))
         self.depth[b].append(deepest)
         self.weight_n[b] = max(weight[x] for x in self.objects)
@@ -156,9 +172,13 @@ class Probe:
                 self.peak_pair[b] = f"{names[a]}|{names[c]}"
             if hand in (a, c):
                 palm += f
-        if n_hand:
+        if split[:, 0].any():
             self.palm_steps[b] += 1
             self.palm_force[b] = max(self.palm_force[b], palm)
+        for k in range(2):
+            if split[k, 0]:
+                self.palm_split_steps[b, k] += 1
+                self.palm_split_force[b, k] = max(self.palm_split_force[b, k], split[k, 1])
         if deepest > self.pen[b]:
             self.pen[b] = deepest
             self.pen_pair[b] = f"{names[where[0]]}|{names[where[1]]}"
@@ -184,7 +204,10 @@ class Probe:
             press_w = np.where(self.weight_n > 0, press / self.weight_n, 0.0)
         return dict(palm_contact=self.palm_steps > 0, palm_steps=self.palm_steps,
                     palm_seconds=self.palm_steps * self.timestep,
-                    palm_force_n=self.palm_force, peak_force_n=self.peak_n, peak_force_weights=self.peak_w,
+                    palm_force_n=self.palm_force, palm_top_steps=self.palm_split_steps[:, 0].copy(),
+                    palm_top_force_n=self.palm_split_force[:, 0].copy(),
+                    palm_side_steps=self.palm_split_steps[:, 1].copy(),
+                    palm_side_force_n=self.palm_split_force[:, 1].copy(), peak_force_n=self.peak_n, peak_force_weights=self.peak_w,
                     peak_pair=self.peak_pair.astype(str), peak_step=self.peak_step,
                     max_penetration_m=self.pen, penetration_pair=self.pen_pair.astype(str),
                     held_penetration_m=held_pen,

@@ -14,6 +14,8 @@ rollout b, ``result(measure)``); gives the same (B,) arrays, every value equal t
 - sums per body pair, per object and over the palm's pairs use ``np.add.at``, which adds in
   contact order from 0 as ``Probe``'s loop does; the peak is the first (step, pair) in ``Probe``'s
   dict order with the largest ratio, which is the one its strict ``>`` update keeps;
+- a palm contact's normal is the z of ``d.contact.frame``'s first row, the value ``Probe`` reads
+  from ``d.contact[i].frame``; from above or from the side by the same ``probe.from_above``;
 - ``mj_objectVelocity`` is called every step (the C function ``Probe`` calls) but the norm and
   the held test (``probe.held_bodies``'s rule on the step's ``eq_active``) only at the
   steps ``result`` reads.
@@ -26,7 +28,7 @@ import mujoco
 import numpy as np
 
 from relaff_jax.sim.physics_bounds import SUSTAIN_STEPS
-from .probe import HAND_BODY, body_names, held_peak, welded_to
+from .probe import HAND_BODY, body_names, from_above, held_peak, welded_to
 
 
 class _Model:
@@ -52,6 +54,7 @@ class _Rollout:
         self.model: _Model | None = None
         self.geom: list[np.ndarray] = []  # per step (ncon, 2)
         self.dist: list[np.ndarray] = []  # per step (ncon,)
+        self.nz: list[np.ndarray] = []  # per step (ncon,) the contact normal's z
         self.adr: list[np.ndarray] = []  # per step (ncon,) efc_address
         self.dim: list[np.ndarray] = []  # per step (ncon,)
         self.efc: list[np.ndarray] = []  # per step (nefc,) efc_force
@@ -80,6 +83,7 @@ class ArrayProbe:
         con = d.contact  # copies of this step's arrays (views of d, sized ncon); the work is done in result
         run.geom.append(np.array(con.geom))
         run.dist.append(np.array(con.dist))
+        run.nz.append(np.array(con.frame[:, 2]))
         run.adr.append(np.array(con.efc_address))
         run.dim.append(np.array(con.dim))
         run.efc.append(np.array(d.efc_force))
@@ -175,8 +179,12 @@ class ArrayProbe:
             at, held = (np.nan, np.nan), (False, False)
         press = held_peak(load, SUSTAIN_STEPS)
         n_palm = int(hand_steps.sum())
+        on_hand = (bodies[:, 0] == hand) | (bodies[:, 1] == hand)
+        top = from_above(np.concatenate(run.nz)[rows])
+        split = [self._palm_split(step[sel], force[sel], steps) for sel in (on_hand & top, on_hand & ~top)]
         return dict(palm_contact=n_palm > 0, palm_steps=n_palm, palm_seconds=n_palm * self.timestep,
-                    palm_force_n=palm_force, peak_force_n=peak_n, peak_force_weights=peak_w,
+                    palm_force_n=palm_force, palm_top_steps=split[0][0], palm_top_force_n=split[0][1],
+                    palm_side_steps=split[1][0], palm_side_force_n=split[1][1], peak_force_n=peak_n, peak_force_weights=peak_w,
                     peak_pair=peak_pair, peak_step=peak_step, max_penetration_m=pen, penetration_pair=pen_pair,
                     held_penetration_m=held_peak(depth, SUSTAIN_STEPS),
                     speed_toy=at[0], speed_other=at[1], held_toy=held[0], held_other=held[1],
@@ -184,13 +192,24 @@ class ArrayProbe:
                     object_peak_n=float(load.max()) if steps else 0.0,
                     press_n=press, weight_n=weight_n, press_weights=press / weight_n if weight_n > 0 else 0.0)
 
+    @staticmethod
+    def _palm_split(step: np.ndarray, force: np.ndarray, steps: int) -> tuple[int, float]:
+        """(steps with one of these palm contacts, the largest per-step sum of their forces):
+        summed in contact order from 0, as ``step_contacts``."""
+        per_step = np.zeros(steps)
+        np.add.at(per_step, step, force)
+        has = np.zeros(steps, bool)
+        has[step] = True
+        return int(has.sum()), float(max(0.0, per_step[has].max())) if has.any() else 0.0
+
     def _held(self, mm: _Model, eq_active: np.ndarray) -> tuple[bool, bool]:
         """``probe.held_bodies``'s rule on a recorded ``eq_active``."""
         out = welded_to(mm.m, eq_active, mm.hand)
         return self.objects[0] in out, self.objects[1] in out
 
     def _empty(self) -> dict[str, Any]:
-        return dict(palm_contact=False, palm_steps=0, palm_seconds=0.0, palm_force_n=0.0, peak_force_n=0.0,
+        return dict(palm_contact=False, palm_steps=0, palm_seconds=0.0, palm_force_n=0.0, palm_top_steps=0,
+                    palm_top_force_n=0.0, palm_side_steps=0, palm_side_force_n=0.0, peak_force_n=0.0,
                     peak_force_weights=0.0, peak_pair="", peak_step=-1, max_penetration_m=0.0, penetration_pair="",
                     held_penetration_m=0.0, speed_toy=np.nan, speed_other=np.nan, held_toy=False,
                     held_other=False, speed_end=np.nan, object_peak_n=0.0, press_n=0.0, weight_n=0.0,
