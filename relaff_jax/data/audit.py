@@ -44,20 +44,25 @@ from relaff_jax.data.layout import SIDECAR
 from relaff_jax.config.action import ActionConfig
 
 AUDIT_FILE = "audit.json"
-AUDIT_VERSION = 5  # 5: a press under PRESS_FLOOR_N newtons passes; 4: penetration held 0.1 s (was one step's); 3: force = the press held 0.1 s, penetration 3 mm
+# 6: the palm check fails on palm contacts from above only (a push from the side is reported);
+# 5: a press under PRESS_FLOOR_N newtons passes; 4: penetration held 0.1 s (was one step's);
+# 3: force = the press held 0.1 s, penetration 3 mm
+AUDIT_VERSION = 6
 DEFAULT_SAMPLE = 64
 # The checks' bounds are the programs' (sim/physics_bounds.py; reasoning: docs/arm.md,
-# "Bounded forces"): a rollout fails a check when it has more hand-object contact steps than
-# PALM_CONTACTS, its press exceeds FORCE_WEIGHTS weights of the heavier object and
-# FORCE_FLOOR_N newtons, a contact with
-# an object stays deeper than PENETRATION_M for 0.1 s (an impact's one-step depth is reported),
-# or an object not held by the hand moves faster than MOVING_M_S at the measuring step
+# "Bounded forces"): a rollout fails a check when it has more steps with a hand-object contact
+# from above (the normal within PALM_ABOVE_DEG of vertical: a press) than PALM_CONTACTS (contacts
+# from the side, the palm pushing an object aside, are reported), its press exceeds FORCE_WEIGHTS
+# weights of the heavier object and FORCE_FLOOR_N newtons, a contact with an object stays deeper
+# than PENETRATION_M for 0.1 s (an impact's one-step depth is reported), or an object not held by
+# the hand moves faster than MOVING_M_S at the measuring step
 PALM_CONTACTS = bounds.PALM_CONTACT_STEPS
 FORCE_WEIGHTS = bounds.PRESS_WEIGHTS
 FORCE_FLOOR_N = bounds.PRESS_FLOOR_N
 PENETRATION_M = bounds.PENETRATION_M
 MOVING_M_S = bounds.MOVING_M_S
-THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "press_weights": FORCE_WEIGHTS, "press_floor_n": FORCE_FLOOR_N,
+PALM_ABOVE_DEG = bounds.PALM_ABOVE_DEG
+THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "palm_above_deg": PALM_ABOVE_DEG, "press_weights": FORCE_WEIGHTS, "press_floor_n": FORCE_FLOOR_N,
               "press_steps": bounds.SUSTAIN_STEPS,
               "penetration_m": PENETRATION_M, "moving_m_s": MOVING_M_S}
 
@@ -193,10 +198,16 @@ def failures(row: Mapping[str, Any]) -> dict[str, bool]:
     """Which checks one audited rollout fails."""
     speeds = [s for s, held in ((row["speed_toy"], row.get("held_toy")), (row["speed_other"], row.get("held_other")))
               if s is not None and not held]  # a held object moves with the arm
-    return {"palm_contact": row["palm_steps"] > PALM_CONTACTS,
+    return {"palm_contact": _palm_top_steps(row) > PALM_CONTACTS,
             "force": not bool(bounds.press_ok(row["press_n"], row["weight_n"])),
             "penetration": _held_depth(row) > PENETRATION_M,
             "moving": bool(speeds) and max(speeds) > MOVING_M_S}
+
+
+def _palm_top_steps(row: Mapping[str, Any]) -> int:
+    """The steps with a palm contact from above (rows made before the split: every palm step)."""
+    top = row.get("palm_top_steps")
+    return row["palm_steps"] if top is None else top
 
 
 def _held_depth(row: Mapping[str, Any]) -> float:
@@ -214,10 +225,18 @@ def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[
     count = {k: sum(f[k] for f in fails) for k in ("palm_contact", "force", "penetration", "moving")}
     share = lambda k: (count[k] / n) if n else None
     arr = lambda k: np.asarray([r[k] for r in rows if r[k] is not None], float)
+    # the palm's forces from above / the side over the rollouts with such a (nonzero) force
+    _pos = lambda k: np.asarray([r[k] for r in rows if r.get(k)], float)
+    side = sum(bool(r.get("palm_side_steps")) for r in rows)
     checks = {
         "palm_contact": dict(count=count["palm_contact"], share=share("palm_contact"),
-                             bound="no contact between the hand body (palm) and an object",
-                             palm_seconds=_dist(arr("palm_seconds")), palm_force_n=_dist(arr("palm_force_n"))),
+                             bound=f"no contact from above (normal within {PALM_ABOVE_DEG:g} deg of vertical) between "
+                                   "the hand body (palm) and an object; contacts from the side are reported",
+                             above_deg=PALM_ABOVE_DEG,
+                             palm_seconds=_dist(arr("palm_seconds")), palm_force_n=_dist(arr("palm_force_n")),
+                             top_force_n=_dist(_pos("palm_top_force_n")),
+                             side_count=side, side_share=(side / n) if n else None,
+                             side_force_n=_dist(_pos("palm_side_force_n"))),
         "force": dict(count=count["force"], share=share("force"), bound_weights=FORCE_WEIGHTS,
                       bound_floor_n=FORCE_FLOOR_N,
                       held_steps=bounds.SUSTAIN_STEPS,
@@ -298,9 +317,15 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.0f}%"
 
 
+def _palm(c: Mapping[str, Any]) -> str:
+    """'above/side' shares of a palm check (an audit made before the split: its one share)."""
+    side = c.get("side_share")
+    return _pct(c["share"]) + ("" if "side_count" not in c else "/" + _pct(side))
+
+
 def format_audit(audits: list[Mapping[str, Any]]) -> str:
     """The table ``relaff audit`` prints: one row per dataset, the bounds below."""
-    head = (f"{'action':<11}{'engine':<7}{'audited':>9}  {'palm':>5}  {'press/weight med p95 max':>25}  "
+    head = (f"{'action':<11}{'engine':<7}{'audited':>9}  {'palm above/side':>15}  {'press/weight med p95 max':>25}  "
             f"{'pen. max':>8}  {'moving':>6}  {'label agr.':>10}  checks")
     lines = [head, "-" * len(head)]
     for a in audits:
@@ -312,12 +337,14 @@ def format_audit(audits: list[Mapping[str, Any]]) -> str:
         failed = [k for k in ("palm_contact", "force", "penetration", "moving") if not c[k]["pass"]]
         lines.append(
             f"{a['action']:<11}{str(a['engine']):<7}{a['n_audited']:>4}/{a['population']:<4}  "
-            f"{_pct(c['palm_contact']['share']):>5}  {force:>25}  "
+            f"{_palm(c['palm_contact']):>15}  {force:>25}  "
             f"{'-' if pen is None else f'{1000 * pen:.1f} mm':>8}  {_pct(c['moving']['share']):>6}  "
             f"{_pct(a['replay']['label_agreement']):>10}  {'FAIL ' + ','.join(failed) if failed else 'pass'}")
     lines.append("")
-    lines.append(f"audited: sampled selected samples whose program ran / all of them. A rollout fails: palm = a "
-                 f"contact between the hand body and an object; force = the summed normal force on an object held "
+    lines.append(f"audited: sampled selected samples whose program ran / all of them. palm above/side: the share "
+                 f"of rollouts with a contact between the hand body and an object from above (its normal within "
+                 f"{PALM_ABOVE_DEG:g} deg of vertical: the palm pressing on an object) / from the side (the palm pushing "
+                 f"it). A rollout fails: palm = a contact from above (side contacts are reported, not checked); force = the summed normal force on an object held "
                  f"over {bounds.SUSTAIN_STEPS} steps (a press, not an impact) > {FORCE_WEIGHTS:g} weights of the "
                  f"heavier object and > {FORCE_FLOOR_N:g} N; pen. = a contact with an object deeper than "
                  f"{1000 * PENETRATION_M:g} mm held over {bounds.SUSTAIN_STEPS} steps; moving = an object not held by "

@@ -22,7 +22,7 @@ from relaff_jax.report import folder as F
 from relaff_jax.report.figures import save_png
 from relaff_jax.data.store import read_sidecar
 
-CHECKS = (("palm_contact", "palm on an object"),
+CHECKS = (("palm_contact", "palm on an object from above"),
           ("force", f"press > {A.FORCE_WEIGHTS:g} weights and {A.FORCE_FLOOR_N:g} N"),
           ("penetration", f"penetration held 0.1 s > {1000 * A.PENETRATION_M:g} mm"),
           ("moving", f"moving > {A.MOVING_M_S:g} m/s at measuring"))
@@ -77,12 +77,22 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.0f} %"
 
 
+def _side(c: Mapping[str, Any]) -> str:
+    """The share of rollouts with a palm contact from the side and its largest force."""
+    if "side_count" not in c:
+        return "-"
+    top = c["side_force_n"]["max"]
+    return _pct(c["side_share"]) + ("" if top is None else f" ({top:.1f})")
+
+
 def audit_blocks(audits: Mapping[str, Mapping[str, Any]], missing: Mapping[str, str], out: Path) -> list[tuple]:
     """The "Physics audit" section: what is checked, one row per dataset, the figure."""
     blocks: list[tuple] = [("h", 2, "Physics audit"), (
         "p", "Per dataset, a sample of the selected samples whose program ran, replayed in MuJoCo C from the stored "
         "settled scene with the dataset's recorded config, every step's contacts read (`relaff audit DIR`, "
-        "docs/audit.md). A rollout fails a check when the hand's palm touches an object; when the summed contact "
+        "docs/audit.md). A rollout fails a check when the hand's palm touches an object from above (the contact "
+        f"normal within {A.PALM_ABOVE_DEG:g} degrees of vertical: the palm pressing on an object's top; a contact from "
+        "the side, the palm pushing an object aside, is reported in `palm side`, not checked); when the summed contact "
         f"normal force on an object held over 0.1 s (a press, not an impact) exceeds {A.FORCE_WEIGHTS:g} weights of "
         f"the heavier object and {A.FORCE_FLOOR_N:g} N (the least squeeze of two pads on a light pair); when a contact with an "
         f"object held over 0.1 s is deeper than {1000 * A.PENETRATION_M:g} mm (an impact's one-step depth is in "
@@ -91,7 +101,7 @@ def audit_blocks(audits: Mapping[str, Mapping[str, Any]], missing: Mapping[str, 
         "at the step whose positions the goal reads. Shares of failing rollouts, over all audited and over the "
         "positives; `label agr.`: the replay's labels equal to the stored ones.")]
     if audits:
-        header = ["action", "engine", "audited", "palm", "palm (pos.)", "press/weight med / p95 / max",
+        header = ["action", "engine", "audited", "palm above", "palm above (pos.)", "palm side (max N)", "press/weight med / p95 / max",
                   "held pen. max (mm)", "moving", "moving (pos.)", "label agr."]
         rows = []
         for act, a in audits.items():
@@ -101,7 +111,7 @@ def audit_blocks(audits: Mapping[str, Mapping[str, Any]], missing: Mapping[str, 
             pen = c["penetration"]["metres"]["max"]
             share = lambda k: _pct(pos[k] / pos["n"]) if pos.get("n") else "-"
             rows.append([act, a["engine"], f"{a['n_audited']} of {a['population']}", _pct(c["palm_contact"]["share"]),
-                         share("palm_contact"), f, "-" if pen is None else f"{1000 * pen:.1f}",
+                         share("palm_contact"), _side(c["palm_contact"]), f, "-" if pen is None else f"{1000 * pen:.1f}",
                          _pct(c["moving"]["share"]), share("moving"), _pct(a["replay"]["label_agreement"])])
         blocks.append(("table", header, rows))
         audit_figure(audits, out / F.FIG_AUDIT)

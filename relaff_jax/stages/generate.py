@@ -131,8 +131,8 @@ def audit_one(run: Run, action: str) -> dict:
         run.progress.message(f"audit {action}: not audited ({e})")
         return {"status": "not audited", "why": str(e)}
     c = a["checks"]
-    run.progress.message(f"audit {action}: {a['n_audited']} rollouts replayed in MuJoCo C, palm contacts "
-                         f"{c['palm_contact']['count']}, peak force {c['force']['weights']['max'] or 0:.0f} weights, "
+    run.progress.message(f"audit {action}: {a['n_audited']} rollouts replayed in MuJoCo C, palm from above "
+                         f"{c['palm_contact']['count']} (side {c['palm_contact']['side_count']}), peak force {c['force']['weights']['max'] or 0:.0f} weights, "
                          f"moving at measuring {c['moving']['count']}, label agreement "
                          f"{a['replay']['agree']}/{a['replay']['n']} in {time.perf_counter() - t0:.0f} s")
     return {"n": a["n_audited"], "seconds": round(time.perf_counter() - t0, 2),

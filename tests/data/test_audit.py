@@ -61,6 +61,9 @@ def test_probe_reads_a_known_palm_press():
     assert r["peak_force_n"][0] == pytest.approx(11 * G, rel=0.02)
     assert r["palm_force_n"][0] == pytest.approx(10 * G, rel=0.02)
     assert r["palm_steps"][0] > 1000
+    # the palm on the box's top: every contact from above (the normal vertical), none from the side
+    assert r["palm_top_steps"][0] == r["palm_steps"][0] and r["palm_side_steps"][0] == 0
+    assert r["palm_top_force_n"][0] == pytest.approx(10 * G, rel=0.02) and r["palm_side_force_n"][0] == 0.0
     # the press sums every contact on the box (palm 98.1 N + table 107.9 N = 21 weights), held
     # at the end of the ramp; the ball (0.2 kg) is lighter: the weight is the box's
     assert r["weight_n"][0] == pytest.approx(G)
@@ -105,7 +108,8 @@ def test_probe_reads_a_known_penetration_and_a_known_speed():
 def _row(**kw):
     row = dict(rollout=0, toy="ball", other="tray", relation="on_top", label=True, replay_label=True,
                plan_feasible=True, resettled=True, palm_contact=False, palm_steps=0, palm_seconds=0.0,
-               palm_force_n=0.0, peak_force_n=5.0, peak_force_weights=1.0, peak_pair="world|obj", peak_step=3,
+               palm_force_n=0.0, palm_top_steps=0, palm_top_force_n=0.0, palm_side_steps=0,
+               palm_side_force_n=0.0, peak_force_n=5.0, peak_force_weights=1.0, peak_pair="world|obj", peak_step=3,
                object_peak_n=5.0, press_n=5.0, weight_n=5.0, press_weights=1.0,
                max_penetration_m=0.001, penetration_pair="world|obj", speed_toy=0.0, speed_other=0.0, held_toy=False,
                held_other=False, speed_end=0.0)
@@ -114,7 +118,8 @@ def _row(**kw):
 
 
 def test_checks_count_failures_against_the_stated_bounds():
-    rows = [_row(), _row(rollout=1, palm_contact=True, palm_steps=5, label=False, replay_label=False, relation="beside"),
+    rows = [_row(), _row(rollout=1, palm_contact=True, palm_steps=5, palm_top_steps=2, palm_top_force_n=30.0,
+                         palm_side_steps=4, palm_side_force_n=3.0, label=False, replay_label=False, relation="beside"),
             _row(rollout=2, press_weights=A.FORCE_WEIGHTS + 1, press_n=5.0 * (A.FORCE_WEIGHTS + 1),
                  max_penetration_m=A.PENETRATION_M * 2, speed_toy=A.MOVING_M_S * 1.5, replay_label=False),
             _row(rollout=3, press_weights=A.FORCE_WEIGHTS, press_n=5.0 * A.FORCE_WEIGHTS, max_penetration_m=A.PENETRATION_M,
@@ -122,17 +127,30 @@ def test_checks_count_failures_against_the_stated_bounds():
             # (a one-step peak) above the bound is not a press
             _row(rollout=4, speed_other=1.0, held_other=True),  # a held object moves with the arm: no failure
             # 11 weights of a 100 g pair, under the floor (the least squeeze): not a failure
-            _row(rollout=5, press_weights=11.0, press_n=11 * 0.981, weight_n=0.981)]
+            _row(rollout=5, press_weights=11.0, press_n=11 * 0.981, weight_n=0.981),
+            # the palm pushing an object from the side (move's sweep against a tall base): reported, not a failure
+            _row(rollout=6, palm_contact=True, palm_steps=318, palm_side_steps=318, palm_side_force_n=41.6)]
     s = A.summarise(rows, "native")
     c = s["checks"]
     assert (c["palm_contact"]["count"], c["force"]["count"], c["penetration"]["count"], c["moving"]["count"]) == (1, 1, 1, 1)
-    assert c["palm_contact"]["share"] == pytest.approx(1 / 6) and not c["palm_contact"]["pass"]
-    assert c["force"]["weights"] == {"median": 5.5, "p95": pytest.approx(np.quantile([1, 1, 11, 10, 1, 11], 0.95)),
+    assert c["palm_contact"]["share"] == pytest.approx(1 / 7) and not c["palm_contact"]["pass"]
+    assert c["palm_contact"]["side_count"] == 2 and c["palm_contact"]["side_share"] == pytest.approx(2 / 7)
+    assert c["palm_contact"]["side_force_n"] == {"median": pytest.approx(22.3), "p95": pytest.approx(3.0 + 0.95 * 38.6),
+                                                  "max": 41.6}
+    assert c["palm_contact"]["top_force_n"]["max"] == 30.0 and c["palm_contact"]["palm_force_n"]["max"] == 0.0
+    assert c["force"]["weights"] == {"median": 1.0, "p95": pytest.approx(np.quantile([1, 1, 11, 10, 1, 11, 1], 0.95)),
                                      "max": 11.0}
     assert s["by_label"]["negative"] == {"n": 1, "palm_contact": 1, "force": 0, "penetration": 0, "moving": 0}
-    assert s["by_relation"]["on_top"]["n"] == 5
-    assert s["replay"]["agree"] == 5 and s["replay"]["disagreements"] == [2]
+    assert s["by_relation"]["on_top"]["n"] == 6
+    assert s["replay"]["agree"] == 6 and s["replay"]["disagreements"] == [2]
     assert A.summarise([_row()], "native")["checks"]["force"]["pass"]
+    # side only passes the palm check; one step from above fails it; a row from before the split
+    # (no palm_top_steps) counts every palm step
+    assert A.summarise([rows[6]], "native")["checks"]["palm_contact"]["pass"]
+    assert not A.summarise([_row(palm_steps=1, palm_top_steps=1)], "native")["checks"]["palm_contact"]["pass"]
+    old = _row(palm_steps=3)
+    del old["palm_top_steps"]
+    assert A.failures(old)["palm_contact"] and not A.failures(_row(palm_steps=3, palm_side_steps=3))["palm_contact"]
     json.dumps(s)  # serialisable as it is
 
 
@@ -155,7 +173,8 @@ def test_cli_one_line_errors(tmp_path):
 
 
 ROLLOUT_KEYS = {"rollout", "toy", "other", "relation", "label", "replay_label", "plan_feasible", "resettled",
-                "palm_contact", "palm_steps", "palm_seconds", "palm_force_n", "peak_force_n", "peak_force_weights",
+                "palm_contact", "palm_steps", "palm_seconds", "palm_force_n", "palm_top_steps", "palm_top_force_n",
+                "palm_side_steps", "palm_side_force_n", "peak_force_n", "peak_force_weights",
                 "peak_pair", "peak_step", "max_penetration_m", "held_penetration_m", "penetration_pair", "speed_toy", "speed_other",
                 "held_toy", "held_other", "speed_end", "object_peak_n", "press_n", "weight_n", "press_weights"}
 TOP_KEYS = {"version", "dataset", "action", "engine", "settle", "sample", "seed", "selection_sha256", "population",
@@ -201,3 +220,14 @@ def test_report_section_plots_the_press_against_the_bound(tmp_path):
     text = " ".join(str(b[1]) for b in blocks if b[0] == "p")
     assert "held over 0.1 s" in text and f"{1000 * A.PENETRATION_M:g} mm" in text
     assert "FAIL force" in A.format_audit([a])
+    # the palm: above / side, the bound on the first; a side push alone does not fail
+    rows.append(_row(rollout=2, palm_contact=True, palm_steps=45, palm_side_steps=45, palm_side_force_n=4.7))
+    a = dict(action="lift", engine="native", n_audited=3, population=3, rollouts=rows, **A.summarise(rows, "native"))
+    table = A.format_audit([a])
+    assert "palm above/side" in table and " 0%/33% " in table and "FAIL force" in table and "palm_contact" not in table
+    assert "side contacts are reported, not checked" in table
+    blocks = RA.audit_blocks({"lift": a}, {}, tmp_path)
+    (_, header, body), = [b for b in blocks if b[0] == "table"]
+    assert body[0][header.index("palm above")] == "0 %" and body[0][header.index("palm side (max N)")] == "33 % (4.7)"
+    text = " ".join(str(b[1]) for b in blocks if b[0] == "p")
+    assert f"within {A.PALM_ABOVE_DEG:g} degrees of vertical" in text
