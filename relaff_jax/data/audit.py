@@ -198,16 +198,10 @@ def failures(row: Mapping[str, Any]) -> dict[str, bool]:
     """Which checks one audited rollout fails."""
     speeds = [s for s, held in ((row["speed_toy"], row.get("held_toy")), (row["speed_other"], row.get("held_other")))
               if s is not None and not held]  # a held object moves with the arm
-    return {"palm_contact": _palm_top_steps(row) > PALM_CONTACTS,
+    return {"palm_contact": row["palm_top_steps"] > PALM_CONTACTS,
             "force": not bool(bounds.press_ok(row["press_n"], row["weight_n"])),
             "penetration": _held_depth(row) > PENETRATION_M,
             "moving": bool(speeds) and max(speeds) > MOVING_M_S}
-
-
-def _palm_top_steps(row: Mapping[str, Any]) -> int:
-    """The steps with a palm contact from above (rows made before the split: every palm step)."""
-    top = row.get("palm_top_steps")
-    return row["palm_steps"] if top is None else top
 
 
 def _held_depth(row: Mapping[str, Any]) -> float:
@@ -226,8 +220,8 @@ def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[
     share = lambda k: (count[k] / n) if n else None
     arr = lambda k: np.asarray([r[k] for r in rows if r[k] is not None], float)
     # the palm's forces from above / the side over the rollouts with such a (nonzero) force
-    _pos = lambda k: np.asarray([r[k] for r in rows if r.get(k)], float)
-    side = sum(bool(r.get("palm_side_steps")) for r in rows)
+    _pos = lambda k: np.asarray([r[k] for r in rows if r[k]], float)
+    side = sum(bool(r["palm_side_steps"]) for r in rows)
     checks = {
         "palm_contact": dict(count=count["palm_contact"], share=share("palm_contact"),
                              bound=f"no contact from above (normal within {PALM_ABOVE_DEG:g} deg of vertical) between "
@@ -317,12 +311,6 @@ def _pct(x: float | None) -> str:
     return "-" if x is None else f"{100 * x:.0f}%"
 
 
-def _palm(c: Mapping[str, Any]) -> str:
-    """'above/side' shares of a palm check (an audit made before the split: its one share)."""
-    side = c.get("side_share")
-    return _pct(c["share"]) + ("" if "side_count" not in c else "/" + _pct(side))
-
-
 def format_audit(audits: list[Mapping[str, Any]]) -> str:
     """The table ``relaff audit`` prints: one row per dataset, the bounds below."""
     head = (f"{'action':<11}{'engine':<7}{'audited':>9}  {'palm above/side':>15}  {'press/weight med p95 max':>25}  "
@@ -337,7 +325,7 @@ def format_audit(audits: list[Mapping[str, Any]]) -> str:
         failed = [k for k in ("palm_contact", "force", "penetration", "moving") if not c[k]["pass"]]
         lines.append(
             f"{a['action']:<11}{str(a['engine']):<7}{a['n_audited']:>4}/{a['population']:<4}  "
-            f"{_palm(c['palm_contact']):>15}  {force:>25}  "
+            f"{_pct(c['palm_contact']['share']) + '/' + _pct(c['palm_contact']['side_share']):>15}  {force:>25}  "
             f"{'-' if pen is None else f'{1000 * pen:.1f} mm':>8}  {_pct(c['moving']['share']):>6}  "
             f"{_pct(a['replay']['label_agreement']):>10}  {'FAIL ' + ','.join(failed) if failed else 'pass'}")
     lines.append("")

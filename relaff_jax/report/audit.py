@@ -79,8 +79,6 @@ def _pct(x: float | None) -> str:
 
 def _side(c: Mapping[str, Any]) -> str:
     """The share of rollouts with a palm contact from the side and its largest force."""
-    if "side_count" not in c:
-        return "-"
     top = c["side_force_n"]["max"]
     return _pct(c["side_share"]) + ("" if top is None else f" ({top:.1f})")
 
