@@ -176,12 +176,16 @@ def _program_move(arm, cfg, toy, oth) -> Program:
     tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
     half = lambda b: arm.pad_thickness  # half the closed fingers' footprint along d
     if cfg.programs == "v2":
-        # a toy whose top is within palm_margin of the palm's underside is pinned under the
-        # palm's edge as the fingers push its foot and it tips (a 12 cm can: 70 N into the
-        # table for 1.5 s): the hand then sweeps higher, the palm palm_margin above the top
-        top = toy.z_range()[1]
+        # a top within palm_margin of the palm's underside is pinned under the palm's edge: the
+        # toy's as the fingers push its foot and it tips (a 12 cm can: 70 N into the table for
+        # 1.5 s), or the rim of the container the sweep meets first (the palm rides on a
+        # basket's rim, 13-23 N for up to 0.9 s): the hand then sweeps higher, the palm
+        # palm_margin above that top. The other object counts when the sweep's start lies over it.
         palm = cfg.tip_clearance + 0.005 + arm.palm_above_tip
-        tcp_z = tcp_z + jnp.where(jnp.abs(top - palm) < cfg.palm_margin, top + cfg.palm_margin - palm, 0.0)
+        clear = lambda top: jnp.where(jnp.abs(top - palm) < cfg.palm_margin, top + cfg.palm_margin - palm, 0.0)
+        gap = arm.pad_thickness + cfg.rake_gap
+        over = exit_distance(c - d * (toy.half_width(d) + gap), d, oth, gap) > 0
+        tcp_z = tcp_z + jnp.maximum(clear(toy.z_range()[1]), jnp.where(over, clear(oth.z_range()[1]), 0.0))
         # ... and the hand's footprint is the palm's (5 cm) where a body reaches up to the palm
         palm_z = tcp_z - arm.tip_below_tcp + arm.palm_above_tip - cfg.palm_margin
         half = lambda b: jnp.where(b.z_range()[1] > palm_z, float(arm.palm_half[1]), arm.pad_thickness)
