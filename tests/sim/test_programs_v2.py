@@ -262,3 +262,37 @@ def test_press_floor_covers_the_least_squeeze():
     # above both: refused; a heavy pair's 10 weights: within
     assert not press_ok(PRESS_FLOOR_N + 0.1, w)
     np.testing.assert_array_equal(press_ok(np.array([30.0, 30.0]), np.array([2.9, 3.1])), [False, True])
+
+
+def test_rake_keeps_the_fingertips_above_the_table_and_squeezes_the_handle_lightly():
+    # the tcp holds the handle's centre line, 1.25 cm above its underside; the pads reach 2 cm
+    # below the tcp: at v1's low point (head 3 mm up) the fingertips are 4.5 mm in the table
+    held = tuple(float(v) for v in wd.PhysicsConfig().held_rake_pos)
+    low = {}
+    for name, cfg in (("v1", V1), ("v2", V2)):
+        pr, arm = prog("rake", cfg, "block", "rake_short", (0.9, 0.3, 0.03), held)
+        low[name] = float(pr.targets.pos[1, 2]) - arm.tip_below_tcp  # fingertips at the low point
+        if name == "v2":
+            assert float(pr.grip_closed) == pytest.approx(bodies.tool_squeeze(arm, cfg))
+    assert low["v1"] == pytest.approx(-0.0045, abs=1e-4)
+    assert low["v2"] == pytest.approx(V2.tip_clearance, abs=1e-4)
+    st = planning.setup(V2)
+    # the held tool's pads push at most squeeze_min (kp x (half - command)); v1 the actuator's command
+    assert st.arm.finger_kp * (bodies.HANDLE_HALF - bodies.tool_squeeze(st.arm, V2)) == pytest.approx(V2.squeeze_min)
+    assert bodies.tool_squeeze(st.arm, V1) == V1.arm.grip_closed
+    assert planning.home_grip(V2)[list(templates.ACTIONS).index("rake")] == np.float32(bodies.tool_squeeze(st.arm, V2))
+
+
+def test_move_sweeps_over_a_top_at_the_palm_height():
+    # fingertips 1 cm above the table put the palm's underside 12 cm up: a 12 cm can's top is
+    # there, so the hand rises until the palm is palm_margin above it; a ball's is far below
+    base = V2.tip_clearance + 0.005 + planning.setup(V2).arm.tip_below_tcp
+    can, arm = prog("move", V2, "toy_can", "placemat", (0.7, 0.1, 0.0), (0.7, -0.25, 0.0))
+    ball, _ = prog("move", V2, "ball", "placemat", (0.7, 0.1, 0.0), (0.7, -0.25, 0.0))
+    assert float(ball.targets.pos[2, 2]) == pytest.approx(base, abs=1e-6)
+    palm = float(can.targets.pos[2, 2]) - arm.tip_below_tcp + arm.palm_above_tip
+    st = planning.setup(V2)
+    p, q = scene(st.world, "toy_can", "placemat", (0.7, 0.1, 0.0), (0.7, -0.25, 0.0))
+    top = float(bodies.bodies(st.geo, jnp.int32(p), jnp.asarray(q))[0].z_range()[1])
+    assert abs(top - (base - arm.tip_below_tcp + arm.palm_above_tip)) < V2.palm_margin  # the case the rule is for
+    assert palm == pytest.approx(top + V2.palm_margin, abs=1e-5)
