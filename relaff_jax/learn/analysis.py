@@ -25,6 +25,7 @@ from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.user_conditions import builtin_results
 from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn import gains as G
+from relaff_jax.learn import heldout as H
 from relaff_jax.learn import halfrows
 from relaff_jax.learn import per_target
 from relaff_jax.learn.intervals import (bc_interval, fast_outcomes, half_sizes, resampled_means, scene_halves,
@@ -98,25 +99,11 @@ def _get(res: Mapping[str, Any], key: str, default: Any) -> Any:
 
 def half_curves(acc_x: np.ndarray, corr_x: np.ndarray, halves: np.ndarray,
                 reference: bool = False) -> np.ndarray | None:
-    """``(2, A, C', S)`` mean accuracy on each half of every test set (None without outcomes).
-    ``reference``: the float copy of every block (the fast path, ``halfrows``, is checked against it)."""
-    if not corr_x.shape[-1]:
-        return None
-    a = acc_x.shape[0]
-    ran = np.isfinite(acc_x).any(-1)
-    out = np.full((2, a) + tuple(corr_x.shape[1:3]), np.nan)  # (2, A, C', S)
-    if not reference and fast_outcomes(corr_x):
-        for t in range(a):
-            cols = [np.flatnonzero(halves[t] == h) for h in range(2)]
-            for sl in corr_x.size_blocks():
-                for h, (bits, on) in enumerate(corr_x.half_parts(t, sl, cols)):
-                    out[h, t, :, sl] = halfrows.row_means(bits, on).mean(-1)
-        return np.where(ran[None], out, np.nan)
-    for t in range(a):
-        for sl, blk in target_blocks(corr_x, t):
-            for h in range(2):
-                out[h, t, :, sl] = blk[..., halves[t] == h].astype(float).mean(-1).mean(-1)
-    return np.where(ran[None], out, np.nan)
+    """``(2, A, C', S)`` mean accuracy on each half of every test set (None without outcomes):
+    the mean over repetitions of ``heldout.half_rep_curves``. ``reference``: the float copy of
+    every block (the fast path, ``halfrows``, is checked against it)."""
+    reps = H.half_rep_curves(acc_x, corr_x, halves, reference=reference)
+    return None if reps is None else reps.mean(-1)
 
 
 def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0, intervals: bool = True,
@@ -151,9 +138,10 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
     halves = scene_halves(n_test, _get(res, "test_positive", None), corr_x.shape[-1])
     hm = None  # the resampled half curves, made with the half curves where one pass reads both
     if intervals and not reference and corr_x.shape[-1] and fast_outcomes(corr_x):
-        half_means, hm = _fused(acc_x, corr_x, n_test, halves, cfg, seed)
+        half_means, hm, half_reps = _fused(acc_x, corr_x, n_test, halves, cfg, seed)
     else:
-        half_means = half_curves(acc_x, corr_x, halves, reference=reference)
+        half_reps = H.half_rep_curves(acc_x, corr_x, halves, reference=reference)  # (2, A, C', S, R)
+        half_means = None if half_reps is None else half_reps.mean(-1)
     bf = bootstrap_factor(mean, mean[:, lay["NB"]][:, None, :], cfg.chance, tol[:, None, None])
     t2 = table2_rows(mean, sizes, cfg, lay, tol, half_means, cbn_ok, masks)
     paper = np.isin(np.asarray(actions), ACTIONS)  # Table II's rows average the paper's nine (a user action: per target only)
@@ -181,7 +169,7 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
         out[f"online_{fam.lower()}"] = w_on[fam]
     out["paper"] = paper
     out["thresholds"] = threshold_study(mean[:, : lay["n"]], bf[:, : lay["n"]], masks, sizes, cfg, lay, t2, paper)
-    out["methods"] = against_nb(acc_x, mean, sizes, cfg, lay, cbn_ok, seed, paper)
+    out["methods"] = against_nb(acc_x, mean, sizes, cfg, lay, cbn_ok, seed, paper, half_means, half_reps)
     if intervals:
         out.update(_intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, out, reference, hm))
     out["affordances"] = per_target.answers(out)
@@ -189,32 +177,36 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
 
 
 def against_nb(acc_x: np.ndarray, mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, lay: dict,
-               cbn_ok: np.ndarray, seed: int, paper: np.ndarray | None = None) -> dict[str, Any]:
+               cbn_ok: np.ndarray, seed: int, paper: np.ndarray | None = None, half_means: np.ndarray | None = None,
+               half_reps: np.ndarray | None = None) -> dict[str, Any]:
     """Each of ``gains.METHODS`` against NB (``gains.py``): the gain curve's area over the
     window and the samples saved at ``select_size`` (mean over the targets ``paper (A,)``,
     all where None; per target ``*_per_target (M, A)``; intervals added by ``_intervals``
     from the same resamples as Table II's), and the probability of improvement over NB of
     the per-repetition window accuracies across those affordances and repetitions, its
     interval from ``cfg.ci_resamples`` stratified resamples, its p-value against 0.5 and the
-    Holm correction over the methods (``holm_reject`` at 1 - ``ci_level``)."""
+    Holm correction over the methods (``holm_reject`` at 1 - ``ci_level``). With the half curves
+    ``half_means (2, A, C', S)`` and ``half_reps (2, A, C', S, R)`` every statistic of a "best"
+    or "after ten" method rests on Table II's held-out choice (``heldout.py``), else on the
+    in-sample one (its name then ends in "(in-sample oracle)")."""
     w = G.method_weights(mean, lay, cfg, sizes, cbn_ok)
     paper = np.ones(mean.shape[0], bool) if paper is None else np.asarray(paper, bool)
-    st = G.curve_stats(mean, w, lay, sizes, cfg, paper)
-    x, y = G.rep_scores(acc_x, w, lay, sizes, cfg)
+    st = G.curve_stats(mean, w, lay, sizes, cfg, paper, halves=half_means)
+    x, y = G.rep_scores(acc_x, w, lay, sizes, cfg, None if half_means is None else (half_reps, half_means))
     rng = np.random.default_rng(derive_seed(seed, streams.IMPROVEMENT))
     poi, ci, p = [], [], []
     for k in range(len(G.METHODS)):
-        keep = np.isfinite(x[k]).any(-1) & np.isfinite(y).any(-1) & paper  # the paper's tasks the method ran for
+        keep = np.isfinite(x[k]).any(-1) & np.isfinite(y[k]).any(-1) & paper  # the paper's tasks the method ran for
         if not keep.any():
             poi.append(np.nan), ci.append((np.nan, np.nan)), p.append(np.nan)
             continue
-        est = G.probability_of_improvement(x[k][keep], y[keep])
-        boot = G.stratified_poi(x[k][keep], y[keep], cfg.ci_resamples, rng)
+        est = G.probability_of_improvement(x[k][keep], y[k][keep])
+        boot = G.stratified_poi(x[k][keep], y[k][keep], cfg.ci_resamples, rng)
         poi.append(est)
         ci.append(tuple(float(v[0]) for v in bc_interval(boot[:, None], np.array([est]), cfg.ci_level)))
         p.append(G.bootstrap_p(boot, 0.5))
     adj, rej = G.holm(p, 1 - cfg.ci_level)
-    return {"names": list(G.METHODS), "weights": w, "area": st["area"], "saved": st["saved"],
+    return {"names": H.method_names(G.METHODS, half_means is not None), "weights": w, "area": st["area"], "saved": st["saved"],
             "censored": st["censored"], "poi": np.asarray(poi), "poi_ci": np.asarray(ci), "poi_p": np.asarray(p),
             "poi_holm_p": adj, "poi_holm_reject": rej} | {k: st[k] for k in st if k.endswith("_per_target")}
 
@@ -253,8 +245,11 @@ def _fused(acc_x, corr_x, n_test, halves, cfg, seed) -> tuple[np.ndarray, np.nda
     """``half_curves`` and ``_intervals``' resampled means from one read of the outcomes (the
     same bits as the two apart: each block's halves unpacked and mixed once, not twice)."""
     means = np.full((2,) + corr_x.shape[:3], np.nan)
-    hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, streams.INTERVALS), halves, means=means)
-    return np.where(np.isfinite(acc_x).any(-1)[None], means, np.nan), hm
+    reps = np.full(means.shape + acc_x.shape[-1:], np.nan)  # per repetition (P(improvement)'s held-out scores)
+    hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, streams.INTERVALS), halves,
+                         means=means, rep_means=reps)
+    ran = np.isfinite(acc_x).any(-1)[None]
+    return np.where(ran, means, np.nan), hm, np.where(ran[..., None], reps, np.nan)
 
 
 def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, pt, reference=False,
@@ -285,7 +280,7 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
         with _quiet():
             boot["nb"].append(np.nanmean(m[:, paper, lay["NB"]], 1))  # (b, S) mean NB over the paper's targets
         boot["mean"].append(m)
-        st = G.curve_stats(m, pt["methods"]["weights"], lay, sizes, cfg, paper)
+        st = G.curve_stats(m, pt["methods"]["weights"], lay, sizes, cfg, paper, halves=h if outcomes else None)
         boot["area"].append(st["area"]), boot["saved"].append(st["saved"])
         choice = lay["DB1"][select_best(m[:, :, lay["DB1"]], sizes, *cfg.best_sizes)]  # (b, A) in-sample best source
         for k, v in per_target.resampled(t2, st, choice).items():

@@ -22,6 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
+from relaff_jax.learn import heldout as H
 from relaff_jax.learn.measures import _score, size_mask, tie_weights
 
 
@@ -124,8 +125,10 @@ def holm(p: Sequence[float], alpha: float = 0.05) -> tuple[np.ndarray, np.ndarra
     return adj, np.where(np.isfinite(adj), adj <= alpha, False)
 
 
-# the learners compared with NB; "best" / "after ten" are the in-sample choices on the whole test
-# set (the paper's), "after ten" the whole curve of the learner kept at select_size
+# the learners compared with NB; "best" / "after ten" choose their source on the test scores: on one
+# half of the test scenes, scored on the other, where the outcomes are kept (Table II's held-out
+# rows, heldout.py), else in-sample on the whole test set (the paper's); "after ten" the whole
+# curve of the learner kept at select_size
 METHODS = ("DB1 average", "DB1 best", "DB1 best after ten", "DB1 best after ten (online)", "DBn",
            "CB1 average", "CB1 best", "CB1 best after ten", "CB1 best after ten (online)", "CBn")
 
@@ -160,26 +163,34 @@ def method_curves(mean: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.where(w.sum(-1)[..., None] > 0, out, np.nan)
 
 
-def per_target_stats(mean: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg) -> dict[str, np.ndarray]:
+def per_target_stats(mean: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg,
+                     halves: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Per method and target: the gain curve's area over the window ``area (..., M, A)``, the
     samples saved at ``select_size`` ``saved (..., M, A)`` (a censored target counts with the
-    largest size: a lower bound) and ``censored (..., M, A)``; NaN where a method did not run."""
+    largest size: a lower bound) and ``censored (..., M, A)``; NaN where a method did not run.
+    With the half curves ``halves (..., 2, A, C', S)`` the choosing methods' curves and NB's
+    beside them are the held-out ones (``heldout.heldout_curves``: Table II's choice), else the
+    in-sample ``w``'s."""
     curves = method_curves(mean, w)  # (..., M, A, S)
-    nb = np.asarray(mean, float)[..., None, :, lay["NB"], :]  # (..., 1, A, S)
+    nb = np.array(np.broadcast_to(np.asarray(mean, float)[..., None, :, lay["NB"], :], curves.shape))
+    if halves is not None:
+        ch = H.choosing(METHODS)
+        curves[..., ch, :, :], nb[..., ch, :, :] = H.heldout_curves(halves, METHODS, lay, sizes, cfg)
     area = window_area(curves - nb, sizes, *cfg.bf_sizes)
     if cfg.select_size in sizes:
-        saved, cens = samples_saved(curves, np.broadcast_to(nb, curves.shape), sizes, cfg.select_size)
+        saved, cens = samples_saved(curves, nb, sizes, cfg.select_size)
     else:
         saved, cens = np.full(area.shape, np.nan), np.zeros(area.shape, bool)
     return {"area": area, "saved": saved, "censored": cens & np.isfinite(saved)}
 
 
 def curve_stats(mean: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg,
-                keep: np.ndarray | None = None) -> dict[str, np.ndarray]:
-    """``per_target_stats`` averaged over the targets ``keep (A,)`` (all: None) a method ran
-    for: ``area (..., M)``, ``saved (..., M)`` and ``censored (..., M)`` how many of them were
-    censored; the per target values as ``*_per_target (..., M, A)``."""
-    st = per_target_stats(mean, w, lay, sizes, cfg)
+                keep: np.ndarray | None = None, halves: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """``per_target_stats`` (``halves``: its held-out choice) averaged over the targets
+    ``keep (A,)`` (all: None) a method ran for: ``area (..., M)``, ``saved (..., M)`` and
+    ``censored (..., M)`` how many of them were censored; the per target values as
+    ``*_per_target (..., M, A)``."""
+    st = per_target_stats(mean, w, lay, sizes, cfg, halves)
     k = np.ones(st["area"].shape[-1], bool) if keep is None else np.asarray(keep, bool)
     with np.errstate(invalid="ignore"):
         import warnings
@@ -193,12 +204,20 @@ def curve_stats(mean: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int]
                     "censored_per_target": st["censored"]}
 
 
-def rep_scores(acc_x: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg) -> tuple[np.ndarray, np.ndarray]:
-    """Per repetition the mean accuracy over the window: methods ``(M, A, R)`` and NB ``(A, R)``
-    (the scores the probability of improvement compares) from ``acc_x (A, C', S, R)``."""
+def rep_scores(acc_x: np.ndarray, w: np.ndarray, lay: dict, sizes: Sequence[int], cfg,
+               halves: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per repetition the mean accuracy over the window: methods ``(M, A, R)`` and NB beside
+    each ``(M, A, R)`` (the scores the probability of improvement compares) from ``acc_x (A,
+    C', S, R)``. With ``halves = (half_reps (2, A, C', S, R), half_means (2, A, C', S))`` the
+    choosing methods' scores and NB's beside them are the held-out ones
+    (``heldout.heldout_rep_scores``), else the in-sample ``w``'s on the whole test set."""
     m = size_mask(sizes, *cfg.bf_sizes)
     with np.errstate(invalid="ignore", divide="ignore"):  # no size in the window: NaN scores
         win = np.asarray(acc_x, float)[:, :, m].mean(2)  # (A, C', R)
     x = np.einsum("mac,acr->mar", w, np.nan_to_num(win))
     x = np.where(w.sum(-1)[..., None] > 0, x, np.nan)
-    return x, win[:, lay["NB"]]
+    y = np.array(np.broadcast_to(win[:, lay["NB"]], x.shape))
+    if halves is not None:
+        ch = H.choosing(METHODS)
+        x[ch], y[ch] = H.heldout_rep_scores(halves[0], halves[1], METHODS, lay, sizes, cfg)
+    return x, y

@@ -74,13 +74,14 @@ def fast_outcomes(correct) -> bool:
 
 def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, resamples: int, seed: int,
                     halves: np.ndarray | None = None, reference: bool = False,
-                    means: np.ndarray | None = None) -> np.ndarray:
+                    means: np.ndarray | None = None, rep_means: np.ndarray | None = None) -> np.ndarray:
     """``(B, 2, A, C', S)`` float64 mean accuracy curves of each test half in ``resamples``
     bootstrap resamples (both entries the whole test set without outcomes). ``reference``:
     the float copy of every block (the fast path, ``halfrows``, is checked against it).
     ``means (2, A, C', S)``: on the fast path, filled with ``analysis.half_curves``' values
     (before its NaN of what did not run) from the halves read for the resampling, so that the
-    outcomes are unpacked and mixed once (NaN where a half is empty or a target kept none)."""
+    outcomes are unpacked and mixed once (NaN where a half is empty or a target kept none);
+    ``rep_means (2, A, C', S, R)`` the same before the mean over repetitions."""
     acc = np.asarray(acc, dtype=np.float64)
     a, c, s, r = acc.shape
     rng = np.random.default_rng(seed)
@@ -107,8 +108,12 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
                 for sl in correct.size_blocks():  # the reference's blocks: the same matmul shapes
                     parts = correct.half_parts(t, sl, [idx for _, idx, _ in draws])
                     for (h, _, w), (bits, on) in zip(draws, parts):
-                        if means is not None:
-                            means[h, t, :, sl] = halfrows.row_means(bits, on).mean(-1)
+                        if means is not None or rep_means is not None:
+                            rm = halfrows.row_means(bits, on)  # (C', s, R)
+                            if means is not None:
+                                means[h, t, :, sl] = rm.mean(-1)
+                            if rep_means is not None:
+                                rep_means[h, t, :, sl] = rm
                         out[:, h, t, :, sl] = halfrows.resampled(bits, on, w, v, work)
                 continue
             for sl, blk in target_blocks(correct, t):

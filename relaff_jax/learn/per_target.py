@@ -10,9 +10,9 @@ of resampled mean curves; gives per target, for the paper's nine and any user ac
   the share of resamples whose in-sample choice is the same source;
 * ``gain``: the mean accuracy gain of ``best_row`` over NB in the window, and ``verdict`` from
   its interval (``verdict``);
-* ``saved``: the samples the in-sample "DB1 best" learner saves at ``select_size`` (the
-  methods-against-NB block's, ``gains.samples_saved``; ``saved_censored`` where NB never
-  reaches it: a lower bound);
+* ``saved``: the samples ``best_row``'s learner saves at ``select_size`` (the methods-against-NB
+  block's "DB1 best", ``gains.samples_saved``, on the same held-out choice as ``bf_best`` and
+  ``gain``: ``heldout.py``; ``saved_censored`` where NB never reaches it: a lower bound);
 
 each with its bias-corrected interval from Table II's resamples (``resampled`` collects the
 values of a chunk, ``intervals`` turns them into intervals: no second resampling scheme, so a
@@ -30,7 +30,7 @@ from relaff_jax.learn.table2 import ORACLE, TABLE2_ROWS
 
 BOOT = ("gain_per", "area_per", "saved_per", "choice")  # what each chunk of resamples gives
 VERDICTS = ("helps", "no evidence", "hurts", "not measurable")
-SAVED_METHOD = "DB1 best"  # gains.METHODS: the in-sample best source's whole curve
+SAVED_METHOD = "DB1 best"  # gains.METHODS: the best source's whole curve, held-out as best_row (or its oracle)
 
 
 def resampled(t2: Mapping[str, np.ndarray], st: Mapping[str, np.ndarray], choice: np.ndarray) -> dict[str, np.ndarray]:
@@ -78,7 +78,7 @@ def answers(a: Mapping[str, Any]) -> dict[str, Any]:
     best_row = "DB1 best" if a["outcomes"] else "DB1 best" + ORACLE
     i_avg, i_best = TABLE2_ROWS.index("DB1 average"), TABLE2_ROWS.index(best_row)
     m = a["methods"]
-    k = list(m["names"]).index(SAVED_METHOD)
+    k = [str(x).replace(ORACLE, "") for x in m["names"]].index(SAVED_METHOD)  # held-out, or its oracle
     nan2 = np.full((n, 2), np.nan)
 
     def ci(src: Mapping[str, Any], key: str, i: int) -> np.ndarray:
@@ -88,7 +88,7 @@ def answers(a: Mapping[str, Any]) -> dict[str, Any]:
     ran = _source_ran(a)
     share = a.get("best_db1_share", np.full(n, np.nan))
     return {"actions": acts, "in_paper": [bool(p) for p in a["paper"]], "best_row": best_row,
-            "saved_method": SAVED_METHOD, "level": a.get("ci_level"),
+            "saved_method": m["names"][k], "level": a.get("ci_level"),
             "bf_average": a["table2_per_target"][i_avg], "bf_average_ci": ci(a, "per_target_ci", i_avg),
             "bf_best": a["table2_per_target"][i_best], "bf_best_ci": ci(a, "per_target_ci", i_best),
             "gain": a["gain_per_target"][i_best], "gain_ci": gain_ci,

@@ -94,8 +94,10 @@ def methods_blocks(a: Mapping[str, Any], cfg: Any, space: str) -> list[tuple]:
                   "repetition beats NB's in another, per affordance (Mann-Whitney U / (R x R)), averaged over the "
                   "paper's affordances, with its interval from stratified resamples of the repetitions (as rliable). "
                   f"Significant: P(improvement) differs from 0.5 at {100 - level:g} % after Holm's correction over "
-                  "the methods. 'best' and 'after ten' are the in-sample choices; 'after ten' the whole curve of the "
-                  "learner kept. " + paper_basis(a, cfg)),
+                  "the methods. 'best' and 'after ten' choose their source as Table II's rows of the same name do: on one "
+                  "half of the test scenes, scored on the other (each statistic from the two ways averaged, NB read on "
+                  "the same halves); a row named '(in-sample oracle)' chose on the scores it reports (no test outcomes "
+                  "kept). 'after ten' is the whole curve of the learner kept. " + paper_basis(a, cfg)),
             ("table", ["method", "area", "samples saved", "P(improvement)", "Holm p", "significant"], rows)]
 
 

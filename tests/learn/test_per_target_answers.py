@@ -13,6 +13,8 @@ from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.constants import ACTIONS
 from relaff_jax.learn import gains as G
 from relaff_jax.learn.analysis import _outcomes
+from relaff_jax.learn.heldout import half_rep_curves
+from relaff_jax.learn.intervals import scene_halves
 from relaff_jax.learn.measures import _quiet
 from relaff_jax.learn.online import extend
 from relaff_jax.learn.results import load_results
@@ -131,13 +133,15 @@ def test_a_tenth_action_is_in_no_mean_beside_the_paper_and_has_its_own_row(tenth
     # P(improvement): its tasks are the nine
     lay = E.layout(10, len(cfg.thresholds))
     acc = np.asarray(res["acc"], float)
-    loo, correct, _ = _outcomes(res, acc)
-    acc_x, _, _ = extend(acc, correct, loo, lay)
-    x, y = G.rep_scores(acc_x, m["weights"], lay, a["sizes"], cfg)
+    loo, correct, n_test = _outcomes(res, acc)
+    acc_x, corr_x, _ = extend(acc, correct, loo, lay)
+    reps = half_rep_curves(acc_x, corr_x, scene_halves(n_test, res["test_positive"], corr_x.shape[-1]))
+    assert reps is not None  # outcomes kept: the choosing methods' scores are held out
+    x, y = G.rep_scores(acc_x, m["weights"], lay, a["sizes"], cfg, (reps, reps.mean(-1)))
     for k in range(len(G.METHODS)):
-        keep = np.isfinite(x[k]).any(-1) & np.isfinite(y).any(-1)
+        keep = np.isfinite(x[k]).any(-1) & np.isfinite(y[k]).any(-1)
         assert keep[9]  # the tenth ran, and is left out
-        assert m["poi"][k] == G.probability_of_improvement(x[k][:9][keep[:9]], y[:9][keep[:9]])
+        assert m["poi"][k] == G.probability_of_improvement(x[k][:9][keep[:9]], y[k][:9][keep[:9]])
     # the tenth's own row: its per target values, marked as not in the paper
     f = a["affordances"]
     assert f["actions"][-1] == "drag" and f["in_paper"] == [True] * 9 + [False]
