@@ -26,10 +26,8 @@ from relaff_jax.learn.user_conditions import builtin_results
 from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn import gains as G
 from relaff_jax.learn import heldout as H
-from relaff_jax.learn import halfrows
 from relaff_jax.learn import per_target
-from relaff_jax.learn.intervals import (bc_interval, fast_outcomes, half_sizes, resampled_means, scene_halves,
-                                         target_blocks, whole)
+from relaff_jax.learn.intervals import bc_interval, fast_outcomes, half_sizes, resampled_means, scene_halves, whole
 from relaff_jax.learn.measures import (
     _quiet,
     bootstrap_factor,
