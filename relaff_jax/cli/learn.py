@@ -78,7 +78,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 def cmd_compare(args: argparse.Namespace) -> int:
     # loaded when the command runs: every command's parser (--help) imports this module
-    from relaff_jax.report.readings import compare
+    from relaff_jax.report.readings import affordance_verdicts, compare
 
     if args.size < 1:
         raise UserError(f"--size is a training size >= 1, got {args.size}")
@@ -94,8 +94,9 @@ def cmd_compare(args: argparse.Namespace) -> int:
             raise UserError(f"readings {folders[real]!r} and {name!r} are the same folder {path}; give different reports")
         reports[name], folders[real] = path, name
     page = compare(reports, args.out, size=args.size)
-    if args.out:
+    if args.out:  # the page's headline answer in the terminal too
         print(f"wrote {args.out}")
+        print("\n".join(affordance_verdicts(reports)))
     else:
         print(page, end="")
     return 0
@@ -139,8 +140,9 @@ def register(subparsers) -> None:
                               description="Read the report folders of runs that differ in one setting (e.g. "
                               "dataset.population=all and feasible) and print one markdown page: what the labels "
                               "consist of, NB by test subset in PCA and RHF, the predictors' correlations with "
-                              "feasible and stacked, the correlation clusters, Table II, every finding's verdict and, last, "
-                              "the robustness table: each finding's verdict and intervals in every reading (each "
+                              "feasible and stacked, the correlation clusters, Table II, every finding's verdict, each "
+                              "affordance's answer in every run (verdict, gain, bf, samples saved, intervals, and whether "
+                              "the verdict is the same in all) and, last, the robustness table: each finding's verdict and intervals in every reading (each "
                               "report and its after_ten readings) and whether it is reproduced in all of them.")
     c.add_argument("readings", nargs="+", metavar="NAME=REPORT_DIR",
                    help="two or more readings, each a name and a report folder, e.g. all=runs/a/report")

@@ -5,8 +5,8 @@ Takes ``{name: REPORT_DIR}`` written by ``write_report`` with datasets (``summar
 ``findings.json``, ``reach.json``); gives ``compare_readings``, a markdown page: what the
 labels consist of per reading (infeasible share of negatives, the oracles), NB by test subset
 at one size, PCA against RHF, the source predictors' correlations with feasible and stacked,
-the correlation clusters, Table II's rows with their intervals, every finding's verdict and, last,
-the robustness table: each finding's verdict and intervals in every reading (the reports given
+the correlation clusters, Table II's rows with their intervals, every finding's verdict, each
+affordance's answer in every run (``compare_affordances.py``) and, last, the robustness table: each finding's verdict and intervals in every reading (the reports given
 and each report's analysis-only readings) and whether it survives all of them.
 Nothing is recomputed: every number is read from the report folders, so the page says what
 the reports say.
@@ -23,6 +23,7 @@ from relaff_jax import io as rio
 from relaff_jax.constants import ACTIONS
 from relaff_jax.errors import UserError
 from relaff_jax.learn import TABLE2_ROWS
+from relaff_jax.report import compare_affordances as CA
 from relaff_jax.report import folder as F
 from relaff_jax.report.findings import correlation_clusters
 from relaff_jax.config.experiment import AFTER_TEN
@@ -95,6 +96,7 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
         if size not in _sizes(r[n]):
             raise UserError(f"--size {size} is not a training size of {reports[n]} (its sizes: "
                             f"{', '.join(map(str, sorted(_sizes(r[n])))) or 'none'})")
+    CA.check({n: r[n]["summary"] for n in names}, reports)
     lines = ["# The same study in " + " and ".join(f"`{n}`" for n in names), ""]
     lines += [f"- `{n}`: `{reports[n]}`" for n in names] + [""]
 
@@ -182,6 +184,8 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
             cells.append(f"**{verdict}**: {g['numbers']}")
         lines.append(f"| {f['finding']} | " + " | ".join(cells) + " |")
 
+    lines += [""] + CA.lines({n: r[n]["summary"] for n in names})[:-1]
+
     # robustness: every finding in every reading, the analysis-only ones of each report included
     every = {}
     for n in names:
@@ -197,3 +201,8 @@ def compare_readings(reports: Mapping[str, str | os.PathLike], size: int = 10, t
               "| " + " | ".join(header) + " |", "|---|" + "---|" * (len(header) - 1)]
     lines += ["| " + " | ".join(row) + " |" for row in rows]
     return "\n".join(lines) + "\n"
+
+
+def affordance_verdicts(reports: Mapping[str, str | os.PathLike]) -> list[str]:
+    """The terminal's lines of each affordance's verdict in every run (``compare_affordances.verdict_lines``)."""
+    return CA.verdict_lines({n: read_report(p)["summary"] for n, p in reports.items()})
