@@ -2,6 +2,7 @@
 plan's corrections (``straight.corrections``) to its control loop."""
 import jax
 import jax.numpy as jnp
+import pytest
 
 from relaff_jax.config.action import ActionConfig
 from relaff_jax.constants import action_id
@@ -12,6 +13,7 @@ V2 = ActionConfig()
 RAKE = action_id("rake")
 
 
+@pytest.mark.slow  # tracing the whole simulate_fn: ~45 CPU s
 def test_mjx_simulate_fn_hands_the_corrections_to_the_control_loop(monkeypatch):
     """Traced, not compiled: the corrections ``make_simulate_fn`` passes per scene (v2: one
     (P - 1, 6) block per segment)."""
