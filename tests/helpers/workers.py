@@ -77,6 +77,8 @@ def pin_worker() -> list[int] | None:
     return cpus
 
 
+# the CPUs before pinning (a test starting its own two-worker suite gives them back to it)
+MACHINE_CPUS = sorted(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else []
 PINNED = pin_worker()
 
 
