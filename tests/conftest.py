@@ -9,6 +9,8 @@ import tempfile
 # Programs compiled in this session go to an on-disk JAX cache shared with the subprocesses
 # the tests start (notebook kernels, CLI runs): they then load a program instead of compiling
 # it again (minutes each on two cores). Set before JAX is imported; an outer setting wins.
+# Under pytest-xdist the main process sets it before it starts the workers, which inherit it:
+# one folder, so a program compiled on one worker is loaded on the other.
 if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     _cache = tempfile.mkdtemp(prefix="relaff-jax-cache-")
     os.environ["JAX_COMPILATION_CACHE_DIR"] = _cache
@@ -39,7 +41,8 @@ import pytest  # noqa: E402
 
 from relaff_jax.sim import scenes, world  # noqa: E402
 
-pytest_plugins = ["helpers.fixtures"]
+# workers: an xdist worker's cores and the units of work (helpers/workers.py); times: RELAFF_TEST_TIMES
+pytest_plugins = ["helpers.workers", "helpers.fixtures", "helpers.times"]
 
 
 @pytest.fixture(scope="session")
