@@ -51,9 +51,10 @@ def replay_probed(meta: Mapping[str, Any], cfg: Any, action: str, pair: np.ndarr
     k = n_workers(len(pair), jobs)
     if k == 1:
         return _replay(cfg, action, pair, qpos, qvel, plan, measure)
-    from relaff_jax.plugins import _LOADED
+    from relaff_jax.plugins import loaded_files
 
-    plugins = [o[len("file "):] for o in _LOADED if o.startswith("file ")]
+    # the plugin files whose registrations still stand here (not every file this process ever ran)
+    plugins = loaded_files()
     parts = np.array_split(np.arange(len(pair)), k)
     jobs_args = [(dict(meta), plugins, cfg, action, pair[i], qpos[i], qvel[i], {f: v[i] for f, v in plan.items()}, measure)
                  for i in parts]
@@ -81,12 +82,11 @@ def _worker(args: tuple) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """One chunk in a spawned process: the parent's plugins, the sidecar's object set and action
     spec (as ``audit.action_config`` sets them up), then ``_replay``."""
     meta, plugins, cfg, action, pair, qpos, qvel, plan, measure = args
-    from relaff_jax.plugins import load_file
+    from relaff_jax.plugins import load_files
     from relaff_jax.sim.actions.registry import check_recorded
     from relaff_jax.sim.object_library import use_recorded
 
-    for path in plugins:
-        load_file(path)
+    load_files(plugins)  # (path, sha256) pairs: a file changed since the parent read it is refused
     use_recorded(meta)
     check_recorded(action, meta["config"].get("action_spec"))
     return _replay(cfg, action, pair, qpos, qvel, plan, measure)
