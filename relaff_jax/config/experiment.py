@@ -197,6 +197,9 @@ class ExperimentConfig(Node):
     keep_outcomes: bool = False
     ci_level: float = 0.95  # bootstrap intervals (intervals.py)
     ci_resamples: int = 1000
+    # a bias-corrected end must leave at least this share of the resamples beyond it, else the
+    # interval is the percentile one (intervals.checked_interval; 0: bias-corrected everywhere)
+    ci_tail: float = 0.005
     # bf is undefined where P_sl - P_c <= this many test scenes' worth (k / T): |bf| <= T / (2 k)
     chance_tol_scenes: float = 0.5
     # a target enters a bf row only with bf defined at >= this share of the window's sizes
@@ -227,6 +230,7 @@ class ExperimentConfig(Node):
         "chance": Interval(float, 0.0, 1.0, closed="neither"),
         "balanced_test": Boolean(), "balanced_train": Boolean(), "keep_outcomes": Boolean(),
         "ci_level": Interval(float, 0.5, 1.0, closed="left"), "ci_resamples": count(10, 10_000_000),
+        "ci_tail": Interval(float, 0.0, 0.5),
         "chance_tol_scenes": Interval(float, 0.0, 1e6), "min_defined_share": FRACTION,
         "sizes_per_block": count(1, 1_000_000),
         "learner": Check(lambda v: isinstance(v, str) and v != "", "'forest' or an import path"),
@@ -237,6 +241,9 @@ class ExperimentConfig(Node):
                                        lambda c: f"({c.select_size}, 'best after ten') must be one of sizes {list(c.sizes)}"),
         ("sizes", "bf_sizes"): Rule(lambda c: any(c.bf_sizes[0] <= s <= c.bf_sizes[1] for s in c.sizes),
                                     lambda c: f"has no training size inside experiment.bf_sizes {list(c.bf_sizes)}"),
+        ("ci_tail", "ci_level"): Rule(lambda c: c.ci_tail <= (1 - c.ci_level) / 2,
+                                      lambda c: f"({c.ci_tail}) must be at most (1 - experiment.ci_level) / 2 = "
+                                      f"{(1 - c.ci_level) / 2:g}: the share the percentile interval leaves beyond each end"),
         ("cbn_threshold", "thresholds"): Rule(lambda c: c.cbn_threshold in c.thresholds,
                                               lambda c: f"({c.cbn_threshold}) must be one of thresholds {list(c.thresholds)}"),
         ("learner_params", "learner"): Rule(
@@ -293,7 +300,7 @@ def experiment_preset(name: str) -> ExperimentConfig:
 # may resume with another; the sweep never reads the analysis keys, which a folder begun before
 # they existed lacks.
 SPEED_ONLY = ("forest.engine",)
-ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share", "after_ten")
+ANALYSIS_ONLY = ("chance_tol_scenes", "min_defined_share", "after_ten", "ci_tail")
 # fit-changing keys added after runs began whose default is what those runs did (issue 44): a
 # folder without the key holds the default's experiment
 ADDED_AS_BEFORE = {"dbn_repeats": "same", "category_labels": "union", "learner": "forest",

@@ -57,7 +57,7 @@ from relaff_jax.learn.correlation import categories_above, category_pairs, corre
 from relaff_jax.learn.datasets import check_datasets, fingerprint, load_datasets
 from relaff_jax.learn.draws import draw_rep, draw_test, draw_train
 from relaff_jax.learn.forest.estimator import check_forest_config, fit_forest, make_forest, n_trees, predict_class
-from relaff_jax.learn.intervals import bc_interval, half_sizes, percentile_interval, resampled_means, scene_halves, whole
+from relaff_jax.learn.intervals import bc_interval, checked_interval, half_sizes, percentile_interval, resampled_means, scene_halves, whole
 from relaff_jax.learn.measures import (bootstrap_factor, chance_tolerance, min_defined, size_mask, summarise,
                                        table2_rows, tie_weights, window_mean)
 from relaff_jax.learn.online import extend, online_weights
@@ -79,5 +79,5 @@ __all__ = [
     "category_allowed", "category_masks", "category_pairs", "check_action", "check_config", "check_datasets",
     "check_forest_config", "condition_names", "condition_plan", "correlation_matrix", "curves", "draw_rep", "fingerprint", "fit_forest", "forests_per_space", "layout", "load_datasets", "make_forest", "manipulated_first_order", "n_trees", "predict_class", "prepare", "select_at", "select_best", "size_mask",
     "split_pools", "state_features", "synthetic_datasets", "threshold_study", "draw_test", "draw_train", "extend", "online_weights", "paper_row", "percentile_interval",
-    "resampled_means", "summarise", "register_condition", "registered_conditions", "load_plugin_file", "pool_sizes", "bc_interval", "half_sizes", "scene_halves", "whole", "chance_tolerance", "min_defined", "ORACLE", "table2_rows", "tie_weights", "window_mean",
+    "resampled_means", "summarise", "register_condition", "registered_conditions", "load_plugin_file", "pool_sizes", "bc_interval", "checked_interval", "half_sizes", "scene_halves", "whole", "chance_tolerance", "min_defined", "ORACLE", "table2_rows", "tie_weights", "window_mean",
 ]

@@ -27,7 +27,7 @@ from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn import gains as G
 from relaff_jax.learn import heldout as H
 from relaff_jax.learn import per_target
-from relaff_jax.learn.intervals import bc_interval, fast_outcomes, half_sizes, resampled_means, scene_halves, whole
+from relaff_jax.learn.intervals import checked_interval, fast_outcomes, interval_pairs, half_sizes, resampled_means, scene_halves, whole
 from relaff_jax.learn.measures import (
     _quiet,
     bootstrap_factor,
@@ -201,7 +201,7 @@ def against_nb(acc_x: np.ndarray, mean: np.ndarray, sizes: Sequence[int], cfg: E
         est = G.probability_of_improvement(x[k][keep], y[k][keep])
         boot = G.stratified_poi(x[k][keep], y[k][keep], cfg.ci_resamples, rng)
         poi.append(est)
-        ci.append(tuple(float(v[0]) for v in bc_interval(boot[:, None], np.array([est]), cfg.ci_level)))
+        ci.append(tuple(float(v[0]) for v in checked_interval(boot[:, None], np.array([est]), cfg.ci_level, cfg.ci_tail)[:2]))
         p.append(G.bootstrap_p(boot, 0.5))
     adj, rej = G.holm(p, 1 - cfg.ci_level)
     return {"names": H.method_names(G.METHODS, half_means is not None), "weights": w, "area": st["area"], "saved": st["saved"],
@@ -252,7 +252,8 @@ def _fused(acc_x, corr_x, n_test, halves, cfg, seed) -> tuple[np.ndarray, np.nda
 
 def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok, masks, pt, reference=False,
                hm=None) -> dict[str, Any]:
-    """Bias-corrected bootstrap intervals (``intervals.bc_interval``) of Table II (bf and gain:
+    """Bootstrap intervals (``intervals.checked_interval``: bias-corrected unless an end would
+    rest on fewer than ``cfg.ci_tail`` of the resamples) of Table II (bf and gain:
     each row's avg over the point estimate's targets, held fixed, and every per target
     value), of the threshold study's averages and of every mean curve; the resampled values
     (``*_boot``, for the findings' paired differences) and the share of resamples in which
@@ -285,16 +286,19 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
             boot[k].append(v)
     bt = {k: np.concatenate(v) for k, v in boot.items()}
     meth = pt["methods"]
-    meth["area_ci"] = np.stack(bc_interval(bt["area"], meth["area"], cfg.ci_level), -1)
-    meth["saved_ci"] = np.stack(bc_interval(bt["saved"], meth["saved"], cfg.ci_level), -1)
-    level = cfg.ci_level
-    ci = lambda vals, est: np.stack(bc_interval(vals, est, level), -1)  # noqa: E731
-    return {"table2_ci": ci(bt["bf"], pt["table2"][:, 0]), "gain_ci": ci(bt["gain"], pt["gain"][:, 0]),
-            "per_target_ci": ci(bt["per"], pt["table2_per_target"]), "mean_ci": ci(bt["mean"], pt["mean"]),
-            "threshold_ci": ci(bt["thr"], pt["thresholds"]["avg"]),
-            "table2_boot": bt["bf"], "gain_boot": bt["gain"], "threshold_boot": bt["thr"], "nb_boot": bt["nb"],
-            "table2_set_held": bt["held"].mean(0), "ci_level": level, "ci_resamples": int(cfg.ci_resamples),
-            "ci_method": "bias-corrected percentile (BC)"} | per_target.intervals(bt, pt, level)
+    level, tail, tally = cfg.ci_level, cfg.ci_tail, []
+    ci = lambda vals, est: interval_pairs(vals, est, level, tail, tally)  # noqa: E731
+    meth["area_ci"], meth["saved_ci"] = ci(bt["area"], meth["area"]), ci(bt["saved"], meth["saved"])
+    out = {"table2_ci": ci(bt["bf"], pt["table2"][:, 0]), "gain_ci": ci(bt["gain"], pt["gain"][:, 0]),
+           "per_target_ci": ci(bt["per"], pt["table2_per_target"]), "mean_ci": ci(bt["mean"], pt["mean"]),
+           "threshold_ci": ci(bt["thr"], pt["thresholds"]["avg"]),
+           "table2_boot": bt["bf"], "gain_boot": bt["gain"], "threshold_boot": bt["thr"], "nb_boot": bt["nb"],
+           "table2_set_held": bt["held"].mean(0), "ci_level": level, "ci_resamples": int(cfg.ci_resamples),
+           "ci_tail": tail, "ci_method": "bias-corrected percentile (BC), percentile where a BC end leaves less "
+           f"than {100 * tail:g} % of the resamples beyond it"} | per_target.intervals(bt, pt, level, tail, tally)
+    # (bias-corrected, defined) over every interval above: how often the percentile one stood in
+    out["ci_bc_count"] = tuple(int(x) for x in np.sum(tally, 0)) if tally else (0, 0)
+    return out
 
 
 def threshold_study(mean: np.ndarray, bf: np.ndarray, masks: np.ndarray, sizes: Sequence[int],

@@ -25,7 +25,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from relaff_jax.learn.intervals import bc_interval
+from relaff_jax.learn.intervals import interval_pairs
 from relaff_jax.learn.table2 import ORACLE, TABLE2_ROWS
 
 BOOT = ("gain_per", "area_per", "saved_per", "choice")  # what each chunk of resamples gives
@@ -41,12 +41,13 @@ def resampled(t2: Mapping[str, np.ndarray], st: Mapping[str, np.ndarray], choice
             "choice": np.asarray(choice)}
 
 
-def intervals(bt: Mapping[str, np.ndarray], pt: dict[str, Any], level: float) -> dict[str, Any]:
+def intervals(bt: Mapping[str, np.ndarray], pt: dict[str, Any], level: float, tail: float = 0.0,
+              tally: list | None = None) -> dict[str, Any]:
     """From all resamples ``bt`` (``BOOT`` keys, concatenated over chunks) and the point
     estimates ``pt``: ``gain_per_target_ci (rows, A, 2)``, ``best_db1_share (A,)`` (NaN
     where no DB1 source ran for the target), and in ``pt["methods"]`` ``area_per_target_ci``
-    and ``saved_per_target_ci (M, A, 2)``."""
-    ci = lambda vals, est: np.stack(bc_interval(vals, est, level), -1)  # noqa: E731
+    and ``saved_per_target_ci (M, A, 2)``; ``tail``, ``tally``: ``intervals.interval_pairs``."""
+    ci = lambda vals, est: interval_pairs(vals, est, level, tail, tally)  # noqa: E731
     meth = pt["methods"]
     meth["area_per_target_ci"] = ci(bt["area_per"], meth["area_per_target"])
     meth["saved_per_target_ci"] = ci(bt["saved_per"], meth["saved_per_target"])

@@ -27,7 +27,7 @@ from relaff_jax.config import streams
 from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.constants import ACTIONS
 from relaff_jax.learn.analysis import CI_CHUNK, _fixed_mean, _outcomes, curves, half_curves, select_at, select_best
-from relaff_jax.learn.intervals import bc_interval, half_sizes, resampled_means, scene_halves, whole
+from relaff_jax.learn.intervals import half_sizes, interval_pairs, resampled_means, scene_halves, whole
 from relaff_jax.learn.measures import chance_tolerance, summarise, table2_rows
 from relaff_jax.learn.online import extend
 from relaff_jax.learn.protocol import layout
@@ -105,7 +105,7 @@ def user_rows(res: Mapping[str, Any], cfg: ExperimentConfig, seed: int = 0, inte
     variant}}`` for conditions with variants (None where the target ran none), and with
     ``intervals`` ``table2_ci``, ``gain_ci (rows, 2)``, ``per_target_ci`` and
     ``gain_per_target_ci (rows, A, 2)``
-    (bias-corrected, ``cfg.ci_level``); ``note``: ``NOT_IN_PAPER``.
+    (``intervals.checked_interval``, ``cfg.ci_level``, ``cfg.ci_tail``); ``note``: ``NOT_IN_PAPER``.
     """
     actions = [str(x) for x in res["actions"]]
     a = len(actions)
@@ -140,7 +140,7 @@ def user_rows(res: Mapping[str, Any], cfg: ExperimentConfig, seed: int = 0, inte
     out["gain"], out["gain_n_targets"] = summarise(np.where(paper, gain, np.nan))
     if intervals:
         level = cfg.ci_level
-        ci = lambda vals, est: np.stack(bc_interval(vals, est, level), -1)  # noqa: E731
+        ci = lambda vals, est: interval_pairs(vals, est, level, cfg.ci_tail)  # noqa: E731
         b_bf, b_gain = np.concatenate(per["boot_bf"], 1), np.concatenate(per["boot_gain"], 1)  # (B, rows, A)
         out["table2_ci"] = ci(_fixed_mean(b_bf, np.isfinite(bf) & paper)[0], out["table2"][:, 0])
         out["gain_ci"] = ci(_fixed_mean(b_gain, np.isfinite(gain) & paper)[0], out["gain"][:, 0])

@@ -14,7 +14,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from relaff_jax.learn import ORACLE, PAPER_TABLE2, TABLE2_ROWS, bc_interval
+from relaff_jax.learn import ORACLE, PAPER_TABLE2, TABLE2_ROWS, bc_interval, checked_interval
+from relaff_jax.learn.intervals import percentile_interval
 from relaff_jax.learn.table2 import after_ten_row
 
 AFTER_TEN_TEXT = {"whole": "the whole curve of the learner kept at n = {n}",
@@ -26,7 +27,7 @@ from relaff_jax.report.formatting import fmt, interval, nanmean
 class FindingRules:
     """How the generated summary decides whether a paper finding is reproduced: each claim is
     a quantity compared with a bound; the claim is "reproduced" if the whole bootstrap interval
-    of the quantity (``analyse``'s resamples, ``cfg.ci_level``) is on the claimed side of the
+    of the quantity (``analyse``'s resamples, ``cfg.ci_level``, ``judge``) is on the claimed side of the
     bound, "not reproduced" if the whole interval is on the other side, and "undecided at this
     scale" if the interval contains the bound."""
 
@@ -63,10 +64,14 @@ def verdict(ok: bool | None) -> str:
     return {True: "reproduced", False: "not reproduced", None: "not measurable"}[ok]
 
 
-def judge(est: float, boot: np.ndarray, bound: float, above: bool, level: float) -> dict[str, Any]:
-    """One claim "est > bound" (``above``) or "est < bound": its verdict from the bias-corrected
-    interval of ``boot (B,)`` resampled values. NaN estimate or no finite resample: not measurable."""
-    lo, hi = (float(x[0]) for x in bc_interval(np.asarray(boot, dtype=float).reshape(-1, 1), np.array([est]), level))
+def judge(est: float, boot: np.ndarray, bound: float, above: bool, level: float, tail: float = 0.0) -> dict[str, Any]:
+    """One claim "est > bound" (``above``) or "est < bound": its verdict from the interval of
+    ``boot (B,)`` resampled values (``checked_interval``: bias-corrected unless an end would
+    leave less than ``tail`` of the resamples beyond it, then the percentile interval; both are
+    kept). NaN estimate or no finite resample: not measurable."""
+    b, e = np.asarray(boot, dtype=float).reshape(-1, 1), np.array([est], dtype=float)
+    lo, hi, bc = (x[0] for x in checked_interval(b, e, level, tail))
+    lo, hi = float(lo), float(hi)
     if not (np.isfinite(est) and np.isfinite(lo) and np.isfinite(hi)):
         v = "not measurable"
     elif (lo > bound) if above else (hi < bound):
@@ -75,7 +80,10 @@ def judge(est: float, boot: np.ndarray, bound: float, above: bool, level: float)
         v = "not reproduced"
     else:
         v = "undecided at this scale"
-    return {"estimate": float(est), "interval": [lo, hi], "bound": bound, "above": above, "verdict": v}
+    return {"estimate": float(est), "interval": [lo, hi], "bound": bound, "above": above, "verdict": v,
+            "method": "BC" if bool(bc) else "percentile",
+            "bc_interval": [float(x[0]) for x in bc_interval(b, e, level)],
+            "percentile_interval": [float(x[0]) for x in percentile_interval(b, level)]}
 
 
 def combine(parts: list[dict[str, Any]]) -> str:
@@ -92,7 +100,9 @@ def _text(label: str, j: Mapping[str, Any], nd: int = 3) -> str:
     lo, hi = j["interval"]
     side = ">" if j["above"] else "<"
     ci = interval(lo, hi, nd)
-    return f"{label} {fmt(j['estimate'], nd)}{'' if ci == '-' else ' ' + ci} (claim {side} {j['bound']:g})"
+    alt = (f", percentile interval: the bias-corrected one, {interval(*j['bc_interval'], nd)}, reads an end in the "
+           "resamples' extreme tail" if j.get("method") == "percentile" else "")
+    return f"{label} {fmt(j['estimate'], nd)}{'' if ci == '-' else ' ' + ci} (claim {side} {j['bound']:g}{alt})"
 
 
 def _ratio(num: np.ndarray, den: np.ndarray) -> np.ndarray:
@@ -109,10 +119,11 @@ def findings(an: Mapping[str, Mapping[str, Any]], cfg, rules: FindingRules = Fin
     ``reproduced`` True / False / None (undecided or not measurable).
     """
     out: list[dict[str, Any]] = []
-    level = float(cfg.ci_level)
+    level, tail = float(cfg.ci_level), float(getattr(cfg, "ci_tail", 0.0))
     pct = f"{100 * level:g} %"
-    how = (f"decided by the {pct} bias-corrected bootstrap interval: reproduced if it lies wholly on the claimed side of "
-           "the bound, not reproduced if wholly on the other side, otherwise undecided at this scale")
+    how = (f"decided by the {pct} bootstrap interval (bias-corrected, or the percentile interval where a bias-corrected end "
+           f"leaves less than {100 * tail:g} % of the resamples beyond it): reproduced if it lies wholly on the claimed "
+           "side of the bound, not reproduced if wholly on the other side, otherwise undecided at this scale")
 
     def add(fid, finding, paper, rule, numbers, values, claims, forced=None):
         v = forced or combine(claims)
@@ -135,7 +146,7 @@ def findings(an: Mapping[str, Mapping[str, Any]], cfg, rules: FindingRules = Fin
             boot = (br - bp).mean(-1)
         else:
             boot = np.full(1, np.nan)
-        j = judge(diff, boot, 0.0, True, level)
+        j = judge(diff, boot, 0.0, True, level, tail)
         numbers = (f"NB accuracy at n = {', '.join(map(str, small))}: PCA {', '.join(fmt(v) for v in p)}; "
                    f"RHF {', '.join(fmt(v) for v in r)}; " + _text("mean difference RHF - PCA", j))
         add("rhf_faster", "RHF learns faster than PCA at small n", "Fig. 7: RHF above PCA for the first samples",
@@ -153,18 +164,25 @@ def findings(an: Mapping[str, Mapping[str, Any]], cfg, rules: FindingRules = Fin
     t_cbn = float(cfg.cbn_threshold)
     cbn_built = int(a["thresholds"]["count"][th_t.index(t_cbn)])
     cbn_note = f" (no category passed T = {t_cbn:g}: CBn is not measurable)" if cbn_built == 0 else ""
-    j_db1 = judge(db1, _boot(a, db1_name), rules.well_above, True, level)
-    j_cbn = judge(cbn if cbn_built else float("nan"), _boot(a, "CBn"), rules.well_above, True, level)
+    j_db1 = judge(db1, _boot(a, db1_name), rules.well_above, True, level, tail)
+    j_cbn = judge(cbn if cbn_built else float("nan"), _boot(a, "CBn"), rules.well_above, True, level, tail)
     add("bootstrapping_helps", "DB1 best and CBn are well above 1",
         f"Table II: DB1 best {p2[0]['avg']:.3f}, CBn {p2[1]['avg']:.3f}",
         f"Table II ({space}) average of '{db1_name}' and of 'CBn' > {rules.well_above}",
         f"{space} Table II average: " + _text(db1_name, j_db1) + "; " + _text("CBn", j_cbn) + cbn_note,
         {"db1_best": db1, "db1_row": db1_name, "cbn": cbn, "cbn_categories": cbn_built}, [j_db1, j_cbn])
     # 3. DBn below DB1 best: the paired difference of the two rows in every resample
-    j = judge(dbn - db1, _boot(a, "DBn") - _boot(a, db1_name), 0.0, False, level)
+    j = judge(dbn - db1, _boot(a, "DBn") - _boot(a, db1_name), 0.0, False, level, tail)
+    gain_note = ""
+    if "gain_boot" in a:  # the same comparison on the gain, which has no ratio's tail (shown, not decided on)
+        gi, gd = TABLE2_ROWS.index("DBn"), TABLE2_ROWS.index(db1_name)
+        g = np.asarray(a["gain"], float)[[gi, gd], 0]
+        gb = np.asarray(a["gain_boot"], float)
+        jg = judge(g[0] - g[1], gb[:, gi] - gb[:, gd], 0.0, False, level, tail)
+        gain_note = f"; on the window's mean gain over NB: DBn {fmt(g[0])}, {db1_name} {fmt(g[1])}, " + _text("difference", jg)
     add("dbn_below_db1", "DBn is below DB1 best", f"Table II: DBn {PAPER_TABLE2['DBn'][0]:.3f} < DB1 best {p2[0]['avg']:.3f}",
         f"Table II ({space}) average of DBn - that of '{db1_name}' < 0",
-        f"{space} Table II average: DBn {fmt(dbn)}, {db1_name} {fmt(db1)}; " + _text("DBn - DB1 best", j),
+        f"{space} Table II average: DBn {fmt(dbn)}, {db1_name} {fmt(db1)}; " + _text("DBn - DB1 best", j) + gain_note,
         {"dbn": dbn, "db1_best": db1, "db1_row": db1_name}, [j])
     # 4. pruning at T = 0.5 costs little (threshold study, Fig. 12, on Table II's aggregation)
     th = a["thresholds"]
@@ -176,7 +194,7 @@ def findings(an: Mapping[str, Mapping[str, Any]], cfg, rules: FindingRules = Fin
     cnt = dict(zip(ts, th["count"]))
     k = len(a["actions"]) * (len(a["actions"]) - 1) // 2
     tb = np.asarray(a["threshold_boot"]) if "threshold_boot" in a else np.full((1, len(ts)), np.nan)
-    j = judge(float(_ratio(hi, lo)), _ratio(tb[:, i_hi], tb[:, i_lo]), rules.close, True, level)
+    j = judge(float(_ratio(hi, lo)), _ratio(tb[:, i_hi], tb[:, i_lo]), rules.close, True, level, tail)
     add("pruning_cheap", f"pruning categories at T = {t_hi:g} costs little",
         "Fig. 12: the best category above T = 0.5 is about as good as the best of all categories",
         f"average bf of the best category built at T = {t_hi:g} / that at T = {t_lo:g} > {rules.close} "
@@ -190,7 +208,7 @@ def findings(an: Mapping[str, Mapping[str, Any]], cfg, rules: FindingRules = Fin
     for fam in ("DB1", "CB1"):
         n_ten, n_best = _best(a, after_ten_row(f"{fam} best after ten", reading)), _best(a, f"{fam} best")
         t, b = _row(a, n_ten), _row(a, n_best)
-        j = judge(float(_ratio(t, b)), _ratio(_boot(a, n_ten), _boot(a, n_best)), rules.close, True, level)
+        j = judge(float(_ratio(t, b)), _ratio(_boot(a, n_ten), _boot(a, n_best)), rules.close, True, level, tail)
         claims.append(j)
         values[fam] = {"after_ten": t, "best": b, "ratio": j["estimate"], "rows": [n_ten, n_best]}
         texts.append(f"{fam}: after ten {fmt(t)} vs best {fmt(b)}, " + _text("ratio", j, 2))

@@ -71,6 +71,9 @@ def rests_on(a: Any, cfg: Any) -> str:
     ci = (f" Intervals: {100 * a['ci_level']:.0f} % bias-corrected (BC) bootstrap, {a['ci_resamples']} resamples of the repetitions"
           + (" and of each affordance's test scenes (within each half of its test set)" if a["outcomes"] else
              " (test scenes not resampled: outcomes not kept)")
+          + (f"; the percentile interval where a BC end would leave less than {100 * a['ci_tail']:g} % of the resamples "
+             f"beyond it ({a['ci_bc_count'][1] - a['ci_bc_count'][0]} of the {a['ci_bc_count'][1]} intervals of this analysis)"
+             if a.get("ci_tail") else "")
           + "; a row's average in a resample is over the affordances of its estimate only"
           + (f" (all of them had a value in {100 * np.nanmin(held):.0f}-{100 * np.nanmax(held):.0f} % of the resamples, by row)"
              if held is not None and np.any(np.isfinite(held)) else "") + "."

@@ -132,3 +132,27 @@ def test_table2_intervals_cover_a_known_truth_at_the_nominal_level():
     se = np.sqrt(0.95 * 0.05 / m)
     for k, h in hits.items():
         assert abs(h / m - 0.95) <= 3 * se, (k, h / m)
+
+
+def test_checked_interval_keeps_bc_unless_an_end_rests_on_the_extreme_tail():
+    from statistics import NormalDist
+    nd = NormalDist()
+    vals = np.arange(1.0, 1001.0)  # 1..1000
+    # three estimates: at the median (z0 = 0), at the 57.3rd percentile (z0 = 0.18: upper end at
+    # Phi(2.33) = 99.0 %, 1 % beyond it) and at the 73.1st (z0 = 0.62: 99.93 %, 0.07 % beyond)
+    est = np.array([500.5, 573.5, 731.5])
+    q_hi = [nd.cdf(2 * nd.inv_cdf((vals < e).mean()) + 1.959964) for e in est]
+    assert 1 - q_hi[1] > 0.005 > 1 - q_hi[2]
+    lo, hi, bc = E.checked_interval(np.repeat(vals[:, None], 3, 1), est, 0.95, 0.005)
+    blo, bhi = E.bc_interval(np.repeat(vals[:, None], 3, 1), est, 0.95)
+    assert bc.tolist() == [True, True, False]
+    np.testing.assert_array_equal([lo[:2], hi[:2]], [blo[:2], bhi[:2]])
+    np.testing.assert_allclose([lo[2], hi[2]], np.percentile(vals, [2.5, 97.5]))  # the percentile interval
+    assert bhi[2] > 999 and hi[2] < 976  # BC's end sat on the last resamples
+    # tail 0: bias-corrected everywhere, bit for bit
+    lo0, hi0, bc0 = E.checked_interval(np.repeat(vals[:, None], 3, 1), est, 0.95, 0.0)
+    assert bc0.all()
+    np.testing.assert_array_equal([lo0, hi0], [blo, bhi])
+    # a lower end in the tail (estimate at the 26.9th percentile) falls back as well; NaN estimate stays NaN
+    lo, hi, bc = E.checked_interval(np.stack([vals, vals], 1), np.array([269.5, np.nan]), 0.95, 0.005)
+    assert not bc[0] and np.isnan([lo[1], hi[1]]).all()

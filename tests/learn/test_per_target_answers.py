@@ -48,12 +48,16 @@ def _hand_case():
     return res, cfg
 
 
-def _bc(boot, est, level):
-    """Efron's BC interval, written apart from ``intervals.bc_interval``."""
+def _bc(boot, est, level, tail=0.0):
+    """Efron's BC interval, written apart from ``intervals.checked_interval``: the percentile
+    interval instead where an end leaves less than ``tail`` of the resamples beyond it."""
     nd = NormalDist()
     below = np.mean(boot < est) + 0.5 * np.mean(boot == est)
     z0, za = nd.inv_cdf(below), nd.inv_cdf(0.5 + level / 2)
-    return np.percentile(boot, [100 * nd.cdf(2 * z0 - za), 100 * nd.cdf(2 * z0 + za)])
+    q = np.array([nd.cdf(2 * z0 - za), nd.cdf(2 * z0 + za)])
+    if q[0] < tail or 1 - q[1] < tail:
+        q = np.array([(1 - level) / 2, (1 + level) / 2])
+    return np.percentile(boot, 100 * q)
 
 
 def test_per_target_gain_interval_source_and_saved_against_numpy_on_the_same_draws():
@@ -79,7 +83,7 @@ def test_per_target_gain_interval_source_and_saved_against_numpy_on_the_same_dra
         est = (mean[LAY["DB1"][best]] - mean[LAY["NB"]])[window].mean()
         assert f["source"][t] == f"DB1:{want_src}" == f"DB1:{ACTS[best]}"
         assert f["gain"][t] == pytest.approx(want_gain, abs=1e-12) and f["gain"][t] == pytest.approx(est, abs=1e-15)
-        np.testing.assert_allclose(f["gain_ci"][t], _bc(gain_b, est, cfg.ci_level), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(f["gain_ci"][t], _bc(gain_b, est, cfg.ci_level, cfg.ci_tail), rtol=0, atol=1e-12)
         assert f["source_share"][t] == pytest.approx(np.mean(np.asarray(src)[pick] == best))
         assert f["verdict"][t] == want_verdict
     assert f["source_share"][0] == 1.0 and 0 < f["source_share"][1] < 1  # take always wins for lift, not for pull

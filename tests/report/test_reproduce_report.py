@@ -76,7 +76,7 @@ def test_findings_hand_worked():
     assert f["best_after_ten"]["values"]["DB1"]["ratio"] == pytest.approx(0.95)
     lo, hi = f["bootstrapping_helps"]["claims"][0]["interval"]  # DB1 best 2.0 +- 0.01
     assert 1.98 < lo < 2.0 < hi < 2.02
-    assert "bias-corrected bootstrap interval" in f["dbn_below_db1"]["decision"]
+    assert "bootstrap interval (bias-corrected, or the percentile interval" in f["dbn_below_db1"]["decision"]
 
     assert verdicts(_analysis([0.6] * 4, [0.59] * 4, GOOD, [2.0, 1.9, 1.9]))["rhf_faster"] == "not reproduced"
     assert verdicts(_analysis([0.6] * 4, [0.7] * 4, dict(GOOD, CBn=1.2), [2.0] * 3))["bootstrapping_helps"] == "not reproduced"
@@ -127,6 +127,27 @@ def test_verdicts_whose_interval_crosses_the_bound_are_undecided():
     assert R.judge(1.3, np.linspace(1.26, 1.34, 101), 1.25, True, 0.95)["verdict"] == "reproduced"
     assert R.judge(1.1, np.linspace(1.0, 1.2, 101), 1.25, True, 0.95)["verdict"] == "not reproduced"
     assert R.judge(np.nan, np.linspace(1.0, 1.2, 101), 1.25, True, 0.95)["verdict"] == "not measurable"
+
+
+def test_a_claim_whose_bc_end_rests_on_the_extreme_tail_is_decided_by_the_percentile_interval():
+    """The paper run's "DBn below DB1 best" in the once reading, in miniature: 1,000 resampled
+    differences around -0.68 with two outliers at +1.2 and +1.6, the estimate -0.64 above 73 % of
+    them. BC reads its upper end at the 99.93rd percentile, between the outliers: "undecided"
+    rests on them. With ``tail`` = 0.005 the percentile interval decides (wholly below 0)."""
+    rng = np.random.default_rng(3)
+    boot = np.concatenate([rng.normal(-0.68, 0.14, 998), [1.2, 1.6]])
+    est = float(np.quantile(boot, 0.731))
+    old = R.judge(est, boot, 0.0, False, 0.95)  # tail 0: bias-corrected, as before
+    assert old["method"] == "BC" and old["verdict"] == "undecided at this scale" and old["interval"][1] > 1.0
+    new = R.judge(est, boot, 0.0, False, 0.95, 0.005)
+    assert new["method"] == "percentile" and new["verdict"] == "reproduced"
+    np.testing.assert_allclose(new["interval"], np.percentile(boot, [2.5, 97.5]))
+    assert new["bc_interval"] == old["interval"] and new["percentile_interval"] == new["interval"]
+    from relaff_jax.report.findings import _text
+    assert "percentile interval: the bias-corrected one" in _text("DBn - DB1 best", new)
+    # an estimate near the resamples' median keeps the bias-corrected interval
+    mid = R.judge(float(np.median(boot)), boot, 0.0, False, 0.95, 0.005)
+    assert mid["method"] == "BC" and mid["interval"] == mid["bc_interval"]
 
 
 def test_correlation_clusters_hand_worked():
@@ -249,7 +270,7 @@ def test_full_report(scene_run, tmp_path):
     # decided from the interval of the paired difference, not from the point values
     i_dbn, i_db1 = E.TABLE2_ROWS.index("DBn"), E.TABLE2_ROWS.index(by_id["dbn_below_db1"]["values"]["db1_row"])
     j = R.judge(t2[i_dbn, 0] - t2[i_db1, 0], an["pca"]["table2_boot"][:, i_dbn] - an["pca"]["table2_boot"][:, i_db1],
-                0.0, False, res["config"].ci_level)
+                0.0, False, res["config"].ci_level, res["config"].ci_tail)
     assert by_id["dbn_below_db1"]["verdict"] == j["verdict"]
     for f in found:
         assert f"| {f['finding']} |" in md
