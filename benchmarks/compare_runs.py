@@ -15,8 +15,8 @@ elements differ and by how much, and it orders the stages:
   predictors' outputs, correlations) and ``results.npz`` (accuracies per target, condition,
   size and repetition, leave-one-out, the per-scene outcomes ``correct``), not the wall times
   nor the fits counter ``new_fits``;
-* report: every leaf of ``findings.json``'s findings (by id) and ``summary.json``, every cell of
-  ``table2.csv``, ``table2_rhf.csv`` and ``affordances.csv``.
+* report: every leaf of ``findings.json``'s findings (by id), ``summary.json`` and
+  ``reach.json``, every cell of ``table2.csv``, ``table2_rhf.csv`` and ``affordances.csv``.
 
 Prints one row per stage and item (keys compared, equal, differing, only in one folder) and
 the first stage where a compared key differs. Keys only in one folder (a field added later)
@@ -150,8 +150,9 @@ def _report_items(run: Path) -> dict[str, dict[str, Any] | None]:
     # keyed by the finding's id, so a finding added or dropped does not shift the others
     items["findings.json"] = (json_leaves({x.get("id", str(i)): x for i, x in enumerate(
         json.loads(f.read_text())["findings"])}) if f.exists() else None)
-    f = rep / "summary.json"
-    items["summary.json"] = json_leaves(json.loads(f.read_text())) if f.exists() else None
+    for name in ("summary.json", "reach.json"):
+        f = rep / name
+        items[name] = json_leaves(json.loads(f.read_text())) if f.exists() else None
     for name in REPORT_CSV:
         f = rep / name
         items[name] = csv_cells(f) if f.exists() else None
@@ -190,6 +191,13 @@ def first_difference(rows: list[dict]) -> dict | None:
     return next((r for r in rows if r.get("differ") or "missing" in r), None)
 
 
+def _few(keys: list[str], most: int = 3) -> str:
+    """Up to ``most`` key names, then how many more."""
+    if not keys:
+        return "-"
+    return ", ".join(keys[:most]) + (f" and {len(keys) - most} more" if len(keys) > most else "")
+
+
 def table(rows: list[dict], keys: bool = False) -> str:
     head = f"| {'stage':<10} | {'item':<18} | {'compared':>8} | {'equal':>6} | {'differ':>6} | only old | only new |"
     lines = [head, "|" + "|".join("-" * (len(c)) for c in head.split("|")[1:-1]) + "|"]
@@ -204,11 +212,13 @@ def table(rows: list[dict], keys: bool = False) -> str:
             continue
         n = len(r["equal"]) + len(r["differ"])
         lines.append(f"| {r['stage']:<10} | {r['item']:<18} | {n:>8} | {len(r['equal']):>6} | {len(r['differ']):>6} | "
-                     f"{', '.join(r['only_old']) or '-'} | {', '.join(r['only_new']) or '-'} |")
+                     f"{_few(r['only_old'])} | {_few(r['only_new'])} |")
     out = "\n".join(lines)
     details = [f"  {r['stage']}/{r['item']}: {k}: {why}" for r in rows for k, why in r.get("differ", ())]
     if keys:
         details += [f"  {r['stage']}/{r['item']}: {k}: equal" for r in rows for k in r.get("equal", ())]
+        details += [f"  {r['stage']}/{r['item']}: {k}: only in {side}" for r in rows for side in ("old", "new")
+                    for k in r.get(f"only_{side}", ())]
     if details:
         out += "\n\nkeys:\n" + "\n".join(details)
     first = first_difference(rows)
@@ -221,7 +231,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("old", type=Path)
     ap.add_argument("new", type=Path)
-    ap.add_argument("--keys", action="store_true", help="list the equal keys too")
+    ap.add_argument("--keys", action="store_true", help="list the equal keys and those only in one folder too")
     ap.add_argument("--json", type=Path, help="write the rows here")
     args = ap.parse_args(argv)
     for p in (args.old, args.new):
