@@ -110,19 +110,17 @@ def _datasets(run: Path) -> list[str]:
 
 
 def _dataset_items(run: Path, action: str) -> dict[str, dict[str, Any] | None]:
-    """``{generate: arrays, features: arrays}`` of one dataset (None where not finished)."""
-    from relaff_jax.data import DatasetError, load_dataset, load_rollouts
+    """``{generate: arrays, features: arrays}`` of one dataset (None where not finished); a
+    damaged or foreign folder raises the loaders' ``DatasetError``."""
+    from relaff_jax.data import load_dataset, load_rollouts
+    from relaff_jax.data.store import read_sidecar
 
     path = run / "data" / action
-    try:
-        rolls = {k: v for k, v in load_rollouts(path).items()}
-        sel = path / "selection.json"
-        if sel.exists():
-            rolls["selection.json"] = np.asarray(json.loads(sel.read_text())["selected"])
-        ds = load_dataset(path)
-    except (DatasetError, FileNotFoundError):
+    if read_sidecar(path)["status"] != "complete":  # still generating: a prefix, not a dataset
         return {"generate": None, "features": None}
-    feats = {k: v for k, v in ds.items() if k not in rolls and isinstance(v, np.ndarray)}
+    rolls = dict(load_rollouts(path))
+    rolls["selection.json"] = np.asarray(json.loads((path / "selection.json").read_text())["selected"])
+    feats = {k: v for k, v in load_dataset(path).items() if k not in rolls and isinstance(v, np.ndarray)}
     return {"generate": rolls, "features": feats or None}
 
 
@@ -238,7 +236,13 @@ def main(argv=None) -> int:
         if not (p / "data").is_dir() and not (p / "results").is_dir():
             print(f"compare_runs: error: {p} is not a run folder (no data/ nor results/)", file=sys.stderr)
             return 2
-    rows = compare_runs(args.old, args.new)
+    from relaff_jax.errors import UserError
+
+    try:
+        rows = compare_runs(args.old, args.new)
+    except (UserError, OSError, ValueError, KeyError) as e:  # a damaged folder: one line, no table
+        print(f"compare_runs: error: {e}", file=sys.stderr)
+        return 2
     print(f"old: {args.old}\nnew: {args.new}\n")
     print(table(rows, args.keys))
     if args.json:

@@ -113,3 +113,12 @@ def test_not_a_run_folder_is_one_line(tmp_path, capsys):
     assert compare_runs.main([str(tmp_path), str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("compare_runs: error:")
+
+
+def test_a_damaged_dataset_is_one_line(run_a, tmp_path, capsys):
+    b = tmp_path / "b"
+    shutil.copytree(run_a, b)
+    (b / "data" / "move" / "relaff_dataset.json").write_text("{not json")
+    assert compare_runs.main([str(run_a), str(b)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("compare_runs: error:") and "relaff_dataset.json" in err[0]
