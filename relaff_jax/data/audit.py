@@ -75,7 +75,10 @@ def action_config(meta: Mapping[str, Any]):
     use_recorded(meta)  # the objects its pair indices refer to (the built-ins if it records none)
 
     check_recorded(str(meta.get("action")), record.get("action_spec"))  # a user action: the spec that made it
-    return from_dict(ActionConfig, record["action_config"])
+    # v1 programs are recorded by the absence of ``programs`` (sim/templates.py, as every
+    # dataset written before the option existed): rebuilt with the default, v2, they replay
+    # other programs than the ones that made the labels
+    return from_dict(ActionConfig, {"programs": "v1", **record["action_config"]})
 
 
 def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int) -> dict[str, np.ndarray]:

@@ -228,3 +228,18 @@ def test_report_section_plots_the_press_against_the_bound(tmp_path):
     assert body[0][header.index("palm above")] == "0 %" and body[0][header.index("palm side (max N)")] == "33 % (4.7)"
     text = " ".join(str(b[1]) for b in blocks if b[0] == "p")
     assert f"within {A.PALM_ABOVE_DEG:g} degrees of vertical" in text
+
+
+@pytest.mark.parametrize("programs", ["v1", "v2"])
+def test_audit_rebuilds_the_recorded_programs(programs):
+    """A dataset records v1 by the absence of ``programs`` (``templates.stored_config``); the
+    audit's replay config is the one that made the labels, not the default (v2)."""
+    import dataclasses
+
+    from relaff_jax.config.action import ActionConfig
+    from relaff_jax.sim.templates import stored_config
+
+    cfg = dataclasses.replace(ActionConfig(), programs=programs)
+    record = json.loads(json.dumps(stored_config(cfg)))  # as the sidecar stores it
+    assert ("programs" in record) == (programs == "v2")
+    assert A.action_config({"action": "lift", "config": {"action_config": record}}) == cfg
