@@ -10,6 +10,7 @@ from relaff_jax.config.action import ActionConfig
 from relaff_jax.data import audit as A
 from relaff_jax.data.layout import SIDECAR
 from relaff_jax.data.store import FORMAT, FORMAT_VERSION
+from relaff_jax.report.audit import stored_audits
 from relaff_jax.sim.templates import stored_config
 
 
@@ -55,6 +56,10 @@ def test_a_stored_audit_is_reused_only_when_it_replayed_the_datasets_programs(tm
     head = {"version": A.AUDIT_VERSION, "sample": 64, "seed": 0, "selection_sha256": "abc"}
     cfg = ActionConfig(programs=programs)
     other = "v2" if programs == "v1" else "v1"
-    assert (A.stored_audit(_dataset(tmp_path / "a", cfg, head), 64, 0) is None) == (programs == "v1")
-    assert A.stored_audit(_dataset(tmp_path / "b", cfg, {**head, "programs": programs}), 64, 0) is not None
-    assert A.stored_audit(_dataset(tmp_path / "c", cfg, {**head, "programs": other}), 64, 0) is None
+    dirs = {"none": _dataset(tmp_path / "a", cfg, head), "same": _dataset(tmp_path / "b", cfg, {**head, "programs": programs}),
+            "other": _dataset(tmp_path / "c", cfg, {**head, "programs": other})}
+    assert (A.stored_audit(dirs["none"], 64, 0) is None) == (programs == "v1")
+    assert A.stored_audit(dirs["same"], 64, 0) is not None
+    assert A.stored_audit(dirs["other"], 64, 0) is None
+    found, missing = stored_audits(dirs)  # the report's reading: the same
+    assert set(found) == ({"same"} if programs == "v1" else {"none", "same"}) and set(missing) == set(dirs) - set(found)
