@@ -79,9 +79,8 @@ def action_config(meta: Mapping[str, Any]):
 
 
 def recorded_programs(meta: Mapping[str, Any]) -> str:
-    """The programs' version a dataset was made with. A v1 dataset records it by the absence of
-    ``programs`` (``templates.stored_config``, as every dataset made before v2), not by the
-    default (v2): read as the default, a v1 dataset would be re-planned and replayed with v2."""
+    """The programs' version a dataset was made with: v1 is recorded by the absence of ``programs``
+    (``templates.stored_config``, as before v2), so a missing one is v1, not the default (v2)."""
     record = meta.get("config")
     stored = record.get("action_config") if isinstance(record, dict) else None
     return str(stored.get("programs", "v1")) if isinstance(stored, dict) else "v1"
@@ -276,8 +275,7 @@ def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[
 
 
 def stored_audit(path: str | os.PathLike, sample: int, seed: int) -> dict[str, Any] | None:
-    """``path/audit.json`` if it was made with this sample, seed and selection and replayed the
-    dataset's programs, else None."""
+    """``path/audit.json`` if made with this sample, seed, selection and the dataset's programs, else None."""
     path = Path(path)
     try:
         d = rio.read_json(path / AUDIT_FILE)
@@ -285,8 +283,7 @@ def stored_audit(path: str | os.PathLike, sample: int, seed: int) -> dict[str, A
         return None
     meta = read_sidecar(path)
     sel = meta.get("selection", {}).get("sha256")
-    # an audit without ``programs`` was made before it was recorded, when every replay ran v2
-    # (a v1 dataset's among them: ``recorded_programs``)
+    # no ``programs``: made before it was recorded, when every replay ran v2 (a v1 dataset's too)
     ok = isinstance(d, dict) and (d.get("version"), d.get("sample"), d.get("seed"), d.get("selection_sha256"),
                                   d.get("programs", "v2")) == (AUDIT_VERSION, int(sample), int(seed), sel,
                                                                recorded_programs(meta))
