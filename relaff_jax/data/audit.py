@@ -75,10 +75,15 @@ def action_config(meta: Mapping[str, Any]):
     use_recorded(meta)  # the objects its pair indices refer to (the built-ins if it records none)
 
     check_recorded(str(meta.get("action")), record.get("action_spec"))  # a user action: the spec that made it
-    # v1 programs are recorded by the absence of ``programs`` (sim/templates.py, as every
-    # dataset written before the option existed): rebuilt with the default, v2, they replay
-    # other programs than the ones that made the labels
-    return from_dict(ActionConfig, {"programs": "v1", **record["action_config"]})
+    return from_dict(ActionConfig, {**record["action_config"], "programs": recorded_programs(meta)})
+
+
+def recorded_programs(meta: Mapping[str, Any]) -> str:
+    """The programs' version a dataset was made with: v1 is recorded by the absence of ``programs``
+    (``templates.stored_config``, as before v2), so a missing one is v1, not the default (v2)."""
+    record = meta.get("config")
+    stored = record.get("action_config") if isinstance(record, dict) else None
+    return str(stored.get("programs", "v1")) if isinstance(stored, dict) else "v1"
 
 
 def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int) -> dict[str, np.ndarray]:
@@ -156,7 +161,7 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
     idx = _sample(rollouts, int(sample), int(seed))
     r = {k: np.asarray(rollouts[k])[idx] for k in need}
     out: dict[str, Any] = dict(version=AUDIT_VERSION, dataset=str(path), action=action, engine=meta.get("engine"),
-                               settle=meta.get("settle"), sample=int(sample), seed=int(seed),
+                               settle=meta.get("settle"), programs=cfg.programs, sample=int(sample), seed=int(seed),
                                selection_sha256=meta.get("selection", {}).get("sha256"),
                                population=int((rollouts["selected"] & rollouts["feasible"]).sum()),
                                n_audited=len(idx), thresholds=dict(THRESHOLDS))
@@ -270,15 +275,18 @@ def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[
 
 
 def stored_audit(path: str | os.PathLike, sample: int, seed: int) -> dict[str, Any] | None:
-    """``path/audit.json`` if it was made with this sample, seed and selection, else None."""
+    """``path/audit.json`` if made with this sample, seed, selection and the dataset's programs, else None."""
     path = Path(path)
     try:
         d = rio.read_json(path / AUDIT_FILE)
     except (OSError, ValueError):
         return None
-    sel = read_sidecar(path).get("selection", {}).get("sha256")
-    ok = isinstance(d, dict) and (d.get("version"), d.get("sample"), d.get("seed"), d.get("selection_sha256")) == (
-        AUDIT_VERSION, int(sample), int(seed), sel)
+    meta = read_sidecar(path)
+    sel = meta.get("selection", {}).get("sha256")
+    # no ``programs``: made before it was recorded, when every replay ran v2 (a v1 dataset's too)
+    ok = isinstance(d, dict) and (d.get("version"), d.get("sample"), d.get("seed"), d.get("selection_sha256"),
+                                  d.get("programs", "v2")) == (AUDIT_VERSION, int(sample), int(seed), sel,
+                                                               recorded_programs(meta))
     return d if ok else None
 
 

@@ -30,17 +30,22 @@ CHECKS = (("palm_contact", "palm on an object from above"),
 
 def stored_audits(data_dirs: Mapping[str, str | os.PathLike]) -> tuple[dict[str, Any], dict[str, str]]:
     """``({action: audit}, {action: why missing})`` from each folder's ``audit.json`` of the
-    current schema made for its current selection (any sample size and seed)."""
+    current schema made for its current selection with the dataset's programs (any sample size
+    and seed)."""
     found, missing = {}, {}
     for act, d in data_dirs.items():
         try:
             a = rio.read_json(Path(d) / A.AUDIT_FILE)
-            sel = read_sidecar(Path(d)).get("selection", {}).get("sha256")
+            meta = read_sidecar(Path(d))
+            sel = meta.get("selection", {}).get("sha256")
         except (OSError, ValueError) as e:
             missing[act] = f"no {A.AUDIT_FILE} ({type(e).__name__})"
             continue
         if not isinstance(a, dict) or a.get("version") != A.AUDIT_VERSION or a.get("selection_sha256") != sel:
             missing[act] = f"{A.AUDIT_FILE} of another version or selection"
+            continue
+        if a.get("programs", "v2") != A.recorded_programs(meta):  # as data.audit.stored_audit
+            missing[act] = f"{A.AUDIT_FILE} replayed with other programs than the dataset's"
             continue
         found[act] = a
     return found, missing

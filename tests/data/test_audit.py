@@ -174,7 +174,7 @@ ROLLOUT_KEYS = {"rollout", "toy", "other", "relation", "label", "replay_label", 
                 "palm_side_steps", "palm_side_force_n", "peak_force_n", "peak_force_weights",
                 "peak_pair", "peak_step", "max_penetration_m", "held_penetration_m", "penetration_pair", "speed_toy", "speed_other",
                 "held_toy", "held_other", "speed_end", "object_peak_n", "press_n", "weight_n", "press_weights"}
-TOP_KEYS = {"version", "dataset", "action", "engine", "settle", "sample", "seed", "selection_sha256", "population",
+TOP_KEYS = {"version", "dataset", "action", "engine", "settle", "programs", "sample", "seed", "selection_sha256", "population",
             "n_audited", "thresholds", "rollouts", "checks", "by_label", "by_relation", "replay", "seconds"}
 
 
