@@ -29,17 +29,20 @@ import argparse
 import os
 import time
 
-from relaff_jax import compile_cache  # noqa: I001 (first: sets the XLA flags)
+if __name__ == "__main__":  # before jaxlib loads: a cached program's loader lines are noise (compile_cache.py)
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
 
-import numpy as np
+from relaff_jax import compile_cache  # noqa: E402,I001 (first: sets the XLA flags)
 
-from relaff_jax.config.override import override_under, parse_set
-from relaff_jax.constants import ACTIONS
-from relaff_jax.io import atomic_write_json, read_json
-from relaff_jax.sim import rollouts, templates
-from relaff_jax.sim.scenes import RELATIONS
+import numpy as np  # noqa: E402
 
-from disagreements import classify, outcomes, quantities
+from relaff_jax.config.override import override_under, parse_set  # noqa: E402
+from relaff_jax.constants import ACTIONS  # noqa: E402
+from relaff_jax.io import atomic_write_json, read_json  # noqa: E402
+from relaff_jax.sim import rollouts, templates  # noqa: E402
+from relaff_jax.sim.scenes import RELATIONS  # noqa: E402
+
+from disagreements import classify, outcomes, quantities  # noqa: E402
 
 ENGINES = ("mjx", "native")
 
