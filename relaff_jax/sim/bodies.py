@@ -229,3 +229,25 @@ def top_down_grasp(arm: A.Arm, cfg: ActionConfig, body: Body) -> Grasp:
     c = body.centre
     return Grasp(jnp.array([c[0], c[1], 0.0]), tip + arm.tip_below_tcp, closing, opening,
                  opening <= float(arm.finger_range[1]))
+
+
+def pads_blocked(arm: A.Arm, g: Grasp, target: Body, other: Body) -> jax.Array:
+    """v3: would a closing pad meet ``other`` before ``target`` (the body grasped at ``g``)?
+
+    True when ``other`` lies in a pad's lane (across the closing axis within the pad's half
+    width), within the fingers' height (fingertips to the palm's underside, ``palm_above_tip``)
+    and, on that pad's side, reaches further out along the closing axis than the target's half
+    width while starting inside the pad's pre-grasp position: the pad stops on ``other`` and
+    the servo squeezes it with the force meant for a body that is not held (a 10 cm toy car
+    across a 9 cm cup: 16.5 N per pad). A toy inside a container or within its base's
+    footprint never blocks."""
+    u, w = g.closing, perp(g.closing)
+    rel = other.centre - g.xy
+    mid, half = rel @ u, other.half_width(u)
+    lane = jnp.abs(rel @ w) < other.half_width(w) + arm.pad_half_x
+    tip = g.tcp_z - arm.tip_below_tcp
+    zmin, zmax = other.z_range()
+    level = (zmin < tip + arm.palm_above_tip) & (zmax > tip)
+    reach = target.half_width(u)
+    side = lambda s: (s * mid + half > reach) & (s * mid - half < g.opening)  # s: +1 / -1 pad
+    return lane & level & (side(1.0) | side(-1.0))

@@ -15,12 +15,16 @@ import jax
 import jax.numpy as jnp
 
 from . import arm as A
-from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, perp, squeeze_command, stack_targets,
-                     tool_squeeze, top_down, top_down_grasp, unit_xy)
+from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, pads_blocked, perp, squeeze_command,
+                     stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
 from .templates import N_TARGETS, ActionConfig
 
 from relaff_jax.constants import ACTIONS
+
+# m, v3: a top this much beyond move's palm_margin band still counts as inside it (settled tops
+# scatter by tenths of a millimetre: a car's top 2.0 cm above the palm pinned it at 5.7 N)
+TOP_TOL = 0.001
 
 
 # -------------------------------------------------------------------------- motor programs
@@ -63,6 +67,11 @@ def tipping_body(toy: Body, radius: jax.Array) -> Body:
     return toy._replace(hi=toy.hi.at[2].set(jnp.where(radius > 0, toy.hi[2], toy.lo[2] + reach)))
 
 
+def _v3(cfg: ActionConfig) -> bool:
+    """Programs v3 (v2 and v1 keep their plans bit for bit)."""
+    return cfg.programs not in ("v1", "v2")
+
+
 def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) -> tuple[Grasp, jax.Array]:
     """The grasp of the other object (base or obstacle) and the closing command: v1 as ever;
     v2 with the palm clear of both objects and a squeeze for both objects' weight. ``tilt``
@@ -73,6 +82,8 @@ def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) ->
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
     toy = tipping_body(sc.toy, sc.toy_radius) if tilt and cfg.tilt_sweep else sc.toy
     g = clear_grasp(arm, cfg, g, sc.oth, toy, jnp.zeros(3))
+    if _v3(cfg):  # refused where the pads would close on the toy first (bodies.pads_blocked)
+        g = g._replace(fits=g.fits & ~pads_blocked(arm, g, sc.oth, sc.toy))
     return g, squeeze_command(arm, cfg, sc.oth.half_width(g.closing), sc.toy_mass + sc.oth_mass)
 
 
@@ -118,7 +129,7 @@ def _program_lift(arm, cfg, sc: Scene, *, grasp_toy: bool, tilt: bool) -> Progra
         # towards the robot, the side the arm reaches more easily
         rot = axis_rotation(g.closing, jnp.deg2rad(cfg.tilt_deg))
         lean_out = jnp.dot(rot @ DOWN, unit_xy(g.xy)) > 0
-        if cfg.programs == "v2" and cfg.tilt_lean == "toy":
+        if cfg.programs != "v1" and cfg.tilt_lean == "toy":
             # the base's side under the toy goes down (the surface falls away from the tool's
             # lean), so a sliding or toppling toy leaves the hand instead of passing under the
             # palm; a toy within 1 cm of the grasp along the slope keeps the lean towards the robot
@@ -158,7 +169,44 @@ def exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax.
     return jnp.where(inside, jnp.maximum(t_out, 0.0), 0.0)
 
 
-def _program_move(arm, cfg, toy, oth) -> Program:
+def _sweep_tops(arm: A.Arm, cfg: ActionConfig, toy: Body, oth: Body, over: jax.Array, radius: jax.Array
+                ) -> tuple[jax.Array, jax.Array, jax.Array]:
+    """What move's v3 sweep keeps the palm off: (4,) tops (-1 m: none), (4,) how far below each
+    top the palm still meets it, (4,) which count only once the sweep is raised. The toy's top
+    as it stands (a tilted toy, no face within 10 degrees of level, meets the palm with a sloped
+    face anywhere along its height: a car leaning on a cup's rim, 5.7 N); the toy's own height
+    (its top once pushed off its base onto the table); when the sweep starts over the other
+    object, the other's top (a container's rim); and, for a toy standing on something (its
+    bottom above ``tip_clearance``), its lying height (its box's least extent) plus
+    ``palm_above_tip``: a raised sweep pushes such a toy off its base, it may fall over in
+    front of the fingers, and they ride onto it when its side is just above the fingertips (a
+    12 cm can off a 2 cm board, 6.5 cm lying, fingertips at 5 cm: 42 N into the table)."""
+    zmin, zmax = toy.z_range()
+    band = cfg.palm_margin + TOP_TOL
+    level = (jnp.max(jnp.abs(toy.mat[2])) >= jnp.cos(jnp.deg2rad(10.0))) | (radius > 0)
+    lying = jnp.min(toy.hi - toy.lo) + arm.palm_above_tip
+    tops = jnp.stack([zmax, zmax - zmin, jnp.where(over, oth.z_range()[1], -1.0),
+                      jnp.where(zmin > cfg.tip_clearance, lying, -1.0)])
+    depth = jnp.stack([jnp.where(level, band, zmax - zmin + band), band, band, band])
+    return tops, depth, jnp.array([False, False, False, True])
+
+
+def sweep_raise(cfg: ActionConfig, palm: jax.Array, tops: jax.Array, depth: jax.Array,
+                when_raised: jax.Array) -> jax.Array:
+    """How far v3 raises move's sweep (m, >= 0): from the palm's underside ``palm`` at the
+    unraised sweep, every top (N,) the palm's underside is within ``palm_margin`` + ``TOP_TOL``
+    above or ``depth`` (N,) below (both inclusive) lifts it to ``palm_margin`` above that top,
+    re-tested at the raised height until none is; a top with ``when_raised`` (N,) counts only
+    once the sweep is raised. Each pass clears at least one more top, so N passes reach the
+    fixed point."""
+    z = palm
+    for _ in range(tops.shape[0]):
+        inside = (z >= tops - depth) & (z <= tops + cfg.palm_margin + TOP_TOL) & (~when_raised | (z > palm))
+        z = jnp.maximum(z, jnp.max(jnp.where(inside, tops + cfg.palm_margin, z)))
+    return z - palm
+
+
+def _program_move(arm, cfg, toy, oth, radius) -> Program:
     """Sweep the toy aside along the table: the closed gripper comes down on free table
     beside the toy, fingertips just above the table, and sweeps across the toy's place to
     ``cfg.move_distance`` beyond that start (further if the start had to step back), at right angles to the line from the toy to the other object (across the
@@ -175,7 +223,7 @@ def _program_move(arm, cfg, toy, oth) -> Program:
     d = jnp.where(jnp.dot(d, c) > 0, -d, d)  # the end nearer the robot
     tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
     half = lambda b: arm.pad_thickness  # half the closed fingers' footprint along d
-    if cfg.programs == "v2":
+    if cfg.programs != "v1":
         # a top within palm_margin of the palm's underside is pinned under the palm's edge: the
         # toy's as the fingers push its foot and it tips (a 12 cm can: 70 N into the table for
         # 1.5 s), or the rim of the container the sweep meets first (the palm rides on a
@@ -185,7 +233,10 @@ def _program_move(arm, cfg, toy, oth) -> Program:
         clear = lambda top: jnp.where(jnp.abs(top - palm) < cfg.palm_margin, top + cfg.palm_margin - palm, 0.0)
         gap = arm.pad_thickness + cfg.rake_gap
         over = exit_distance(c - d * (toy.half_width(d) + gap), d, oth, gap) > 0
-        tcp_z = tcp_z + jnp.maximum(clear(toy.z_range()[1]), jnp.where(over, clear(oth.z_range()[1]), 0.0))
+        if _v3(cfg):
+            tcp_z = tcp_z + sweep_raise(cfg, palm, *_sweep_tops(arm, cfg, toy, oth, over, radius))
+        else:
+            tcp_z = tcp_z + jnp.maximum(clear(toy.z_range()[1]), jnp.where(over, clear(oth.z_range()[1]), 0.0))
         # ... and the hand's footprint is the palm's (5 cm) where a body reaches up to the palm
         palm_z = tcp_z - arm.tip_below_tcp + arm.palm_above_tip - cfg.palm_margin
         half = lambda b: jnp.where(b.z_range()[1] > palm_z, float(arm.palm_half[1]), arm.pad_thickness)
@@ -218,7 +269,7 @@ def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     # below the handle's underside (tip_below_tcp past the handle's centre line), tip_clearance
     # above it: at 3 mm they were 4.5 mm into the table and levered the rake at 100-275 N
     low_z = 0.003
-    if cfg.programs == "v2":
+    if cfg.programs != "v1":
         low_z = max(low_z, arm.tip_below_tcp - float(A.TOOL_GRIP_POS[2]) + cfg.tip_clearance)
     low = origin + jnp.array([0.0, 0.0, low_z])
     above = origin + jnp.array([0.0, 0.0, toy.z_range()[1] + cfg.clearance])
@@ -261,7 +312,7 @@ def toy_grasp_target(arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax.Arr
     whether its other conditions hold (the toy fits the gripper, the corridor is clear)."""
     toy, obst = bodies(geo, pair, qpos)
     g = top_down_grasp(arm, cfg, toy)
-    if cfg.programs == "v2":  # the toy's grasp keeps the palm off the obstacle too
+    if cfg.programs != "v1":  # the toy's grasp keeps the palm off the obstacle too
         g = clear_grasp(arm, cfg, g, toy, obst, jnp.zeros(3))
     target = top_down(g.xy + jnp.array([0.0, 0.0, 1.0]) * g.tcp_z, g.closing)
     return target, g.fits & ~_corridor_blocked(cfg, toy, obst, cfg.scene.min_radius)
@@ -295,7 +346,7 @@ def program(action: str, arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax
         prog = _program_drag(arm, cfg, sc, direction=d, distance=cfg.unobstruct_distance,
                              raise_by=cfg.drag_raise + 0.01)
     elif action == "move":
-        prog = _program_move(arm, cfg, toy, oth)
+        prog = _program_move(arm, cfg, toy, oth, sc.toy_radius)
     elif action == "rake":
         prog = _program_rake(arm, cfg, toy, jnp.asarray(geo.head_x0)[pair], jnp.asarray(geo.head_y)[pair])
     else:
