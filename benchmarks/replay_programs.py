@@ -1,6 +1,8 @@
 """Audited rollouts of a dataset replayed with another programs version, in MuJoCo C.
 
 Usage: python benchmarks/replay_programs.py DATASET:ID[,ID...] [...] [--programs v3] [--json OUT]
+       python benchmarks/replay_programs.py DATASET:audited [...] (every rollout of DATASET/audit.json;
+       prints only the summary)
 
 For each listed rollout: the dataset's scene (its placement, re-settled in C as ``relaff audit``
 does: the settle does not depend on the programs), planned with the dataset's action settings
@@ -53,6 +55,19 @@ def replay(path: str, ids: list[int], programs: str) -> list[dict]:
     return rows
 
 
+def summary(name: str, programs: str, rows: list[dict], old: dict) -> None:
+    """One line per dataset: refused, failing per check (the audit's), label changes."""
+    ran = [r for r in rows if r["feasible"]]
+    fails = {k: sum(k in r["fails"] for r in ran) for k in ("palm_contact", "force", "penetration", "moving")}
+    was = {k: sum(AU.failures(old[r["rollout"]])[k] for r in rows if r["rollout"] in old) for k in fails}
+    flips = sum(r["label"] != r["stored_label"] for r in ran)
+    press = max((r["press_n"] / r["weight_n"] for r in ran), default=float("nan"))
+    print(f"# {name}: {len(rows)} rollouts, {programs}: {len(rows) - len(ran)} refused at plan time; failing "
+          f"(palm above / force / penetration / moving) {' / '.join(str(v) for v in fails.values())} "
+          f"(stored: {' / '.join(str(v) for v in was.values())}); press/weight max {press:.1f}; "
+          f"labels changed {flips} of {len(ran)} ({sum(r['label'] and not r['stored_label'] for r in ran)} to positive)", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("specs", nargs="+", help="DATASET:ID[,ID...]")
@@ -65,10 +80,15 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|---|---|---|")
     for spec in a.specs:
         path, ids = spec.rsplit(":", 1)
-        ids = [int(x) for x in ids.split(",")]
         audit = json.loads((Path(path) / "audit.json").read_text()) if (Path(path) / "audit.json").exists() else None
         old = {r["rollout"]: r for r in audit["rollouts"]} if audit else {}
-        for row in replay(path, ids, a.programs):
+        every = ids == "audited"
+        ids = sorted(old) if every else [int(x) for x in ids.split(",")]
+        rows = replay(path, ids, a.programs)
+        summary(Path(path).name, a.programs, rows, old)
+        for row in rows:
+            if every and not row["fails"]:
+                continue
             o = old.get(row["rollout"])
             was = "-" if o is None else (f"{o['palm_top_steps']}, {o['palm_top_force_n']:.1f} / {o['press_n']:.1f} / "
                                          f"{1000 * AU._held_depth(o):.1f} / {'+'.join(k for k, v in AU.failures(o).items() if v) or 'none'}")

@@ -209,7 +209,7 @@ class ActionConfig(Node):
     # lift, take, pour and slide read the measuring step only, so they cannot change; the
     # other actions read the end, now the program's end (docs/actions.md, "Tuning").
     stop_at_program_end: bool = True
-    # Which motor programs (docs/actions.md, "Programs v1, v2 and v3"): "v2" grasps below an
+    # Which motor programs (docs/actions.md, "Programs v1 and v2", "Programs v3"): "v2" grasps below an
     # object's top by at most what the pads allow and refuses a grasp that would put the palm on
     # an object, squeezes with a force from the held objects' weight, and reads every goal once
     # the objects are at rest; "v3" (default) is v2 with move's higher sweep re-tested until no
