@@ -169,44 +169,53 @@ def exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax.
     return jnp.where(inside, jnp.maximum(t_out, 0.0), 0.0)
 
 
-def _sweep_tops(arm: A.Arm, cfg: ActionConfig, toy: Body, oth: Body, over: jax.Array, radius: jax.Array
-                ) -> tuple[jax.Array, jax.Array, jax.Array]:
-    """What move's v3 sweep keeps the palm off: (4,) tops (-1 m: none), (4,) how far below each
-    top the palm still meets it, (4,) which count only once the sweep is raised. The toy's top
-    as it stands (a tilted toy, no face within 10 degrees of level, meets the palm with a sloped
-    face anywhere along its height: a car leaning on a cup's rim, 5.7 N); the toy's own height
-    (its top once pushed off its base onto the table); when the sweep starts over the other
-    object, the other's top (a container's rim); and, for a toy standing on something (its
-    bottom above ``tip_clearance``), its lying height (its box's least extent) plus
-    ``palm_above_tip``: a raised sweep pushes such a toy off its base, it may fall over in
-    front of the fingers, and they ride onto it when its side is just above the fingertips (a
-    12 cm can off a 2 cm board, 6.5 cm lying, fingertips at 5 cm: 42 N into the table)."""
+def _sweep_tops(cfg: ActionConfig, toy: Body, oth: Body, over: jax.Array, radius: jax.Array
+                ) -> tuple[jax.Array, jax.Array]:
+    """What move's v3 sweep keeps the palm off: (3,) tops (-1 m: none) and (3,) how far below
+    each top the palm still meets it. The toy's top as it stands (a tilted toy, no face within
+    10 degrees of level, not a ball, meets the palm with a sloped face anywhere along its
+    height: a car leaning on a cup's rim, 5.7 N); the toy's own height (its top once pushed off
+    its base onto the table); and, when the sweep starts over the other object, the other's top
+    (a container's rim)."""
     zmin, zmax = toy.z_range()
     band = cfg.palm_margin + TOP_TOL
     level = (jnp.max(jnp.abs(toy.mat[2])) >= jnp.cos(jnp.deg2rad(10.0))) | (radius > 0)
-    lying = jnp.min(toy.hi - toy.lo) + arm.palm_above_tip
-    tops = jnp.stack([zmax, zmax - zmin, jnp.where(over, oth.z_range()[1], -1.0),
-                      jnp.where(zmin > cfg.tip_clearance, lying, -1.0)])
-    depth = jnp.stack([jnp.where(level, band, zmax - zmin + band), band, band, band])
-    return tops, depth, jnp.array([False, False, False, True])
+    tops = jnp.stack([zmax, zmax - zmin, jnp.where(over, oth.z_range()[1], -1.0)])
+    return tops, jnp.stack([jnp.where(level, band, zmax - zmin + band), band, band])
 
 
-def sweep_raise(cfg: ActionConfig, palm: jax.Array, tops: jax.Array, depth: jax.Array,
-                when_raised: jax.Array) -> jax.Array:
+def sweep_raise(cfg: ActionConfig, palm: jax.Array, tops: jax.Array, depth: jax.Array) -> jax.Array:
     """How far v3 raises move's sweep (m, >= 0): from the palm's underside ``palm`` at the
     unraised sweep, every top (N,) the palm's underside is within ``palm_margin`` + ``TOP_TOL``
     above or ``depth`` (N,) below (both inclusive) lifts it to ``palm_margin`` above that top,
-    re-tested at the raised height until none is; a top with ``when_raised`` (N,) counts only
-    once the sweep is raised. Each pass clears at least one more top, so N passes reach the
-    fixed point."""
+    re-tested at the raised height until none is. Each pass clears at least one more top, so N
+    passes reach the fixed point."""
     z = palm
     for _ in range(tops.shape[0]):
-        inside = (z >= tops - depth) & (z <= tops + cfg.palm_margin + TOP_TOL) & (~when_raised | (z > palm))
+        inside = (z >= tops - depth) & (z <= tops + cfg.palm_margin + TOP_TOL)
         z = jnp.maximum(z, jnp.max(jnp.where(inside, tops + cfg.palm_margin, z)))
     return z - palm
 
 
-def _program_move(arm, cfg, toy, oth, radius) -> Program:
+def falls_onto_fingers(cfg: ActionConfig, toy: Body, oth: Body, inner: jax.Array, raise_by: jax.Array
+                       ) -> jax.Array:
+    """v3: would a raised sweep push the toy off a flat base so that, fallen over on the table,
+    its side (its box's least extent up) lies within ``palm_margin`` of the fingertips, which
+    then ride onto it? (A 12 cm can off a 2 cm cutting board lies 6.5 cm high; with the
+    fingertips at 5 cm they pressed it into the table at 42 N, 6.4 mm deep; sweeping higher,
+    over its side, tipped the can over the fingers at up to 17 weights.) Such a move is refused
+    at plan time. Only a toy standing on something (its bottom above ``tip_clearance``) and not
+    inside a container (``inner``, the other's opening, with the toy's bottom below its rim:
+    the toy falls inside it)."""
+    zmin, _ = toy.z_range()
+    tip = cfg.tip_clearance + 0.005 + raise_by  # the sweep's fingertips above the table
+    lying = jnp.min(toy.hi - toy.lo)
+    inside = jnp.any(inner[:2] > 0) & (zmin < oth.z_range()[1] - cfg.tip_clearance)
+    on_flat = (zmin > cfg.tip_clearance) & ~inside
+    return on_flat & (raise_by > 0) & (jnp.abs(tip - lying) < cfg.palm_margin)
+
+
+def _program_move(arm, cfg, toy, oth, radius, inner) -> Program:
     """Sweep the toy aside along the table: the closed gripper comes down on free table
     beside the toy, fingertips just above the table, and sweeps across the toy's place to
     ``cfg.move_distance`` beyond that start (further if the start had to step back), at right angles to the line from the toy to the other object (across the
@@ -222,6 +231,7 @@ def _program_move(arm, cfg, toy, oth, radius) -> Program:
     d = perp(jnp.where(far, unit_xy(towards), unit_xy(c)))
     d = jnp.where(jnp.dot(d, c) > 0, -d, d)  # the end nearer the robot
     tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
+    ok = jnp.asarray(True)
     half = lambda b: arm.pad_thickness  # half the closed fingers' footprint along d
     if cfg.programs != "v1":
         # a top within palm_margin of the palm's underside is pinned under the palm's edge: the
@@ -234,7 +244,9 @@ def _program_move(arm, cfg, toy, oth, radius) -> Program:
         gap = arm.pad_thickness + cfg.rake_gap
         over = exit_distance(c - d * (toy.half_width(d) + gap), d, oth, gap) > 0
         if _v3(cfg):
-            tcp_z = tcp_z + sweep_raise(cfg, palm, *_sweep_tops(arm, cfg, toy, oth, over, radius))
+            raise_by = sweep_raise(cfg, palm, *_sweep_tops(cfg, toy, oth, over, radius))
+            ok = ~falls_onto_fingers(cfg, toy, oth, inner, raise_by)
+            tcp_z = tcp_z + raise_by
         else:
             tcp_z = tcp_z + jnp.maximum(clear(toy.z_range()[1]), jnp.where(over, clear(oth.z_range()[1]), 0.0))
         # ... and the hand's footprint is the palm's (5 cm) where a body reaches up to the palm
@@ -250,7 +262,7 @@ def _program_move(arm, cfg, toy, oth, radius) -> Program:
     end = c + d * (cfg.move_distance - (toy.half_width(d) + arm.pad_thickness + cfg.rake_gap))
     targets = [top_down(start + z * up, d), top_down(start + z * tcp_z, d), top_down(end + z * tcp_z, d),
                top_down(end + z * (tcp_z + 0.10), d)]
-    return Program(stack_targets(targets), jnp.asarray(0.0), jnp.asarray(True), d,
+    return Program(stack_targets(targets), jnp.asarray(0.0), ok, d,
                    jnp.asarray(cfg.arm.grip_closed, jnp.float32))
 
 
@@ -346,7 +358,7 @@ def program(action: str, arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax
         prog = _program_drag(arm, cfg, sc, direction=d, distance=cfg.unobstruct_distance,
                              raise_by=cfg.drag_raise + 0.01)
     elif action == "move":
-        prog = _program_move(arm, cfg, toy, oth, sc.toy_radius)
+        prog = _program_move(arm, cfg, toy, oth, sc.toy_radius, sc.inner)
     elif action == "rake":
         prog = _program_rake(arm, cfg, toy, jnp.asarray(geo.head_x0)[pair], jnp.asarray(geo.head_y)[pair])
     else:

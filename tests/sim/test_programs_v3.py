@@ -67,29 +67,37 @@ def test_move_palm_clears_every_top_it_sweeps_over(name):
     tops = [zmax, zmax - zmin, float(ob.z_range()[1])]
     for top in tops:  # each top is palm_margin below the palm's underside or beyond the band above
         assert top <= palm - V3.palm_margin + 1e-6 or top > palm + V3.palm_margin + programs.TOP_TOL, (name, top, palm)
-    assert bool(pr.ok)
 
 
 def test_move_v3_heights_hand_worked():
     # unraised sweep: fingertips 1 cm up, the palm's underside 12 cm up (palm_above_tip 11 cm)
     pr, arm, (tb, ob) = prog("move", V3, *MOVE_SCENES["can in basket"])
     assert arm.palm_above_tip == pytest.approx(0.11, abs=1e-6)
-    # the can (12 cm on the 1 cm floor: top 13 cm) -> 15 cm; the basket's rim (15 cm) -> 17 cm;
-    # raised, the fingertips (6 cm) are within 2 cm of the lying can's side (6.5 cm) -> 8.5 cm
+    # the can (12 cm on the 1 cm floor: top 13 cm) -> 15 cm; the basket's rim (15 cm) -> 17 cm
     assert float(ob.z_range()[1]) == pytest.approx(0.15, abs=1e-6)
-    assert sweep_palm(arm, pr) == pytest.approx(0.065 + 0.02 + 0.11, abs=1e-5)
+    assert sweep_palm(arm, pr) == pytest.approx(0.17, abs=1e-5) and bool(pr.ok)  # falls inside
     pr2, _, _ = prog("move", V2, *MOVE_SCENES["can in basket"])
     assert sweep_palm(arm, pr2) == pytest.approx(0.15, abs=1e-5)  # v2: on the rim
-    # the car's top 2 cm above the palm (the band's edge) -> 16 cm; its lying height (4 cm)
-    # 1 cm below the fingertips (5 cm) -> 17 cm; v2 left it at 12 cm
+    # the car's top 2 cm above the palm (the band's edge) -> 16 cm; v2 left it at 12 cm; the
+    # car pushed off the cup lies 4 cm high, 1 cm under the fingertips (5 cm): refused
     pr, _, (tb, _) = prog("move", V3, *MOVE_SCENES["car on cup"])
     assert float(tb.z_range()[1]) == pytest.approx(0.14, abs=1e-6)
-    assert sweep_palm(arm, pr) == pytest.approx(0.17, abs=1e-5)
-    assert sweep_palm(arm, prog("move", V2, *MOVE_SCENES["car on cup"])[0]) == pytest.approx(0.12, abs=1e-5)
-    # a can on the table: 14 cm as in v2 (its top 12 cm); nothing it stands on, no lying test
+    assert sweep_palm(arm, pr) == pytest.approx(0.16, abs=1e-5) and not bool(pr.ok)
+    v2 = prog("move", V2, *MOVE_SCENES["car on cup"])[0]
+    assert sweep_palm(arm, v2) == pytest.approx(0.12, abs=1e-5) and bool(v2.ok)
+    # a can on a 2 cm board: the palm at 16 cm, the fingertips 5 cm, 1.5 cm under the side of the
+    # can fallen off the board (6.5 cm): refused (v2 swept at 12 or 16 cm, by 0.1 mm of its height)
+    for name in ("can on cutting board", "can on cutting board +0.1 mm", "can on cutting board -0.3 mm"):
+        pr, _, _ = prog("move", V3, *MOVE_SCENES[name])
+        assert sweep_palm(arm, pr) == pytest.approx(0.16, abs=5e-4) and not bool(pr.ok), name
+    # a can on a 1.4 cm lid: palm 15.4 cm, fingertips 4.4 cm, 2.1 cm under the fallen can: swept
+    lid, _, _ = prog("move", V3, "toy_can", "lid", (0.7, 0.0, 0.014), (0.7, 0.0, 0.0))
+    assert sweep_palm(arm, lid) == pytest.approx(0.154, abs=1e-5) and bool(lid.ok)
+    # a can on the table: 14 cm as in v2 (its top 12 cm); it stands on nothing, no fall
     on_table = ("toy_can", "book", (0.7, 0.3, 0.0), (0.7, 0.0, 0.0))
-    assert sweep_palm(arm, prog("move", V3, *on_table)[0]) == pytest.approx(0.14, abs=1e-5)
-    assert sweep_palm(arm, prog("move", V2, *on_table)[0]) == pytest.approx(0.14, abs=1e-5)
+    for cfg in (V3, V2):
+        pr = prog("move", cfg, *on_table)[0]
+        assert sweep_palm(arm, pr) == pytest.approx(0.14, abs=1e-5) and bool(pr.ok)
     # a car leaning on a cup's rim (tilted 30 degrees): its slope meets the palm at 12 cm, so it
     # rises over the car's top
     lean, _, (tb, _) = prog("move", V3, "toy_car", "cup", (0.7, 0.0, 0.09), (0.7, 0.0, 0.0), tilt=np.pi / 6)
@@ -100,11 +108,10 @@ def test_move_v3_heights_hand_worked():
 
 def test_sweep_raise_fixed_point_hand_worked():
     m, tol = V3.palm_margin, programs.TOP_TOL
-    band = jnp.float32(m + tol)
-    r = lambda palm, tops, late=None, depth=None: float(programs.sweep_raise(
+    band = m + tol
+    r = lambda palm, tops, depth=None: float(programs.sweep_raise(
         V3, jnp.float32(palm), jnp.asarray(tops, jnp.float32),
-        jnp.full(len(tops), band) if depth is None else jnp.asarray(depth, jnp.float32),
-        jnp.zeros(len(tops), bool) if late is None else jnp.asarray(late)))
+        jnp.full(len(tops), band, jnp.float32) if depth is None else jnp.asarray(depth, jnp.float32)))
     assert r(0.12, [0.13, 0.12, 0.15]) == pytest.approx(0.05, abs=1e-6)  # 0.13 -> 0.15 -> rim 0.15 -> 0.17
     assert r(0.12, [0.15, 0.13, -1.0]) == pytest.approx(0.05, abs=1e-6)  # the order does not matter
     assert r(0.12, [0.14, 0.04, -1.0]) == pytest.approx(0.04, abs=1e-6)  # the band's edge is inside
@@ -113,12 +120,9 @@ def test_sweep_raise_fixed_point_hand_worked():
     assert r(0.12, [0.05, 0.099, -1.0]) == 0.0  # far below
     # a chain of three, each inside the band only once the palm has risen for the one before
     assert r(0.12, [0.173, 0.133, 0.153]) == pytest.approx(0.193 - 0.12, abs=1e-6)
-    # a top counted only on a raised sweep: ignored at the unraised palm, met once raised
-    assert r(0.12, [-1.0, -1.0, -1.0, 0.11], [False, False, False, True]) == 0.0
     # a tilted toy from 7 to 15 cm: the palm at 12 cm meets its slope, so it rises over its top
-    assert r(0.12, [0.15, -1.0], None, [0.08 + m + tol, m + tol]) == pytest.approx(0.05, abs=1e-6)
+    assert r(0.12, [0.15, -1.0], [0.08 + band, band]) == pytest.approx(0.05, abs=1e-6)
     assert r(0.12, [0.15, -1.0]) == 0.0  # upright, its top 3 cm above the palm: met from the side
-    assert r(0.12, [0.13, -1.0, -1.0, 0.165], [False, False, False, True]) == pytest.approx(0.065, abs=1e-6)
 
 
 def test_pull_refuses_a_grasp_whose_pads_meet_the_toy_first():
