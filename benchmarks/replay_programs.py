@@ -87,6 +87,7 @@ def main() -> None:
         rows = replay(path, ids, a.programs)
         summary(Path(path).name, a.programs, rows, old)
         for row in rows:
+            out.append(dict(dataset=path, **{k: v for k, v in row.items() if not isinstance(v, np.ndarray)}))
             if every and not row["fails"]:
                 continue
             o = old.get(row["rollout"])
@@ -99,7 +100,6 @@ def main() -> None:
             else:
                 new = f"refused at plan time | - | - | - | {row['label']} ({row['stored_label']}) | none"
             print(f"| {Path(path).name} | {row['rollout']} | {row['toy']} / {row['other']} | {was} | {new} |", flush=True)
-            out.append(dict(dataset=path, **{k: v for k, v in row.items() if not isinstance(v, np.ndarray)}))
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1, default=float) + "\n")
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from relaff_jax.config.action import ActionConfig
-from relaff_jax.sim import bodies, planning, programs
+from relaff_jax.sim import bodies, planning, programs, sweep
 from relaff_jax.sim import objects as lib
 
 V3 = ActionConfig()
@@ -66,7 +66,7 @@ def test_move_palm_clears_every_top_it_sweeps_over(name):
     # the toy's top, its top once swept onto the table, the other's top (the sweep starts over it)
     tops = [zmax, zmax - zmin, float(ob.z_range()[1])]
     for top in tops:  # each top is palm_margin below the palm's underside or beyond the band above
-        assert top <= palm - V3.palm_margin + 1e-6 or top > palm + V3.palm_margin + programs.TOP_TOL, (name, top, palm)
+        assert top <= palm - V3.palm_margin + 1e-6 or top > palm + V3.palm_margin + sweep.TOP_TOL, (name, top, palm)
 
 
 def test_move_v3_heights_hand_worked():
@@ -107,9 +107,9 @@ def test_move_v3_heights_hand_worked():
 
 
 def test_sweep_raise_fixed_point_hand_worked():
-    m, tol = V3.palm_margin, programs.TOP_TOL
+    m, tol = V3.palm_margin, sweep.TOP_TOL
     band = m + tol
-    r = lambda palm, tops, depth=None: float(programs.sweep_raise(
+    r = lambda palm, tops, depth=None: float(sweep.sweep_raise(
         V3, jnp.float32(palm), jnp.asarray(tops, jnp.float32),
         jnp.full(len(tops), band, jnp.float32) if depth is None else jnp.asarray(depth, jnp.float32)))
     assert r(0.12, [0.13, 0.12, 0.15]) == pytest.approx(0.05, abs=1e-6)  # 0.13 -> 0.15 -> rim 0.15 -> 0.17
