@@ -15,9 +15,10 @@ import jax
 import jax.numpy as jnp
 
 from . import arm as A
-from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, pads_blocked, perp, squeeze_command,
-                     stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
+from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, pad_overhang, perp, squeeze_command,
+                     squeeze_force, stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
+from .physics_bounds import press_ok
 from .sweep import falls_onto_fingers, sweep_raise, sweep_tops
 from .templates import N_TARGETS, ActionConfig
 
@@ -79,9 +80,22 @@ def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) ->
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
     toy = tipping_body(sc.toy, sc.toy_radius) if tilt and cfg.tilt_sweep else sc.toy
     g = clear_grasp(arm, cfg, g, sc.oth, toy, jnp.zeros(3))
-    if _v3(cfg):  # refused where the pads would close on the toy first (bodies.pads_blocked)
-        g = g._replace(fits=g.fits & ~pads_blocked(arm, g, sc.oth, sc.toy))
-    return g, squeeze_command(arm, cfg, sc.oth.half_width(g.closing), sc.toy_mass + sc.oth_mass)
+    mass = sc.toy_mass + sc.oth_mass
+    if _v3(cfg):  # refused where the pads would press the toy beyond the force bound
+        g = g._replace(fits=g.fits & ~toy_overpressed(arm, cfg, g, sc, mass))
+    return g, squeeze_command(arm, cfg, sc.oth.half_width(g.closing), mass)
+
+
+def toy_overpressed(arm: A.Arm, cfg: ActionConfig, g: Grasp, sc: Scene, mass: jax.Array) -> jax.Array:
+    """v3: would the pads of the base grasp ``g`` meet the toy first (``bodies.pad_overhang``)
+    and press it beyond the stated bound (``physics_bounds.press_ok``, for the heavier object)?
+    Each pad then pushes the planned squeeze plus ``finger_kp`` x the overhang: a 10 cm car
+    across a 9 cm cup took 16.5 N per pad, 13.9 weights of the cup. A small overhang (a ball
+    a few millimetres past a cup's wall) stays within the bound and is grasped, as in v2."""
+    over = pad_overhang(arm, g, sc.oth, sc.toy)
+    push = squeeze_force(cfg, arm, mass) + arm.finger_kp * over
+    weight = 9.81 * jnp.maximum(sc.toy_mass, sc.oth_mass)
+    return (over > 0) & ~press_ok(2.0 * push, weight)
 
 
 def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
