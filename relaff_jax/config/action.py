@@ -10,9 +10,10 @@ from relaff_jax.config.constraints import (FRACTION, AnyOf, Boolean, Check, Inte
                                            count, length)
 from relaff_jax.config.node import Node
 
-# ActionConfig.programs: the motor programs' versions (v1: before issue 43)
-PROGRAMS = ("v1", "v2")
-# ActionConfig fields only v2 reads; a v1 dataset's sidecar leaves them out (templates.stored_config)
+# ActionConfig.programs: the motor programs' versions (v1: before issue 43; v3: v2 with move's
+# sweep raised to a fixed point and base grasps refused that would press the toy too hard)
+PROGRAMS = ("v1", "v2", "v3")
+# ActionConfig fields only v2 and v3 read; a v1 dataset's sidecar leaves them out (templates.stored_config)
 V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window",
              "guard_depth", "tilt_lean", "tilt_sweep", "straight_pieces")
 
@@ -208,11 +209,15 @@ class ActionConfig(Node):
     # lift, take, pour and slide read the measuring step only, so they cannot change; the
     # other actions read the end, now the program's end (docs/actions.md, "Tuning").
     stop_at_program_end: bool = True
-    # Which motor programs (docs/actions.md, "Programs v1 and v2"): "v2" (default) grasps
-    # below an object's top by at most what the pads allow and refuses a grasp that would put
-    # the palm on an object, squeezes with a force from the held objects' weight, and reads
-    # every goal once the objects are at rest; "v1" the programs before issue 43, bit for bit.
-    programs: str = "v2"
+    # Which motor programs (docs/actions.md, "Programs v1 and v2", "Programs v3"): "v2" grasps below an
+    # object's top by at most what the pads allow and refuses a grasp that would put the palm on
+    # an object, squeezes with a force from the held objects' weight, and reads every goal once
+    # the objects are at rest; "v3" (default) is v2 with move's higher sweep re-tested until no
+    # top is within palm_margin of the palm (and refused where a toy pushed off a flat base would
+    # fall onto the raised fingers), and a base or obstacle grasp refused where the pads would
+    # meet the toy first and press it beyond the force bound; "v1" the programs before issue 43,
+    # bit for bit. v2 stays bit for bit as well.
+    programs: str = "v3"
     palm_margin: float = 0.02  # v2: the palm's underside this far above every object under it
     min_grip: float = 0.02  # v2: the pads overlap the grasped object by at least this height
     squeeze_min: float = 5.0  # N, v2: the least squeeze per pad

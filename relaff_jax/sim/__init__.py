@@ -17,6 +17,7 @@ Modules, in pipeline order:
 - ``templates``: the timing templates of the nine motor programs.
 - ``bodies``: the settled objects as the programs see them (boxes, grasps).
 - ``programs``: the nine motor programs (tcp targets) and unobstruct's reachability.
+- ``sweep``: move's sweep height under programs v3 (tops, fixed point, refusal).
 - ``planning``: ``setup`` (action world, home pose) and ``make_plan_fn`` (batched IK).
 - ``labels``: the outcome rules of Table I (``goals``).
 - ``simulate``: planned programs executed in MJX with grasp locks, then labelled.

@@ -174,8 +174,12 @@ def squeeze_command(arm: A.Arm, cfg: ActionConfig, half: jax.Array, mass: jax.Ar
     so commanding ``half - F / kp`` squeezes with at most F per pad. F is ``squeeze_safety``
     times what two pads need to hold ``mass`` (kg) by friction alone, within
     [``squeeze_min``, ``squeeze_max``] N (docs/arm.md, "Bounded forces")."""
-    force = jnp.clip(cfg.squeeze_safety * mass * 9.81 / (2.0 * arm.pad_friction), cfg.squeeze_min, cfg.squeeze_max)
-    return jnp.maximum(half - force / arm.finger_kp, 0.0)
+    return jnp.maximum(half - squeeze_force(cfg, arm, mass) / arm.finger_kp, 0.0)
+
+
+def squeeze_force(cfg: ActionConfig, arm: A.Arm, mass: jax.Array) -> jax.Array:
+    """The planned squeeze per pad (N) for a held ``mass`` (kg): ``squeeze_command``'s F."""
+    return jnp.clip(cfg.squeeze_safety * mass * 9.81 / (2.0 * arm.pad_friction), cfg.squeeze_min, cfg.squeeze_max)
 
 
 HANDLE_HALF = 0.0125  # half the held rake handle's 2.5 cm cross-section (objects._rake)
@@ -229,3 +233,26 @@ def top_down_grasp(arm: A.Arm, cfg: ActionConfig, body: Body) -> Grasp:
     c = body.centre
     return Grasp(jnp.array([c[0], c[1], 0.0]), tip + arm.tip_below_tcp, closing, opening,
                  opening <= float(arm.finger_range[1]))
+
+
+def pad_overhang(arm: A.Arm, g: Grasp, target: Body, other: Body) -> jax.Array:
+    """v3: how far (m, >= 0) a closing pad meets ``other`` before ``target`` (the body grasped
+    at ``g``); 0 when neither does.
+
+    A pad meets ``other`` first when it lies in the pad's lane (across the closing axis within
+    the pad's half width), within the fingers' height (fingertips to the palm's underside,
+    ``palm_above_tip``) and, on that pad's side, reaches further out along the closing axis than
+    the target's half width while starting inside the pad's pre-grasp position. The pad then
+    stops on ``other`` and its servo pushes the planned squeeze plus ``finger_kp`` times that
+    overhang (a 10 cm toy car across a 9 cm cup: 16.5 N per pad for a planned 5 N). A toy inside
+    a container or within its base's footprint never does."""
+    u, w = g.closing, perp(g.closing)
+    rel = other.centre - g.xy
+    mid, half = rel @ u, other.half_width(u)
+    lane = jnp.abs(rel @ w) < other.half_width(w) + arm.pad_half_x
+    tip = g.tcp_z - arm.tip_below_tcp
+    zmin, zmax = other.z_range()
+    level = (zmin < tip + arm.palm_above_tip) & (zmax > tip)
+    reach = target.half_width(u)
+    side = lambda s: jnp.where(s * mid - half < g.opening, jnp.maximum(s * mid + half - reach, 0.0), 0.0)
+    return jnp.where(lane & level, jnp.maximum(side(1.0), side(-1.0)), 0.0)

@@ -15,9 +15,11 @@ import jax
 import jax.numpy as jnp
 
 from . import arm as A
-from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, perp, squeeze_command, stack_targets,
-                     tool_squeeze, top_down, top_down_grasp, unit_xy)
+from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, pad_overhang, perp, squeeze_command,
+                     squeeze_force, stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
+from .physics_bounds import press_ok
+from .sweep import falls_onto_fingers, sweep_raise, sweep_tops
 from .templates import N_TARGETS, ActionConfig
 
 from relaff_jax.constants import ACTIONS
@@ -63,6 +65,11 @@ def tipping_body(toy: Body, radius: jax.Array) -> Body:
     return toy._replace(hi=toy.hi.at[2].set(jnp.where(radius > 0, toy.hi[2], toy.lo[2] + reach)))
 
 
+def _v3(cfg: ActionConfig) -> bool:
+    """Programs v3 (v2 and v1 keep their plans bit for bit)."""
+    return cfg.programs not in ("v1", "v2")
+
+
 def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) -> tuple[Grasp, jax.Array]:
     """The grasp of the other object (base or obstacle) and the closing command: v1 as ever;
     v2 with the palm clear of both objects and a squeeze for both objects' weight. ``tilt``
@@ -73,7 +80,22 @@ def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) ->
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
     toy = tipping_body(sc.toy, sc.toy_radius) if tilt and cfg.tilt_sweep else sc.toy
     g = clear_grasp(arm, cfg, g, sc.oth, toy, jnp.zeros(3))
-    return g, squeeze_command(arm, cfg, sc.oth.half_width(g.closing), sc.toy_mass + sc.oth_mass)
+    mass = sc.toy_mass + sc.oth_mass
+    if _v3(cfg):  # refused where the pads would press the toy beyond the force bound
+        g = g._replace(fits=g.fits & ~toy_overpressed(arm, cfg, g, sc, mass))
+    return g, squeeze_command(arm, cfg, sc.oth.half_width(g.closing), mass)
+
+
+def toy_overpressed(arm: A.Arm, cfg: ActionConfig, g: Grasp, sc: Scene, mass: jax.Array) -> jax.Array:
+    """v3: would the pads of the base grasp ``g`` meet the toy first (``bodies.pad_overhang``)
+    and press it beyond the stated bound (``physics_bounds.press_ok``, for the heavier object)?
+    Each pad then pushes the planned squeeze plus ``finger_kp`` x the overhang: a 10 cm car
+    across a 9 cm cup took 16.5 N per pad, 13.9 weights of the cup. A small overhang (a ball
+    a few millimetres past a cup's wall) stays within the bound and is grasped, as in v2."""
+    over = pad_overhang(arm, g, sc.oth, sc.toy)
+    push = squeeze_force(cfg, arm, mass) + arm.finger_kp * over
+    weight = 9.81 * jnp.maximum(sc.toy_mass, sc.oth_mass)
+    return (over > 0) & ~press_ok(2.0 * push, weight)
 
 
 def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
@@ -118,7 +140,7 @@ def _program_lift(arm, cfg, sc: Scene, *, grasp_toy: bool, tilt: bool) -> Progra
         # towards the robot, the side the arm reaches more easily
         rot = axis_rotation(g.closing, jnp.deg2rad(cfg.tilt_deg))
         lean_out = jnp.dot(rot @ DOWN, unit_xy(g.xy)) > 0
-        if cfg.programs == "v2" and cfg.tilt_lean == "toy":
+        if cfg.programs != "v1" and cfg.tilt_lean == "toy":
             # the base's side under the toy goes down (the surface falls away from the tool's
             # lean), so a sliding or toppling toy leaves the hand instead of passing under the
             # palm; a toy within 1 cm of the grasp along the slope keeps the lean towards the robot
@@ -158,7 +180,7 @@ def exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax.
     return jnp.where(inside, jnp.maximum(t_out, 0.0), 0.0)
 
 
-def _program_move(arm, cfg, toy, oth) -> Program:
+def _program_move(arm, cfg, toy, oth, radius, inner) -> Program:
     """Sweep the toy aside along the table: the closed gripper comes down on free table
     beside the toy, fingertips just above the table, and sweeps across the toy's place to
     ``cfg.move_distance`` beyond that start (further if the start had to step back), at right angles to the line from the toy to the other object (across the
@@ -174,8 +196,9 @@ def _program_move(arm, cfg, toy, oth) -> Program:
     d = perp(jnp.where(far, unit_xy(towards), unit_xy(c)))
     d = jnp.where(jnp.dot(d, c) > 0, -d, d)  # the end nearer the robot
     tcp_z = cfg.tip_clearance + 0.005 + arm.tip_below_tcp  # fingertips 1 cm above the table
+    ok = jnp.asarray(True)
     half = lambda b: arm.pad_thickness  # half the closed fingers' footprint along d
-    if cfg.programs == "v2":
+    if cfg.programs != "v1":
         # a top within palm_margin of the palm's underside is pinned under the palm's edge: the
         # toy's as the fingers push its foot and it tips (a 12 cm can: 70 N into the table for
         # 1.5 s), or the rim of the container the sweep meets first (the palm rides on a
@@ -185,7 +208,12 @@ def _program_move(arm, cfg, toy, oth) -> Program:
         clear = lambda top: jnp.where(jnp.abs(top - palm) < cfg.palm_margin, top + cfg.palm_margin - palm, 0.0)
         gap = arm.pad_thickness + cfg.rake_gap
         over = exit_distance(c - d * (toy.half_width(d) + gap), d, oth, gap) > 0
-        tcp_z = tcp_z + jnp.maximum(clear(toy.z_range()[1]), jnp.where(over, clear(oth.z_range()[1]), 0.0))
+        if _v3(cfg):
+            raise_by = sweep_raise(cfg, palm, *sweep_tops(cfg, toy, oth, over, radius))
+            ok = ~falls_onto_fingers(cfg, toy, oth, inner, raise_by)
+            tcp_z = tcp_z + raise_by
+        else:
+            tcp_z = tcp_z + jnp.maximum(clear(toy.z_range()[1]), jnp.where(over, clear(oth.z_range()[1]), 0.0))
         # ... and the hand's footprint is the palm's (5 cm) where a body reaches up to the palm
         palm_z = tcp_z - arm.tip_below_tcp + arm.palm_above_tip - cfg.palm_margin
         half = lambda b: jnp.where(b.z_range()[1] > palm_z, float(arm.palm_half[1]), arm.pad_thickness)
@@ -199,7 +227,7 @@ def _program_move(arm, cfg, toy, oth) -> Program:
     end = c + d * (cfg.move_distance - (toy.half_width(d) + arm.pad_thickness + cfg.rake_gap))
     targets = [top_down(start + z * up, d), top_down(start + z * tcp_z, d), top_down(end + z * tcp_z, d),
                top_down(end + z * (tcp_z + 0.10), d)]
-    return Program(stack_targets(targets), jnp.asarray(0.0), jnp.asarray(True), d,
+    return Program(stack_targets(targets), jnp.asarray(0.0), ok, d,
                    jnp.asarray(cfg.arm.grip_closed, jnp.float32))
 
 
@@ -218,7 +246,7 @@ def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     # below the handle's underside (tip_below_tcp past the handle's centre line), tip_clearance
     # above it: at 3 mm they were 4.5 mm into the table and levered the rake at 100-275 N
     low_z = 0.003
-    if cfg.programs == "v2":
+    if cfg.programs != "v1":
         low_z = max(low_z, arm.tip_below_tcp - float(A.TOOL_GRIP_POS[2]) + cfg.tip_clearance)
     low = origin + jnp.array([0.0, 0.0, low_z])
     above = origin + jnp.array([0.0, 0.0, toy.z_range()[1] + cfg.clearance])
@@ -261,7 +289,7 @@ def toy_grasp_target(arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax.Arr
     whether its other conditions hold (the toy fits the gripper, the corridor is clear)."""
     toy, obst = bodies(geo, pair, qpos)
     g = top_down_grasp(arm, cfg, toy)
-    if cfg.programs == "v2":  # the toy's grasp keeps the palm off the obstacle too
+    if cfg.programs != "v1":  # the toy's grasp keeps the palm off the obstacle too
         g = clear_grasp(arm, cfg, g, toy, obst, jnp.zeros(3))
     target = top_down(g.xy + jnp.array([0.0, 0.0, 1.0]) * g.tcp_z, g.closing)
     return target, g.fits & ~_corridor_blocked(cfg, toy, obst, cfg.scene.min_radius)
@@ -295,7 +323,7 @@ def program(action: str, arm: A.Arm, cfg: ActionConfig, geo: Geometry, pair: jax
         prog = _program_drag(arm, cfg, sc, direction=d, distance=cfg.unobstruct_distance,
                              raise_by=cfg.drag_raise + 0.01)
     elif action == "move":
-        prog = _program_move(arm, cfg, toy, oth)
+        prog = _program_move(arm, cfg, toy, oth, sc.toy_radius, sc.inner)
     elif action == "rake":
         prog = _program_rake(arm, cfg, toy, jnp.asarray(geo.head_x0)[pair], jnp.asarray(geo.head_y)[pair])
     else:

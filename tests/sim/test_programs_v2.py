@@ -17,7 +17,7 @@ from relaff_jax.config.action import ActionConfig
 
 from helpers.scenes import plan_rows
 
-V2 = ActionConfig()
+V2 = ActionConfig(programs="v2")  # v3 (the default) is tested in test_programs_v3.py
 V1 = dataclasses.replace(V2, programs="v1")
 
 
@@ -128,7 +128,7 @@ def test_versions_config_and_sidecar():
     d = templates.stored_config(V2)
     assert d["programs"] == "v2" and d["rest_hold"] == V2.rest_hold
     with pytest.raises(UserError, match="action.programs"):
-        ActionConfig(programs="v3")
+        ActionConfig(programs="v4")
     with pytest.raises(UserError, match="action.squeeze_max"):
         ActionConfig(squeeze_max=80.0)
     t1, t2 = templates.tables(V1), templates.tables(V2)

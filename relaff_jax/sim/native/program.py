@@ -79,7 +79,7 @@ def _jitted(cfg: ActionConfig):
         d = jax.vmap(lambda q, v: initial_data(st, cfg, aid, q, v))(qpos, qvel)
         return d.qpos, d.eq_active
 
-    v2 = cfg.programs == "v2"
+    v2 = cfg.programs != "v1"  # v2 and v3 execute alike (v3 plans differently)
     srows = jnp.asarray(straight_rows(cfg, tb.target))
 
     def corr(aid, q_way):  # (B, S, P - 1, 6): as simulate.make_simulate_fn's, from the plan
@@ -134,7 +134,7 @@ def program_inputs(cfg: ActionConfig, aid: int, qpos: np.ndarray, qvel: np.ndarr
     seg = np.asarray(A.segment_index(tb.steps[aid], jnp.arange(tb.n_steps)))
     g_seg, g_rows = guard_tables(cfg)
     return ProgramInputs(full_q, full_v, np.asarray(eq0, np.float64), u, np.asarray(tb.closed[aid])[seg],
-                         int(tb.grasp[aid]), int(tb.measure[aid]), int(run_steps(cfg)[aid]), cfg.programs == "v2",
+                         int(tb.grasp[aid]), int(tb.measure[aid]), int(run_steps(cfg)[aid]), cfg.programs != "v1",
                          g_seg[aid][seg], g_rows[aid], int(aid), np.array(q_way, np.float32),
                          np.array(grip_way, np.float32), c)
 

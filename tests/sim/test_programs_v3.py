@@ -1,0 +1,205 @@
+"""Motor programs v3: move's sweep raised to a fixed point over every top near the palm, and a
+base or obstacle grasp refused when the toy stands between the pads; v2's plans unchanged, bit
+for bit. Fast tests on hand-built scenes (``programs.program``, no simulation)."""
+import dataclasses
+import json
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from relaff_jax.config.action import ActionConfig
+from relaff_jax.sim import bodies, planning, programs, sweep
+from relaff_jax.sim import objects as lib
+
+V3 = ActionConfig()
+V2 = dataclasses.replace(V3, programs="v2")
+FLOOR = dict(lib.get("basket").parts)["base"].size[2]  # the basket's floor, 1 cm
+# v2's programs of SCENES, made by ``v2_programs()`` with the code before v3 existed (main at
+# a00fc45, run with PYTHONPATH pointing at it): v2 must plan them bit for bit as then
+REFERENCE = Path(__file__).with_name("programs_v2_reference.json")
+
+
+def quat(yaw):
+    return [float(np.cos(yaw / 2)), 0.0, 0.0, float(np.sin(yaw / 2))]
+
+
+def scene(w, toy, other, txyz, oxyz, tyaw=0.0, tilt=0.0):
+    q = np.array(w.mj_model.qpos0, np.float32)[:14]
+    q[0:7] = [*txyz, *quat(tyaw)]
+    if tilt:  # about the toy's y axis (a car's long side goes up)
+        q[3:7] = [np.cos(tilt / 2), 0.0, np.sin(tilt / 2), 0.0]
+    q[7:14] = [*oxyz, *quat(0.0)]
+    return w.pair_id(toy, other), q
+
+
+def prog(action, cfg, toy, other, txyz, oxyz, tyaw=0.0, tilt=0.0):
+    st = planning.setup(cfg)
+    p, q = scene(st.world, toy, other, txyz, oxyz, tyaw, tilt)
+    body = bodies.bodies(st.geo, jnp.int32(p), jnp.asarray(q))
+    return programs.program(action, st.arm, cfg, st.geo, jnp.int32(p), jnp.asarray(q)), st.arm, body
+
+
+def sweep_palm(arm, pr):
+    """The palm's underside during move's sweep (targets 1-2)."""
+    return float(pr.targets.pos[2, 2]) - arm.tip_below_tcp + arm.palm_above_tip
+
+
+# (toy, other, toy position, other position, toy yaw): the toy centred in or on the other
+MOVE_SCENES = {
+    "can in basket": ("toy_can", "basket", (0.7, 0.0, FLOOR), (0.7, 0.0, 0.0)),
+    "car on cup": ("toy_car", "cup", (0.7, 0.0, lib.get("cup").height), (0.7, 0.0, 0.0)),
+    "can on cutting board": ("toy_can", "cutting_board", (0.7, 0.0, 0.02), (0.7, 0.0, 0.0)),
+    "can on cutting board +0.1 mm": ("toy_can", "cutting_board", (0.7, 0.0, 0.0201), (0.7, 0.0, 0.0)),
+    "can on cutting board -0.3 mm": ("toy_can", "cutting_board", (0.7, 0.0, 0.0197), (0.7, 0.0, 0.0)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(MOVE_SCENES))
+def test_move_palm_clears_every_top_it_sweeps_over(name):
+    toy, other, t, o = MOVE_SCENES[name]
+    pr, arm, (tb, ob) = prog("move", V3, toy, other, t, o)
+    palm = sweep_palm(arm, pr)
+    zmin, zmax = (float(z) for z in tb.z_range())
+    # the toy's top, its top once swept onto the table, the other's top (the sweep starts over it)
+    tops = [zmax, zmax - zmin, float(ob.z_range()[1])]
+    for top in tops:  # each top is palm_margin below the palm's underside or beyond the band above
+        assert top <= palm - V3.palm_margin + 1e-6 or top > palm + V3.palm_margin + sweep.TOP_TOL, (name, top, palm)
+
+
+def test_move_v3_heights_hand_worked():
+    # unraised sweep: fingertips 1 cm up, the palm's underside 12 cm up (palm_above_tip 11 cm)
+    pr, arm, (tb, ob) = prog("move", V3, *MOVE_SCENES["can in basket"])
+    assert arm.palm_above_tip == pytest.approx(0.11, abs=1e-6)
+    # the can (12 cm on the 1 cm floor: top 13 cm) -> 15 cm; the basket's rim (15 cm) -> 17 cm
+    assert float(ob.z_range()[1]) == pytest.approx(0.15, abs=1e-6)
+    assert sweep_palm(arm, pr) == pytest.approx(0.17, abs=1e-5) and bool(pr.ok)  # falls inside
+    pr2, _, _ = prog("move", V2, *MOVE_SCENES["can in basket"])
+    assert sweep_palm(arm, pr2) == pytest.approx(0.15, abs=1e-5)  # v2: on the rim
+    # the car's top 2 cm above the palm (the band's edge) -> 16 cm; v2 left it at 12 cm; the
+    # car pushed off the cup lies 4 cm high, 1 cm under the fingertips (5 cm): refused
+    pr, _, (tb, _) = prog("move", V3, *MOVE_SCENES["car on cup"])
+    assert float(tb.z_range()[1]) == pytest.approx(0.14, abs=1e-6)
+    assert sweep_palm(arm, pr) == pytest.approx(0.16, abs=1e-5) and not bool(pr.ok)
+    v2 = prog("move", V2, *MOVE_SCENES["car on cup"])[0]
+    assert sweep_palm(arm, v2) == pytest.approx(0.12, abs=1e-5) and bool(v2.ok)
+    # a can on a 2 cm board: the palm at 16 cm, the fingertips 5 cm, 1.5 cm under the side of the
+    # can fallen off the board (6.5 cm): refused (v2 swept at 12 or 16 cm, by 0.1 mm of its height)
+    for name in ("can on cutting board", "can on cutting board +0.1 mm", "can on cutting board -0.3 mm"):
+        pr, _, _ = prog("move", V3, *MOVE_SCENES[name])
+        assert sweep_palm(arm, pr) == pytest.approx(0.16, abs=5e-4) and not bool(pr.ok), name
+    # a can on a 1.4 cm lid: palm 15.4 cm, fingertips 4.4 cm, 2.1 cm under the fallen can: swept
+    lid, _, _ = prog("move", V3, "toy_can", "lid", (0.7, 0.0, 0.014), (0.7, 0.0, 0.0))
+    assert sweep_palm(arm, lid) == pytest.approx(0.154, abs=1e-5) and bool(lid.ok)
+    # a can on the table: 14 cm as in v2 (its top 12 cm); it stands on nothing, no fall
+    on_table = ("toy_can", "book", (0.7, 0.3, 0.0), (0.7, 0.0, 0.0))
+    for cfg in (V3, V2):
+        pr = prog("move", cfg, *on_table)[0]
+        assert sweep_palm(arm, pr) == pytest.approx(0.14, abs=1e-5) and bool(pr.ok)
+    # a car leaning on a cup's rim (tilted 30 degrees): its slope meets the palm at 12 cm, so it
+    # rises over the car's top
+    lean, _, (tb, _) = prog("move", V3, "toy_car", "cup", (0.7, 0.0, 0.09), (0.7, 0.0, 0.0), tilt=np.pi / 6)
+    zmin, zmax = (float(z) for z in tb.z_range())
+    assert zmin < 0.12 < zmax - V3.palm_margin
+    assert sweep_palm(arm, lean) >= zmax + V3.palm_margin - 1e-5
+
+
+def test_sweep_raise_fixed_point_hand_worked():
+    m, tol = V3.palm_margin, sweep.TOP_TOL
+    band = m + tol
+    r = lambda palm, tops, depth=None: float(sweep.sweep_raise(
+        V3, jnp.float32(palm), jnp.asarray(tops, jnp.float32),
+        jnp.full(len(tops), band, jnp.float32) if depth is None else jnp.asarray(depth, jnp.float32)))
+    assert r(0.12, [0.13, 0.12, 0.15]) == pytest.approx(0.05, abs=1e-6)  # 0.13 -> 0.15 -> rim 0.15 -> 0.17
+    assert r(0.12, [0.15, 0.13, -1.0]) == pytest.approx(0.05, abs=1e-6)  # the order does not matter
+    assert r(0.12, [0.14, 0.04, -1.0]) == pytest.approx(0.04, abs=1e-6)  # the band's edge is inside
+    assert r(0.12, [0.14 + tol * 0.9, -1.0, -1.0]) == pytest.approx(0.04 + tol * 0.9, abs=1e-6)
+    assert r(0.12, [0.14 + tol * 1.5, -1.0, -1.0]) == 0.0  # beyond: the hand meets its side
+    assert r(0.12, [0.05, 0.099, -1.0]) == 0.0  # far below
+    # a chain of three, each inside the band only once the palm has risen for the one before
+    assert r(0.12, [0.173, 0.133, 0.153]) == pytest.approx(0.193 - 0.12, abs=1e-6)
+    # a tilted toy from 7 to 15 cm: the palm at 12 cm meets its slope, so it rises over its top
+    assert r(0.12, [0.15, -1.0], [0.08 + band, band]) == pytest.approx(0.05, abs=1e-6)
+    assert r(0.12, [0.15, -1.0]) == 0.0  # upright, its top 3 cm above the palm: met from the side
+
+
+def test_pull_refuses_a_grasp_whose_pads_meet_the_toy_first():
+    cup = lib.get("cup").height
+    # a 10 cm toy car lying across a 9 cm cup along the closing axis: the pads would squeeze the car
+    across, arm, (car, cup_b) = prog("pull", V3, "toy_car", "cup", (0.7, 0.0, cup), (0.7, 0.0, 0.0))
+    g = bodies.top_down_grasp(arm, V3, cup_b)
+    assert float(car.half_width(g.closing)) > float(cup_b.half_width(g.closing))  # the geometry
+    assert not bool(across.ok)
+    assert bool(prog("pull", V2, "toy_car", "cup", (0.7, 0.0, cup), (0.7, 0.0, 0.0))[0].ok)  # v2 grasped it
+    # turned a quarter: 5 cm along the closing axis, inside the cup's width: grasped, as in v2
+    along, _, _ = prog("pull", V3, "toy_car", "cup", (0.7, 0.0, cup), (0.7, 0.0, 0.0), tyaw=np.pi / 2)
+    along2, _, _ = prog("pull", V2, "toy_car", "cup", (0.7, 0.0, cup), (0.7, 0.0, 0.0), tyaw=np.pi / 2)
+    assert bool(along.ok)
+    np.testing.assert_array_equal(np.asarray(along.targets.pos), np.asarray(along2.targets.pos))
+
+
+@pytest.mark.parametrize("action", ["lift", "pour", "slide", "push", "pull"])
+def test_every_base_grasp_refuses_the_car_across_the_cup(action):
+    cup = lib.get("cup").height
+    assert not bool(prog(action, V3, "toy_car", "cup", (0.7, 0.0, cup), (0.7, 0.0, 0.0))[0].ok)
+    # a toy inside a container never blocks the pads
+    assert bool(prog(action, V3, "toy_car", "basket", (0.7, 0.0, FLOOR), (0.7, 0.0, 0.0))[0].ok)
+
+
+def test_unobstruct_refuses_a_toy_in_the_pads_lane():
+    # the toy 1 cm beside a brick along the grasp's closing axis, inside the pads' reach: refused
+    _, arm, (toy, obst) = prog("unobstruct", V3, "block", "brick", (0.7, 0.0, 0.0), (0.7, 0.0, 0.0))
+    g = bodies.top_down_grasp(arm, V3, obst)
+    off = float(obst.half_width(g.closing)) + 0.01 + float(toy.half_width(g.closing))
+    assert off - float(toy.half_width(g.closing)) < float(g.opening)  # inside the pad's start
+    near = np.array([0.7, 0.0, 0.0]) + off * np.asarray(g.closing)
+    assert not bool(prog("unobstruct", V3, "block", "brick", tuple(near), (0.7, 0.0, 0.0))[0].ok)
+    # (v2 refuses it too: its pad would come down on the block, clear_grasp's test)
+    assert not bool(prog("unobstruct", V2, "block", "brick", tuple(near), (0.7, 0.0, 0.0))[0].ok)
+    far = np.array([0.7, 0.0, 0.0]) + 0.3 * np.asarray(g.closing)
+    assert bool(prog("unobstruct", V3, "block", "brick", tuple(far), (0.7, 0.0, 0.0))[0].ok)
+    # beside a bottle the grasp is high (the palm 2 cm above its top): the block is below the
+    # fingertips, out of the pads' way
+    _, _, (toy, obst) = prog("unobstruct", V3, "block", "bottle", (0.7, 0.0, 0.0), (0.7, 0.0, 0.0))
+    g = bodies.top_down_grasp(arm, V3, obst)
+    off = float(obst.half_width(g.closing)) + 0.01 + float(toy.half_width(g.closing))
+    near = np.array([0.7, 0.0, 0.0]) + off * np.asarray(g.closing)
+    assert bool(prog("unobstruct", V3, "block", "bottle", tuple(near), (0.7, 0.0, 0.0))[0].ok)
+
+
+# scenes whose v2 programs are pinned: (action, toy, other, toy position, other position, toy yaw)
+SCENES = [(a, *s) for a in ("lift", "pull", "push", "pour", "slide", "take", "unobstruct", "move")
+          for s in (("toy_car", "cup", (0.7, 0.0, 0.1), (0.7, 0.0, 0.0), 0.0),
+                    ("toy_can", "basket", (0.7, 0.0, 0.01), (0.7, 0.0, 0.0), 0.0),
+                    ("toy_can", "cutting_board", (0.6, 0.2, 0.02), (0.6, 0.2, 0.0), 0.3),
+                    ("block", "bottle", (0.8, 0.1, 0.0), (0.7, 0.0, 0.0), 0.0),
+                    ("ball", "tray", (0.5, -0.3, 0.02), (0.5, -0.3, 0.0), 0.0))]
+
+
+def v2_programs() -> dict:
+    """v2's program of every scene of SCENES that the world has, as lists of float32 values."""
+    st = planning.setup(V2)
+    out = {}
+    for action, toy, other, t, o, yaw in SCENES:
+        try:
+            p, q = scene(st.world, toy, other, t, o, yaw)
+        except (KeyError, ValueError):  # the pair is not in the world
+            continue
+        pr = programs.program(action, st.arm, V2, st.geo, jnp.int32(p), jnp.asarray(q))
+        leaves = [np.asarray(x, np.float32).ravel().tolist() for x in jax.tree_util.tree_leaves(pr)]
+        out[f"{action} {toy} {other}"] = leaves
+    return out
+
+
+def test_v2_programs_unchanged():
+    want = json.loads(REFERENCE.read_text())
+    got = v2_programs()
+    assert sorted(got) == sorted(want) and len(got) >= 20
+    for k in want:
+        assert got[k] == want[k], k
+
+
+if __name__ == "__main__":  # write the reference (run with the code v2 must equal)
+    REFERENCE.write_text(json.dumps(v2_programs(), sort_keys=True) + "\n")
