@@ -14,7 +14,7 @@ from relaff_jax.config.action import ActionConfig
 from relaff_jax.sim import bodies, planning, programs, sweep
 from relaff_jax.sim import objects as lib
 
-V3 = ActionConfig()
+V3 = ActionConfig(programs="v3")
 V2 = dataclasses.replace(V3, programs="v2")
 FLOOR = dict(lib.get("basket").parts)["base"].size[2]  # the basket's floor, 1 cm
 # v2's programs of SCENES, made by ``v2_programs()`` with the code before v3 existed (main at
