@@ -74,7 +74,7 @@ def main() -> None:
     ap.add_argument("--programs", default="v3")
     ap.add_argument("--json", default=None)
     a = ap.parse_args()
-    audits, out = {}, []
+    out = []
     print(f"| dataset | rollout | toy / other | stored: palm above steps, N / press N / pen. mm / fails | "
           f"{a.programs}: feasible | palm above steps, N | press N (weights) | held pen. mm | label (stored) | fails |")
     print("|---|---|---|---|---|---|---|---|---|---|")
