@@ -173,13 +173,18 @@ def bc_interval(values: np.ndarray, estimate: np.ndarray, level: float) -> tuple
     """Bias-corrected percentile interval: ``values (B, ...)``, ``estimate (...)`` -> (low, high),
     read at ``bc_percentiles`` (the jackknife acceleration would need a refit per left-out
     scene and repetition). NaN where the estimate or every resample is undefined."""
+    return _bc_read(values, estimate, level)[:2]
+
+
+def _bc_read(values: np.ndarray, estimate: np.ndarray, level: float):
+    """``bc_interval``'s ``(low, high)`` and the percentiles it read them at, ``(q_lo, q_hi)``."""
     v = np.asarray(values, dtype=float)
     est = np.broadcast_to(np.asarray(estimate, dtype=float), v.shape[1:])
     q_lo, q_hi, n = bc_percentiles(v, est, level)
     srt = np.sort(np.where(np.isfinite(v), v, np.inf), axis=0)  # finite values first
     lo, hi = (_pick(srt, n, q) for q in (q_lo, q_hi))
     bad = (n == 0) | ~np.isfinite(est)
-    return np.where(bad, np.nan, lo), np.where(bad, np.nan, hi)
+    return np.where(bad, np.nan, lo), np.where(bad, np.nan, hi), q_lo, q_hi
 
 
 def checked_interval(values: np.ndarray, estimate: np.ndarray, level: float,
@@ -193,9 +198,8 @@ def checked_interval(values: np.ndarray, estimate: np.ndarray, level: float,
     ``tail = 0`` keeps the bias-corrected interval everywhere. Shapes as ``bc_interval``."""
     v = np.asarray(values, dtype=float)
     est = np.broadcast_to(np.asarray(estimate, dtype=float), v.shape[1:])
-    q_lo, q_hi, _ = bc_percentiles(v, est, level)
+    lo, hi, q_lo, q_hi = _bc_read(v, est, level)
     bc = (q_lo / 100 >= tail) & (1 - q_hi / 100 >= tail)
-    lo, hi = bc_interval(v, est, level)
     if bc.all():
         return lo, hi, bc
     p_lo, p_hi = percentile_interval(v, level)
