@@ -17,7 +17,7 @@ def test_two_processes_generate_bit_identical_datasets(tmp_path):
     cores, several on loaded ones) and two short simulations."""
     env = dict(os.environ, JAX_PLATFORMS="cpu")
     cmd = [sys.executable, "-m", "relaff_jax.cli", "generate", "take", "--samples", "2", "--batch", "8",
-           "--max-rollouts", "32", "--seed", "3", "--set", "dataset.borrow_fraction=1.0", "--set", "dataset.distance_bins=2"]
+           "--max-rollouts", "32", "--seed", "3", "--engine", "native", "--set", "dataset.borrow_fraction=1.0", "--set", "dataset.distance_bins=2"]
     for name in ("a", "b"):
         r = subprocess.run(cmd + ["--out", str(tmp_path / name)], capture_output=True, text=True, env=env, timeout=1800)
         assert r.returncode == 0, r.stderr[-2000:]

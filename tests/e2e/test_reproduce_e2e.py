@@ -1,5 +1,7 @@
-"""End to end: `relaff reproduce --preset tiny` with the arm's nine actions, MJX scenes, the
-Kinect perception, the forests and the report.
+"""End to end: `relaff reproduce --preset tiny` with the arm's nine actions (scenes settled in
+MJX, motor programs run by MuJoCo C: ``--engine native``, the engine of the quick and paper
+presets; the MJX executor of every action is tested in tests/sim/test_actions.py), the Kinect
+perception, the forests and the report.
 
 Checks every expected file, that a second run skips every stage, and that a run interrupted
 in the middle of simulating a dataset, then rerun, ends with the datasets, accuracies and
@@ -31,7 +33,7 @@ def cli_run(out, *extra):
     parser = argparse.ArgumentParser()
     cli_reproduce.register(parser.add_subparsers(dest="command"))
     args = parser.parse_args(["reproduce", "--preset", "tiny", "--out", str(out), "--seed", str(SEED),
-                              "--no-progress", *extra])
+                              "--engine", "native", "--no-progress", *extra])
     assert args.func(args) == 0
     return json.loads((out / R.RUN_LOG).read_text())
 
@@ -87,7 +89,7 @@ def test_tiny_end_to_end(tmp_path):
         shutil.rmtree(p)
 
     def stop_after_first_chunk(action, batch):
-        fn, config, names = default_rollout_factory(action, batch)
+        fn, config, names = default_rollout_factory(action, batch, engine="native")
         calls = [0]
 
         def rollout(key, b):
@@ -99,7 +101,8 @@ def test_tiny_end_to_end(tmp_path):
         return rollout, config, names
 
     with pytest.raises(KeyboardInterrupt):
-        R.reproduce(out2, "tiny", SEED, progress=False, hooks=R.Hooks(rollout_factory=stop_after_first_chunk))
+        R.reproduce(out2, "tiny", SEED, progress=False, overrides={"dataset.engine": "native"},
+                    hooks=R.Hooks(rollout_factory=stop_after_first_chunk))
     assert len(list((out2 / "data" / "take" / D.CHUNKS).iterdir())) == 1
     log = cli_run(out2)
     assert statuses(log) == {"generate": "ran", "features": "ran", "experiment": "ran", "report": "ran"}
