@@ -1,47 +1,14 @@
-"""The audit's fast replay (``probe_arrays.ArrayProbe``, the replay's pad contacts from arrays) and
-its worker processes (``data/audit_replay.py``) give the audit of the former path, field for field,
-on a generated native dataset."""
-import subprocess
-import sys
-
+"""The audit's worker processes (``data/audit_replay.py``): how many, and which plugin files they
+load. The fast replay and its workers against the former audit, on a generated native dataset:
+tests/data/test_generate_processes.py (it shares that test's dataset)."""
 import numpy as np
-import pytest
 
-from relaff_jax.data import audit as A
 from relaff_jax.data import audit_replay as AR
-from relaff_jax.sim.native import reference as native
-from relaff_jax.sim.native import probe_arrays
-from relaff_jax.sim.native.probe import Probe
-
-
-def _former_pad_contacts(d, pad, geoms):
-    cons = [c for c in d.contact[:d.ncon]
-            if (c.geom1 == pad and c.geom2 in geoms) or (c.geom2 == pad and c.geom1 in geoms)]
-    return np.array([c.dist for c in cons]), np.array([np.asarray(c.frame[:3], np.float64) for c in cons]).reshape(-1, 3)
 
 
 def test_workers_for_few_scenes_is_one():
     assert AR.n_workers(AR.MIN_PER_JOB - 1, 2) == 1 and AR.n_workers(2 * AR.MIN_PER_JOB, 2) == 2
     assert AR.n_workers(10 * AR.MIN_PER_JOB, 1) == 1 and AR.default_jobs() >= 1
-
-
-@pytest.mark.slow  # generates a small native dataset (plan compile), audits it three times, starts 2 workers
-def test_fast_audit_and_its_workers_equal_the_former_audit(tmp_path, monkeypatch):
-    d = tmp_path / "take"
-    p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "generate", "take", "--samples", "8", "--out", str(d),
-                        "--engine", "native", "--batch", "8", "--seed", "5"], capture_output=True, text=True)
-    assert p.returncode == 0, p.stderr
-    with monkeypatch.context() as mp:  # the former path: Probe, contacts read one at a time
-        mp.setattr(probe_arrays, "ArrayProbe", Probe)
-        mp.setattr(native, "_pad_contacts", _former_pad_contacts)
-        ref = A.audit_dataset(d, 6, 0, jobs=1)
-    one = A.audit_dataset(d, 6, 0, jobs=1)
-    monkeypatch.setattr(AR, "MIN_PER_JOB", 1)
-    two = A.audit_dataset(d, 6, 0, jobs=2)  # 2 spawned workers, 3 scenes each
-    assert ref["n_audited"] >= 4 and ref["replay"]["label_agreement"] == 1.0
-    for a in (one, two):
-        assert a["rollouts"] == ref["rollouts"]
-        assert {k: v for k, v in a.items() if k != "seconds"} == {k: v for k, v in ref.items() if k != "seconds"}
 
 
 def test_workers_get_only_the_plugin_files_whose_registrations_stand(tmp_path, monkeypatch):
