@@ -169,12 +169,13 @@ def two_counts(fo, sc, w, wy, j, start, end):
     c = 0
     wl = 0.0
     l1 = 0.0
-    for p in range(start, end):
+    for p in range(start, end):  # branch-free (the values come in no order): w * 1.0 or w * 0.0 is exact
         s = samples[p]
         a = XT[j, s] == lo
         c += a
-        wl += w[s] if a else 0.0
-        l1 += wy[s] if a else 0.0
+        f = np.float64(a)
+        wl += w[s] * f
+        l1 += wy[s] * f
     return c, wl, l1
 
 
