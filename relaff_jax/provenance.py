@@ -122,6 +122,8 @@ def derive_seeds(keys: np.ndarray) -> np.ndarray:
     sweep derives one per forest). SeedSequence's own mixing, step by step: each key is one
     32-bit word of entropy, the pool of 4 words is mixed with ``hashmix`` / ``mix`` and the
     first word of ``generate_state`` is hashed out; tests check it against SeedSequence."""
+    if len(keys) == 0:
+        return np.zeros(0, np.int64)
     keys = np.asarray(keys, dtype=np.int64)
     if keys.ndim != 2 or keys.size and (keys.min() < 0 or keys.max() >= 2**32):
         raise ValueError(f"derive_seeds: keys must be (F, K) integers in [0, 2**32), got shape {keys.shape}")

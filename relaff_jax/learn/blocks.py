@@ -88,6 +88,16 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
 
     loo_hits: dict[int, list[bool]] = {}
     batch = 1 if forest.engine == "sklearn" else FLUSH
+    # every forest's seed at once (one SeedSequence per seed would cost ~20 us a forest)
+    firsts: dict[tuple, int] = {}
+    for c, r in plan:
+        firsts.setdefault(learner_key(r, repeats, c), c)
+    learners = list(firsts.values())  # the first condition of each learner, in plan order
+    row = {c: i for i, c in enumerate(learners)}
+    seeds = derive_seeds([(*seed_keys, n, c) for c in learners for n in sizes]).reshape(len(learners), len(sizes))
+    if loo_n is not None:
+        loo_seeds = derive_seeds([(*seed_keys, loo_n, c, i + 1) for c in learners for i in range(loo_n)])
+        loo_seeds = loo_seeds.reshape(len(learners), loo_n)
     for cond, rows in plan:
         key = learner_key(rows, repeats, cond)
         if key in first:
@@ -101,19 +111,17 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
         # nested training sets: size n's states are the first n rows of the largest size's
         tr = train_order[:max(sizes)]
         XA, yA = augment(X[tr], inputs[:, tr], rep), y[tr]
-        seeds = derive_seeds([(*seed_keys, n, cond) for n in sizes])
         for si, n in enumerate(sizes):
-            fits.append((XA[:n], yA[:n], int(seeds[si])))
+            fits.append((XA[:n], yA[:n], int(seeds[row[cond], si])))
             colmaps.append(colmap)
             slots.append((cond, si))
             if len(fits) >= batch:
                 flush()
         if loo_n is not None and any(c in loo_conditions for c, r in plan if learner_key(r, repeats, c) == key):
             loo_hits[cond] = []
-            seeds = derive_seeds([(*seed_keys, loo_n, cond, i + 1) for i in range(loo_n)])
             for i in range(loo_n):
                 keep = np.delete(tr_loo, i)
-                loo_fits.append((augment(X[keep], inputs[:, keep], rep), y[keep], int(seeds[i])))
+                loo_fits.append((augment(X[keep], inputs[:, keep], rep), y[keep], int(loo_seeds[row[cond], i])))
                 loo_maps.append(colmap)
                 loo_slots.append((cond, i))
                 if len(loo_fits) >= batch:
