@@ -30,6 +30,9 @@ How a drawn feature is searched: each feature of the forest is sorted once, on f
 samples are turned into their ranks in ascending order (``node_ranks``: a bitmap of ranks
 read back lowest bit first, or an insertion sort for small nodes), and the scan walks them,
 reading values and weights through the presorted arrays: one pass, no moving of samples. A
+feature of exactly two values (``two_valued``: a bootstrap input's 0/1) is never sorted; its
+one candidate, after the node's samples of the lower value, comes from one pass over the node
+(``two_counts``) and is scored by the same ``offer`` as the scan's. A
 candidate's Gini (two float64 divisions) is computed only when an exact, division-free form
 of its proxy says it may beat the best so far (``may_win``, with a margin far above rounding):
 a candidate that could win is always computed and compared as scikit-learn does it, in its
