@@ -24,7 +24,8 @@ wall time with 2 workers is the CPU sum / 2.
     PYTHONPATH=. python benchmarks/experiment_stage.py --ref /path/to/reference/checkout [--spaces pca rhf]
 
 ``--ref``: a checkout of the reference code (``git worktree add`` or ``git archive main``);
-without it only this checkout runs. Each version's folder is kept in ``--out``.
+without it only this checkout runs. Each version's folder is kept in ``--out``. With ``--ref`` the
+script exits non-zero when any result array differs between the two.
 """
 from __future__ import annotations
 
@@ -267,6 +268,8 @@ def main() -> None:
         print(f"other: new / reference {n['other'] / r['other']:.2f}; whole projection new / reference "
               f"{sum(n.values()) / sum(r.values()):.3f}")
         print(f"identical={same == total}")
+        if same != total:
+            sys.exit("the new code's results differ from the reference's")
     if a.main_reps and not a.render:
         m = main_process(a.main_reps)
         k = 50 / a.main_reps * 1.5  # to the PCA preset's 50 repetitions, and RHF's half of that

@@ -26,7 +26,7 @@ from relaff_jax.learn.forest.engine import predict_many
 from relaff_jax.learn.learners import fit_many
 from relaff_jax.config.experiment import ForestConfig
 from relaff_jax.learn.states import augment
-from relaff_jax.provenance import derive_seed
+from relaff_jax.provenance import derive_seeds
 
 FLUSH = 256  # fast / compiled forests fitted and evaluated together (bounds the trees held in memory)
 # test subsets an accuracy is broken down by: what a negative label is made of (issue 24)
@@ -88,6 +88,16 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
 
     loo_hits: dict[int, list[bool]] = {}
     batch = 1 if forest.engine == "sklearn" else FLUSH
+    # every forest's seed at once (one SeedSequence per seed would cost ~20 us a forest)
+    firsts: dict[tuple, int] = {}
+    for c, r in plan:
+        firsts.setdefault(learner_key(r, repeats, c), c)
+    learners = list(firsts.values())  # the first condition of each learner, in plan order
+    row = {c: i for i, c in enumerate(learners)}
+    seeds = derive_seeds([(*seed_keys, n, c) for c in learners for n in sizes]).reshape(len(learners), len(sizes))
+    if loo_n is not None:
+        loo_seeds = derive_seeds([(*seed_keys, loo_n, c, i + 1) for c in learners for i in range(loo_n)])
+        loo_seeds = loo_seeds.reshape(len(learners), loo_n)
     for cond, rows in plan:
         key = learner_key(rows, repeats, cond)
         if key in first:
@@ -98,9 +108,11 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
         if not np.all(np.isfinite(inputs)):
             raise ValueError(f"condition {cond}: bootstrap inputs {rows} were not computed for this space")
         colmap = np.concatenate([np.arange(d0), d0 + np.repeat(np.asarray(rows, dtype=np.intp), rep)])
+        # nested training sets: size n's states are the first n rows of the largest size's
+        tr = train_order[:max(sizes)]
+        XA, yA = augment(X[tr], inputs[:, tr], rep), y[tr]
         for si, n in enumerate(sizes):
-            tr = train_order[:n]
-            fits.append((augment(X[tr], inputs[:, tr], rep), y[tr], derive_seed(*seed_keys, n, cond)))
+            fits.append((XA[:n], yA[:n], int(seeds[row[cond], si])))
             colmaps.append(colmap)
             slots.append((cond, si))
             if len(fits) >= batch:
@@ -109,8 +121,7 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
             loo_hits[cond] = []
             for i in range(loo_n):
                 keep = np.delete(tr_loo, i)
-                loo_fits.append((augment(X[keep], inputs[:, keep], rep), y[keep],
-                                  derive_seed(*seed_keys, loo_n, cond, i + 1)))
+                loo_fits.append((augment(X[keep], inputs[:, keep], rep), y[keep], int(loo_seeds[row[cond], i])))
                 loo_maps.append(colmap)
                 loo_slots.append((cond, i))
                 if len(loo_fits) >= batch:

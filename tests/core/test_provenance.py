@@ -4,6 +4,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 
@@ -35,3 +36,18 @@ def test_machine_records_the_blas_kernels_scipy_chose():
         env = dict(os.environ, OPENBLAS_CORETYPE=core)
         out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
         assert core in out, (core, out)
+
+
+def test_derive_seeds_is_derive_seed_row_by_row():
+    """The vectorised seeds equal SeedSequence's, for tuples shorter and longer than its
+    pool of four words, small and full 32-bit keys."""
+    from relaff_jax.provenance import derive_seed, derive_seeds
+
+    rng = np.random.default_rng(1)
+    for k in (1, 3, 4, 5, 7, 8, 9):
+        keys = rng.integers(0, 2**32, size=(60, k))
+        keys[:30] = rng.integers(0, 6, size=(30, k))
+        np.testing.assert_array_equal(derive_seeds(keys), [derive_seed(*row) for row in keys])
+    assert derive_seeds(np.zeros((0, 7), np.int64)).shape == derive_seeds([]).shape == (0,)
+    with pytest.raises(ValueError):
+        derive_seeds([[2**32]])

@@ -84,6 +84,13 @@ def _data(n, d, seed, kind="plain"):
         X = np.round(X, 1)
         X[:, 1] = np.float32(0.01) + rng.integers(0, 3, n).astype(np.float32) * np.float32(5e-8)
         X[:, 2] = np.float32(0.01) + rng.integers(0, 2, n).astype(np.float32) * np.float32(2e-7)
+    elif kind == "binary":  # two-valued columns (bootstrap inputs), the compiled engine's own path
+        b = (X[:, 0] + rng.normal(size=n) > 0).astype(np.float32)
+        X[:, 4:10] = b[:, None]  # one 0/1 input repeated, as states.augment does
+        X[:, 10] = np.where(b > 0, np.float32(-0.0), np.float32(0.0))  # two bit patterns, one value: constant
+        X[:, 11] = np.where(rng.random(n) < 0.3, np.float32(-2.5), np.float32(-7.0))  # lower value second
+        X[:, 12] = np.float32(3.0) + b * np.float32(5e-8)  # apart by less than FEATURE_THRESHOLD: constant
+        X[:, 13] = np.where(rng.random(n) < 0.5, np.float32(0.0), np.float32(-0.0)) - b  # -1, -0 and 0: two values
     return X, y
 
 
@@ -157,7 +164,8 @@ def test_same_forest_and_predictions_as_sklearn(n, d):
 
 
 @pytest.mark.parametrize("kind, n", [("one_class", 2), ("one_class", 25), ("duplicates", 25), ("duplicates", 100),
-                                     ("constant", 3), ("constant", 25), ("ties", 25), ("ties", 100)])
+                                     ("constant", 3), ("constant", 25), ("ties", 25), ("ties", 100),
+                                     ("binary", 2), ("binary", 25), ("binary", 100), ("binary", 400)])
 def test_edge_cases_match_sklearn(kind, n):
     fast = _check(*_data(n, 24, 1, kind), seed=7)
     if kind == "one_class":
@@ -193,7 +201,7 @@ def test_subsample_reading_matches_sklearn(kind, n):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind", ["plain", "one_class", "duplicates", "constant"])
+@pytest.mark.parametrize("kind", ["plain", "one_class", "duplicates", "constant", "binary"])
 @pytest.mark.parametrize("d", [18, 24, 318, 348])
 @pytest.mark.parametrize("n", [2, 3, 10, 25, 100, 400])
 def test_full_grid_several_seeds(n, d, kind):

@@ -18,6 +18,16 @@ min_impurity_decrease`` (0). Leaves get feature -2, threshold -2.0, children -1,
 latency-bound chain, four interleave) and the bootstrap drawn by ``draw_bootstrap``. Output node arrays are flat over all trees of all forests, children ids
 local to their tree (as ``Tree.children_left``), ``tree_start: (T_all + 1,)`` the first
 node of each tree.
+
+``build_tree`` is compiled without numba's reference counting (``_nrt=False``): it allocates
+nothing (every array comes from ``build_forests``, which outlives the call), and with it
+numba counted references to the arrays each inlined split-search function binds, per node
+and per drawn feature (numba's pruning of those counts failed here: LLVM merges the decrefs
+of two call sites into one on a phi of pointers); ``perf`` put ~a third of the fit's
+samples at N = 100 in ``NRT_incref`` / ``NRT_decref``, and without them the fit takes ~0.9x.
+An allocation (or numba's sort, which returns its array) added to ``build_tree`` fails to
+compile, it cannot run uncounted; so forests of N > COUNT_SORT have every feature sorted
+before their trees (``split.presort_all``).
 """
 from __future__ import annotations
 
@@ -26,14 +36,14 @@ from numba import njit
 
 from relaff_jax.learn.forest.compiled.rng import (MAX_INT, RAND_R_MAX, draw_bootstrap, draw_subsample, first_randint, mt_seed,
                                            mt_seed4, randint)
-from relaff_jax.learn.forest.compiled.split import best_split, node_impurity
+from relaff_jax.learn.forest.compiled.split import COUNT_SORT, best_split, node_impurity, presort_all
 
 EPSILON = np.finfo(np.float64).eps  # sklearn/tree/_tree.pyx
 LEAF = -1  # _TREE_LEAF
 UNDEFINED = -2  # _TREE_UNDEFINED
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def build_tree(fo, sc, stk_i, stk_f, y1, w, K, max_features, min_leaf, min_split, max_depth, state, out, base):
     """One tree on the forest ``fo`` (``split.py``) with weights ``w: (N,)``; nodes written
     to ``out = (feature, threshold, left, right, value)`` from ``base``. ``stk_i: (N + 2, 6)``
@@ -184,6 +194,8 @@ def build_forests(xs, x_start, ns, ds, ys, ks, seeds, n_trees, n_boot, max_featu
         fo = (XT, order_all[: d * n].reshape(d, n), rank_all[: d * n].reshape(d, n), sv_all[: d * n].reshape(d, n),
               rf, keys[:n])  # C-contiguous
         scf = (sc[0][:n], sc[1][:n], sc[2][: (n + 63) // 64], sc[3][:d], sc[4][:d], sc[5][:n])
+        if n > COUNT_SORT:  # sorted here: build_tree cannot call numba's sort (no reference counting)
+            presort_all(fo)
         mt_seed(mt, seeds[f])
         for t in range(n_trees[f]):  # _set_random_states: one draw per tree
             tree_seeds[t] = randint(mt, 0, MAX_INT)

@@ -30,6 +30,9 @@ How a drawn feature is searched: each feature of the forest is sorted once, on f
 samples are turned into their ranks in ascending order (``node_ranks``: a bitmap of ranks
 read back lowest bit first, or an insertion sort for small nodes), and the scan walks them,
 reading values and weights through the presorted arrays: one pass, no moving of samples. A
+feature of exactly two values (``two_valued``: a bootstrap input's 0/1) is never sorted; its
+one candidate, after the node's samples of the lower value, comes from one pass over the node
+(``two_counts``) and is scored by the same ``offer`` as the scan's. A
 candidate's Gini (two float64 divisions) is computed only when an exact, division-free form
 of its proxy says it may beat the best so far (``may_win``, with a margin far above rounding):
 a candidate that could win is always computed and compared as scikit-learn does it, in its
@@ -65,6 +68,7 @@ INSERTION = 12  # nodes up to this size get their ranks by insertion sort
 ONE = np.uint64(1)
 ZERO = np.uint64(0)
 SIGN = np.uint32(0x80000000)
+TWO = 2  # ready[j] of a two-valued feature (presort)
 
 
 @njit(cache=True, inline="always")
@@ -80,34 +84,102 @@ def clz(b):
 
 
 @njit(cache=True, inline="always")
-def presort(fo, j):
-    """Sort feature j of the forest once (``order[j]``, ``rank[j]``, ``sv[j]``), on first use."""
-    XT, order, rank, sv, ready, keys = fo
-    if ready[j]:
-        return
+def two_valued(fo, j):
+    """Whether feature j of the forest holds exactly two values lo < hi more than
+    FEATURE_THRESHOLD apart (a bootstrap input's 0/1); then ``ready[j] = TWO`` and ``sv[j,
+    :2] = lo, hi``, and the feature is never sorted (``two_counts`` searches it)."""
+    XT, sv, ready = fo[0], fo[3], fo[4]
     n = XT.shape[1]
+    a = XT[j, 0]
+    b = a
+    for i in range(n):  # at most two distinct values (-0.0 and 0.0 are one: so they are for every split)
+        x = XT[j, i]
+        if x != a and x != b:
+            if a == b:
+                b = x
+            else:
+                return False
+    lo = min(a, b)
+    hi = max(a, b)
+    if not hi > lo + FEATURE_THRESHOLD:
+        return False
+    sv[j, 0] = lo
+    sv[j, 1] = hi
+    ready[j] = TWO
+    return True
+
+
+@njit(cache=True, inline="always")
+def sort_keys(fo, j):
+    """``keys[i]``: feature j's float32 order as unsigned keys, the sample in the low word."""
+    XT, keys = fo[0], fo[5]
     bits = XT[j].view(np.uint32)
-    for i in range(n):  # float32 order as unsigned keys, the sample in the low word
+    for i in range(XT.shape[1]):
         b = bits[i]
         k = ~b if b & SIGN else b | SIGN
         keys[i] = ((np.int64(k) - 0x80000000) << 32) | i  # high word signed: no overflow
-    if n <= COUNT_SORT:  # rank = how many keys are smaller: n^2 compares, vectorised, beat the sort here
-        for s in range(n):
-            ks = keys[s]
-            r = 0
-            for i in range(n):
-                r += keys[i] < ks
-            order[j, r] = s
-            rank[j, s] = r
-            sv[j, r] = XT[j, s]
-    else:
+
+
+@njit(cache=True, inline="always")
+def presort(fo, j):
+    """Sort feature j of the forest once (``order[j]``, ``rank[j]``, ``sv[j]``), on first use,
+    for N <= COUNT_SORT (``presort_all`` sorted every feature of a larger forest before its
+    trees); a two-valued feature is not sorted (``two_valued``)."""
+    XT, order, rank, sv, ready, keys = fo
+    if ready[j] or two_valued(fo, j):
+        return
+    n = XT.shape[1]
+    sort_keys(fo, j)
+    for s in range(n):  # rank = how many keys are smaller: n^2 compares, vectorised, beat the sort here
+        ks = keys[s]
+        r = 0
+        for i in range(n):
+            r += keys[i] < ks
+        order[j, r] = s
+        rank[j, s] = r
+        sv[j, r] = XT[j, s]
+    ready[j] = 1
+
+
+@njit(cache=True)
+def presort_all(fo):
+    """Every feature of a forest of N > COUNT_SORT samples sorted (or found two-valued) before
+    its trees, by ``keys.sort()``: numba's sort needs its reference counting, which the tree
+    builder runs without (``build.py``)."""
+    XT, order, rank, sv, ready, keys = fo
+    n = XT.shape[1]
+    for j in range(XT.shape[0]):
+        if two_valued(fo, j):
+            continue
+        sort_keys(fo, j)
         keys.sort()
         for r in range(n):
             s = keys[r] & 0xFFFFFFFF
             order[j, r] = s
             rank[j, s] = r
             sv[j, r] = XT[j, s]
-    ready[j] = 1
+        ready[j] = 1
+
+
+@njit(cache=True, inline="always")
+def two_counts(fo, sc, w, wy, j, start, end):
+    """For a two-valued feature j (``ready[j] == TWO``): ``(c, wl, l1)``, how many of
+    ``samples[start:end]`` hold the lower value and their weight and class-1 weight (the
+    only candidate split of such a feature is after them, at position ``start + c``)."""
+    XT, sv = fo[0], fo[3]
+    samples = sc[0]
+    lo = sv[j, 0]
+    c = 0
+    wl = 0.0
+    l1 = 0.0
+    for p in range(start, end):  # branch-free (the values come in no order): w * 1.0 or w * 0.0 is exact
+        s = samples[p]
+        a = XT[j, s] == lo
+        c += a
+        f = np.float64(a)
+        wl += w[s] * f
+        l1 += wy[s] * f
+    return c, wl, l1
 
 
 @njit(cache=True, inline="always")
@@ -212,23 +284,34 @@ def node_impurity(t0, t1, wn):
 
 
 @njit(cache=True, inline="always")
+def offer(best, wl, l1, t0, t1, wn, pos, feat, prev, v):
+    """The best split so far ``best = (proxy, cut, pos, feature, threshold, wl, l1)`` after
+    the candidate at ``pos`` of feature ``feat`` (left weight ``wl``, class-1 weight ``l1``,
+    between values ``prev < v``): replaced when its proxy is strictly greater (scikit-learn's
+    rule), computed only when ``may_win`` says it may be."""
+    wr = wn - wl
+    l0 = wl - l1
+    if may_win(l0, l1, t0 - l0, t1 - l1, wl, wr, best[1]):  # else no divisions: it cannot beat the best
+        gl, gr = gini_pair(l0, l1, t0, t1, wl, wr)
+        proxy = -wr * gr - wl * gl
+        if proxy > best[0]:
+            return proxy, cut_of(proxy, wn), pos, feat, prev / 2.0 + v / 2.0, wl, l1
+    return best
+
+
+@njit(cache=True, inline="always")
 def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, max_features, min_leaf,
                state):
     """``node_split_best`` on ``samples[start:end]`` of class-count totals (t0, t1) and
     weight ``wn`` (``samples`` partitioned in place when a split is found). Returns ``(pos,
     feature, threshold, impurity_left, impurity_right, improvement, n_constant)``; ``pos ==
     end`` when no split is valid."""
-    XT, order, sv = fo[0], fo[1], fo[3]
+    XT, order, sv, ready = fo[0], fo[1], fo[3], fo[4]
     samples, rk, features, constant = sc[0], sc[1], sc[3], sc[4]
     n_features = XT.shape[0]
     m = end - start
-    best_pos = end
-    best_feature = 0
-    best_thr = 0.0
-    best_proxy = -np.inf
-    best_wl = 0.0
-    best_l1 = 0.0
-    cut = -np.inf  # cut_of(best_proxy, wn), for may_win
+    # (proxy, cut_of(proxy, wn) for may_win, pos, feature, threshold, wl, l1) of the best split so far
+    best = (-np.inf, -np.inf, end, 0, 0.0, 0.0, 0.0)
     imp_l = np.inf
     imp_r = np.inf
     improvement = -np.inf
@@ -249,7 +332,13 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
         f_j += n_found
         feat = features[f_j]
         presort(fo, feat)
-        if node_ranks(fo, sc, feat, start, end):
+        two = ready[feat] == TWO
+        if two:
+            c, wl, l1 = two_counts(fo, sc, w, wy, feat, start, end)
+            is_constant = c == 0 or c == m
+        else:
+            is_constant = node_ranks(fo, sc, feat, start, end)
+        if is_constant:
             features[f_j] = features[n_total]
             features[n_total] = feat
             n_found += 1
@@ -259,6 +348,10 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
         t = features[f_i]
         features[f_i] = features[f_j]
         features[f_j] = t
+        if two:  # one candidate: after the c samples of the lower value
+            if c >= min_leaf and m - c >= min_leaf:
+                best = offer(best, wl, l1, t0, t1, wn, start + c, feat, sv[feat, 0], sv[feat, 1])
+            continue
         prev = sv[feat, rk[0]]
         s = order[feat, rk[0]]
         wl = w[s]
@@ -267,25 +360,12 @@ def best_split(fo, sc, wy, w, start, end, t0, t1, wn, w_all, impurity, n_known, 
             r = rk[i]
             v = sv[feat, r]
             if not (v <= prev + FEATURE_THRESHOLD) and i >= min_leaf and m - i >= min_leaf:
-                wr = wn - wl
-                l0 = wl - l1
-                r0 = t0 - l0
-                r1 = t1 - l1
-                if may_win(l0, l1, r0, r1, wl, wr, cut):  # else no divisions: it cannot beat the best
-                    gl, gr = gini_pair(l0, l1, t0, t1, wl, wr)
-                    proxy = -wr * gr - wl * gl
-                    if proxy > best_proxy:
-                        best_proxy = proxy
-                        cut = cut_of(best_proxy, wn)
-                        best_pos = start + i
-                        best_feature = feat
-                        best_thr = prev / 2.0 + v / 2.0
-                        best_wl = wl
-                        best_l1 = l1
+                best = offer(best, wl, l1, t0, t1, wn, start + i, feat, prev, v)
             s = order[feat, r]
             wl += w[s]
             l1 += wy[s]
             prev = v
+    best_pos, best_feature, best_thr, best_wl, best_l1 = best[2], best[3], best[4], best[5], best[6]
     if best_pos < end:  # partition_samples_final, branch-free through rk (any order will do)
         lo = 0
         hi = m - 1
