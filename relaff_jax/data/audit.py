@@ -44,25 +44,28 @@ from relaff_jax.data.layout import SIDECAR
 from relaff_jax.config.action import ActionConfig
 
 AUDIT_FILE = "audit.json"
+# 7: a palm contact from above fails only above PALM_FORCE_N (a 0 N touch is not a press);
 # 6: the palm check fails on palm contacts from above only (a push from the side is reported);
 # 5: a press under PRESS_FLOOR_N newtons passes; 4: penetration held 0.1 s (was one step's);
 # 3: force = the press held 0.1 s, penetration 3 mm
-AUDIT_VERSION = 6
+AUDIT_VERSION = 7
 DEFAULT_SAMPLE = 64
 # The checks' bounds are the programs' (sim/physics_bounds.py; reasoning: docs/arm.md,
 # "Bounded forces"): a rollout fails a check when it has more steps with a hand-object contact
-# from above (the normal within PALM_ABOVE_DEG of vertical: a press) than PALM_CONTACTS (contacts
+# from above (the normal within PALM_ABOVE_DEG of vertical: a press) carrying more than PALM_FORCE_N
+# newtons than PALM_CONTACTS (contacts
 # from the side, the palm pushing an object aside, are reported), its press exceeds FORCE_WEIGHTS
 # weights of the heavier object and FORCE_FLOOR_N newtons, a contact with an object stays deeper
 # than PENETRATION_M for 0.1 s (an impact's one-step depth is reported), or an object not held by
 # the hand moves faster than MOVING_M_S at the measuring step
 PALM_CONTACTS = bounds.PALM_CONTACT_STEPS
+PALM_FORCE_N = bounds.PALM_FORCE_N
 FORCE_WEIGHTS = bounds.PRESS_WEIGHTS
 FORCE_FLOOR_N = bounds.PRESS_FLOOR_N
 PENETRATION_M = bounds.PENETRATION_M
 MOVING_M_S = bounds.MOVING_M_S
 PALM_ABOVE_DEG = bounds.PALM_ABOVE_DEG
-THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "palm_above_deg": PALM_ABOVE_DEG, "press_weights": FORCE_WEIGHTS, "press_floor_n": FORCE_FLOOR_N,
+THRESHOLDS = {"palm_contact_steps": PALM_CONTACTS, "palm_force_n": PALM_FORCE_N, "palm_above_deg": PALM_ABOVE_DEG, "press_weights": FORCE_WEIGHTS, "press_floor_n": FORCE_FLOOR_N,
               "press_steps": bounds.SUSTAIN_STEPS,
               "penetration_m": PENETRATION_M, "moving_m_s": MOVING_M_S}
 
@@ -206,7 +209,7 @@ def failures(row: Mapping[str, Any]) -> dict[str, bool]:
     """Which checks one audited rollout fails."""
     speeds = [s for s, held in ((row["speed_toy"], row.get("held_toy")), (row["speed_other"], row.get("held_other")))
               if s is not None and not held]  # a held object moves with the arm
-    return {"palm_contact": row["palm_top_steps"] > PALM_CONTACTS,
+    return {"palm_contact": row["palm_top_steps"] > PALM_CONTACTS and row["palm_top_force_n"] > PALM_FORCE_N,
             "force": not bool(bounds.press_ok(row["press_n"], row["weight_n"])),
             "penetration": _held_depth(row) > PENETRATION_M,
             "moving": bool(speeds) and max(speeds) > MOVING_M_S}
@@ -233,7 +236,8 @@ def summarise(rows: list[Mapping[str, Any]], engine: str | None = None) -> dict[
     checks = {
         "palm_contact": dict(count=count["palm_contact"], share=share("palm_contact"),
                              bound=f"no contact from above (normal within {PALM_ABOVE_DEG:g} deg of vertical) between "
-                                   "the hand body (palm) and an object; contacts from the side are reported",
+                                   f"the hand body (palm) and an object carrying more than {PALM_FORCE_N:g} N; contacts "
+                                   "from the side are reported",
                              above_deg=PALM_ABOVE_DEG,
                              palm_seconds=_dist(arr("palm_seconds")), palm_force_n=_dist(arr("palm_force_n")),
                              top_force_n=_dist(_pos("palm_top_force_n")),
@@ -343,7 +347,7 @@ def format_audit(audits: list[Mapping[str, Any]]) -> str:
     lines.append(f"audited: sampled selected samples whose program ran / all of them. palm above/side: the share "
                  f"of rollouts with a contact between the hand body and an object from above (its normal within "
                  f"{PALM_ABOVE_DEG:g} deg of vertical: the palm pressing on an object) / from the side (the palm pushing "
-                 f"it). A rollout fails: palm = a contact from above (side contacts are reported, not checked); force = the summed normal force on an object held "
+                 f"it). A rollout fails: palm = a contact from above carrying more than {PALM_FORCE_N:g} N (lighter touches and side contacts are reported, not checked); force = the summed normal force on an object held "
                  f"over {bounds.SUSTAIN_STEPS} steps (a press, not an impact) > {FORCE_WEIGHTS:g} weights of the "
                  f"heavier object and > {FORCE_FLOOR_N:g} N; pen. = a contact with an object deeper than "
                  f"{1000 * PENETRATION_M:g} mm held over {bounds.SUSTAIN_STEPS} steps; moving = an object not held by "

@@ -93,8 +93,9 @@ def audit_blocks(audits: Mapping[str, Mapping[str, Any]], missing: Mapping[str, 
     blocks: list[tuple] = [("h", 2, "Physics audit"), (
         "p", "Per dataset, a sample of the selected samples whose program ran, replayed in MuJoCo C from the stored "
         "settled scene with the dataset's recorded config, every step's contacts read (`relaff audit DIR`, "
-        "docs/audit.md). A rollout fails a check when the hand's palm touches an object from above (the contact "
-        f"normal within {A.PALM_ABOVE_DEG:g} degrees of vertical: the palm pressing on an object's top; a contact from "
+        "docs/audit.md). A rollout fails a check when the hand's palm touches an object from above with more than "
+        f"{A.PALM_FORCE_N:g} N (the contact normal within {A.PALM_ABOVE_DEG:g} degrees of vertical: the palm pressing on "
+        "an object's top; a lighter touch is not checked, and a contact from "
         "the side, the palm pushing an object aside, is reported in `palm side`, not checked); when the summed contact "
         f"normal force on an object held over 0.1 s (a press, not an impact) exceeds {A.FORCE_WEIGHTS:g} weights of "
         f"the heavier object and {A.FORCE_FLOOR_N:g} N (the least squeeze of two pads on a light pair); when a contact with an "

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import NamedTuple
+from typing import Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -235,24 +235,44 @@ def top_down_grasp(arm: A.Arm, cfg: ActionConfig, body: Body) -> Grasp:
                  opening <= float(arm.finger_range[1]))
 
 
-def pad_overhang(arm: A.Arm, g: Grasp, target: Body, other: Body) -> jax.Array:
-    """v3: how far (m, >= 0) a closing pad meets ``other`` before ``target`` (the body grasped
-    at ``g``); 0 when neither does.
+def ball_extent(body: Body, radius: jax.Array) -> tuple[Callable[[jax.Array], jax.Array], jax.Array, jax.Array]:
+    """The body's half width along a direction (a function), bottom and top: its box's, or for a
+    ball (``radius`` > 0) its sphere's whatever its box's orientation (a ball's box turned by
+    its rolling reaches up to sqrt(3) radii)."""
+    zmin, zmax = body.z_range()
+    ball = radius > 0
+    cz = body.centre[2]
+    return ((lambda d: jnp.where(ball, radius, body.half_width(d))),
+            jnp.where(ball, cz - radius, zmin), jnp.where(ball, cz + radius, zmax))
 
-    A pad meets ``other`` first when it lies in the pad's lane (across the closing axis within
-    the pad's half width), within the fingers' height (fingertips to the palm's underside,
-    ``palm_above_tip``) and, on that pad's side, reaches further out along the closing axis than
-    the target's half width while starting inside the pad's pre-grasp position. The pad then
-    stops on ``other`` and its servo pushes the planned squeeze plus ``finger_kp`` times that
-    overhang (a 10 cm toy car across a 9 cm cup: 16.5 N per pad for a planned 5 N). A toy inside
-    a container or within its base's footprint never does."""
+
+def between_pads(arm: A.Arm, g: Grasp, body: Body, radius: jax.Array = 0.0) -> jax.Array:
+    """v3: does ``body`` (a ball if ``radius`` > 0) lie between the pads of the grasp ``g``,
+    where the closing pads meet it?
+
+    It does when it lies in the pads' lane (across the closing axis within the pads' half width),
+    within the fingers' height (fingertips to the palm's underside, ``palm_above_tip``) and,
+    along the closing axis, wholly inside the pads' pre-grasp positions (``g.opening`` from the
+    grasp point). A container whose opening holds the pads (its walls outside them) is not
+    between them; a body under a pad or reaching past one is one the pads would land on, which
+    ``clear_grasp`` refuses."""
     u, w = g.closing, perp(g.closing)
-    rel = other.centre - g.xy
-    mid, half = rel @ u, other.half_width(u)
-    lane = jnp.abs(rel @ w) < other.half_width(w) + arm.pad_half_x
+    half, zmin, zmax = ball_extent(body, radius)
+    rel = body.centre - g.xy
+    lane = jnp.abs(rel @ w) < half(w) + arm.pad_half_x
     tip = g.tcp_z - arm.tip_below_tcp
-    zmin, zmax = other.z_range()
     level = (zmin < tip + arm.palm_above_tip) & (zmax > tip)
-    reach = target.half_width(u)
-    side = lambda s: jnp.where(s * mid - half < g.opening, jnp.maximum(s * mid + half - reach, 0.0), 0.0)
-    return jnp.where(lane & level, jnp.maximum(side(1.0), side(-1.0)), 0.0)
+    return lane & level & (jnp.abs(rel @ u) + half(u) < g.opening)
+
+
+def squeezed_half(arm: A.Arm, g: Grasp, half: jax.Array, other: Body, radius: jax.Array = 0.0) -> jax.Array:
+    """v3: the half width (m) of the body the closing pads of ``g`` end on: the widest along the
+    closing axis of the grasped body (``half``, its half width) and ``other`` (a ball if
+    ``radius`` > 0) where it lies between the pads (``between_pads``). Each pad stops on the
+    first body it meets and pushes a narrower one it meets first (a toy overhanging its base on
+    one side) across until both pads rest on the widest, which they centre: each then pushes
+    ``finger_kp`` x (this half width - the command). So ``squeeze_command`` from it bounds the
+    squeeze by F whatever the pads close on (a cup around the toy take grasps: v2's command from
+    the toy pressed the cup's walls with 10-22 N per pad)."""
+    width = ball_extent(other, radius)[0](g.closing)
+    return jnp.maximum(half, jnp.where(between_pads(arm, g, other, radius), width, 0.0))

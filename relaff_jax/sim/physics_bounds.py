@@ -17,6 +17,9 @@ def press_ok(press_n, weight_n):
     return (press_n <= PRESS_WEIGHTS * weight_n) | (press_n <= PRESS_FLOOR_N)
 PENETRATION_M = 0.003  # no contact with an object deeper than this held over SUSTAIN_STEPS (impacts: reported)
 PALM_CONTACT_STEPS = 0  # steps with a contact FROM ABOVE between the hand body (palm) and an object
+PALM_FORCE_N = 0.5  # ... carrying more than this normal force (N): under the lightest object's weight (the 60 g
+# ball, 0.59 N) a touch holds nothing down; the audits' palm contacts from above are presses of 5.7 N and more or
+# single steps at 0.00 N (a tilted rim grazing the palm's underside, 0.13 mm deep, separating)
 PALM_ABOVE_DEG = 45.0  # a palm contact is from above when its normal is within this angle of vertical
 PALM_ABOVE_COS = math.cos(math.radians(PALM_ABOVE_DEG))  # |n_z| >= this: the palm presses down (or an
 # object's top edge is under it); the rest are from the side: the palm pushing (move's sweep against a tall base)

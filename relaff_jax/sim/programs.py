@@ -15,10 +15,9 @@ import jax
 import jax.numpy as jnp
 
 from . import arm as A
-from .bodies import (DOWN, Body, Geometry, Grasp, bodies, clear_grasp, pad_overhang, perp, squeeze_command,
-                     squeeze_force, stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
+from .bodies import (DOWN, Body, Geometry, Grasp, ball_extent, between_pads, bodies, clear_grasp, perp,
+                     squeeze_command, squeezed_half, stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
-from .physics_bounds import press_ok
 from .sweep import falls_onto_fingers, sweep_raise, sweep_tops
 from .templates import N_TARGETS, ActionConfig
 
@@ -74,28 +73,31 @@ def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) ->
     """The grasp of the other object (base or obstacle) and the closing command: v1 as ever;
     v2 with the palm clear of both objects and a squeeze for both objects' weight. ``tilt``
     (pour, slide; ``cfg.tilt_sweep``): the palm clears the toy's diagonal, since a tilted
-    toy may tip over inside or on its base."""
+    toy may tip over inside or on its base. v3: the squeeze from the body the pads end on
+    (``bodies.squeezed_half``), and refused where that is the toy (``toy_spans_pads``)."""
     g = top_down_grasp(arm, cfg, sc.oth)
     if cfg.programs == "v1":
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
     toy = tipping_body(sc.toy, sc.toy_radius) if tilt and cfg.tilt_sweep else sc.toy
     g = clear_grasp(arm, cfg, g, sc.oth, toy, jnp.zeros(3))
     mass = sc.toy_mass + sc.oth_mass
-    if _v3(cfg):  # refused where the pads would press the toy beyond the force bound
-        g = g._replace(fits=g.fits & ~toy_overpressed(arm, cfg, g, sc, mass))
-    return g, squeeze_command(arm, cfg, sc.oth.half_width(g.closing), mass)
+    half = sc.oth.half_width(g.closing)
+    if _v3(cfg):
+        g = g._replace(fits=g.fits & ~toy_spans_pads(arm, g, sc))
+        half = squeezed_half(arm, g, half, sc.toy, sc.toy_radius)
+    return g, squeeze_command(arm, cfg, half, mass)
 
 
-def toy_overpressed(arm: A.Arm, cfg: ActionConfig, g: Grasp, sc: Scene, mass: jax.Array) -> jax.Array:
-    """v3: would the pads of the base grasp ``g`` meet the toy first (``bodies.pad_overhang``)
-    and press it beyond the stated bound (``physics_bounds.press_ok``, for the heavier object)?
-    Each pad then pushes the planned squeeze plus ``finger_kp`` x the overhang: a 10 cm car
-    across a 9 cm cup took 16.5 N per pad, 13.9 weights of the cup. A small overhang (a ball
-    a few millimetres past a cup's wall) stays within the bound and is grasped, as in v2."""
-    over = pad_overhang(arm, g, sc.oth, sc.toy)
-    push = squeeze_force(cfg, arm, mass) + arm.finger_kp * over
-    weight = 9.81 * jnp.maximum(sc.toy_mass, sc.oth_mass)
-    return (over > 0) & ~press_ok(2.0 * push, weight)
+def toy_spans_pads(arm: A.Arm, g: Grasp, sc: Scene) -> jax.Array:
+    """v3: would the pads of the base grasp ``g`` end on the toy instead of the base? They do
+    when the toy lies between them (``bodies.between_pads``) and is wider along the closing axis
+    than the base: pushed across, it still meets both pads before the base does (a 10 cm toy
+    car across a 9 cm cup). The base is then never gripped (the grasp lock needs both pads on
+    it), so the program cannot do what it is for: refused at plan time. A narrower toy met
+    first by one pad (a ball or car overhanging its base's edge) is pushed across until the
+    pads rest on the base, and is grasped as in v2."""
+    toy_half = ball_extent(sc.toy, sc.toy_radius)[0](g.closing)
+    return between_pads(arm, g, sc.toy, sc.toy_radius) & (toy_half > sc.oth.half_width(g.closing))
 
 
 def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
@@ -114,12 +116,15 @@ def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
 
 
 def _toy_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Array]:
-    """Take's grasp and closing command (v2: palm clear, squeeze for the toy's weight)."""
+    """Take's grasp and closing command (v2: palm clear, squeeze for the toy's weight; v3: the
+    squeeze from the body the pads end on, ``bodies.squeezed_half``)."""
     g = _take_grasp(arm, cfg, sc.toy)
     if cfg.programs == "v1":
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
     g = clear_grasp(arm, cfg, g, sc.toy, sc.oth, sc.inner)
     half = jnp.where(sc.toy_radius > 0, sc.toy_radius, sc.toy.half_width(g.closing))  # a ball's is its radius
+    if _v3(cfg):  # the pads end on the widest body between them: the toy, or a cup around it
+        half = squeezed_half(arm, g, half, sc.oth)
     return g, squeeze_command(arm, cfg, half, sc.toy_mass)
 
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from relaff_jax.data import audit as A
+from relaff_jax.sim import objects as lib
 from relaff_jax.sim import physics_bounds as bounds
 from relaff_jax.sim.native.probe import Probe, held_peak
 
@@ -146,7 +147,12 @@ def test_checks_count_failures_against_the_stated_bounds():
     assert A.summarise([_row()], "native")["checks"]["force"]["pass"]
     # side only passes the palm check; one step from above fails it
     assert A.summarise([rows[6]], "native")["checks"]["palm_contact"]["pass"]
-    assert not A.summarise([_row(palm_steps=1, palm_top_steps=1)], "native")["checks"]["palm_contact"]["pass"]
+    assert not A.summarise([_row(palm_steps=1, palm_top_steps=1, palm_top_force_n=1.0)], "native")["checks"]["palm_contact"]["pass"]
+    # a touch from above that carries no more than PALM_FORCE_N (a rim grazing the palm at 0 N) presses nothing
+    for f in (0.0, A.PALM_FORCE_N):
+        assert not A.failures(_row(palm_contact=True, palm_steps=1, palm_top_steps=1, palm_top_force_n=f))["palm_contact"]
+    assert A.failures(_row(palm_contact=True, palm_steps=1, palm_top_steps=1, palm_top_force_n=0.6))["palm_contact"]
+    assert A.PALM_FORCE_N < 9.81 * min(o.mass for o in lib.OBJECTS.values())  # under the lightest object's weight
     assert not A.failures(_row(palm_steps=3, palm_side_steps=3))["palm_contact"]
     json.dumps(s)  # serialisable as it is
 
@@ -222,7 +228,7 @@ def test_report_section_plots_the_press_against_the_bound(tmp_path):
     a = dict(action="lift", engine="native", n_audited=3, population=3, rollouts=rows, **A.summarise(rows, "native"))
     table = A.format_audit([a])
     assert "palm above/side" in table and " 0%/33% " in table and "FAIL force" in table and "palm_contact" not in table
-    assert "side contacts are reported, not checked" in table
+    assert "side contacts are reported, not checked" in table and f"more than {A.PALM_FORCE_N:g} N" in table
     blocks = RA.audit_blocks({"lift": a}, {}, tmp_path)
     (_, header, body), = [b for b in blocks if b[0] == "table"]
     assert body[0][header.index("palm above")] == "0 %" and body[0][header.index("palm side (max N)")] == "33 % (4.7)"

@@ -103,3 +103,18 @@ def plan_rows(action, cfg, pair, qpos, batch=8):
                                                 jnp.asarray(np.asarray(qpos)[idx], jnp.float32))
     plan = jax.device_get(plan)
     return {k: np.asarray(getattr(plan, k))[:n] for k in ("q_way", "grip_way", "feasible", "direction")}
+
+
+def replay_built(action, cfg, built):
+    """Settle hand-built scenes (``built``: (pair, qpos (14,)) per row) in C, plan them (JAX,
+    ``plan_rows``) and measure their replay in C (``native.forces.physics``). Returns the plan
+    and the measured arrays."""
+    from relaff_jax.sim.native import forces as native_forces
+    from relaff_jax.sim.native import reference as native
+
+    pair = np.array([p for p, _ in built])
+    q0 = np.array([q for _, q in built], np.float64)
+    qs, _ = native.settle_native(wd.build_world(cfg.phys), pair, q0)
+    qpos = qs[:, :14]
+    res = plan_rows(action, cfg, pair, qpos)
+    return res, native_forces.physics(action, cfg, pair, qpos, np.zeros((len(built), 12)), res)

@@ -10,12 +10,11 @@ import pytest
 
 from relaff_jax.errors import UserError
 from relaff_jax.sim import bodies, labels, planning, programs, templates
-from relaff_jax.sim.native import reference as native
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim import world as wd
 from relaff_jax.config.action import ActionConfig
 
-from helpers.scenes import plan_rows
+from helpers.scenes import replay_built
 
 V2 = ActionConfig(programs="v2")  # v3 (the default) is tested in test_programs_v3.py
 V1 = dataclasses.replace(V2, programs="v1")
@@ -139,18 +138,8 @@ def test_versions_config_and_sidecar():
 
 def _replay(action, cfg, rows):
     """Settle hand-built scenes in C, plan them (JAX) and measure their replay in C."""
-    from relaff_jax.sim.native import forces as native_forces
-
-    st = planning.setup(cfg)
-    w = st.world
-    built = [scene(w, *r) for r in rows]
-    pair = np.array([p for p, _ in built])
-    q0 = np.array([q for _, q in built], np.float64)
-    qs, _ = native.settle_native(wd.build_world(cfg.phys), pair, q0)
-    qpos = qs[:, :14]
-    qvel = np.zeros((len(rows), 12))
-    res = plan_rows(action, cfg, pair, qpos)  # the session's planner at batch 8
-    return res, native_forces.physics(action, cfg, pair, qpos, qvel, res)
+    w = planning.setup(cfg).world
+    return replay_built(action, cfg, [scene(w, *r) for r in rows])
 
 
 @pytest.mark.slow  # plans and replays 4 unobstructs twice in C (~2 min)

@@ -12,6 +12,7 @@ import pytest
 
 from relaff_jax.config.action import ActionConfig
 from relaff_jax.sim import bodies, planning, programs, sweep
+from relaff_jax.sim.geometry import quat_to_mat
 from relaff_jax.sim import objects as lib
 
 V3 = ActionConfig(programs="v3")
@@ -167,6 +168,88 @@ def test_unobstruct_refuses_a_toy_in_the_pads_lane():
     off = float(obst.half_width(g.closing)) + 0.01 + float(toy.half_width(g.closing))
     near = np.array([0.7, 0.0, 0.0]) + off * np.asarray(g.closing)
     assert bool(prog("unobstruct", V3, "block", "bottle", tuple(near), (0.7, 0.0, 0.0))[0].ok)
+
+
+CUP_FLOOR = dict(lib.get("cup").parts)["base"].size[2]
+# take: a block and a ball in a cup (the fixed 10 cm opening puts the pads outside its 9 cm);
+# lift: a toy car on a book (24 x 17 cm, grasped across its 17 cm), its 5 cm side along the
+# closing axis, 1.5 cm past the book's edge on one pad's side
+SQUEEZE_SCENES = {
+    "take block in cup": ("take", "block", "cup", (0.7, 0.0, CUP_FLOOR), (0.7, 0.0, 0.0), 0.0),
+    "take ball in cup": ("take", "ball", "cup", (0.7, 0.0, CUP_FLOOR), (0.7, 0.0, 0.0), 0.0),
+    "lift car past a book's edge": ("lift", "toy_car", "book", (0.7, 0.075, lib.get("book").height), (0.7, 0.0, 0.0),
+                                    0.0),
+}
+
+
+def test_squeeze_from_the_body_the_pads_end_on_hand_worked():
+    def command(name, cfg):
+        action, *rest = SQUEEZE_SCENES[name]
+        pr, arm, (tb, ob) = prog(action, cfg, *rest)
+        return pr, arm, tb, ob
+
+    for name in ("take block in cup", "take ball in cup"):
+        pr3, arm, tb, ob = command(name, V3)
+        pr2 = command(name, V2)[0]
+        f = float(bodies.squeeze_force(V3, arm, jnp.float32(lib.get(SQUEEZE_SCENES[name][1]).mass)))
+        assert f == pytest.approx(V3.squeeze_min)  # a toy's squeeze: 5 N
+        g = np.asarray(pr3.targets.closing[1])
+        cup_half = float(ob.half_width(jnp.asarray(g)))
+        assert cup_half == pytest.approx(0.045, abs=1e-6) and cup_half < V3.take_opening  # the pads start outside it
+        toy_half = 0.035 if "ball" in name else 0.025
+        # v2 commands from the toy: the pads stop on the cup's walls, 1-2 cm further out, and press them
+        assert float(pr2.grip_closed) == pytest.approx(toy_half - f / arm.finger_kp, abs=1e-6)
+        assert float(pr3.grip_closed) == pytest.approx(cup_half - f / arm.finger_kp, abs=1e-6)
+        assert bool(pr3.ok) and bool(pr2.ok)
+        np.testing.assert_array_equal(np.asarray(pr3.targets.pos), np.asarray(pr2.targets.pos))
+    # a block in a bowl: the pads come down inside the bowl, the block alone between them: as v2
+    bowl = dict(lib.get("bowl").parts)["base"].size[2]
+    in_bowl = ("block", "bowl", (0.7, 0.0, bowl), (0.7, 0.0, 0.0))
+    assert float(prog("take", V3, *in_bowl)[0].grip_closed) == float(prog("take", V2, *in_bowl)[0].grip_closed)
+    # the car 1.5 cm past the book's edge: the pad pushes it across and both rest on the book:
+    # grasped, with v2's command from the book (the overhang estimate refused it: 2 x (6.4 N +
+    # finger_kp x 1.5 cm) against the bound's 49 N)
+    pr3, arm, car, book = command("lift car past a book's edge", V3)
+    pr2 = command("lift car past a book's edge", V2)[0]
+    u = jnp.asarray(np.asarray(pr3.targets.closing[1]))
+    past = float(jnp.abs((car.centre - book.centre) @ u) + car.half_width(u) - book.half_width(u))
+    assert past == pytest.approx(0.015, abs=1e-5) and float(car.half_width(u)) < float(book.half_width(u))
+    assert bool(pr3.ok) and float(pr3.grip_closed) == float(pr2.grip_closed)
+    # the same car turned across a 9 cm cup (10 cm along the closing axis): refused, it ends between the pads
+    assert not bool(prog("lift", V3, "toy_car", "cup", (0.7, 0.0, lib.get("cup").height), (0.7, 0.0, 0.0))[0].ok)
+    # a ball in a cup (its box turned by rolling reaches past the cup, the ball does not): grasped
+    turned = ("ball", "cup", (0.7, 0.0, CUP_FLOOR), (0.7, 0.0, 0.0))
+    st = planning.setup(V3)
+    p, q = scene(st.world, *turned)
+    q[3:7] = [np.cos(0.4), np.sin(0.4) * 0.6, np.sin(0.4) * 0.8, 0.0]  # rolled; its centre stays put
+    q[0:3] = np.array(turned[2]) + 0.035 * (np.array([0.0, 0.0, 1.0]) - np.asarray(quat_to_mat(jnp.asarray(q[3:7])))[:, 2])
+    tb = bodies.bodies(st.geo, jnp.int32(p), jnp.asarray(q))[0]
+    np.testing.assert_allclose(np.asarray(tb.centre), [0.7, 0.0, CUP_FLOOR + 0.035], atol=1e-6)
+    assert float(tb.half_width(jnp.array([1.0, 0.0, 0.0]))) > 0.045  # the box would be wider than the cup
+    assert bool(programs.program("lift", st.arm, V3, st.geo, jnp.int32(p), jnp.asarray(q)).ok)
+
+
+@pytest.mark.slow  # settles, plans (v2 and v3) and replays 3 scenes in C twice (~2 min)
+def test_squeeze_stays_within_the_bound_in_c():
+    from relaff_jax.sim.physics_bounds import press_ok
+    from helpers.scenes import replay_built
+
+    def run(action, cfg):
+        w = planning.setup(cfg).world
+        rows = [v[1:] for v in SQUEEZE_SCENES.values() if v[0] == action]
+        return replay_built(action, cfg, [scene(w, *r) for r in rows])
+
+    plan3, take3 = run("take", V3)
+    plan2, take2 = run("take", V2)
+    assert plan3["feasible"].all() and plan2["feasible"].all()
+    # v2 pressed the cup's walls (a kN/m servo 1-2 cm short of its command); v3 within the bound
+    assert not press_ok(take2["press"], take2["weight"]).any(), take2["press"]
+    assert press_ok(take3["press"], take3["weight"]).all(), take3["press"]
+    assert not take3["label"].any() and not take2["label"].any()  # the cup comes along: not taken
+    plan3, lift3 = run("lift", V3)
+    assert plan3["feasible"].all()
+    assert press_ok(lift3["press"], lift3["weight"]).all(), lift3["press"]
+    assert lift3["label"].all()  # the car pushed back onto the book, the pair lifted
 
 
 # scenes whose v2 programs are pinned: (action, toy, other, toy position, other position, toy yaw)
