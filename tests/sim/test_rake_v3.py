@@ -55,9 +55,12 @@ def test_descent_that_flips_the_base_in_v2_stays_on_one_branch_in_v3():
     assert turns_deg(fwd.q)[0] == pytest.approx(180.0, abs=5.0)  # above -> low
     assert turns_deg(one.q).max() < 45.0
     assert np.abs(np.degrees(np.asarray(one.q[1:4] - fwd.q[1:4]))).max() < 5.0  # from `low` on: as before
-    # v2's plan is the forward path (its program's targets are v3's here: the pull line clears the axis)
-    ok2, fwd2, _ = _path(V2, *scene("toy_car", "hoe", 0.26, 0.0))
-    np.testing.assert_array_equal(np.asarray(fwd2.q), np.asarray(fwd.q))
+    # the forward path is v2's plan: v2's program has the same targets (the pull line clears the axis)
+    st = planning.setup(V2)
+    pair, q = scene("toy_car", "hoe", 0.26, 0.0)
+    v2 = programs.program("rake", st.arm, V2, st.geo, pair, q)
+    v3 = programs.program("rake", st.arm, V3, st.geo, pair, q)
+    np.testing.assert_array_equal(np.asarray(v2.targets.pos), np.asarray(v3.targets.pos))
     # 10 cm to the right the pull must cross the base joint's +-175 degree limit the short way:
     # both paths turn the base by more than 300 degrees, and the turn bound refuses the program
     _, fwd, one = _path(V3, *scene("toy_car", "hoe", 0.26, -0.1))
