@@ -28,8 +28,7 @@ from relaff_jax.data import audit as AU
 from relaff_jax.data.audit_replay import replay_probed
 from relaff_jax.data.load import load_rollouts
 from relaff_jax.data.store import read_sidecar
-from relaff_jax.sim.actions.tables import spec_tables
-from relaff_jax.sim.actions.registry import registry
+from relaff_jax.sim.actions.tables import tables
 
 NEED = ("pair", "qpos0", "qpos_settled", "intended", "label", "feasible", "relation", "toy", "other", "rollout")
 
@@ -43,7 +42,7 @@ def replay(path: str, ids: list[int], programs: str) -> list[dict]:
     rr = {k: np.asarray(r[k])[idx] for k in NEED}
     qvel, same = AU.settled_velocities(cfg, meta, rr, None)
     plan = AU._plan(cfg, action, rr["pair"], rr["qpos_settled"], int(meta["batch"]))
-    measure = int(spec_tables(registry()).measure[action_id(action)])
+    measure = int(tables(cfg).measure[action_id(action)])  # the replayed version's (v3: rake's dwell)
     rep, got = replay_probed(meta, cfg, action, rr["pair"], rr["qpos_settled"], qvel, plan, measure, 1)
     rows = []
     for b, i in enumerate(ids):

@@ -39,7 +39,7 @@ from relaff_jax.data.store import read_sidecar
 from relaff_jax.sim import physics_bounds as bounds
 from relaff_jax.config import from_dict
 from relaff_jax.sim.object_library import use_recorded
-from relaff_jax.sim.actions.registry import action_id, check_recorded, names, registry
+from relaff_jax.sim.actions.registry import action_id, check_recorded, names
 from relaff_jax.data.layout import SIDECAR
 from relaff_jax.config.action import ActionConfig
 
@@ -145,9 +145,7 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
     their summary (``summarise``)."""
     # the simulation (JAX, MuJoCo) loads when a replay runs: reproduce --status reads this module
     from relaff_jax.data.audit_replay import default_jobs, replay_probed
-    from relaff_jax.sim.actions.tables import spec_tables
-
-    TPL_MEASURE = spec_tables(registry()).measure  # the run's actions' (the nine's: templates.TPL_MEASURE)
+    from relaff_jax.sim.actions.tables import tables
 
     t0 = time.perf_counter()
     path = Path(path)
@@ -173,7 +171,7 @@ def audit_dataset(path: str | os.PathLike, sample: int = DEFAULT_SAMPLE, seed: i
         qvel, resettled = settled_velocities(cfg, meta, r, nthread)
         plan = _plan(cfg, action, r["pair"], r["qpos_settled"], int(meta["batch"]))
         rep, got = replay_probed(meta, cfg, action, r["pair"], r["qpos_settled"], qvel, plan,
-                                 int(TPL_MEASURE[action_id(action)]), default_jobs() if jobs is None else jobs)
+                                 int(tables(cfg).measure[action_id(action)]), default_jobs() if jobs is None else jobs)
         for i in range(len(idx)):
             rel = r["relation"][i]
             rows.append(dict(

@@ -5,7 +5,9 @@ pairs' geometry and the arm's home pose; built once and cached) and
 ``make_plan_fn(cfg) -> plan_fn(action_id (), pair (B,), qpos (B, 14)) -> Plan``: the tcp
 targets of ``programs.program`` solved by the batched IK (``arm.solve_ik_path``) from the home
 pose. If any waypoint is unreachable or badly conditioned, or the object does not fit the
-gripper, or (v2) the tcp cannot follow a straight segment's line (``straight.py``), the action is
+gripper, or (v2) the tcp cannot follow a straight segment's line (``straight.py``), or (v3, the
+held rake) the base joint turns more than ``branch.BASE_TURN_MAX`` between waypoints after the
+transit (the waypoints first put on one IK branch, ``branch.one_branch``), the action is
 *infeasible*: the arm stays home and the label is False.
 """
 from __future__ import annotations
@@ -24,6 +26,7 @@ from .actions.tables import tables
 from .templates import N_TARGETS, ActionConfig
 from .actions.registry import registry
 from .actions.rules import plan_program
+from .branch import BASE_TURN_MAX, base_turn, one_branch
 from .straight import corrections, straight_rows
 
 
@@ -77,6 +80,7 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     grip_home = jnp.asarray(home_grip(cfg))
     branches = [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
     straight = straight_rows(cfg, tb.target)
+    v3 = cfg.programs not in ("v1", "v2")
 
     def one(action_id, pair, qpos):
         prog = jax.lax.switch(action_id, branches, pair, qpos)
@@ -85,7 +89,15 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         n_used = jnp.max(jnp.asarray(tb.target)[action_id]) + 1
         res = A.solve_ik_path(st.arm, cfg.arm, prog.targets, q_home, n_used)
         used = jnp.arange(N_TARGETS) < n_used
-        feasible = jnp.all(res.reachable | ~used) & prog.ok
+        turned = jnp.asarray(False)
+        if v3:
+            # v3, the held rake: the waypoints on one IK branch, and a base turn beyond the bound
+            # after the transit refused (branch.py: the tool swung over the table)
+            held = jnp.asarray(tb.held)[action_id]
+            res = jax.lax.cond(held, lambda r: one_branch(st.arm, cfg.arm, prog.targets, r, n_used),
+                               lambda r: r, res)
+            turned = held & (base_turn(res.q, n_used) > BASE_TURN_MAX)
+        feasible = jnp.all(res.reachable | ~used) & prog.ok & ~turned
         q_way = jnp.concatenate([q_home[None], res.q[jnp.asarray(tb.target)[action_id]]])
         # v2: a straight segment whose line the arm cannot follow makes the program infeasible
         _, line_err = corrections(st.arm, cfg, q_way, jnp.asarray(straight)[action_id])

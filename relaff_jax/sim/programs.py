@@ -236,6 +236,24 @@ def _program_move(arm, cfg, toy, oth, radius, inner) -> Program:
                    jnp.asarray(cfg.arm.grip_closed, jnp.float32))
 
 
+# m, v3: the closest the held rake's pull may bring the hand (tcp) to the base joint's axis. The
+# base turns at the hand's speed over its distance from the axis: at the pull's peak speed
+# (0.45 m/s, 30 cm in 1 s with the smoothstep) 10 cm is 4.5 rad/s; the three audited pulls
+# that passed the axis ended 7-8 cm from it, the base turning 81-92 degrees while the tool
+# pitched 19 degrees and pressed the table at 191-199 N.
+RAKE_AXIS_CLEARANCE = 0.10
+
+
+def axis_distance(arm: A.Arm, a: jax.Array, b: jax.Array) -> jax.Array:
+    """() m: the horizontal distance from the base joint's (vertical) axis to the segment from
+    ``a`` to ``b`` (3,), a straight tcp move."""
+    o = jnp.asarray(arm.base_pos, jnp.float32)[:2]
+    a, b = a[:2] - o, b[:2] - o
+    ab = b - a
+    s = jnp.clip(-jnp.dot(a, ab) / jnp.maximum(jnp.dot(ab, ab), 1e-12), 0.0, 1.0)
+    return jnp.linalg.norm(a + s * ab)
+
+
 def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     """Put the rake head behind the toy (seen from the robot), beside the handle, and pull."""
     radial = unit_xy(toy.centre)
@@ -260,6 +278,8 @@ def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     targets = [A.tool_tcp_target(p, tool_mat) for p in (above, low, pulled, raised)]
     # the toy must lie within the head's lateral extent to be caught at all
     covers = y_t - toy.half_width(side) < geo_head_y[1]
+    if _v3(cfg):  # the hand's pull line clear of the base axis (else the base spins, the tool swings)
+        covers = covers & (axis_distance(arm, targets[1].pos, targets[2].pos) >= RAKE_AXIS_CLEARANCE)
     return Program(stack_targets(targets), jnp.asarray(0.0), covers, -radial,
                    jnp.asarray(tool_squeeze(arm, cfg), jnp.float32))
 

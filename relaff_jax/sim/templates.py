@@ -104,7 +104,8 @@ def tables(cfg: ActionConfig) -> Tables:
     """The nine built-ins' templates ``cfg.programs`` runs: v1 the module's ``TPL_*`` tables
     (``N_STEPS``); v2 the same segments with the final rest ``cfg.rest_hold`` steps longer, so
     that a goal read at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after
-    ``measure``. The run's tables, a user's actions after the nine: ``actions.tables``."""
+    ``measure``; v3 as v2 here (rake's dwell after the transit is the run's tables': ``actions.tables``).
+    The run's tables, a user's actions after the nine: ``actions.tables``."""
     if cfg.programs == "v1":
         return Tables(TPL_STEPS, TPL_TARGET, TPL_CLOSED, TPL_MEASURE, N_STEPS, 0)
     steps = TPL_STEPS.copy()

@@ -6,6 +6,8 @@ built-ins they are ``templates.TPL_*``, ``GRASPS`` (v1) and v2's longer rest, ro
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from relaff_jax.sim.templates import N_STEPS, ActionConfig, Tables, _template
@@ -25,11 +27,34 @@ def spec_tables(specs) -> Tables:
                   np.asarray([s.grasp == "tool" for s in specs], bool), np.asarray([s.reach for s in specs], bool))
 
 
+# v3: control steps the held rake holds its first waypoint (``above``, over the toy) after the
+# transit from home, before the descent. The transit interpolates the joints in 150 steps
+# (0.6 s); the position servos lag a large base turn (at its end the hand was 0.3-1.7 m short
+# of ``above`` for base turns of 105-170 degrees, C replays, journal), so v2's descent began
+# wherever the hand was and cut the corner down onto the toy. RAKE_DWELL lets the hand arrive.
+RAKE_DWELL = 150
+
+
+def with_rake_dwell(specs):
+    """The specs with the built-in rake's template holding ``above`` for ``RAKE_DWELL`` steps after
+    its transit (its measuring step ``RAKE_DWELL`` later); the other specs as they are."""
+    def dwell(s):
+        if s.name != "rake" or s.grasp != "tool":
+            return s
+        seg = tuple(s.segments)
+        first = seg[0]
+        return dataclasses.replace(s, segments=seg[:1] + ((RAKE_DWELL, first[1], first[2]),) + seg[1:],
+                                   measure=None if s.measure is None else s.measure + RAKE_DWELL)
+    return tuple(dwell(s) for s in specs)
+
+
 def tables(cfg: ActionConfig) -> Tables:
     """The templates ``cfg.programs`` runs for the run's actions: v1 as declared (``N_STEPS``);
     v2 the same segments with the final rest ``cfg.rest_hold`` steps longer, so that a goal read
-    at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after ``measure``."""
-    tb = spec_tables(registry())
+    at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after ``measure``; v3
+    as v2 with rake's dwell after the transit (``with_rake_dwell``)."""
+    specs = registry()
+    tb = spec_tables(with_rake_dwell(specs) if cfg.programs not in ("v1", "v2") else specs)
     if cfg.programs == "v1":
         return tb
     steps = tb.steps.copy()
