@@ -36,6 +36,10 @@ so its projection is pessimistic. The last line is ``native_per_s=<whole-batch l
 rollouts/s, lift> forest_speedup=<compiled/fast CPU s per forest, n = 25, PCA>
 paper_projected_h=<hours, projected> quick_s=<wall seconds of the quick preset's run>``
 (``--no-quick``: ``quick_s=nan``; the quick run adds 2-4 minutes with a warm cache).
+``--quick-only`` runs only the quick preset, twice on a new empty compilation cache (fresh,
+then warm into a new folder), wall and CPU seconds of each; its last line is ``quick_s=<the
+warm run's wall seconds>``, the line before it ``quick_fresh_s=... quick_fresh_cpu_s=...
+quick_cpu_s=...``.
 ``--write-figures`` writes the quick run's time into ``docs/figures.json`` (record
 ``quick_native_s`` with ``--xla-cache ''``, compiles included; else ``quick_native_warm_s``).
 """
@@ -254,22 +258,39 @@ def features_stage(n: int) -> dict:
 
 def quick_preset(cache: str) -> dict:
     """Wall seconds of ``relaff reproduce --preset quick`` into a new folder (a subprocess, the
-    compilation cache in ``cache``: warm from the second run of this benchmark on), and its
-    stage seconds from the run log."""
+    compilation cache in ``cache``: warm from the second run of this benchmark on), its CPU
+    seconds (the process and its workers) and its stage seconds from the run log."""
     import json
+    import resource
     import subprocess
     import tempfile
 
     env = dict(os.environ, RELAFF_COMPILE_CACHE=cache or "0")
+    cpu = lambda: (lambda r: r.ru_utime + r.ru_stime)(resource.getrusage(resource.RUSAGE_CHILDREN))
     with tempfile.TemporaryDirectory(prefix="relaff_quick_") as tmp:
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu()
         subprocess.run([sys.executable, "-m", "relaff_jax.cli", "reproduce", "--preset", "quick", "--out",
                         os.path.join(tmp, "q"), "--no-progress"], env=env, check=True, capture_output=True)
-        wall = time.perf_counter() - t0
+        wall, cpu_s = time.perf_counter() - t0, cpu() - c0
         log = json.load(open(os.path.join(tmp, "q", "run.json")))
     run = log["runs"][-1]
     programs = log.get("config", {}).get("action", {}).get("programs")
-    return dict(seconds=wall, stages={k: v["seconds"] for k, v in run["stages"].items()}, programs=programs)
+    return dict(seconds=wall, cpu=cpu_s, stages={k: v["seconds"] for k, v in run["stages"].items()}, programs=programs)
+
+
+def quick_fresh_and_warm() -> tuple[dict, dict]:
+    """The quick preset twice on one new, empty compilation cache: fresh (every compile and
+    trace), then warm (a new run folder, the cache the first run filled)."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory(prefix="relaff_quick_cache_") as cache:
+        return quick_preset(cache), quick_preset(cache)
+
+
+def print_quick(what: str, quick: dict) -> None:
+    print(f"\nquick preset, `relaff reproduce --preset quick` into a new folder, compilation cache {what}: "
+          f"{quick['seconds']:.0f} s wall, {quick['cpu']:.0f} s CPU, load average after {os.getloadavg()[0]:.2f}; "
+          "stages (s): " + ", ".join(f"{k} {v:.0f}" for k, v in quick["stages"].items()), flush=True)
 
 
 def project(rollout: list[dict], feats: dict) -> dict:
@@ -333,6 +354,9 @@ def main() -> None:
     ap.add_argument("--report-sizes", type=int, default=20, help="training sizes of the report's resampling target")
     ap.add_argument("--no-quick", dest="quick", action="store_false",
                     help="skip the quick preset's run (quick_s=nan)")
+    ap.add_argument("--quick-only", action="store_true",
+                    help="only the quick preset: twice on a new empty compilation cache, fresh then warm "
+                         "(prints quick_fresh_s and ends with quick_s = the warm run's seconds)")
     ap.add_argument("--smoke", action="store_true", help="lift, batch 64, 2 batches, few forests and scenes")
     ap.add_argument("--rollouts-only", action="store_true",
                     help="time the native rollout functions (with and without the reach screen) and stop")
@@ -343,8 +367,17 @@ def main() -> None:
     ap.add_argument("--xla-cache", default=os.path.join(os.environ.get("TMPDIR", "/tmp"), "relaff_paper_stages_xla"),
                     help="JAX's persistent compilation cache ('' for none): a rerun skips the ~2-5 min of compiles")
     args = ap.parse_args()
-    if args.write_figures and (args.smoke or not args.quick):
-        ap.error("--write-figures records the quick preset's run: not with --smoke or --no-quick")
+    if args.write_figures and (args.smoke or not args.quick or args.quick_only):
+        ap.error("--write-figures records the quick preset's run: not with --smoke, --no-quick or --quick-only")
+    if args.quick_only:
+        print(f"machine: {platform.machine()}, {os.cpu_count()} cores; jax {jax.__version__}; load average before "
+              f"{os.getloadavg()[0]:.2f}; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}", flush=True)
+        fresh, warm = quick_fresh_and_warm()
+        print_quick("new and empty (fresh)", fresh)
+        print_quick("the one the fresh run filled (warm)", warm)
+        print(f"quick_fresh_s={fresh['seconds']:.0f} quick_fresh_cpu_s={fresh['cpu']:.0f} quick_cpu_s={warm['cpu']:.0f}")
+        print(f"quick_s={warm['seconds']:.0f}")
+        return
     resamples = 1000
     if args.smoke:
         args.actions, args.parts, args.batch, args.batches, args.features, args.forests = ["lift"], ["lift"], 64, 2, 32, 8
@@ -414,9 +447,7 @@ def main() -> None:
     quick = quick_preset(args.xla_cache) if args.quick else {"seconds": float("nan"), "stages": {}}
     if args.quick:
         stamp("quick preset done")
-        print("\nquick preset, `relaff reproduce --preset quick` into a new folder, compilation cache "
-              f"{args.xla_cache or 'off'}: {quick['seconds']:.0f} s; stages (s): "
-              + ", ".join(f"{k} {v:.0f}" for k, v in quick["stages"].items()))
+        print_quick(args.xla_cache or "off", quick)
     if args.write_figures:
         write_quick_figure(quick, args.xla_cache)
     print(f"\nwall time of this benchmark {time.perf_counter() - t_start:.0f} s; load average after {os.getloadavg()[0]:.2f}")
