@@ -23,7 +23,7 @@ from . import arm as A
 from . import world as wd
 from .bodies import Geometry, geometry, tool_squeeze
 from .actions.tables import tables
-from .templates import N_TARGETS, ActionConfig
+from .templates import N_TARGETS, ActionConfig, is_v3
 from .actions.registry import registry
 from .actions.rules import plan_program
 from .branch import BASE_TURN_MAX, base_turn, one_branch
@@ -80,7 +80,7 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     grip_home = jnp.asarray(home_grip(cfg))
     branches = [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
     straight = straight_rows(cfg, tb.target)
-    v3 = cfg.programs not in ("v1", "v2")
+    v3 = is_v3(cfg)
 
     def one(action_id, pair, qpos):
         prog = jax.lax.switch(action_id, branches, pair, qpos)

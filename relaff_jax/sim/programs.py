@@ -19,7 +19,7 @@ from .bodies import (DOWN, Body, Geometry, Grasp, ball_extent, between_pads, bod
                      squeeze_command, squeezed_half, stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
 from .sweep import falls_onto_fingers, sweep_raise, sweep_tops
-from .templates import N_TARGETS, ActionConfig
+from .templates import N_TARGETS, ActionConfig, is_v3 as _v3
 
 from relaff_jax.constants import ACTIONS
 
@@ -62,11 +62,6 @@ def tipping_body(toy: Body, radius: jax.Array) -> Body:
     size = toy.hi - toy.lo
     reach = jnp.sqrt(size[2] ** 2 + jnp.maximum(size[0], size[1]) ** 2)
     return toy._replace(hi=toy.hi.at[2].set(jnp.where(radius > 0, toy.hi[2], toy.lo[2] + reach)))
-
-
-def _v3(cfg: ActionConfig) -> bool:
-    """Programs v3 (v2 and v1 keep their plans bit for bit)."""
-    return cfg.programs not in ("v1", "v2")
 
 
 def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) -> tuple[Grasp, jax.Array]:

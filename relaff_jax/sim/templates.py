@@ -100,6 +100,11 @@ class Tables(NamedTuple):
     reach: np.ndarray = np.asarray(ACTIONS) == "unobstruct"
 
 
+def is_v3(cfg: ActionConfig) -> bool:
+    """Programs v3: v2 with plan-time rules and rake's dwell (v2 and v1 keep their plans bit for bit)."""
+    return cfg.programs not in ("v1", "v2")
+
+
 def tables(cfg: ActionConfig) -> Tables:
     """The nine built-ins' templates ``cfg.programs`` runs: v1 the module's ``TPL_*`` tables
     (``N_STEPS``); v2 the same segments with the final rest ``cfg.rest_hold`` steps longer, so

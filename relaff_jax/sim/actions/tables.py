@@ -10,7 +10,7 @@ import dataclasses
 
 import numpy as np
 
-from relaff_jax.sim.templates import N_STEPS, ActionConfig, Tables, _template
+from relaff_jax.sim.templates import N_STEPS, ActionConfig, Tables, _template, is_v3
 
 from .registry import registry
 from .spec import GRASP_CODE
@@ -54,7 +54,7 @@ def tables(cfg: ActionConfig) -> Tables:
     at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after ``measure``; v3
     as v2 with rake's dwell after the transit (``with_rake_dwell``)."""
     specs = registry()
-    tb = spec_tables(with_rake_dwell(specs) if cfg.programs not in ("v1", "v2") else specs)
+    tb = spec_tables(with_rake_dwell(specs) if is_v3(cfg) else specs)
     if cfg.programs == "v1":
         return tb
     steps = tb.steps.copy()
