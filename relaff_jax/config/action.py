@@ -209,16 +209,15 @@ class ActionConfig(Node):
     # lift, take, pour and slide read the measuring step only, so they cannot change; the
     # other actions read the end, now the program's end (docs/actions.md, "Tuning").
     stop_at_program_end: bool = True
-    # Which motor programs (docs/actions.md, "Programs v1 and v2", "Programs v3"): "v2" grasps below an
-    # object's top by at most what the pads allow and refuses a grasp that would put the palm on
-    # an object, squeezes with a force from the held objects' weight, and reads every goal once
-    # the objects are at rest (the default: the published paper-scale results rest on it); "v3" is
-    # v2 with move's higher sweep re-tested until no
-    # top is within palm_margin of the palm (and refused where a toy pushed off a flat base would
-    # fall onto the raised fingers), and a base or obstacle grasp refused where the pads would
-    # meet the toy first and press it beyond the force bound; "v1" the programs before issue 43,
-    # bit for bit. v3 is not the default until it is audited at scale (docs/actions.md, "Programs v3").
-    programs: str = "v2"
+    # Which motor programs (docs/actions.md, "Programs v1 and v2", "Programs v3"): "v3" (the
+    # default) is v2 with move's sweep raised over every top and rim, a base or obstacle grasp refused
+    # where the pads would press the toy beyond the force bound, the squeeze commanded from the
+    # widest body between the pads, and rake on one IK branch with its turn, axis and hand-ahead
+    # refusals and a dwell before the descent; "v2" grasps below an object's top by at most what
+    # the pads allow, refuses a grasp that would put the palm on an object, squeezes with a force
+    # from the held objects' weight, and reads every goal once the objects are at rest; "v1" the
+    # first programs, bit for bit. v1 and v2 stay one --set away to compare labels.
+    programs: str = "v3"
     palm_margin: float = 0.02  # v2: the palm's underside this far above every object under it
     min_grip: float = 0.02  # v2: the pads overlap the grasped object by at least this height
     squeeze_min: float = 5.0  # N, v2: the least squeeze per pad

@@ -249,6 +249,13 @@ def axis_distance(arm: A.Arm, a: jax.Array, b: jax.Array) -> jax.Array:
     return jnp.linalg.norm(a + s * ab)
 
 
+def ahead_of_base(arm: A.Arm, p: jax.Array, radial: jax.Array) -> jax.Array:
+    """() m: how far the point ``p`` (3,) lies in front of the base joint's axis along the
+    horizontal unit direction ``radial`` (3,); negative behind it."""
+    o = jnp.asarray(arm.base_pos, jnp.float32)
+    return jnp.dot((p - o)[:2], radial[:2])
+
+
 def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     """Put the rake head behind the toy (seen from the robot), beside the handle, and pull."""
     radial = unit_xy(toy.centre)
@@ -275,6 +282,9 @@ def _program_rake(arm, cfg, toy, geo_head_x0, geo_head_y) -> Program:
     covers = y_t - toy.half_width(side) < geo_head_y[1]
     if _v3(cfg):  # the hand's pull line clear of the base axis (else the base spins, the tool swings)
         covers = covers & (axis_distance(arm, targets[1].pos, targets[2].pos) >= RAKE_AXIS_CLEARANCE)
+        # and the hand in front of the base: a tool toy near the robot puts the grip point behind
+        # it, the arm folded back over the base, where the descent leaves its vertical line
+        covers = covers & (ahead_of_base(arm, targets[1].pos, radial) >= 0.0)
     return Program(stack_targets(targets), jnp.asarray(0.0), covers, -radial,
                    jnp.asarray(tool_squeeze(arm, cfg), jnp.float32))
 

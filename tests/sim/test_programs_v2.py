@@ -16,7 +16,7 @@ from relaff_jax.config.action import ActionConfig
 
 from helpers.scenes import replay_built
 
-V2 = ActionConfig(programs="v2")  # the default, pinned; v3 is tested in test_programs_v3.py
+V2 = ActionConfig(programs="v2")  # pinned (v3, the default, is tested in test_programs_v3.py)
 V1 = dataclasses.replace(V2, programs="v1")
 
 

@@ -1,5 +1,5 @@
-"""Programs v3, the held rake: waypoints on one IK branch, the refusals of a large base turn and of a
-pull line passing the base axis, and the dwell before the descent; v2's rake unchanged. Hand-built
+"""Programs v3, the held rake: waypoints on one IK branch, the refusals of a large base turn, of a
+pull line passing the base axis and of a grip point behind the base, and the dwell before the descent; v2's rake unchanged. Hand-built
 scenes (``programs.program``, the IK path of ``planning.make_plan_fn``; no simulation)."""
 import dataclasses
 import functools
@@ -51,7 +51,8 @@ def test_descent_that_flips_the_base_in_v2_stays_on_one_branch_in_v3():
     # lower, is beyond that branch (the shoulder at its limit), so v2's `low` turns the base 180
     # degrees in the vertical descent. v3 solves the targets backwards: `above` on `low`'s branch.
     ok, fwd, one = _path(V3, *scene("toy_car", "hoe", 0.26, 0.0))
-    assert bool(ok) and bool(jnp.all(fwd.reachable[:4])) and bool(jnp.all(one.reachable[:4]))
+    assert bool(jnp.all(fwd.reachable[:4])) and bool(jnp.all(one.reachable[:4]))
+    assert not bool(ok)  # v3 refuses the program all the same: the grip point is behind the base
     assert turns_deg(fwd.q)[0] == pytest.approx(180.0, abs=5.0)  # above -> low
     assert turns_deg(one.q).max() < 45.0
     assert np.abs(np.degrees(np.asarray(one.q[1:4] - fwd.q[1:4]))).max() < 5.0  # from `low` on: as before
@@ -106,6 +107,21 @@ def test_pull_line_refusal_hand_worked(x, refused):
     assert (got < programs.RAKE_AXIS_CLEARANCE) == refused
     assert bool(pr.ok) == (not refused) and bool(pr2.ok)  # v2 pulls both
     np.testing.assert_array_equal(np.asarray(pr.targets.pos), np.asarray(pr2.targets.pos))  # same targets
+
+
+def test_hand_behind_the_base_refused_hand_worked():
+    # the long rake's grip point 12 cm behind the base axis (the toy 36.5 cm out on the x axis):
+    # the pull line, 5.75 cm beside the axis and from -12 cm back to -42 cm, stays
+    # hypot(12, 5.75) = 13.3 cm from it, so only the hand-ahead rule refuses it
+    st = planning.setup(V3)
+    pair, _ = scene("block", "rake_long", 0.5, 0.0)
+    x = -0.12 + (float(st.geo.head_x0[int(pair)]) - 0.025 - V3.rake_gap - GRIP)
+    pair, q = scene("block", "rake_long", x, 0.0)
+    pr = programs.program("rake", st.arm, V3, st.geo, pair, q)
+    low = pr.targets.pos[1]
+    assert float(programs.axis_distance(st.arm, low, pr.targets.pos[2])) == pytest.approx(np.hypot(0.12, 0.0575), abs=1e-4)
+    assert float(programs.ahead_of_base(st.arm, low, jnp.array([1.0, 0.0, 0.0]))) == pytest.approx(-0.12, abs=1e-4)
+    assert not bool(pr.ok) and bool(programs.program("rake", st.arm, V2, st.geo, pair, q).ok)
 
 
 def test_v3_rake_dwells_at_above_after_the_transit():
