@@ -42,7 +42,7 @@ RAKE_ROWS = [
     ("ball", "rake_short", (0.9, 0.3, 0.0), HELD, 0.0),  # 0 within reach of the rake
     ("block", "rake_long", (1.45, -0.2, 0.0), HELD, 0.0),  # 1 beyond the arm, within the rake's
     ("ball", "rake_long", (1.75, 0.0, 0.0), HELD, 0.0),  # 2 beyond arm + rake: infeasible
-    ("block", "rake_short", (0.3, 0.1, 0.0), HELD, 0.0),  # 3 close to the robot: pulled past 0.2 m
+    ("block", "rake_short", (0.3, 0.1, 0.0), HELD, 0.0),  # 3 close to the robot: v3 refuses it (axis)
 ] * 2
 
 def hand_built(w, rows):
