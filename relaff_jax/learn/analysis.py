@@ -141,7 +141,7 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
         half_reps = H.half_rep_curves(acc_x, corr_x, halves, reference=reference)  # (2, A, C', S, R)
         half_means = None if half_reps is None else half_reps.mean(-1)
     bf = bootstrap_factor(mean, mean[:, lay["NB"]][:, None, :], cfg.chance, tol[:, None, None])
-    t2 = table2_rows(mean, sizes, cfg, lay, tol, half_means, cbn_ok, masks)
+    t2 = table2_rows(mean, sizes, cfg, lay, tol, half_means, cbn_ok, masks, reference=reference)
     paper = np.isin(np.asarray(actions), ACTIONS)  # Table II's rows average the paper's nine (a user action: per target only)
     table2, n_targets = summarise(np.where(paper, t2["bf"], np.nan))
     gain, gain_n = summarise(np.where(paper, t2["gain"], np.nan))
@@ -270,7 +270,7 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
     for b in range(0, len(hm), CI_CHUNK):
         h = hm[b : b + CI_CHUNK]
         m = whole(h, hs)
-        t2 = table2_rows(m, sizes, cfg, lay, tol, h if outcomes else None, cbn_ok, masks, min_cells=1)
+        t2 = table2_rows(m, sizes, cfg, lay, tol, h if outcomes else None, cbn_ok, masks, min_cells=1, reference=reference)
         v, held = _fixed_mean(t2["bf"], fixed_bf)
         boot["bf"].append(v), boot["held"].append(held)
         boot["gain"].append(_fixed_mean(t2["gain"], fixed_gain)[0])
