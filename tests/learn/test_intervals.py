@@ -134,6 +134,28 @@ def test_table2_intervals_cover_a_known_truth_at_the_nominal_level():
         assert abs(h / m - 0.95) <= 3 * se, (k, h / m)
 
 
+def test_bc_tally_from_chunked_counts_is_interval_pairs_tally():
+    # estimates inside, at the edge of and outside the resamples (bias-corrected and percentile
+    # intervals both), ties with the estimate, NaN resamples, a column without any, NaN estimates
+    from relaff_jax.learn import intervals as I
+
+    rng = np.random.default_rng(5)
+    vals = np.round(rng.normal(size=(300, 40)), 1)
+    vals[rng.random(vals.shape) < 0.1] = np.nan
+    vals[:, 3] = np.nan
+    est = np.concatenate([np.zeros(10), np.full(10, 1.9), np.full(10, -2.4), np.full(10, np.nan)])
+    est[3] = 0.0
+    for tail in (0.005, 0.0, 0.02):
+        want: list = []
+        I.interval_pairs(vals, est, 0.95, tail, want)
+        counts = [0, 0, 0]
+        for b in range(0, 300, 70):
+            counts = [c + k for c, k in zip(counts, I.bc_counts(vals[b : b + 70], est))]
+        got = I.bc_tally(counts, est, 0.95, tail)
+        assert got == want[0]
+        assert 0 < got[0] < got[1] < 40 or tail == 0.0
+
+
 def test_checked_interval_keeps_bc_unless_an_end_rests_on_the_extreme_tail():
     from statistics import NormalDist
     nd = NormalDist()
