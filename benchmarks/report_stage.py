@@ -11,11 +11,12 @@ sizes 2, 3, ...) is built once in ``--out/results`` and reused. No ``--data``: t
 sections need dataset folders (see docs/journal/2026-12-04.md, "Report stage", for what that leaves out).
 
 Each variant (``reference``: ``write_report(..., reference=True)``; ``new``: the default path;
-``base``: the default path of another checkout, ``--base``) runs in its own process,
-with timers wrapped around the writer's parts (inclusive seconds; a part's exclusive seconds
-leave out the parts timed inside it), and reports its peak RSS; ``--profile`` also writes a
-cProfile of each variant beside the reports. The variants' report files (``findings.json``,
-``summary.json``, ``reach.json``, Table II CSV and Markdown) are compared byte for byte.
+``base``: the default path of another checkout, ``--base``) runs in its own process, with
+timers wrapped around the writer's parts (inclusive seconds; a part's exclusive seconds leave
+out the parts timed inside it; inclusive CPU seconds of the process, BLAS threads included),
+and reports its peak RSS; ``--profile`` also writes a cProfile of each variant beside the
+reports. The variants' report files (``findings.json``, ``summary.json``, ``reach.json``,
+``affordances.csv``, Table II CSV and Markdown, the PNGs of Figs. 6-12) are compared byte for byte.
 
 ``--run RUN``: a finished ``relaff reproduce`` folder instead (``RUN/results`` and the datasets
 ``RUN/data/<action>``, ``--examples`` example scenes per action, as the stage writes them; the
@@ -39,7 +40,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[1]
-COMPARED = ("findings.json", "summary.json", "reach.json", "table2.csv", "table2_rhf.csv", "table2.md", "affordances.csv")
+COMPARED = ("findings.json", "summary.json", "reach.json", "table2.csv", "table2_rhf.csv", "table2.md", "affordances.csv",
+            "fig06_nb_learning.png", "fig07_nb_spaces.png", "fig08_db1_best.png", "fig09_db1_best_bf.png",
+            "fig10_average_bf.png", "fig11_correlation.png", "fig12_thresholds.png")
 
 # (module, attribute, part name): wrapped where the writer and the analysis look them up
 PARTS = [
@@ -142,16 +145,17 @@ class Timers:
     taken off that one's exclusive time)."""
 
     def __init__(self):
-        self.incl, self.excl, self.calls, self.stack = {}, {}, {}, []
+        self.incl, self.excl, self.cpu, self.calls, self.stack = {}, {}, {}, {}, []
 
     def wrap(self, name, f):
         def timed(*a, **k):
             self.stack.append(0.0)
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             try:
                 return f(*a, **k)
             finally:
                 dt = time.perf_counter() - t
+                self.cpu[name] = self.cpu.get(name, 0.0) + time.process_time() - c
                 inner = self.stack.pop()
                 if self.stack:
                     self.stack[-1] += dt
@@ -185,7 +189,7 @@ def child(results: Path, report: Path, variant: str, profile: bool, data: dict |
     total, cpu = time.perf_counter() - t, time.process_time() - cpu
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB -> GB
     print(json.dumps({"variant": variant, "total": total, "cpu": cpu, "import": t_import, "rss_gb": rss,
-                      "incl": timers.incl, "excl": timers.excl, "calls": timers.calls}))
+                      "incl": timers.incl, "excl": timers.excl, "cpu_incl": timers.cpu, "calls": timers.calls}))
 
 
 def main() -> None:
@@ -232,14 +236,15 @@ def main() -> None:
         runs[v] = json.loads(p.stdout.strip().splitlines()[-1])
     scale = 1.0 if args.run else 99 / args.sizes  # see the module docstring
     names = [n for _, _, n in PARTS if any(n in r["incl"] for r in runs.values())]
-    head = f"{'part':26}" + "".join(f" {v + ' incl':>14} {v + ' excl':>14}" for v in runs)
+    head = f"{'part':26}" + "".join(f" {v + ' incl':>14} {v + ' excl':>14} {v + ' CPU':>14}" for v in runs)
     print(f"{results}: seconds" if args.run else
           f"{args.sizes} sizes, {args.resamples} resamples; seconds (projection x{scale:.2f} to 99 sizes in the last line)")
     print(head)
     for n in names:
-        print(f"{n:26}" + "".join(f" {r['incl'].get(n, 0):14.2f} {r['excl'].get(n, 0):14.2f}" for r in runs.values()))
+        print(f"{n:26}" + "".join(f" {r['incl'].get(n, 0):14.2f} {r['excl'].get(n, 0):14.2f} {r['cpu_incl'].get(n, 0):14.2f}"
+                                  for r in runs.values()))
     for key in ("total", "cpu", "import"):
-        print(f"{key:26}" + "".join(f" {r[key]:14.2f} {'':14}" for r in runs.values()))
+        print(f"{key:26}" + "".join(f" {r[key]:14.2f} {'':14} {'':14}" for r in runs.values()))
     print(f"{'peak RSS GB':26}" + "".join(f" {r['rss_gb']:14.2f} {'':14}" for r in runs.values()))
     if not args.run:
         print(f"{'projected total (paper)':26}" + "".join(f" {_project(r, scale):14.0f} {'':14}" for r in runs.values()))
