@@ -3,6 +3,7 @@ reference path against the default one in the same run, outputs compared byte fo
 
     PYTHONPATH=. python benchmarks/report_stage.py --out /tmp/relaff_report_bench [--sizes 99]
         [--resamples 1000] [--variants reference new] [--profile]
+    PYTHONPATH=. python benchmarks/report_stage.py --run RUN --out /tmp/relaff_report_run [--examples 2]
 
 The folder (``learn.synthetic_results``: 9 actions, 50 conditions, 4,000 balanced test scenes,
 50 PCA / 25 RHF repetitions, outcomes bit-packed as the sweep writes them, ``--sizes`` training
@@ -10,11 +11,16 @@ sizes 2, 3, ...) is built once in ``--out/results`` and reused. No ``--data``: t
 sections need dataset folders (see docs/journal/2026-12-04.md, "Report stage", for what that leaves out).
 
 Each variant (``reference``: ``write_report(..., reference=True)``; ``new``: the default path;
-``base``: the default path of another checkout, ``--base``) runs in its own process,
-with timers wrapped around the writer's parts (inclusive seconds; a part's exclusive seconds
-leave out the parts timed inside it), and reports its peak RSS; ``--profile`` also writes a
-cProfile of each variant beside the reports. The variants' report files (``findings.json``,
-``summary.json``, ``reach.json``, Table II CSV and Markdown) are compared byte for byte.
+``base``: the default path of another checkout, ``--base``) runs in its own process, with
+timers wrapped around the writer's parts (inclusive seconds; a part's exclusive seconds leave
+out the parts timed inside it; inclusive CPU seconds of the process, BLAS threads included),
+and reports its peak RSS; ``--profile`` also writes a cProfile of each variant beside the
+reports. The variants' report files (``findings.json``, ``summary.json``, ``reach.json``,
+``affordances.csv``, Table II CSV and Markdown, the PNGs of Figs. 6-12) are compared byte for byte.
+
+``--run RUN``: a finished ``relaff reproduce`` folder instead (``RUN/results`` and the datasets
+``RUN/data/<action>``, ``--examples`` example scenes per action, as the stage writes them; the
+folder is only read, the reports go to ``--out``); nothing is projected.
 
 Projection to the paper preset when ``--sizes`` < 99: every part's time but the dataset
 sections' times 99 / sizes (the outcomes and the resamples' curves grow with the sizes; the
@@ -34,7 +40,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parents[1]
-COMPARED = ("findings.json", "summary.json", "reach.json", "table2.csv", "table2_rhf.csv", "table2.md")
+COMPARED = ("findings.json", "summary.json", "reach.json", "table2.csv", "table2_rhf.csv", "table2.md", "affordances.csv",
+            "fig06_nb_learning.png", "fig07_nb_spaces.png", "fig08_db1_best.png", "fig09_db1_best_bf.png",
+            "fig10_average_bf.png", "fig11_correlation.png", "fig12_thresholds.png")
 
 # (module, attribute, part name): wrapped where the writer and the analysis look them up
 PARTS = [
@@ -45,10 +53,12 @@ PARTS = [
     ("relaff_jax.learn.analysis", "half_curves", "  half_curves"),
     ("relaff_jax.learn.analysis", "table2_rows", "  table2_rows"),
     ("relaff_jax.learn.analysis", "threshold_study", "  threshold_study"),
+    ("relaff_jax.learn.analysis", "against_nb", "  against_nb"),
     ("relaff_jax.learn.analysis", "_intervals", "  _intervals"),
     ("relaff_jax.learn.analysis", "resampled_means", "    resampled_means"),
     ("relaff_jax.learn.analysis", "whole", "    whole"),
-    ("relaff_jax.learn.analysis", "bc_interval", "    bc_interval"),
+    ("relaff_jax.learn.analysis", "interval_pairs", "    interval_pairs"),
+    ("relaff_jax.report.write", "user_rows", "user_rows"),
     ("relaff_jax.report.write", "table2_csv", "table2_csv"),
     ("relaff_jax.report.write", "table2_markdown", "table2_markdown"),
     ("relaff_jax.report.write", "write_figures", "figures (Figs. 6-12)"),
@@ -56,12 +66,16 @@ PARTS = [
     ("relaff_jax.report.write", "summary", "summary"),
     ("relaff_jax.report.write", "reach_json", "reach_json"),
     ("relaff_jax.report.write", "findings", "findings"),
-    ("relaff_jax.data", "info", "data: info"),
-    ("relaff_jax.data", "anatomy", "data: anatomy"),
+    ("relaff_jax.report.write", "dataset_info", "data: info"),
+    ("relaff_jax.report.write", "anatomy", "data: anatomy"),
     ("relaff_jax.report.write", "dataset_figure", "data: dataset_figure"),
     ("relaff_jax.report.write", "reach_figure", "data: reach_figure"),
     ("relaff_jax.report.write", "reach_blocks", "data: reach_blocks"),
     ("relaff_jax.report.write", "subset_blocks", "data: subset_blocks"),
+    ("relaff_jax.report.write", "stored_audits", "data: stored_audits"),
+    ("relaff_jax.report.write", "audit_blocks", "data: audit_blocks"),
+    ("relaff_jax.report.write", "example_scenes", "data: example_scenes"),
+    ("relaff_jax.report.write", "by_reading", "by_reading"),
     ("relaff_jax.report.write", "finite", "finite (json prep)"),
     ("relaff_jax.report.sections", "correlation_blocks", "correlation_blocks"),
     ("relaff_jax.report.sections", "threshold_blocks", "threshold_blocks"),
@@ -131,16 +145,17 @@ class Timers:
     taken off that one's exclusive time)."""
 
     def __init__(self):
-        self.incl, self.excl, self.calls, self.stack = {}, {}, {}, []
+        self.incl, self.excl, self.cpu, self.calls, self.stack = {}, {}, {}, {}, []
 
     def wrap(self, name, f):
         def timed(*a, **k):
             self.stack.append(0.0)
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             try:
                 return f(*a, **k)
             finally:
                 dt = time.perf_counter() - t
+                self.cpu[name] = self.cpu.get(name, 0.0) + time.process_time() - c
                 inner = self.stack.pop()
                 if self.stack:
                     self.stack[-1] += dt
@@ -150,7 +165,7 @@ class Timers:
         return timed
 
 
-def child(results: Path, report: Path, variant: str, profile: bool, data: dict | None) -> None:
+def child(results: Path, report: Path, variant: str, profile: bool, data: dict | None, examples: int = 0) -> None:
     """One variant's report under the timers; prints one JSON line of its parts."""
     import importlib
 
@@ -163,18 +178,18 @@ def child(results: Path, report: Path, variant: str, profile: bool, data: dict |
         setattr(m, attr, timers.wrap(name, getattr(m, attr)))
     kw = {"reference": True} if variant == "reference" else {}
     kw["data_dirs"] = data
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), time.process_time()
     if profile:
         import cProfile
         pr = cProfile.Profile()
-        pr.runcall(W.write_report, results, report, examples_per_action=0, **kw)
+        pr.runcall(W.write_report, results, report, examples_per_action=examples, **kw)
         pr.dump_stats(str(report) + ".prof")
     else:
-        W.write_report(results, report, examples_per_action=0, **kw)
-    total = time.perf_counter() - t
+        W.write_report(results, report, examples_per_action=examples, **kw)
+    total, cpu = time.perf_counter() - t, time.process_time() - cpu
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6  # kB -> GB
-    print(json.dumps({"variant": variant, "total": total, "import": t_import, "rss_gb": rss,
-                      "incl": timers.incl, "excl": timers.excl, "calls": timers.calls}))
+    print(json.dumps({"variant": variant, "total": total, "cpu": cpu, "import": t_import, "rss_gb": rss,
+                      "incl": timers.incl, "excl": timers.excl, "cpu_incl": timers.cpu, "calls": timers.calls}))
 
 
 def main() -> None:
@@ -188,14 +203,23 @@ def main() -> None:
     ap.add_argument("--profile", action="store_true", help="cProfile each variant (report.prof)")
     ap.add_argument("--data", type=int, default=0, metavar="N",
                     help="also the --data sections, on nine datasets of N samples (paper: 10000; built once)")
+    ap.add_argument("--run", type=Path, help="a finished `relaff reproduce` folder (its results and datasets) "
+                                             "instead of the synthetic one; nothing projected")
+    ap.add_argument("--examples", type=int, default=2, help="with --run: example scenes per action (the stage's default 2)")
     ap.add_argument("--child", nargs=2, metavar=("VARIANT", "REPORT"), help=argparse.SUPPRESS)
     args = ap.parse_args()
-    data = {a: str(args.out / "data" / a) for a in _actions()} if args.data else None
+    if args.run:
+        results = args.run / "results"
+        data = {a: str(args.run / "data" / a) for a in _actions() if (args.run / "data" / a).is_dir()} or None
+    else:
+        results = args.out / "results"
+        data = {a: str(args.out / "data" / a) for a in _actions()} if args.data else None
     if args.child:
-        return child(args.out / "results", Path(args.child[1]), args.child[0], args.profile, data)
+        return child(results, Path(args.child[1]), args.child[0], args.profile, data, args.examples if args.run else 0)
     print(f"{platform.machine()} {os.cpu_count()} cores, load average {os.getloadavg()}")
-    build(args.out, args.sizes, args.resamples)
-    if args.data:
+    if not args.run:
+        build(args.out, args.sizes, args.resamples)
+    if args.data and not args.run:
         t = time.perf_counter()
         build_data(args.out, args.data)
         print(f"datasets ready in {time.perf_counter() - t:.0f} s")
@@ -203,29 +227,34 @@ def main() -> None:
     for v in args.variants:
         report = args.out / f"report_{v}"
         cmd = [sys.executable, __file__, "--out", str(args.out), "--child", v, str(report), "--data", str(args.data)]
+        cmd += ["--run", str(args.run), "--examples", str(args.examples)] if args.run else []
         cmd += ["--profile"] if args.profile else []
         code = args.base if v == "base" else HERE
         p = subprocess.run(cmd, capture_output=True, text=True, env=dict(os.environ, PYTHONPATH=str(code)))
         if p.returncode:
             sys.exit(p.stderr)
         runs[v] = json.loads(p.stdout.strip().splitlines()[-1])
-    scale = 99 / args.sizes * 1.0  # see the module docstring
+    scale = 1.0 if args.run else 99 / args.sizes  # see the module docstring
     names = [n for _, _, n in PARTS if any(n in r["incl"] for r in runs.values())]
-    head = f"{'part':26}" + "".join(f" {v + ' incl':>14} {v + ' excl':>14}" for v in runs)
-    print(f"{args.sizes} sizes, {args.resamples} resamples; seconds (projection x{scale:.2f} to 99 sizes in the last line)")
+    head = f"{'part':26}" + "".join(f" {v + ' incl':>14} {v + ' excl':>14} {v + ' CPU':>14}" for v in runs)
+    print(f"{results}: seconds" if args.run else
+          f"{args.sizes} sizes, {args.resamples} resamples; seconds (projection x{scale:.2f} to 99 sizes in the last line)")
     print(head)
     for n in names:
-        print(f"{n:26}" + "".join(f" {r['incl'].get(n, 0):14.2f} {r['excl'].get(n, 0):14.2f}" for r in runs.values()))
-    for key in ("total", "import"):
-        print(f"{key:26}" + "".join(f" {r[key]:14.2f} {'':14}" for r in runs.values()))
+        print(f"{n:26}" + "".join(f" {r['incl'].get(n, 0):14.2f} {r['excl'].get(n, 0):14.2f} {r['cpu_incl'].get(n, 0):14.2f}"
+                                  for r in runs.values()))
+    for key in ("total", "cpu", "import"):
+        print(f"{key:26}" + "".join(f" {r[key]:14.2f} {'':14} {'':14}" for r in runs.values()))
     print(f"{'peak RSS GB':26}" + "".join(f" {r['rss_gb']:14.2f} {'':14}" for r in runs.values()))
-    print(f"{'projected total (paper)':26}" + "".join(f" {_project(r, scale):14.0f} {'':14}" for r in runs.values()))
+    if not args.run:
+        print(f"{'projected total (paper)':26}" + "".join(f" {_project(r, scale):14.0f} {'':14}" for r in runs.values()))
     first = next(iter(runs))
     for v in list(runs)[1:]:
         same = {f: _same(args.out / f"report_{first}" / f, args.out / f"report_{v}" / f) for f in COMPARED}
         print(f"{v} files identical to {first}'s: {same}")
-        print(f"ratio {first}/{v} total {runs[first]['total'] / runs[v]['total']:.2f}; projected to the paper preset "
-              f"{_project(runs[first], scale):.0f} s -> {_project(runs[v], scale):.0f} s")
+        print(f"ratio {first}/{v} total {runs[first]['total'] / runs[v]['total']:.2f}, CPU {runs[first]['cpu'] / runs[v]['cpu']:.2f}"
+              + ("" if args.run else f"; projected to the paper preset {_project(runs[first], scale):.0f} s -> "
+                 f"{_project(runs[v], scale):.0f} s"))
 
 
 def _project(run: dict, scale: float) -> float:

@@ -8,7 +8,7 @@ then the online "best after ten" learners of ``online.py``), bootstrap factors (
 its sizes each target has a bf for, the chosen sources ("best", "best after ten", offline
 and online), Table II per target ``(rows, A)`` and as avg/min/max ``(rows, 3)`` with
 ``n_targets`` and bootstrap intervals (``intervals.py``), the same for the accuracy gain
-(``measures.py``), bootstrap intervals of every mean curve, and the threshold study (paper
+(``measures.py``), bootstrap intervals of the mean curves the figures draw, and the threshold study (paper
 Fig. 12); every average over targets is over the paper's nine (``paper``), and per target the
 answers of ``per_target.py``. ``categories_per_threshold`` counts the categories the
 heuristic builds.
@@ -27,7 +27,17 @@ from relaff_jax.learn.correlation import categories_above, category_pairs
 from relaff_jax.learn import gains as G
 from relaff_jax.learn import heldout as H
 from relaff_jax.learn import per_target
-from relaff_jax.learn.intervals import checked_interval, fast_outcomes, interval_pairs, half_sizes, resampled_means, scene_halves, whole
+from relaff_jax.learn.intervals import (
+    bc_counts,
+    checked_interval,
+    drawn_intervals,
+    fast_outcomes,
+    half_sizes,
+    interval_pairs,
+    resampled_means,
+    scene_halves,
+    whole,
+)
 from relaff_jax.learn.measures import (
     _quiet,
     bootstrap_factor,
@@ -141,7 +151,7 @@ def analyse(res: Mapping[str, np.ndarray], cfg: ExperimentConfig, seed: int = 0,
         half_reps = H.half_rep_curves(acc_x, corr_x, halves, reference=reference)  # (2, A, C', S, R)
         half_means = None if half_reps is None else half_reps.mean(-1)
     bf = bootstrap_factor(mean, mean[:, lay["NB"]][:, None, :], cfg.chance, tol[:, None, None])
-    t2 = table2_rows(mean, sizes, cfg, lay, tol, half_means, cbn_ok, masks)
+    t2 = table2_rows(mean, sizes, cfg, lay, tol, half_means, cbn_ok, masks, reference=reference)
     paper = np.isin(np.asarray(actions), ACTIONS)  # Table II's rows average the paper's nine (a user action: per target only)
     table2, n_targets = summarise(np.where(paper, t2["bf"], np.nan))
     gain, gain_n = summarise(np.where(paper, t2["gain"], np.nan))
@@ -255,9 +265,13 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
     """Bootstrap intervals (``intervals.checked_interval``: bias-corrected unless an end would
     rest on fewer than ``cfg.ci_tail`` of the resamples) of Table II (bf and gain:
     each row's avg over the point estimate's targets, held fixed, and every per target
-    value), of the threshold study's averages and of every mean curve; the resampled values
-    (``*_boot``, for the findings' paired differences) and the share of resamples in which
-    each row's set of targets kept a value (``table2_set_held (rows,)``)."""
+    value), of the threshold study's averages and of the mean curves the figures draw
+    (``mean_ci (A, C', S, 2)``: NB's and each target's in-sample best DB1 source's, NaN
+    elsewhere; ``ci_bc_count`` still counts every mean curve's interval, from the resamples'
+    counts, ``intervals.drawn_intervals``); the resampled values (``*_boot``, for the findings'
+    paired differences) and the share of resamples in which each row's set of targets kept a
+    value (``table2_set_held (rows,)``). ``reference``: every mean curve's interval made, the
+    drawn ones kept (the same bits)."""
     if hm is None:
         hm = resampled_means(acc_x, corr_x, n_test, cfg.ci_resamples, derive_seed(seed, streams.INTERVALS), halves, reference=reference)
     hs = half_sizes(n_test, halves)
@@ -265,12 +279,16 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
     paper = pt["paper"]  # every average: the paper's nine
     fixed_bf, fixed_gain = np.isfinite(pt["table2_per_target"]) & paper, np.isfinite(pt["gain_per_target"]) & paper
     fixed_thr = np.isfinite(pt["thresholds"]["per_target"]) & paper
+    drawn = np.zeros(pt["mean"].shape[:2], bool)  # (A, C'): the curves Figs. 7 and 8 draw with their bands
+    drawn[:, lay["NB"]] = True
+    drawn[np.arange(len(drawn)), pt["best_db1"]] = True
+    counts = [0, 0, 0]  # every mean curve's bc_counts, resample chunk by chunk
     boot: dict[str, list] = {k: [] for k in ("bf", "held", "gain", "per", "thr", "nb", "mean", "area", "saved")}
     boot.update({k: [] for k in per_target.BOOT})
     for b in range(0, len(hm), CI_CHUNK):
         h = hm[b : b + CI_CHUNK]
         m = whole(h, hs)
-        t2 = table2_rows(m, sizes, cfg, lay, tol, h if outcomes else None, cbn_ok, masks, min_cells=1)
+        t2 = table2_rows(m, sizes, cfg, lay, tol, h if outcomes else None, cbn_ok, masks, min_cells=1, reference=reference)
         v, held = _fixed_mean(t2["bf"], fixed_bf)
         boot["bf"].append(v), boot["held"].append(held)
         boot["gain"].append(_fixed_mean(t2["gain"], fixed_gain)[0])
@@ -278,7 +296,8 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
         boot["thr"].append(_fixed_mean(t2["thr_bf"], fixed_thr)[0])
         with _quiet():
             boot["nb"].append(np.nanmean(m[:, paper, lay["NB"]], 1))  # (b, S) mean NB over the paper's targets
-        boot["mean"].append(m)
+        boot["mean"].append(m if reference else m[:, drawn])
+        counts = [c + k for c, k in zip(counts, bc_counts(m, pt["mean"]))]
         st = G.curve_stats(m, pt["methods"]["weights"], lay, sizes, cfg, paper, halves=h if outcomes else None)
         boot["area"].append(st["area"]), boot["saved"].append(st["saved"])
         choice = lay["DB1"][select_best(m[:, :, lay["DB1"]], sizes, *cfg.best_sizes)]  # (b, A) in-sample best source
@@ -290,7 +309,7 @@ def _intervals(acc_x, corr_x, n_test, halves, sizes, cfg, lay, seed, tol, cbn_ok
     ci = lambda vals, est: interval_pairs(vals, est, level, tail, tally)  # noqa: E731
     meth["area_ci"], meth["saved_ci"] = ci(bt["area"], meth["area"]), ci(bt["saved"], meth["saved"])
     out = {"table2_ci": ci(bt["bf"], pt["table2"][:, 0]), "gain_ci": ci(bt["gain"], pt["gain"][:, 0]),
-           "per_target_ci": ci(bt["per"], pt["table2_per_target"]), "mean_ci": ci(bt["mean"], pt["mean"]),
+           "per_target_ci": ci(bt["per"], pt["table2_per_target"]), "mean_ci": drawn_intervals(bt["mean"], pt["mean"], drawn, counts, level, tail, tally, reference),
            "threshold_ci": ci(bt["thr"], pt["thresholds"]["avg"]),
            "table2_boot": bt["bf"], "gain_boot": bt["gain"], "threshold_boot": bt["thr"], "nb_boot": bt["nb"],
            "table2_set_held": bt["held"].mean(0), "ci_level": level, "ci_resamples": int(cfg.ci_resamples),

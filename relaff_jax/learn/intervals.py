@@ -157,16 +157,37 @@ def bc_percentiles(values: np.ndarray, estimate: np.ndarray, level: float):
     z0 = Phi^-1(share of finite resamples below the estimate, ties counted half); the ends are
     the percentiles Phi(2 z0 -+ z_level) (Efron 1987 with acceleration 0)."""
     v = np.asarray(values, dtype=float)
-    est = np.broadcast_to(np.asarray(estimate, dtype=float), v.shape[1:])
-    ok = np.isfinite(v)
-    n = ok.sum(0)
-    below = (np.where(ok, v < est, False).sum(0) + 0.5 * np.where(ok, v == est, False).sum(0)) / np.maximum(n, 1)
+    counts = bc_counts(v, np.broadcast_to(np.asarray(estimate, dtype=float), v.shape[1:]))
+    return _bc_q(*counts, level) + (counts[2],)
+
+
+def bc_counts(values: np.ndarray, estimate: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(below, equal, finite)`` int counts of ``values (B, ...)`` against ``estimate (...)``:
+    all a bias-corrected interval's percentiles rest on; the counts of resamples seen in
+    chunks add up to those of all of them."""
+    ok = np.isfinite(values)
+    return np.where(ok, values < estimate, False).sum(0), np.where(ok, values == estimate, False).sum(0), ok.sum(0)
+
+
+def _bc_q(below: np.ndarray, equal: np.ndarray, n: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
+    share = (below + 0.5 * equal) / np.maximum(n, 1)
     nd = NormalDist()
     eps = 0.5 / np.maximum(n, 1)  # keep z0 finite when the estimate is outside every resample
-    z0 = np.vectorize(nd.inv_cdf, otypes=[float])(np.clip(below, eps, 1 - eps))
+    z0 = np.vectorize(nd.inv_cdf, otypes=[float])(np.clip(share, eps, 1 - eps))
     za = nd.inv_cdf(0.5 + level / 2)
     cdf = np.vectorize(nd.cdf, otypes=[float])
-    return 100 * cdf(2 * z0 - za), 100 * cdf(2 * z0 + za), n
+    return 100 * cdf(2 * z0 - za), 100 * cdf(2 * z0 + za)
+
+
+def bc_tally(counts: tuple[np.ndarray, np.ndarray, np.ndarray], estimate: np.ndarray, level: float,
+             tail: float) -> tuple[int, int]:
+    """What ``interval_pairs`` appends to its ``tally`` for these intervals, from ``bc_counts``
+    alone (no interval made): how many are bias-corrected (each end leaves at least ``tail``
+    of the finite resamples beyond it) and defined (a finite estimate and a finite resample)."""
+    q_lo, q_hi = _bc_q(*counts, level)
+    defined = (counts[2] > 0) & np.isfinite(estimate)
+    bc = (q_lo / 100 >= tail) & (1 - q_hi / 100 >= tail)
+    return int((bc & defined).sum()), int(defined.sum())
 
 
 def bc_interval(values: np.ndarray, estimate: np.ndarray, level: float) -> tuple[np.ndarray, np.ndarray]:
@@ -229,3 +250,19 @@ def _pick(srt: np.ndarray, n: np.ndarray, q: np.ndarray) -> np.ndarray:
     f = pos - i0
     with np.errstate(invalid="ignore"):
         return np.where(n > 0, a + f * np.where(np.isfinite(b), b - a, 0.0), np.nan)
+
+
+def drawn_intervals(boot: np.ndarray, estimate: np.ndarray, drawn: np.ndarray, counts, level: float, tail: float,
+                    tally: list, reference: bool = False) -> np.ndarray:
+    """``(A, C', S, 2)`` intervals (``interval_pairs``) of the curves ``estimate (A, C', S)``
+    marked ``drawn (A, C')``, NaN elsewhere, from their resamples ``boot (B, drawn, S)``;
+    ``tally`` gets the count of every curve's interval, from the ``bc_counts`` of all their
+    resamples, ``counts`` (``bc_tally``). ``reference``: ``boot (B, A, C', S)`` holds every
+    curve's resamples, and every interval is made (the same bits, slower)."""
+    out = np.full(estimate.shape + (2,), np.nan)
+    if reference:
+        out[drawn] = interval_pairs(boot, estimate, level, tail, tally)[drawn]
+        return out
+    out[drawn] = interval_pairs(boot, estimate[drawn], level, tail)
+    tally.append(bc_tally(counts, estimate, level, tail))
+    return out

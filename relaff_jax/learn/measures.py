@@ -102,7 +102,7 @@ def _from_ten(cells_k: np.ndarray, chosen: np.ndarray, ran: np.ndarray, after: n
 
 def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, lay: dict, tol: np.ndarray,
                 halves: np.ndarray | None = None, cbn_ok: np.ndarray | None = None,
-                masks: np.ndarray | None = None, min_cells: int | None = None) -> dict[str, Any]:
+                masks: np.ndarray | None = None, min_cells: int | None = None, reference: bool = False) -> dict[str, Any]:
     """Per target values of every Table II row, ``bf`` and ``gain`` ``(..., rows, A)`` (rows in
     ``TABLE2_ROWS`` order), ``defined (..., A)``: the window's sizes where bf is defined (NB
     more than ``tol`` above chance; the same for every row), and with ``masks (T, A, K)`` the
@@ -115,54 +115,67 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
     half the scenes: twice it); ``cbn_ok (A,)`` whether the target had a category at CBn's
     threshold (False: CBn is NB relabelled, so NaN). A target whose bf is defined at fewer than
     ``min_cells`` (default ``min_defined(cfg, sizes)``) sizes of the window has no bf in any row
-    (resamples pass 1: which targets a row rests on is the estimate's decision)."""
+    (resamples pass 1: which targets a row rests on is the estimate's decision). ``reference``:
+    bf and gain cells made for every size, not the window's only, and each set of allowed
+    candidates scored apart, not masked from its family's scores (the same bits, slower)."""
     mean = np.asarray(mean, dtype=float)
     tol = np.asarray(tol, dtype=float)
     lo, hi = cfg.bf_sizes
-    wm = lambda x: window_mean(x, sizes, lo, hi)[0]  # noqa: E731
-    bf, gain = _curves(mean, tol, cfg.chance)
-    split = [_curves(halves[..., h, :, :, :], 2 * tol, cfg.chance) if halves is not None else None for h in range(2)]
+    # Every bf and gain cell is read through the window's mean: they are made for its sizes only
+    # (the same bits: each cell's arithmetic is per size). The choices read every size of ``mean``.
+    win = _window_columns(sizes, lo, hi) if not reference else np.ones(len(sizes), bool)
+    wm = lambda x: window_mean(x, np.asarray(sizes)[win], lo, hi)[0]  # noqa: E731
+    bf, gain = _curves(mean[..., win], tol, cfg.chance)
+    split = [_curves(halves[..., h, :, :, :][..., win], 2 * tol, cfg.chance) if halves is not None else None for h in range(2)]
     b_lo, b_hi = cfg.best_sizes
     best_mask = size_mask(sizes, b_lo, b_hi)
     best_mask = best_mask if best_mask.any() else np.ones_like(best_mask)
     sz = np.asarray(sizes)
-    after = sz >= cfg.select_size
+    after = (sz >= cfg.select_size)[win]
     at = list(sizes).index(cfg.select_size) if cfg.select_size in sizes else None
     on = {"DB1": lay["n"], "CB1": lay["n"] + 1}
     nan = np.full(mean.shape[:-2], np.nan)  # (..., A)
 
-    seen: dict = {}  # family's values per (curves, candidates, allowed): the same for bf and gain
+    seen: dict = {}  # values per (curves, candidates[, allowed]) and per cells: the same for bf and gain
 
-    def family(m, idx, allowed, h=None):
-        """Candidates' mean curves, which ran, and the 'best' / 'at ten' weights ``(..., A, K)``
-        of the curves ``m`` (``h``: which of them, the whole test set's or a half's)."""
-        key = (h, np.asarray(idx).tobytes(), np.shape(allowed), np.asarray(allowed).tobytes())
+    def once(key, make):
         if key not in seen:
-            seen[key] = _family(m, idx, allowed)
+            seen[key] = make()
         return seen[key]
 
-    def _family(m, idx, allowed):
-        fm = m[..., idx, :]
-        ran = np.any(np.isfinite(fm), -1) & allowed
-        fm = np.where(ran[..., None], fm, np.nan)
-        return fm, ran, tie_weights(_score(fm, best_mask)), tie_weights(fm[..., at] if at is not None else _score(fm, best_mask))
+    def family(m, idx, allowed, h=None):
+        """Which candidates ran, and the 'best' / 'at ten' weights ``(..., A, K)`` of the curves
+        ``m`` (``h``: which of them, the whole test set's or a half's). The scores are made once
+        per family and masked per ``allowed`` (a row's mean is its own: the same bits)."""
+        own = (np.shape(allowed), np.asarray(allowed).tobytes()) if reference else ()  # the reference: each set apart
+        ran0, score0, at0 = once(("scores", h, idx.tobytes()) + own,
+                                 lambda: _family(np.where(allowed[..., None], m[..., idx, :], np.nan) if reference else m[..., idx, :]))
+        key = ("family", h, idx.tobytes(), np.shape(allowed), np.asarray(allowed).tobytes())
+        return once(key, lambda: _allowed(ran0 & allowed, score0, at0))
+
+    def _family(fm):
+        score = _score(fm, best_mask)
+        return np.any(np.isfinite(fm), -1), score, fm[..., at] if at is not None else score
+
+    def _allowed(ran, score, at_score):
+        return ran, tie_weights(np.where(ran, score, np.nan)), tie_weights(np.where(ran, at_score, np.nan))
 
     def choices(key_i, idx, allowed):
         """(best held-out, best oracle, ten held-out, ten oracle, average, ran) of one family, ``(..., A)``."""
-        cells = (bf, gain)[key_i][..., idx, :]
-        fm, ran, w_best, w_ten = family(mean, idx, allowed)
+        cells = once(("cells", key_i, idx.tobytes()), lambda: (bf, gain)[key_i][..., idx, :])
+        ran, w_best, w_ten = family(mean, idx, allowed)
         best_o = wm(_mix(cells, w_best))
         kept = _mix(cells, w_ten)  # the learner kept at n = select_size, its whole curve
         ten_o, ten_c = wm(kept), wm(_from_ten(cells, kept, ran, after))
         with _quiet():
-            avg = np.nanmean(np.where(ran, wm(cells), np.nan), -1)
+            avg = np.nanmean(np.where(ran, once(("window", key_i, idx.tobytes()), lambda: wm(cells)), np.nan), -1)
         if halves is None:
             return {"best": nan, "best_o": best_o, "ten": nan, "ten_o": ten_o, "ten_c": nan, "ten_co": ten_c,
                     "avg": avg, "ran": ran}
         held_b, held_t, held_c = [], [], []
         for h in range(2):  # choose on half h, score on the other half
-            _, ran_h, wb_h, wt_h = family(halves[..., h, :, :, :], idx, allowed, h)
-            other = split[1 - h][key_i][..., idx, :]
+            ran_h, wb_h, wt_h = family(halves[..., h, :, :, :], idx, allowed, h)
+            other = once(("other", key_i, h, idx.tobytes()), lambda: split[1 - h][key_i][..., idx, :])
             held_b.append(wm(_mix(other, wb_h)))
             kept_h = _mix(other, wt_h)
             held_t.append(wm(kept_h))
@@ -171,7 +184,7 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
             return {"best": np.nanmean(held_b, 0), "best_o": best_o, "ten": np.nanmean(held_t, 0), "ten_o": ten_o,
                     "ten_c": np.nanmean(held_c, 0), "ten_co": ten_c, "avg": avg, "ran": ran}
 
-    defined = window_mean(bf[..., lay["NB"], :], sizes, lo, hi)[1]  # (..., A)
+    defined = window_mean(bf[..., lay["NB"], :], np.asarray(sizes)[win], lo, hi)[1]  # (..., A)
     enough = defined >= (min_defined(cfg, sizes) if min_cells is None else min_cells)
     out: dict[str, Any] = {}
     for key_i, key in enumerate(("bf", "gain")):
@@ -200,6 +213,14 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
     out["defined"] = defined
     out["enough"] = enough
     return out
+
+
+def _window_columns(sizes: Sequence[int], lo: int, hi: int) -> np.ndarray:
+    """``(S,)`` bool: the sizes ``table2_rows`` makes bf and gain cells for, the window's. All of
+    them where the window has fewer than two: with one column left numpy would sum ``_mix``'s
+    candidates pairwise instead of one by one, and the last bits could differ."""
+    win = size_mask(sizes, lo, hi)
+    return win if win.sum() >= 2 else np.ones_like(win)
 
 
 def min_defined(cfg: ExperimentConfig, sizes: Sequence[int]) -> int:

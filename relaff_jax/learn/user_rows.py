@@ -70,7 +70,8 @@ def _one(res, cfg, idx, variants, seed, intervals, reference, halves, tol, n_tes
     acc_x, corr_x, _ = extend(acc, correct, np.full((a, 1 + k, acc.shape[-1]), np.nan), lay)  # no online choice
     mean, _ = curves(acc_x)
     outcomes = bool(corr_x.shape[-1])
-    t2 = table2_rows(mean, sizes, cfg, lay, tol, half_curves(acc_x, corr_x, halves, reference=reference))
+    t2 = table2_rows(mean, sizes, cfg, lay, tol, half_curves(acc_x, corr_x, halves, reference=reference),
+                     reference=reference)
     names = list(VARIANT_ROWS.values()) if variants else ["DB1 average"]
     pick = [TABLE2_ROWS.index(n) for n in names]
     out = {"bf": t2["bf"][pick], "gain": t2["gain"][pick]}
@@ -88,7 +89,7 @@ def _one(res, cfg, idx, variants, seed, intervals, reference, halves, tol, n_tes
     boot = {"bf": [], "gain": []}
     for b in range(0, len(hm), CI_CHUNK):
         h = hm[b : b + CI_CHUNK]
-        tb = table2_rows(whole(h, hs), sizes, cfg, lay, tol, h if outcomes else None, min_cells=1)
+        tb = table2_rows(whole(h, hs), sizes, cfg, lay, tol, h if outcomes else None, min_cells=1, reference=reference)
         boot["bf"].append(tb["bf"][:, pick]), boot["gain"].append(tb["gain"][:, pick])
     out["boot"] = {key: np.concatenate(v) for key, v in boot.items()}  # (B, rows, A)
     return out

@@ -93,6 +93,28 @@ def test_window_area_and_samples_saved_hand_made():
     assert G.samples_needed(nb, sizes, np.array(0.3))[0] == pytest.approx(2)
 
 
+def test_stratified_poi_has_the_bits_of_one_resample_at_a_time(monkeypatch):
+    # the resamples compared many at once (and in steps: POI_CELLS small) against the loop
+    # of probability_of_improvement over the same draws; NaN repetitions, ties, a task without values
+    from relaff_jax.learn import gains as G
+
+    rng = np.random.default_rng(7)
+    x, y = np.round(rng.random((9, 6)), 1), np.round(rng.random((9, 5)), 1)
+    x[2, :2], y[4, 1] = np.nan, np.nan
+    x[7], y[8, :] = np.nan, np.nan
+    for cells in (G.POI_CELLS, 700):
+        monkeypatch.setattr(G, "POI_CELLS", cells)
+        got = G.stratified_poi(x, y, 50, np.random.default_rng(3))
+        g, rows, want = np.random.default_rng(3), np.arange(9)[:, None], []
+        for _ in range(50):
+            ix, iy = g.integers(0, 6, (9, 6)), g.integers(0, 5, (9, 5))
+            want.append(G.probability_of_improvement(x[rows, ix], y[rows, iy]))
+        np.testing.assert_array_equal(got, want)
+        assert np.isfinite(got).all() and len(set(got.tolist())) > 10
+    x[:], y[:] = np.nan, np.nan  # no task with a value: NaN, as probability_of_improvement
+    assert np.isnan(G.stratified_poi(x, y, 4, np.random.default_rng(3))).all()
+
+
 def test_probability_of_improvement_and_holm_hand_worked():
     from relaff_jax.learn import gains as G
 

@@ -161,6 +161,35 @@ def test_leave_one_out_accuracy_matches_sklearn_forests_on_nine_samples():
     np.testing.assert_allclose(got["acc"], got["correct"].mean(-1))
 
 
+@pytest.mark.parametrize("sizes,select", [((2, 3, 4, 6, 10, 14, 25, 30), 10), ((2, 4, 30), 30), (tuple(range(4, 26)), 10)])
+def test_table2_rows_from_the_window_only_has_the_bits_of_every_size(sizes, select):
+    # the default makes bf and gain cells for the window's sizes only (with a window of one
+    # size, for all: numpy would sum a single column's candidates pairwise, which the causal
+    # rows' equal shares of eight sources before select_size show); the reference for every
+    # size: every output the same bits, with resamples in front, ties (accuracies in 1/31), a
+    # source that did not run, NB at chance
+    from relaff_jax.constants import ACTIONS
+    from relaff_jax.learn.measures import chance_tolerance, table2_rows
+
+    cfg = override(_cfg(), {"sizes": sizes, "select_size": select})
+    lay = E.layout(9, len(cfg.thresholds))
+    rng = np.random.default_rng(len(sizes))
+    halves = np.round(rng.uniform(0.45, 1.0, (4, 2, 9, lay["n"] + 2, len(sizes))) * 31) / 31
+    halves[..., lay["DB1"][2], :] = np.nan  # a source that did not run
+    halves[:, :, 1, 0, 1:] = 0.5  # NB of one target at chance beyond the first size
+    mean = halves.mean(1)
+    corr = np.eye(9) + rng.uniform(0, 0.9, (9, 9))
+    masks = E.category_masks((corr + corr.T) / 2, list(ACTIONS), cfg)
+    tol = chance_tolerance(cfg, np.full(9, 62), 9)
+    for m, h in ((mean[0], halves[0]), (mean, halves), (mean, None)):
+        args = (m, list(sizes), cfg, lay, tol, h, np.arange(9) % 3 > 0, masks)
+        new, ref = table2_rows(*args, min_cells=1), table2_rows(*args, min_cells=1, reference=True)
+        assert new.keys() == ref.keys()
+        for k in new:
+            np.testing.assert_array_equal(new[k], ref[k], err_msg=k)
+        assert np.isfinite(new["bf"]).any() and np.isnan(new["bf"]).any()
+
+
 # ------------------------------------------------------------------------- intervals
 
 
