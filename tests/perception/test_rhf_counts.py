@@ -67,3 +67,15 @@ def test_rhf_counts_equal_the_fused_loop_at_the_stage_tile():
     new = jax.jit(jax.vmap(lambda *a: rhf_histograms(*a, rcfg)))(*_args(pts, nrm, cnt))
     old = jax.jit(jax.vmap(lambda *a: rhf_histograms_fused(*a, rcfg)))(*_args(pts, nrm, cnt))
     np.testing.assert_array_equal(np.asarray(new), np.asarray(old))
+
+
+def test_rhf_counts_equal_the_fused_loop_in_either_grouping():
+    """Three-feature joint histograms at 50 bins, pairs of features past 2^17 joint bins (60)."""
+    from relaff_jax.perception.descriptors import rhf_groups
+    assert len(rhf_groups(50)[0]) == 3 and len(rhf_groups(60)[0]) == 2
+    pts, nrm, cnt = clouds(3, 4)
+    for bins in (50, 60):
+        rcfg = dataclasses.replace(RCFG, bins=bins)
+        new = jax.jit(jax.vmap(lambda *a: rhf_histograms(*a, rcfg)))(*_args(pts, nrm, cnt))
+        old = jax.jit(jax.vmap(lambda *a: rhf_histograms_fused(*a, rcfg)))(*_args(pts, nrm, cnt))
+        np.testing.assert_array_equal(np.asarray(new), np.asarray(old))
