@@ -26,6 +26,7 @@ never overflow (object pixels <= K * tile^2). Tested: ``tests/perception/test_fe
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
@@ -73,6 +74,13 @@ def pixel_capacity(count: int, cast_pixels: int, buckets=PIXEL_BUCKETS) -> int:
     if not jax.config.jax_threefry_partitionable:
         return cast_pixels
     return next((b for b in sorted(buckets) if count <= b < cast_pixels), cast_pixels)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def cut(pix: dict, m: int) -> dict:
+    """A batch of ``object_pixels`` results with the buffer fields cut to their first m slots
+    (one dispatch for all of them)."""
+    return {name: v[:, :m] if name in BUFFER_FIELDS else v for name, v in pix.items()}
 
 
 def make_tile_counter(geom_type, geom_seg, cfg: PerceptionConfig):
@@ -132,7 +140,8 @@ def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = Perception
         for grp, pix in zip(groups, pixels):
             full = pix["seg"].shape[1]
             m = pixel_capacity(int(np.asarray(pix["n_pixels"]).sum(1).max()), full, pixel_buckets)
-            pix = {name: v[:, :m] if name in BUFFER_FIELDS else v for name, v in pix.items()}
+            if m < full:
+                pix = cut(pix, m)
             parts.append(rest(m)(size[grp], xpos[grp], xmat[grp], keys[grp], pix))
         parts = jax.device_get(parts)
         out = {}
