@@ -2,13 +2,14 @@
 
 Scenes: ``--scenes`` settled scenes per action (``settled_scenes.load_scenes``), sorted
 by active tiles and cut into calls of ``from_sim.SUB_BATCH`` (4) as ``make_culled_features``
-does; each call runs at its ``tile_capacity``. Every stage of the chain is jitted on its own
-(vmapped over the call's scenes, inputs computed by the stage before, untimed) and timed
-over all calls after one untimed pass: tile count, ray cast (``render_objects``), compaction,
-ray-hit normals, noise, voxel grid, PCA, RHF, and the RHF as it was (``rhf_histograms_fused``,
-the reference); then the whole chain (``make_culled_features``) with the RHF of now and with
-the one before, in the same run, rounds alternating. Asserts that both chains give the same
-bits. Prints ms per scene of each stage (process CPU seconds: the machine is shared), its
+does; each call is cast at its ``tile_capacity`` and runs the stages after the cast at its
+``pixel_capacity``. Every stage of the chain is jitted on its own (vmapped over the call's
+scenes, inputs computed by the stage before, untimed) and timed over all calls after one
+untimed pass: tile count, ray cast (``render_objects``), compaction, ray-hit normals, noise,
+voxel grid, PCA, RHF, and the RHF as it was (``rhf_histograms_fused``, the reference); then
+the whole chain (``make_culled_features``) as it runs and the reference chain (the pixel
+buffer at the tile capacity, ``pixel_buckets=()``, and the fused RHF), in the same run, rounds
+alternating. Asserts that both chains give the same bits. Prints ms per scene of each stage (process CPU seconds: the machine is shared), its
 share, and both chains' scenes/s (wall clock), CPU ms per scene and the ratios (on a shared
 machine the CPU figure is the steadier one).
 
@@ -34,15 +35,14 @@ from relaff_jax.perception.descriptors import pca_object, rhf_histograms, rhf_hi
 from relaff_jax.perception.noise import add_depth_noise
 from relaff_jax.perception.raycast import surface_normals
 from relaff_jax.perception.render import active_tiles, compact_objects, render_objects
-from relaff_jax.perception.scene import SceneGeoms, make_scene
+from relaff_jax.perception.render import BUFFER_FIELDS
+from relaff_jax.perception.scene import scene_layout
 from relaff_jax.perception.voxels import voxel_downsample
 
 
 def stage_fns(geom_type, geom_seg, cfg):
     """name -> (jitted vmapped fn, fn(previous outputs) -> its args)."""
-    g = len(geom_type)
-    st = make_scene(geom_type, geom_seg, np.zeros((g, 3)), np.zeros((g, 3)), np.tile(np.eye(3), (g, 1, 1)))
-    sc = lambda s, x, m: SceneGeoms(st.geom_type, st.geom_seg, s, x, m)
+    sc = scene_layout(geom_type, geom_seg)
     v = lambda f: jax.jit(jax.vmap(f))
 
     def pca2(vox):
@@ -77,8 +77,9 @@ def fused_rhf():
         pipeline.rhf_histograms = rhf_histograms
 
 
-def run_stages(fns, s, x, m, k):
-    """Each stage once on one call's inputs; returns {name: seconds} (blocking after each)."""
+def run_stages(fns, s, x, m, k, pixels):
+    """Each stage once on one call's inputs, the stages after the compaction on its first
+    ``pixels`` slots; returns {name: seconds} (blocking after each)."""
     t = {}
 
     def go(name, *args):
@@ -90,6 +91,7 @@ def run_stages(fns, s, x, m, k):
     go("tile count", s, x, m)
     ro = go("ray cast", s, x, m)
     pix = go("compaction", ro)
+    pix = {name: v[:, :pixels] if name in BUFFER_FIELDS else v for name, v in pix.items()}
     pix = dict(pix, normal=go("hit normals", s, x, m, pix))
     pix = go("noise", pix, k)
     vox = go("voxel grid", pix)
@@ -117,15 +119,14 @@ def main() -> None:
     sb = from_sim.SUB_BATCH
     order = np.argsort(tiles, kind="stable")
     order = np.concatenate([order, np.full(-n % sb, order[-1])])
-    calls = [(grp, pc.tile_capacity(int(tiles[grp].max()), cfg)) for grp in np.split(order, len(order) // sb)]
-    fns = {k: stage_fns(gt, gs, pc.capacity_config(cfg, k)) for k in {c for _, c in calls}}
+    groups = np.split(order, len(order) // sb)
     chains = {"now": pc.make_culled_features(gt, gs, cfg, sub_batch=sb),
-              "before": pc.make_culled_features(gt, gs, cfg, sub_batch=sb)}
+              "before": pc.make_culled_features(gt, gs, cfg, sub_batch=sb, pixel_buckets=())}
 
     def stages_pass():
         tot = {}
-        for grp, k in calls:
-            for name, dt in run_stages(fns[k], size[grp], xpos[grp], xmat[grp], keys[grp]).items():
+        for grp, k, m in calls:
+            for name, dt in run_stages(fns[k], size[grp], xpos[grp], xmat[grp], keys[grp], m).items():
                 tot[name] = tot.get(name, 0.0) + dt
         return tot
 
@@ -137,12 +138,18 @@ def main() -> None:
                 outs.append(chains[name](size[lo:lo + 32], xpos[lo:lo + 32], xmat[lo:lo + 32], keys[lo:lo + 32]))
             return (time.perf_counter() - t0, time.process_time() - c0), outs
 
-    stages_pass()  # compiles
-    first = {name: chain_pass(name) for name in chains}
+    first = {name: chain_pass(name) for name in chains}  # compiles
     for a, b in zip(first["now"][1], first["before"][1]):
         for k in a:
             if not np.array_equal(a[k], b[k]):
-                raise AssertionError(f"the RHF of now changed {k}")
+                raise AssertionError(f"the chain of now changed {k}")
+    pixels = np.concatenate([o["n_pixels"] for o in first["now"][1]]).sum(1)
+    calls = []
+    for grp in groups:
+        k = pc.tile_capacity(int(tiles[grp].max()), cfg)
+        calls.append((grp, k, pc.pixel_capacity(int(pixels[grp].max()), pc.capacity_config(cfg, k).voxel.max_object_pixels)))
+    fns = {k: stage_fns(gt, gs, pc.capacity_config(cfg, k)) for k in {c[1] for c in calls}}
+    stages_pass()  # compiles
     best, best_chain = {}, {name: (np.inf, np.inf) for name in chains}
     for r in range(args.rounds):
         for name, dt in stages_pass().items():
@@ -152,17 +159,19 @@ def main() -> None:
             best_chain[name] = (min(best_chain[name][0], wall), min(best_chain[name][1], cpu))
     total = sum(dt for name, dt in best.items() if name != "RHF before (reference)")
     print(f"\n{n} settled scenes ({', '.join(args.actions)}), calls of {sb} at capacities "
-          f"{sorted({k for _, k in calls})} tiles; active tiles median {np.median(tiles):.0f}, max {tiles.max()}; "
-          f"best of {args.rounds} passes")
+          f"{sorted({c[1] for c in calls})} tiles and {sorted({c[2] for c in calls})} pixels; active tiles median "
+          f"{np.median(tiles):.0f}, max {tiles.max()}; object pixels median {np.median(pixels):.0f}, max "
+          f"{pixels.max()}; best of {args.rounds} passes")
     print("\n| stage | CPU ms / scene | share |\n|---|---:|---:|")
     for name, dt in best.items():
         print(f"| {name} | {1e3 * dt / n:.2f} | {'' if 'before' in name else f'{dt / total:.0%}'} |")
     print(f"| sum of stages (now) | {1e3 * total / n:.2f} | |")
     print("\n| whole chain (make_culled_features, chunks of 32) | scenes/s (wall) | wall ms / scene "
           "| CPU ms / scene |\n|---|---:|---:|---:|")
+    labels = {"before": "reference (buffer at the tile capacity, fused RHF)", "now": "as it runs"}
     for name in ("before", "now"):
         wall, cpu = best_chain[name]
-        print(f"| RHF {name} | {n / wall:.1f} | {1e3 * wall / n:.2f} | {1e3 * cpu / n:.2f} |")
+        print(f"| {labels[name]} | {n / wall:.1f} | {1e3 * wall / n:.2f} | {1e3 * cpu / n:.2f} |")
     (wb, cb), (wn, cn) = best_chain["before"], best_chain["now"]
     print(f"\nnow / before: {wb / wn:.2f} (wall), {cb / cn:.2f} (CPU); outputs equal bit for bit; "
           f"load average after {os.getloadavg()[0]:.2f}")

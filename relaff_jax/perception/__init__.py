@@ -44,7 +44,8 @@ Files, in dependency order (this module re-exports their public names):
 - ``normals.py``: normals from the cloud (image-window PCA), shared with real organized clouds;
 - ``voxels.py``: stage 3, per-object voxel grid;
 - ``descriptors.py``: stages 4-5, PCA values and RHF histograms;
-- ``pipeline.py``: ``point_cloud``, ``features``, ``make_batched_features``;
+- ``pipeline.py``: ``object_pixels`` (stage 1) and ``cloud_from_pixels`` (stages 2-3), together
+  ``point_cloud``; ``features``, ``make_batched_features``;
 - ``culled.py``: ``make_culled_features`` (the batched chain with capacities sized per call, same bits);
 - ``plots.py``: ``scene_view`` and ``render_scene_png`` (pyplot-free);
 - ``from_sim.py``: dataset samples -> features (``make_feature_fn``,
@@ -59,20 +60,20 @@ from __future__ import annotations
 
 from relaff_jax.constants import OBJECT_SEGMENTS, SEG_BACKGROUND, SEG_NONE, SEG_OTHER, SEG_TOY
 from relaff_jax.perception.camera import camera_frame, camera_rays, intrinsics, tile_rays
-from relaff_jax.perception.culled import (TILE_BUCKETS, capacity_config, make_culled_features, make_tile_counter,
-                                          tile_capacity)
+from relaff_jax.perception.culled import (PIXEL_BUCKETS, TILE_BUCKETS, capacity_config, make_culled_features,
+                                          make_tile_counter, pixel_capacity, tile_capacity)
 from relaff_jax.perception.descriptors import (fast_arccos, pca_frame, pca_object, rhf_bin, rhf_histograms,
                                                rhf_pair_values, rotation_to_rpy)
 from relaff_jax.perception.noise import NOISE_MODELS, add_depth_noise, depth_noise_sigma, pixel_radius
 from relaff_jax.perception.normals import pixel_normals, smallest_eigenvector, window_normals
-from relaff_jax.perception.pipeline import (SceneFeatures, features, features_from_voxels, make_batched_features,
-                                            point_cloud)
+from relaff_jax.perception.pipeline import (SceneFeatures, cloud_from_pixels, features, features_from_voxels,
+                                            make_batched_features, object_pixels, point_cloud)
 from relaff_jax.perception.plots import object_crop, render_scene_png, scene_view
 from relaff_jax.perception.raycast import cast_rays, surface_normals
 # the function ``render`` shadows its submodule's name on the package (the import binds it last)
 from relaff_jax.perception.render import active_tiles, compact_objects, render, render_objects
 from relaff_jax.perception.scene import (GEOM_BOX, GEOM_CAPSULE, GEOM_PLANE, GEOM_SPHERE, SUPPORTED_GEOMS,
-                                         SceneGeoms, bounding_radius, make_scene, scene_from_mujoco)
+                                         SceneGeoms, bounding_radius, make_scene, scene_from_mujoco, scene_layout)
 from relaff_jax.perception.voxels import voxel_downsample
 
 __all__ = [
@@ -82,12 +83,14 @@ __all__ = [
     "rotation_to_rpy",
     "NOISE_MODELS", "add_depth_noise", "depth_noise_sigma", "pixel_radius",
     "pixel_normals", "smallest_eigenvector", "window_normals",
-    "SceneFeatures", "features", "features_from_voxels", "make_batched_features", "point_cloud",
-    "TILE_BUCKETS", "capacity_config", "make_culled_features", "make_tile_counter", "tile_capacity",
+    "SceneFeatures", "cloud_from_pixels", "features", "features_from_voxels", "make_batched_features",
+    "object_pixels", "point_cloud",
+    "PIXEL_BUCKETS", "TILE_BUCKETS", "capacity_config", "make_culled_features", "make_tile_counter",
+    "pixel_capacity", "tile_capacity",
     "object_crop", "render_scene_png", "scene_view",
     "cast_rays", "surface_normals",
     "active_tiles", "compact_objects", "render", "render_objects",
     "GEOM_BOX", "GEOM_CAPSULE", "GEOM_PLANE", "GEOM_SPHERE", "SUPPORTED_GEOMS", "SceneGeoms",
-    "bounding_radius", "make_scene", "scene_from_mujoco",
+    "bounding_radius", "make_scene", "scene_from_mujoco", "scene_layout",
     "voxel_downsample",
 ]

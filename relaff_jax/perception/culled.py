@@ -5,14 +5,18 @@ Takes a geom layout, a ``PerceptionConfig`` and batched scenes (size, xpos, xmat
 (numpy, one row per scene, input order). ``make_batched_features`` casts ``cull.max_tiles``
 tiles (65,536 rays at the default) and compacts into ``voxel.max_object_pixels`` (32,768)
 slots per scene whatever the scene shows; here a cheap first pass counts each scene's active
-tiles (``render.active_tiles``), scenes are grouped by that count, and each group runs the
-chain compiled for the smallest capacity of ``TILE_BUCKETS`` that holds it: max_tiles = K,
-max_object_pixels = min(M, K * tile^2), and RHF pair tiles of ``RHF_CHUNK``.
+tiles (``render.active_tiles``), scenes are grouped by that count, and each group is cast
+(``object_pixels``) by the program compiled for the smallest capacity of ``TILE_BUCKETS``
+that holds it: max_tiles = K, max_object_pixels = min(M, K * tile^2). The stages after the
+cast (``cloud_from_pixels``, ``features_from_voxels``) then run in a second program on the
+buffer cut to the smallest of ``PIXEL_BUCKETS`` that holds the group's object pixels (read
+back from the cast), with RHF pair tiles of ``RHF_CHUNK`` columns.
 
 Why the bits stay: every object pixel lies in an active tile and the active tiles keep their
 order, so the compacted buffer holds the same pixels in the same slots; slot i's noise is
 draw i of ``normal(key, (M',))``, which with JAX's partitionable threefry (the default) is
-draw i of ``normal(key, (M,))`` (without it the pixel buffer stays at M); the voxel sort,
+draw i of ``normal(key, (M,))`` (without it the pixel buffer stays at M; cutting it to the
+object pixels only drops empty slots, the same argument); the voxel sort,
 scatter and RHF counts see the same valid entries in the same order (the RHF counts are
 integers, so their tiling does not matter). Overflow flags are
 those of the full capacities: a group with more than the largest bucket's tiles runs at the
@@ -22,22 +26,25 @@ never overflow (object pixels <= K * tile^2). Tested: ``tests/perception/test_fe
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from relaff_jax.config.perception import PerceptionConfig
-from .pipeline import make_batched_features
-from .render import active_tiles
-from .scene import SceneGeoms, make_scene
+from .pipeline import cloud_from_pixels, features_from_voxels, object_pixels
+from .render import BUFFER_FIELDS, active_tiles
+from .scene import scene_layout
 
 # Tile capacities a group can run at (each one compiled when first used), then the config's.
 TILE_BUCKETS = (32, 64, 128)
-# RHF pair tile edge: the histograms are integer counts, so any tiling gives the same bits;
-# 128 x 128 pairs run faster than the config's 256 x 256 on XLA CPU (the tile's pair
-# arrays fit the caches; benchmarks/perception_culled.py).
-RHF_CHUNK = 128
+# Object pixel buffer lengths the stages after the cast can run at (each compiled when first
+# used), below the cast's own buffer. Settled scenes show a median of ~2,500 object pixels.
+PIXEL_BUCKETS = (2048, 3072, 4096, 6144, 8192)
+# RHF pair tile columns (``rhf.chunk``; tiles of ``descriptors.RHF_ROWS`` x this): the
+# histograms are integer counts, so any tiling gives the same bits.
+RHF_CHUNK = 256
 
 
 def capacity_config(cfg: PerceptionConfig, tiles: int) -> PerceptionConfig:
@@ -61,28 +68,60 @@ def tile_capacity(count: int, cfg: PerceptionConfig, buckets=TILE_BUCKETS) -> in
     return next((b for b in sorted(buckets) if count <= b < cfg.cull.max_tiles), cfg.cull.max_tiles)
 
 
+def pixel_capacity(count: int, cast_pixels: int, buckets=PIXEL_BUCKETS) -> int:
+    """Smallest bucket below the cast's buffer ``cast_pixels`` holding ``count`` object pixels,
+    else ``cast_pixels`` (always so if threefry is not partitionable: see ``capacity_config``)."""
+    if not jax.config.jax_threefry_partitionable:
+        return cast_pixels
+    return next((b for b in sorted(buckets) if count <= b < cast_pixels), cast_pixels)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def cut(pix: dict, m: int) -> dict:
+    """A batch of ``object_pixels`` results with the buffer fields cut to their first m slots
+    (one dispatch for all of them)."""
+    return {name: v[:, :m] if name in BUFFER_FIELDS else v for name, v in pix.items()}
+
+
 def make_tile_counter(geom_type, geom_seg, cfg: PerceptionConfig):
     """Jitted ``(size (B, G, 3), xpos (B, G, 3), xmat (B, G, 3, 3)) -> (B,) int32`` active tiles per scene."""
-    g = len(np.asarray(geom_type).ravel())
-    static = make_scene(geom_type, geom_seg, np.zeros((g, 3)), np.zeros((g, 3)), np.tile(np.eye(3), (g, 1, 1)))
-
-    def one(size, xpos, xmat):
-        return jnp.sum(active_tiles(SceneGeoms(static.geom_type, static.geom_seg, size, xpos, xmat), cfg))
-
-    return jax.jit(jax.vmap(one))
+    scene = scene_layout(geom_type, geom_seg)
+    return jax.jit(jax.vmap(lambda size, xpos, xmat: jnp.sum(active_tiles(scene(size, xpos, xmat), cfg))))
 
 
 def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = PerceptionConfig(), sub_batch: int = 4,
-                         buckets=TILE_BUCKETS):
+                         buckets=TILE_BUCKETS, pixel_buckets=PIXEL_BUCKETS):
     """``f(size, xpos, xmat, keys) -> dict`` of numpy arrays (B, ...), the fields of
     ``SceneFeatures``, equal to ``make_batched_features(...)(...)`` bit for bit.
 
     Inputs as ``make_batched_features`` (xmat (B, G, 3, 3)). Scenes are sorted by active tiles
-    and perceived in calls of ``sub_batch`` (the last padded by repeating its last scene), each
-    at ``tile_capacity`` of its largest count. ``f.capacities`` lists the capacities used so far.
+    and perceived in calls of ``sub_batch`` (the last padded by repeating its last scene): the
+    cast (``object_pixels``) at ``tile_capacity`` of the call's largest count, then the stages
+    after it (``cloud_from_pixels``, ``features_from_voxels``) on the buffer cut to
+    ``pixel_capacity`` of its largest object pixel count. ``f.capacities`` lists the tile
+    capacities used so far, ``f.pixel_capacities`` the buffer lengths.
     """
     count = make_tile_counter(geom_type, geom_seg, cfg)
-    fns: dict[int, object] = {}
+    scene = scene_layout(geom_type, geom_seg)
+    casts: dict[int, object] = {}
+    rests: dict[int, object] = {}
+
+    def cast(k):
+        if k not in casts:
+            ck = capacity_config(cfg, k)
+            casts[k] = jax.jit(jax.vmap(lambda s, x, m: object_pixels(scene(s, x, m), ck)))
+        return casts[k]
+
+    def rest(m):
+        if m not in rests:
+            base = capacity_config(cfg, cfg.cull.max_tiles)
+            cm = dataclasses.replace(base, voxel=dataclasses.replace(base.voxel, max_object_pixels=m))
+
+            def one(s, x, mat, key, pix):
+                return features_from_voxels(cloud_from_pixels(scene(s, x, mat), pix, key, cm)["voxels"], cm)
+
+            rests[m] = jax.jit(jax.vmap(one))
+        return rests[m]
 
     def f(size, xpos, xmat, keys) -> dict:
         xmat = jnp.asarray(xmat, jnp.float32)
@@ -93,12 +132,17 @@ def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = Perception
         order = np.argsort(n, kind="stable")
         sb = max(1, min(int(sub_batch), b))
         order = np.concatenate([order, np.full(-len(order) % sb, order[-1])])  # pad: repeat the last
+        groups = np.split(order, len(order) // sb)
+        # Every cast is dispatched before the first pixel count is read back.
+        pixels = [cast(tile_capacity(int(n[grp].max()), cfg, buckets))(size[grp], xpos[grp], xmat[grp])
+                  for grp in groups]
         parts = []
-        for grp in np.split(order, len(order) // sb):
-            k = tile_capacity(int(n[grp].max()), cfg, buckets)  # the config's own: overflow as there
-            if k not in fns:
-                fns[k] = make_batched_features(geom_type, geom_seg, capacity_config(cfg, k))
-            parts.append(fns[k](size[grp], xpos[grp], xmat[grp], keys[grp]))
+        for grp, pix in zip(groups, pixels):
+            full = pix["seg"].shape[1]
+            m = pixel_capacity(int(np.asarray(pix["n_pixels"]).sum(1).max()), full, pixel_buckets)
+            if m < full:
+                pix = cut(pix, m)
+            parts.append(rest(m)(size[grp], xpos[grp], xmat[grp], keys[grp], pix))
         parts = jax.device_get(parts)
         out = {}
         for name in parts[0]:
@@ -107,5 +151,6 @@ def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = Perception
             out[name][order[:b]] = cat
         return out
 
-    f.capacities = fns
+    f.capacities = casts
+    f.pixel_capacities = rests
     return f

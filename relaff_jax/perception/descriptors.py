@@ -113,7 +113,8 @@ def rhf_bin(value, feature: int, rcfg: RHFConfig):
 def _rhf_tiles(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
     """(ca, cb, tb, load, index): what both RHF loops share. ``load(t)`` gives pair tile t
     (A's and B's points, normals (3, C), validity (C,)); ``index(tiles)`` the three joint-bin
-    indices (a list of three (C, C)) of its pairs (invalid pairs: the dump slot 3 * bins^2)."""
+    indices (a list of three (C, C)) of its pairs (invalid pairs: the dump slot 3 * bins^2)
+    in the joint histograms of ``_PAIRS``."""
     C, nbin = rcfg.chunk, rcfg.bins
     V = pa.shape[0]
     if V % C:
@@ -122,7 +123,6 @@ def _rhf_tiles(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
     cb = jnp.minimum(cb, V).astype(jnp.int32)
     tb = jnp.maximum((cb + C - 1) // C, 1)
     ar = jnp.arange(C)
-    joint = nbin * nbin
     pa_t, na_t, pb_t, nb_t = pa.T, na.T, pb.T, nb.T  # (3, V) structure of arrays
 
     def load(t):
@@ -134,42 +134,126 @@ def _rhf_tiles(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
         a, an, wa, b, bn, wb = tiles
         w = wa[:, None] & wb[None, :]
         vals = rhf_pair_values(a[:, :, None], an[:, :, None], b[:, None, :], bn[:, None, :])
-        bins = [rhf_bin(v, f, rcfg) for f, v in enumerate(vals)]
-        return [jnp.where(w, q * joint + bins[2 * q] * nbin + bins[2 * q + 1], 3 * joint) for q in range(3)]
+        return _joint_index([rhf_bin(v, f, rcfg) for f, v in enumerate(vals)], w, _PAIRS, nbin)
 
     return ca, cb, tb, load, index
 
 
-def _rhf_normalise(hist, ca, cb, nbin):
-    """(6 * bins,) histograms from the three joint count histograms ``hist`` (3 * bins^2 + 1,)."""
-    j3 = hist[:3 * nbin * nbin].reshape(3, nbin, nbin)
-    marg = jnp.stack([j3.sum(2), j3.sum(1)], axis=1).reshape(len(RHF_NAMES), nbin)  # dx,dy,dz,d,...
+_PAIRS = ((0, 1), (2, 3), (4, 5))  # (dx, dy), (dz, |d|), (the two angles)
+_JOINT_MAX = 1 << 17  # the most bins of one joint histogram of three features
+
+
+def rhf_groups(bins: int) -> tuple:
+    """The feature groups (indices into ``RHF_NAMES``) whose joint histograms the RHF loop
+    counts, one scatter update per group and pair: (dx, dy, dz) and (|d|, both angles) while
+    bins^3 <= 2^17 (50 bins: 125,000 each, both 1 MB: ~15 % faster than three joint 50 x 50
+    histograms, benchmarks/perception_stages.py), else the three pairs (dx, dy), (dz, |d|),
+    (the angles). Integer counts: any grouping gives the same histograms."""
+    return ((0, 1, 2), (3, 4, 5)) if bins ** 3 <= _JOINT_MAX else _PAIRS
+
+
+def _rhf_normalise(hist, ca, cb, nbin, groups):
+    """(6 * bins,) histograms from the joint count histograms ``hist`` of ``groups``
+    (len(groups) * bins^g + 1,) (the last slot: invalid pairs)."""
+    g = len(groups[0])
+    joint = hist[:len(groups) * nbin ** g].reshape((len(groups),) + (nbin,) * g)
+    marg = {f: joint[q].sum(axis=tuple(a for a in range(g) if a != i))
+            for q, grp in enumerate(groups) for i, f in enumerate(grp)}
+    marg = jnp.stack([marg[f] for f in range(len(RHF_NAMES))])
     pairs = ca.astype(jnp.float32) * cb.astype(jnp.float32)
     out = marg.astype(jnp.float32) / jnp.maximum(pairs, 1.0)
     return jnp.where(pairs > 0, out, 0.0).reshape(-1)
 
 
+def _joint_index(bins, w, groups, nbin):
+    """The joint-bin index of each pair in each group's histogram (a list, one per group);
+    invalid pairs (``w`` False) go to the dump slot len(groups) * nbin^g."""
+    size = nbin ** len(groups[0])
+    out = []
+    for q, grp in enumerate(groups):
+        code = bins[grp[0]]
+        for f in grp[1:]:
+            code = code * nbin + bins[f]
+        out.append(jnp.where(w, q * size + code, len(groups) * size))
+    return out
+
+
+# Rows of A per pair tile of ``rhf_histograms`` (its columns: ``rhf.chunk`` points of B).
+RHF_ROWS = 16
+
+
+def _rhf_rows_tiles(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
+    """(n_tiles, load, index) of the pair tiles ``rhf_histograms`` counts: R = ``RHF_ROWS`` rows
+    of A by C = ``rhf.chunk`` consecutive points of B, taken from the sequence of (row block,
+    j) for j < cb, so a tile that reaches B's end carries on with the next row block's first
+    points (when cb >= C; otherwise each row block is one tile of C columns, those past cb
+    invalid). Every valid pair lies in exactly one tile, and only the last tile and A's last
+    row block are partly padded (on settled scenes ~1.03 slots per pair, against ~1.48 for
+    square tiles of 128). ``load(t)`` gives tile t's A rows of its two row blocks (points and
+    normals (3, R) each), the column's row block (0 or 1, (C,)), B's points and normals
+    (3, C) and the pair validity (R, C); ``index(tiles)`` the joint-bin indices of its pairs,
+    one (R, C) array per group of ``rhf_groups`` (invalid pairs: the dump slot)."""
+    C, R, nbin = rcfg.chunk, min(RHF_ROWS, rcfg.chunk), rcfg.bins
+    V = pa.shape[0]
+    ca = jnp.minimum(ca, V).astype(jnp.int32)
+    cb = jnp.minimum(cb, V).astype(jnp.int32)
+    n_blocks = (ca + R - 1) // R
+    row_len = jnp.maximum(cb, C)  # a row block's stretch of the sequence
+    n_tiles = (n_blocks * row_len + C - 1) // C
+    # A padded by a row block (the next block's slice never clamps); B followed by its own first
+    # C points at cb, so a wrapped tile reads B[j0:j0 + C] as one slice.
+    a_t = jnp.concatenate([pa.T, na.T], 0)  # (6, V) structure of arrays
+    a_t = jnp.concatenate([a_t, jnp.zeros((6, R), a_t.dtype)], 1)
+    b_t = jnp.concatenate([pb.T, nb.T], 0)
+    b_t = jnp.concatenate([b_t, jnp.zeros((6, C), b_t.dtype)], 1)
+    b_t = jax.lax.dynamic_update_slice(b_t, b_t[:, :C], (0, cb))
+    rows, cols = jnp.arange(R), jnp.arange(C)
+    groups = rhf_groups(nbin)
+
+    def load(t):
+        s = t * C
+        blk, j0 = s // row_len, s % row_len
+        nxt = (j0 + cols >= row_len).astype(jnp.int32)  # column in the next row block
+        j = j0 + cols - nxt * row_len
+        a0 = jax.lax.dynamic_slice(a_t, (0, blk * R), (6, R))
+        a1 = jax.lax.dynamic_slice(a_t, (0, blk * R + R), (6, R))
+        b = jax.lax.dynamic_slice(b_t, (0, j0), (6, C))
+        w = ((blk + nxt) * R)[None, :] + rows[:, None] < ca
+        w = w & (j < cb)[None, :]  # past the sequence's end: a row block >= n_blocks, invalid above
+        return a0, a1, nxt, b, w
+
+    def index(tiles):
+        a0, a1, nxt, b, w = tiles
+        a = jnp.where(nxt[None, None, :] > 0, a1[:, :, None], a0[:, :, None])  # (6, R, C)
+        vals = rhf_pair_values(a[:3], a[3:], b[:3, None, :], b[3:, None, :])
+        return _joint_index([rhf_bin(v, f, rcfg) for f, v in enumerate(vals)], w, groups, nbin)
+
+    return n_tiles, load, index
+
+
 @functools.lru_cache(maxsize=None)
 def _rhf_counts_for(rcfg: RHFConfig):
-    """``counts(pa, na, ca, pb, nb, cb) -> (3 * bins^2 + 1,) int32``: the three joint count
-    histograms of one scene (the last slot collects invalid pairs), built once per config."""
+    """``counts(pa, na, ca, pb, nb, cb) -> (len(groups) * bins^g + 1,) int32``: the joint count
+    histograms of ``rhf_groups`` of one scene (the last slot collects invalid pairs), built
+    once per config."""
+    groups = rhf_groups(rcfg.bins)
 
     @jax.custom_batching.custom_vmap
     def counts(pa, na, ca, pb, nb, cb):
-        ca, cb, tb, load, index = _rhf_tiles(pa, na, ca, pb, nb, cb, rcfg)
-        n_tiles = (ca + rcfg.chunk - 1) // rcfg.chunk * tb
+        n_tiles, load, index = _rhf_rows_tiles(pa, na, ca, pb, nb, cb, rcfg)
 
         def body(state):
             # The current tiles travel in the loop state: read as loop parameters, the pair
             # arithmetic vectorises (with the dynamic slices fused into it, it ran ~10x
-            # slower). The indices stay (3, C, C): flattened to 1-D inside the fusion, XLA CPU
+            # slower). The indices stay (groups, R, C): flattened to 1-D inside the fusion, XLA CPU
             # computes each pair's (i, j) by division and gathers its operands unvectorised
             # (~5x slower per tile).
             t, hist, tiles = state
             idx = jnp.stack(index(tiles))
             return t + 1, scatter_add(hist, idx, jnp.ones_like(idx)), load(t + 1)
 
-        init = (jnp.int32(0), jnp.zeros(3 * rcfg.bins ** 2 + 1, jnp.int32), load(jnp.int32(0)))
+        init = (jnp.int32(0), jnp.zeros(len(groups) * rcfg.bins ** len(groups[0]) + 1, jnp.int32),
+                load(jnp.int32(0)))
         return jax.lax.while_loop(lambda s: s[0] < n_tiles, body, init)[1]
 
     @counts.def_vmap
@@ -187,18 +271,21 @@ def rhf_histograms(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
     """Six histograms over all pairs (a in object A, b in object B), tile by tile.
 
     pa, na: (V, 3) points and unit normals of A with the first ``ca`` valid; likewise pb, nb, cb.
-    Values per pair: ``rhf_pair_values``; bins: ``rhf_bin``. Work is done on
-    ``chunk`` x ``chunk`` tiles in a while loop over only the tiles that hold valid pairs, so
-    memory is bounded and time follows ca * cb, not V * V. Counts are accumulated in three joint
-    bins x bins histograms (dx,dy), (dz,|d|), (the two angles) -- one scatter per tile for
-    the three -- and marginalised at the end (exact: the same counts). Under ``vmap`` the
+    Values per pair: ``rhf_pair_values``; bins: ``rhf_bin``. Work is done on tiles of
+    ``RHF_ROWS`` points of A by ``chunk`` consecutive points of B (a tile reaching B's end
+    carries on with the next rows, ``_rhf_rows_tiles``) in a while loop over only the tiles
+    that hold valid pairs, so memory is bounded and time follows ca * cb, not V * V. Counts are
+    accumulated in the joint histograms of ``rhf_groups`` ((dx, dy, dz) and (|d|, both angles)
+    at 50 bins) -- one scatter per tile for all groups -- and marginalised at the end (exact:
+    the same counts). Under ``vmap`` the
     scenes run one after another, each loop to its own tile count (integer counts: the same
     bits as any order). Returns (6 * bins,): counts divided by ca * cb (each histogram sums to
     1), or all zeros if ca * cb == 0.
     """
     ca, cb = jnp.asarray(ca, jnp.int32), jnp.asarray(cb, jnp.int32)
     hist = _rhf_counts_for(rcfg)(jnp.asarray(pa), jnp.asarray(na), ca, jnp.asarray(pb), jnp.asarray(nb), cb)
-    return _rhf_normalise(hist, jnp.minimum(ca, pa.shape[0]), jnp.minimum(cb, pb.shape[0]), rcfg.bins)
+    return _rhf_normalise(hist, jnp.minimum(ca, pa.shape[0]), jnp.minimum(cb, pb.shape[0]), rcfg.bins,
+                          rhf_groups(rcfg.bins))
 
 
 def rhf_histograms_fused(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
@@ -217,4 +304,4 @@ def rhf_histograms_fused(pa, na, ca, pb, nb, cb, rcfg: RHFConfig):
 
     init = (jnp.int32(0), jnp.zeros(3 * rcfg.bins ** 2 + 1, jnp.int32), load(jnp.int32(0)))
     hist = jax.lax.while_loop(lambda s: s[0] < n_tiles, body, init)[1]
-    return _rhf_normalise(hist, ca, cb, rcfg.bins)
+    return _rhf_normalise(hist, ca, cb, rcfg.bins, _PAIRS)

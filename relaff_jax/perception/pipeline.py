@@ -18,19 +18,23 @@ from .noise import add_depth_noise
 from .normals import pixel_normals
 from .raycast import surface_normals
 from .render import compact_objects, render_objects
-from .scene import SceneGeoms, make_scene
+from .scene import SceneGeoms, scene_layout
 from .voxels import voxel_downsample
 
 
-def point_cloud(scene: SceneGeoms, key, cfg: PerceptionConfig) -> dict:
-    """Stages 1-3 for one scene: object pixels (noisy) and per-object voxel clouds.
-
-    Returns dict(pixels=``compact_objects`` result after noise with normal (M, 3) from
-    ``cfg.normals.source``, voxels=``voxel_downsample`` result plus n_pixels, pixel_overflow
-    and tile_overflow).
-    """
+def object_pixels(scene: SceneGeoms, cfg: PerceptionConfig) -> dict:
+    """Stage 1 for one scene: the ``compact_objects`` result of ``render_objects`` (noise-free
+    object pixels in a buffer of ``voxel.max_object_pixels``) plus its ``tile_overflow``."""
     ro = render_objects(scene, cfg)
-    pix = compact_objects(ro, cfg)
+    return dict(compact_objects(ro, cfg), tile_overflow=ro["tile_overflow"])
+
+
+def cloud_from_pixels(scene: SceneGeoms, pix: dict, key, cfg: PerceptionConfig) -> dict:
+    """Stages 2-3 on an ``object_pixels`` result: normals, depth noise, voxel grid (returns
+    what ``point_cloud`` does). Any buffer length that holds the scene's object pixels gives the same
+    bits (slot i's noise is draw i; the voxel sort sees the same valid keys in the same order)."""
+    pix = dict(pix)
+    tile_overflow = pix.pop("tile_overflow")
     if cfg.normals.source == "ray":  # the exact (noise-free) hit geometry, see docs/perception.md
         pix["normal"] = surface_normals(scene, pix["points"], pix["geom"])
     if cfg.noise.model != "none":
@@ -40,8 +44,18 @@ def point_cloud(scene: SceneGeoms, key, cfg: PerceptionConfig) -> dict:
     vox = voxel_downsample(pix["points"], pix["normal"], pix["seg"], cfg)
     vox["n_pixels"] = pix["n_pixels"]
     vox["pixel_overflow"] = pix["pixel_overflow"]
-    vox["tile_overflow"] = ro["tile_overflow"]
+    vox["tile_overflow"] = tile_overflow
     return dict(pixels=pix, voxels=vox)
+
+
+def point_cloud(scene: SceneGeoms, key, cfg: PerceptionConfig) -> dict:
+    """Stages 1-3 for one scene: object pixels (noisy) and per-object voxel clouds.
+
+    Returns dict(pixels=``compact_objects`` result after noise with normal (M, 3) from
+    ``cfg.normals.source``, voxels=``voxel_downsample`` result plus n_pixels, pixel_overflow
+    and tile_overflow).
+    """
+    return cloud_from_pixels(scene, object_pixels(scene, cfg), key, cfg)
 
 
 @chex.dataclass(frozen=True)
@@ -115,10 +129,10 @@ def make_batched_features(geom_type, geom_seg, cfg: PerceptionConfig = Perceptio
     before vmap, e.g. ``chex.assert_max_traces(n=1)`` in tests.
     """
     g = len(np.asarray(geom_type).ravel())
-    static = make_scene(geom_type, geom_seg, np.zeros((g, 3)), np.zeros((g, 3)), np.tile(np.eye(3), (g, 1, 1)))
+    scene = scene_layout(geom_type, geom_seg)
 
     def one(size, xpos, xmat, key):
-        return features(SceneGeoms(static.geom_type, static.geom_seg, size, xpos, xmat), key, cfg)
+        return features(scene(size, xpos, xmat), key, cfg)
 
     batched = jax.jit(jax.vmap(wrap(one) if wrap is not None else one))
 

@@ -157,6 +157,10 @@ def render_objects(scene: SceneGeoms, cfg: PerceptionConfig) -> dict:
                 geom=jnp.where(valid, geom, -1), tile_overflow=jnp.sum(act) > K)
 
 
+# The fields of a ``compact_objects`` result with one entry per buffer slot (M, ...).
+BUFFER_FIELDS = ("pixel", "points", "geom", "depth", "seg")
+
+
 def compact_objects(cloud: dict, cfg: PerceptionConfig) -> dict:
     """Keep only object pixels (segments 1, 2) in a fixed buffer of M = max_object_pixels.
 

@@ -73,6 +73,14 @@ def make_scene(geom_type, geom_seg, size, xpos, xmat) -> SceneGeoms:
     return SceneGeoms(gt, gs, size, xpos, xmat)
 
 
+def scene_layout(geom_type, geom_seg):
+    """``build(size, xpos, xmat) -> SceneGeoms`` for one geom layout, checked once here by
+    ``make_scene``; ``build`` takes the arrays as given (one scene's, inside jit and vmap)."""
+    g = len(np.asarray(geom_type).ravel())
+    static = make_scene(geom_type, geom_seg, np.zeros((g, 3)), np.zeros((g, 3)), np.tile(np.eye(3), (g, 1, 1)))
+    return lambda size, xpos, xmat: SceneGeoms(static.geom_type, static.geom_seg, size, xpos, xmat)
+
+
 def scene_from_mujoco(model, data, geom_seg) -> SceneGeoms:
     """``SceneGeoms`` of a native MuJoCo (MjModel, MjData) after ``mj_forward``."""
     return make_scene(model.geom_type, geom_seg, model.geom_size, data.geom_xpos, data.geom_xmat)

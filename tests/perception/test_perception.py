@@ -730,3 +730,19 @@ def test_culled_features_equal_the_batched_chain(chain, random_scenes):
     for k, want in chain["feats"].items():
         np.testing.assert_array_equal(got[k], np.asarray(want), err_msg=k)
     assert not np.all(got["rhf"] == 0)
+
+
+def test_culled_features_on_pixel_buffers_cut_to_the_cast(chain, random_scenes):
+    """The stages after the cast on buffers cut to the object pixels (one bucket: the largest
+    scene's count, so that scene's buffer holds exactly its pixels and the others' are shorter
+    than their cast's) give the bits of ``make_batched_features``."""
+    scenes, seg = random_scenes
+    b = chain["batch"]
+    counts = np.asarray(chain["feats"]["n_pixels"]).sum(1)
+    assert 0 < counts.min() < counts.max() < SMALL.voxel.max_object_pixels
+    f = P.make_culled_features(scenes[0][0].geom_type, seg, SMALL, sub_batch=1, buckets=(),
+                               pixel_buckets=(int(counts.max()),))
+    got = f(b.size, b.xpos, b.xmat, chain["keys"])
+    assert sorted(f.pixel_capacities) == [int(counts.max())]
+    for k, want in chain["feats"].items():
+        np.testing.assert_array_equal(got[k], np.asarray(want), err_msg=k)

@@ -1,6 +1,7 @@
-"""The RHF counting loop (one scatter of (3, C, C) indices per tile, scenes one after another
-under vmap) against the loop it replaced (``rhf_histograms_fused``): the same bits, single
-and batched, on random clouds with clipped values, empty objects and capacities past C."""
+"""The RHF counting loop (wrapped row tiles, one scatter of the joint indices per tile, scenes
+one after another under vmap) against the loop it replaced (``rhf_histograms_fused``): the
+same bits, single and batched, on random clouds with clipped values, empty objects and
+capacities past C."""
 import dataclasses
 
 import jax
@@ -66,4 +67,16 @@ def test_rhf_counts_equal_the_fused_loop_at_the_stage_tile():
     cnt[3] = (RHF_CHUNK + 3, 2 * RHF_CHUNK - 1)
     new = jax.jit(jax.vmap(lambda *a: rhf_histograms(*a, rcfg)))(*_args(pts, nrm, cnt))
     old = jax.jit(jax.vmap(lambda *a: rhf_histograms_fused(*a, rcfg)))(*_args(pts, nrm, cnt))
+    np.testing.assert_array_equal(np.asarray(new), np.asarray(old))
+
+
+def test_rhf_counts_in_joint_histograms_of_two_features_past_2_17_cells():
+    """At 50 bins (the other tests) the loop counts two joint histograms of three features; at
+    60 (216,000 cells each) three of two features: the same histograms as the fused loop."""
+    from relaff_jax.perception.descriptors import rhf_groups
+    assert len(rhf_groups(50)[0]) == 3 and len(rhf_groups(60)[0]) == 2
+    rcfg = dataclasses.replace(RCFG, bins=60)
+    pts, nrm, cnt = clouds(3, 4)
+    new = jax.jit(jax.vmap(lambda *a: rhf_histograms(*a, rcfg)))(*_args(pts, nrm, cnt))
+    old = jax.vmap(lambda *a: rhf_histograms_fused(*a, rcfg))(*_args(pts, nrm, cnt))
     np.testing.assert_array_equal(np.asarray(new), np.asarray(old))
