@@ -24,7 +24,6 @@ from typing import Any, Iterable, Mapping
 from relaff_jax.errors import UserError
 
 from . import objects as lib
-from relaff_jax.config.action import SceneConfig
 
 OBJECT_KEYS = ("name", "groups", "mass", "friction", "colour", "parts", "sphere_radius", "inner")
 PART_KEYS = ("size", "centre")
@@ -205,7 +204,10 @@ def load_library(path: str | Path, scene: Any = None, grip_margin: float = 0.02)
         if name in colours:
             _refuse(where, f"object {name!r}: defined twice in the file")
         spec = parse_spec(d, f"{where} (object {i + 1})" if not isinstance(name, str) else where, colours)
-        check_fits(spec, where, scene or SceneConfig(), grip_margin)
+        if scene is None:  # here, not at the top: the config tree imports this module
+            from relaff_jax.config.action import SceneConfig
+            scene = SceneConfig()
+        check_fits(spec, where, scene, grip_margin)
         colours[spec.name] = spec.colour
         out.append(spec)
     return tuple(out)

@@ -352,3 +352,12 @@ def test_commands_that_simulate_refuse_a_bad_library_before_any_work(tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "object 'dish': groups ['base', 'rake']: at most one of base, obstacle, rake" in err[0]
     assert not out.exists()
+
+
+def test_the_module_imports_on_its_own():
+    # the config tree imports this module; it once imported the config at its top, a cycle that
+    # failed whenever this module was the first one imported
+    import subprocess
+    import sys
+    run = subprocess.run([sys.executable, "-c", "import relaff_jax.sim.object_library"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr.splitlines()[-1:]
