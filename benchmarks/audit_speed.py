@@ -70,10 +70,10 @@ def main() -> None:
     n = min(a.sample, len(z["pair"]))
     pair, qpos, qvel = z["pair"][:n], z["qpos"][:n], z["qvel"][:n]
     plan = {k[5:]: z[k][:n] for k in z if k.startswith("plan_")}
-    from relaff_jax.sim.actions.registry import action_id, registry
-    from relaff_jax.sim.actions.tables import spec_tables
+    from relaff_jax.sim.actions.registry import action_id
+    from relaff_jax.sim.actions.tables import tables
 
-    measure = int(spec_tables(registry()).measure[action_id(action)])
+    measure = int(tables(cfg).measure[action_id(action)])  # the dataset's programs' (v3: rake's dwell), as the audit
     AR._replay(cfg, action, pair[:1], qpos[:1], qvel[:1], {k: v[:1] for k, v in plan.items()}, measure)  # warm-up
     world = setup(cfg).world
     new_pad, native._pad_contacts = native._pad_contacts, former_pad_contacts
