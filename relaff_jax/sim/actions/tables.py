@@ -2,7 +2,8 @@
 user's), what the compiled programs index with the traced action id.
 
 ``tables(cfg) -> templates.Tables`` (A, ...) and ``run_steps(cfg) -> (A,)``; for the nine
-built-ins they are ``templates.TPL_*``, ``GRASPS`` (v1) and v2's longer rest, row for row.
+built-ins they are ``templates.TPL_*``, ``GRASPS`` (v1) and v2's longer rest, row for row, with
+v3's dwell in rake and v4's before every built-in's descent (``dwells``).
 """
 from __future__ import annotations
 
