@@ -11,9 +11,11 @@ from relaff_jax.config.constraints import (FRACTION, AnyOf, Boolean, Check, Inte
 from relaff_jax.config.node import Node
 
 # ActionConfig.programs: the motor programs' versions (v1: before issue 43; v3: v2 with move's
-# sweep raised to a fixed point and base grasps refused that would press the toy too hard)
-PROGRAMS = ("v1", "v2", "v3")
-# ActionConfig fields only v2 and v3 read; a v1 dataset's sidecar leaves them out (templates.stored_config)
+# sweep raised to a fixed point and base grasps refused that would press the toy too hard; v4:
+# v3 with the arm at rest before each descent, the pads' footprint grown by the tracking error
+# and the palm clear of a toy a base grasp pushes across)
+PROGRAMS = ("v1", "v2", "v3", "v4")
+# ActionConfig fields only v2, v3 and v4 read; a v1 dataset's sidecar leaves them out (templates.stored_config)
 V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window",
              "guard_depth", "tilt_lean", "tilt_sweep", "straight_pieces")
 
@@ -209,7 +211,10 @@ class ActionConfig(Node):
     # lift, take, pour and slide read the measuring step only, so they cannot change; the
     # other actions read the end, now the program's end (docs/actions.md, "Tuning").
     stop_at_program_end: bool = True
-    # Which motor programs (docs/actions.md, "Programs v1 and v2", "Programs v3"): "v3" (the
+    # Which motor programs (docs/actions.md, "Programs v1 and v2", "Programs v3", "Programs v4"):
+    # "v4" is v3 with the arm at rest at the pre-grasp pose before it descends, the pads'
+    # footprint grown by the arm's tracking error, and the palm clear of the tipping reach of
+    # a toy a base grasp pushes across (not yet the default: the paper study runs v3); "v3" (the
     # default) is v2 with move's sweep raised over every top and rim, a base or obstacle grasp refused
     # where the pads would press the toy beyond the force bound, the squeeze commanded from the
     # widest body between the pads, and rake on one IK branch with its turn, axis and hand-ahead

@@ -20,7 +20,7 @@ from . import arm as A
 from . import objects as lib
 from . import world as wd
 from .geometry import quat_to_mat
-from .templates import ActionConfig
+from .templates import ActionConfig, is_v4
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -195,6 +195,14 @@ def tool_squeeze(arm: A.Arm, cfg: ActionConfig) -> float:
     return max(HANDLE_HALF - cfg.squeeze_min / arm.finger_kp, 0.0)
 
 
+# m, v4: how far the pads' footprint is grown where ``clear_grasp`` tests that no pad comes down
+# on the other object: the hand's largest horizontal distance from the grasp's vertical line
+# during the descent, 3.4 mm in 254 C replays of v4's pull and lift (after the dwell), rounded up
+# to the millimetre (docs/actions.md, "Programs v4"). v3 tested the pads' exact rectangles: a toy
+# car 0.3 mm clear of a pad at plan time was landed on by the pad 4-6 mm off its plan (285 N).
+PAD_MARGIN = 0.004
+
+
 def clear_grasp(arm: A.Arm, cfg: ActionConfig, g: Grasp, body: Body, other: Body, inner: jax.Array) -> Grasp:
     """v2: a grasp that keeps the palm off every object (docs/actions.md, "Programs v1 and v2").
 
@@ -202,9 +210,9 @@ def clear_grasp(arm: A.Arm, cfg: ActionConfig, g: Grasp, body: Body, other: Body
     top (the palm's underside stays ``palm_margin`` above it) and than the same below the
     highest point of ``other`` under the palm's footprint (grown by ``palm_margin``); the
     grasp is refused (``fits`` False) if that leaves the pads less than ``min_grip`` (or, for
-    a thinner body, all its v1 overlap) of the body, or if a pad would come down on ``other``
-    above the fingertips. ``inner``: the other's container opening (``Geometry.oth_inner``
-    for the other slot, zeros for a toy)."""
+    a thinner body, all its v1 overlap) of the body, or if a pad (v4: its footprint grown by
+    ``PAD_MARGIN``) would come down on ``other`` above the fingertips. ``inner``: the other's
+    container opening (``Geometry.oth_inner`` for the other slot, zeros for a toy)."""
     zmin, zmax = body.z_range()
     reach = arm.palm_above_tip - cfg.palm_margin
     palm = jnp.asarray(arm.palm_half[::-1], jnp.float32) + cfg.palm_margin  # along, across the closing axis
@@ -214,6 +222,8 @@ def clear_grasp(arm: A.Arm, cfg: ActionConfig, g: Grasp, body: Body, other: Body
     tip = jnp.maximum(tip, top_under(other, inner, c, g.closing, palm) + cfg.palm_margin - arm.palm_above_tip)
     holds = zmax - tip >= jnp.minimum(cfg.min_grip, zmax - tip0) - 1e-6
     pad = jnp.array([arm.pad_thickness / 2, arm.pad_half_x], jnp.float32)
+    if is_v4(cfg):
+        pad = pad + PAD_MARGIN
     off = g.opening + arm.pad_thickness / 2
     pads_free = jnp.all(jnp.stack([top_under(other, inner, c + s * off * g.closing, g.closing, pad) < tip
                                    for s in (-1.0, 1.0)]))

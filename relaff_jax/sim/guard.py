@@ -39,8 +39,8 @@ BACKOFF_S = 0.02
 def guard_tables(cfg: ActionConfig) -> tuple[np.ndarray, np.ndarray]:
     """(A, S) bool (the run's actions, ``actions.tables``): the segments at whose steps a landing
     stops the descent, and (A, S + 1)
-    bool: the waypoints a stop replaces (segment k runs from waypoint k to k + 1: waypoint 1,
-    where the descent starts, through the last one that is the grasp). All False for v1 and
+    bool: the waypoints a stop replaces (segment k runs from waypoint k to k + 1: the waypoint
+    where the descent starts (1; v4 2, after the dwell) through the last one that is the grasp). All False for v1 and
     for the programs without a grasp (move, rake)."""
     tb = tables(cfg)
     grasp = (tb.target == GRASP_TARGET) & (tb.grasp[:, None] != 0)
@@ -51,7 +51,7 @@ def guard_tables(cfg: ActionConfig) -> tuple[np.ndarray, np.ndarray]:
         return np.zeros_like(seg), rows
     for a in range(len(rows)):
         if seg[a].any():
-            rows[a, 1:np.flatnonzero(grasp[a]).max() + 2] = True
+            rows[a, np.flatnonzero(seg[a]).min():np.flatnonzero(grasp[a]).max() + 2] = True
     return seg, rows
 
 

@@ -19,7 +19,7 @@ from .bodies import (DOWN, Body, Geometry, Grasp, ball_extent, between_pads, bod
                      squeeze_command, squeezed_half, stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
 from .sweep import falls_onto_fingers, sweep_raise, sweep_tops
-from .templates import N_TARGETS, ActionConfig, is_v3 as _v3
+from .templates import N_TARGETS, ActionConfig, is_v3 as _v3, is_v4
 
 from relaff_jax.constants import ACTIONS
 
@@ -69,12 +69,17 @@ def _base_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene, tilt: bool = False) ->
     v2 with the palm clear of both objects and a squeeze for both objects' weight. ``tilt``
     (pour, slide; ``cfg.tilt_sweep``): the palm clears the toy's diagonal, since a tilted
     toy may tip over inside or on its base. v3: the squeeze from the body the pads end on
-    (``bodies.squeezed_half``), and refused where that is the toy (``toy_spans_pads``)."""
+    (``bodies.squeezed_half``), and refused where that is the toy (``toy_spans_pads``). v4: the
+    palm also clears the diagonal of a toy the pads push across (``pushed_across``)."""
     g = top_down_grasp(arm, cfg, sc.oth)
     if cfg.programs == "v1":
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
     toy = tipping_body(sc.toy, sc.toy_radius) if tilt and cfg.tilt_sweep else sc.toy
-    g = clear_grasp(arm, cfg, g, sc.oth, toy, jnp.zeros(3))
+    g0, g = g, clear_grasp(arm, cfg, g, sc.oth, toy, jnp.zeros(3))
+    if is_v4(cfg):  # a toy the pads push across may tip: the palm clears its diagonal too
+        tall = clear_grasp(arm, cfg, g0, sc.oth, tipping_body(sc.toy, sc.toy_radius), jnp.zeros(3))
+        tall = tall._replace(fits=tall.fits & g.fits)
+        g = jax.tree_util.tree_map(lambda a, b: jnp.where(pushed_across(arm, g, sc), a, b), tall, g)
     mass = sc.toy_mass + sc.oth_mass
     half = sc.oth.half_width(g.closing)
     if _v3(cfg):
@@ -93,6 +98,20 @@ def toy_spans_pads(arm: A.Arm, g: Grasp, sc: Scene) -> jax.Array:
     pads rest on the base, and is grasped as in v2."""
     toy_half = ball_extent(sc.toy, sc.toy_radius)[0](g.closing)
     return between_pads(arm, g, sc.toy, sc.toy_radius) & (toy_half > sc.oth.half_width(g.closing))
+
+
+def pushed_across(arm: A.Arm, g: Grasp, sc: Scene) -> jax.Array:
+    """v4: would the closing pads of the base grasp ``g`` push the toy across the base's top? They
+    do when the toy lies between them (``bodies.between_pads``), is no wider than the base along
+    the closing axis (else ``toy_spans_pads``) and reaches past the base's side there: the pad on
+    that side meets it first and pushes it until the pads rest on the base. Pushed across an open
+    container, one end drops into the opening and the other rises (pull 10054 of the paper v3
+    dataset: a toy car on a cup, 9 mm over its edge, then under the palm at 2.95 N for 0.55 s),
+    so the palm clears the toy's tipping reach (``tipping_body``), as pour's and slide's do."""
+    toy_half = ball_extent(sc.toy, sc.toy_radius)[0](g.closing)
+    base_half = sc.oth.half_width(g.closing)
+    reach = jnp.abs((sc.toy.centre - g.xy) @ g.closing) + toy_half
+    return between_pads(arm, g, sc.toy, sc.toy_radius) & (toy_half <= base_half) & (reach > base_half)
 
 
 def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:

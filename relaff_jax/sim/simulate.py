@@ -171,7 +171,7 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     world, arm = st.world, st.arm
     toy_b, obj_b = world.toy_body, world.obj_body
     tb = tables(cfg)
-    v2 = cfg.programs != "v1"  # v2 and v3 execute alike (v3 plans differently)
+    v2 = cfg.programs != "v1"  # v2-v4 execute alike (v3 and v4 plan differently, their tables dwell)
     com_of = lambda d: jnp.stack([d.xipos[toy_b], d.xipos[obj_b]])
     nqo = 14  # the two free joints lead the action world's qpos (settled scenes' layout)
     # v2 reads the objects' state at a step found after the run, so the trace keeps qpos too

@@ -38,15 +38,15 @@ N_STEPS = 815  # 3.26 s at the 4 ms step (the longest template, pour/slide, plus
 N_TARGETS = 6
 
 
-def _template(rows) -> Template:
+def _template(rows, n_segments: int = N_SEGMENTS, n_steps: int = N_STEPS) -> Template:
     steps, target, closed = (list(c) for c in zip(*rows))
     measure = sum(steps) - 1
-    while len(steps) < N_SEGMENTS:  # 1-step dwells, then the last one rests until N_STEPS
+    while len(steps) < n_segments:  # 1-step dwells, then the last one rests until n_steps
         steps.append(1)
         target.append(target[-1])
         closed.append(closed[-1])
-    steps[-1] += N_STEPS - sum(steps)
-    assert len(steps) == N_SEGMENTS and min(steps) >= 1, rows
+    steps[-1] += n_steps - sum(steps)
+    assert len(steps) == n_segments and min(steps) >= 1, rows
     return Template(tuple(steps), tuple(target), tuple(closed), measure)
 
 
@@ -101,15 +101,22 @@ class Tables(NamedTuple):
 
 
 def is_v3(cfg: ActionConfig) -> bool:
-    """Programs v3: v2 with plan-time rules and rake's dwell (v2 and v1 keep their plans bit for bit)."""
+    """Programs v3 or later: v2 with plan-time rules and rake's dwell (v2 and v1 keep their plans bit for bit)."""
     return cfg.programs not in ("v1", "v2")
+
+
+def is_v4(cfg: ActionConfig) -> bool:
+    """Programs v4: v3 with the dwell before every descent and the grasp rules of
+    ``bodies.PAD_MARGIN`` and ``programs.pushed_across`` (v3 keeps its plans bit for bit)."""
+    return cfg.programs == "v4"
 
 
 def tables(cfg: ActionConfig) -> Tables:
     """The nine built-ins' templates ``cfg.programs`` runs: v1 the module's ``TPL_*`` tables
     (``N_STEPS``); v2 the same segments with the final rest ``cfg.rest_hold`` steps longer, so
     that a goal read at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after
-    ``measure``; v3 as v2 here (rake's dwell after the transit is the run's tables': ``actions.tables``).
+    ``measure``; v3 and v4 as v2 here (their dwells after the transit are the run's tables':
+    ``actions.tables``).
     The run's tables, a user's actions after the nine: ``actions.tables``."""
     if cfg.programs == "v1":
         return Tables(TPL_STEPS, TPL_TARGET, TPL_CLOSED, TPL_MEASURE, N_STEPS, 0)

@@ -45,6 +45,29 @@ RAKE_ROWS = [
     ("block", "rake_short", (0.3, 0.1, 0.0), HELD, 0.0),  # 3 close to the robot: v3 refuses it (axis)
 ] * 2
 
+def posed(w, toy, other, txyz, oxyz, tyaw=0.0, tilt=0.0):
+    """(pair id, object qpos (14,) float32) of a hand-posed scene: the toy at ``txyz`` turned
+    ``tyaw`` about z (or tilted ``tilt`` about its y axis: a car's long side goes up), the other
+    object at ``oxyz``, unturned."""
+    q = np.array(w.mj_model.qpos0, np.float32)[:14]
+    q[0:7] = [*txyz, *quat(tyaw)]
+    if tilt:
+        q[3:7] = [np.cos(tilt / 2), 0.0, np.sin(tilt / 2), 0.0]
+    q[7:14] = [*oxyz, *quat(0.0)]
+    return w.pair_id(toy, other), q
+
+
+def posed_program(action, cfg, toy, other, txyz, oxyz, tyaw=0.0, tilt=0.0):
+    """The motor program of ``action`` (``programs.program``, one scene, no simulation) in the
+    scene ``posed`` makes, the arm tables and the (toy, other) ``bodies.Body`` views."""
+    from relaff_jax.sim import bodies, planning, programs
+
+    st = planning.setup(cfg)
+    p, q = posed(st.world, toy, other, txyz, oxyz, tyaw, tilt)
+    body = bodies.bodies(st.geo, jnp.int32(p), jnp.asarray(q))
+    return programs.program(action, st.arm, cfg, st.geo, jnp.int32(p), jnp.asarray(q)), st.arm, body
+
+
 def hand_built(w, rows):
     """rows: (toy, other, toy_xyz, obj_xyz, obj_yaw) -> (pair, qpos0) at batch len(rows)."""
     pair, qpos = [], []

@@ -15,32 +15,16 @@ from relaff_jax.sim import bodies, planning, programs, sweep
 from relaff_jax.sim.geometry import quat_to_mat
 from relaff_jax.sim import objects as lib
 
+from helpers.scenes import posed as scene, posed_program as prog
+
 V3 = ActionConfig(programs="v3")
 V2 = dataclasses.replace(V3, programs="v2")
 FLOOR = dict(lib.get("basket").parts)["base"].size[2]  # the basket's floor, 1 cm
-# v2's programs of SCENES, made by ``v2_programs()`` with the code before v3 existed (main at
+# v2's programs of SCENES, made by ``pinned_programs()`` with the code before v3 existed (main at
 # a00fc45, run with PYTHONPATH pointing at it): v2 must plan them bit for bit as then
 REFERENCE = Path(__file__).with_name("programs_v2_reference.json")
-
-
-def quat(yaw):
-    return [float(np.cos(yaw / 2)), 0.0, 0.0, float(np.sin(yaw / 2))]
-
-
-def scene(w, toy, other, txyz, oxyz, tyaw=0.0, tilt=0.0):
-    q = np.array(w.mj_model.qpos0, np.float32)[:14]
-    q[0:7] = [*txyz, *quat(tyaw)]
-    if tilt:  # about the toy's y axis (a car's long side goes up)
-        q[3:7] = [np.cos(tilt / 2), 0.0, np.sin(tilt / 2), 0.0]
-    q[7:14] = [*oxyz, *quat(0.0)]
-    return w.pair_id(toy, other), q
-
-
-def prog(action, cfg, toy, other, txyz, oxyz, tyaw=0.0, tilt=0.0):
-    st = planning.setup(cfg)
-    p, q = scene(st.world, toy, other, txyz, oxyz, tyaw, tilt)
-    body = bodies.bodies(st.geo, jnp.int32(p), jnp.asarray(q))
-    return programs.program(action, st.arm, cfg, st.geo, jnp.int32(p), jnp.asarray(q)), st.arm, body
+# v3's, made the same way with the code before v4 existed (main at 1d674f7)
+REFERENCE_V3 = Path(__file__).with_name("programs_v3_reference.json")
 
 
 def sweep_palm(arm, pr):
@@ -261,28 +245,29 @@ SCENES = [(a, *s) for a in ("lift", "pull", "push", "pour", "slide", "take", "un
                     ("ball", "tray", (0.5, -0.3, 0.02), (0.5, -0.3, 0.0), 0.0))]
 
 
-def v2_programs() -> dict:
-    """v2's program of every scene of SCENES that the world has, as lists of float32 values."""
-    st = planning.setup(V2)
+def pinned_programs(cfg: ActionConfig = V2) -> dict:
+    """``cfg``'s program of every scene of SCENES that the world has, as lists of float32 values."""
+    st = planning.setup(cfg)
     out = {}
     for action, toy, other, t, o, yaw in SCENES:
         try:
             p, q = scene(st.world, toy, other, t, o, yaw)
         except (KeyError, ValueError):  # the pair is not in the world
             continue
-        pr = programs.program(action, st.arm, V2, st.geo, jnp.int32(p), jnp.asarray(q))
+        pr = programs.program(action, st.arm, cfg, st.geo, jnp.int32(p), jnp.asarray(q))
         leaves = [np.asarray(x, np.float32).ravel().tolist() for x in jax.tree_util.tree_leaves(pr)]
         out[f"{action} {toy} {other}"] = leaves
     return out
 
 
-def test_v2_programs_unchanged():
-    want = json.loads(REFERENCE.read_text())
-    got = v2_programs()
+@pytest.mark.parametrize("cfg, reference", [(V2, REFERENCE), (V3, REFERENCE_V3)], ids=["v2", "v3"])
+def test_pinned_programs_unchanged(cfg, reference):
+    want = json.loads(reference.read_text())
+    got = pinned_programs(cfg)
     assert sorted(got) == sorted(want) and len(got) >= 20
     for k in want:
         assert got[k] == want[k], k
 
 
-if __name__ == "__main__":  # write the reference (run with the code v2 must equal)
-    REFERENCE.write_text(json.dumps(v2_programs(), sort_keys=True) + "\n")
+if __name__ == "__main__":  # write v3's reference (run with the code v3 must equal)
+    REFERENCE_V3.write_text(json.dumps(pinned_programs(V3), sort_keys=True) + "\n")

@@ -2,29 +2,44 @@
 user's), what the compiled programs index with the traced action id.
 
 ``tables(cfg) -> templates.Tables`` (A, ...) and ``run_steps(cfg) -> (A,)``; for the nine
-built-ins they are ``templates.TPL_*``, ``GRASPS`` (v1) and v2's longer rest, row for row.
+built-ins they are ``templates.TPL_*``, ``GRASPS`` (v1) and v2's longer rest, row for row, with
+v3's dwell in rake and v4's before every built-in's descent (``dwells``).
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 
-from relaff_jax.sim.templates import N_STEPS, ActionConfig, Tables, _template, is_v3
+from relaff_jax.constants import ACTIONS
+from relaff_jax.sim.templates import N_SEGMENTS, N_STEPS, ActionConfig, Tables, _template, is_v3, is_v4
 
-from .registry import registry
+from .registry import is_builtin, registry
 from .spec import GRASP_CODE
 
 
-def spec_tables(specs) -> Tables:
+def spec_tables(specs, dwell: dict[str, int] | None = None) -> Tables:
     """v1's tables of ``specs`` (checked ``ActionSpec``s): each template padded by
-    ``templates._template``, its measuring step the spec's (default: the end of its segments)."""
-    tpl = [_template(s.segments) for s in specs]
-    measure = [t.measure if s.measure is None else s.measure for s, t in zip(specs, tpl)]
+    ``templates._template``, its measuring step the spec's (default: the end of its segments).
+    ``dwell``: steps each built-in it names holds its first waypoint after its transit (a segment
+    inserted after the first, its measuring step as much later; ``dwells``). The padding is
+    ``N_SEGMENTS`` segments and ``N_STEPS`` steps, or more where a dwell needs them."""
+    rows = [_dwelled(s, (dwell or {}).get(s.name, 0) if is_builtin(s.name) else 0) for s in specs]
+    n_seg = max([N_SEGMENTS] + [len(seg) for seg, _ in rows])
+    n_steps = max([N_STEPS] + [sum(g[0] for g in seg) + n_seg - len(seg) for seg, _ in rows])
+    tpl = [_template(seg, n_seg, n_steps) for seg, _ in rows]
+    measure = [t.measure if m is None else m for (_, m), t in zip(rows, tpl)]
     return Tables(np.asarray([t.seg_steps for t in tpl], np.int32), np.asarray([t.target for t in tpl], np.int32),
-                  np.asarray([t.closed for t in tpl], bool), np.asarray(measure, np.int32), N_STEPS, 0,
+                  np.asarray([t.closed for t in tpl], bool), np.asarray(measure, np.int32), n_steps, 0,
                   np.asarray([GRASP_CODE[s.grasp] for s in specs], np.int32),
                   np.asarray([s.grasp == "tool" for s in specs], bool), np.asarray([s.reach for s in specs], bool))
+
+
+def _dwelled(spec, n: int) -> tuple[tuple, int | None]:
+    """A spec's segments with its first waypoint held ``n`` steps after the first segment (none
+    for 0) and its measuring step (``None``: the end of its segments)."""
+    seg = tuple(spec.segments)
+    if n <= 0:
+        return seg, spec.measure
+    return seg[:1] + ((n, seg[0][1], seg[0][2]),) + seg[1:], None if spec.measure is None else spec.measure + n
 
 
 # v3: control steps the held rake holds its first waypoint (``above``, over the toy) after the
@@ -35,31 +50,38 @@ def spec_tables(specs) -> Tables:
 RAKE_DWELL = 150
 
 
-def with_rake_dwell(specs):
-    """The specs with the built-in rake's template holding ``above`` for ``RAKE_DWELL`` steps after
-    its transit (its measuring step ``RAKE_DWELL`` later); the other specs as they are."""
-    def dwell(s):
-        if s.name != "rake" or s.grasp != "tool":
-            return s
-        seg = tuple(s.segments)
-        first = seg[0]
-        return dataclasses.replace(s, segments=seg[:1] + ((RAKE_DWELL, first[1], first[2]),) + seg[1:],
-                                   measure=None if s.measure is None else s.measure + RAKE_DWELL)
-    return tuple(dwell(s) for s in specs)
+# v4: control steps every other built-in program holds its first waypoint (the pose above the
+# objects, before the descent to the grasp or to the table) after the transit from home. The
+# transit interpolates the joints in 150 steps; at its end the servos still lag a large swing
+# (joint errors up to ~20 degrees, the tcp up to ~0.5 m from the waypoint) and overshoot it
+# before they settle, and v3's descent began wherever the hand was (pull 335 of the paper v3
+# dataset: a finger met a cup's rim, then the pad pressed the ball in it at 70 N). After 150 steps
+# (0.6 s, rake's dwell too) the tcp is within 0.5 mm of the waypoint in C replays of v4 programs
+# (docs/actions.md, "Programs v4").
+DESCENT_DWELL = 150
+
+
+def dwells(cfg: ActionConfig) -> dict[str, int]:
+    """The steps each built-in holds its first waypoint after the transit under ``cfg.programs``:
+    none (v1, v2), rake's ``RAKE_DWELL`` (v3), and v4 the others' ``DESCENT_DWELL`` too."""
+    if not is_v3(cfg):
+        return {}
+    if not is_v4(cfg):
+        return {"rake": RAKE_DWELL}
+    return {a: RAKE_DWELL if a == "rake" else DESCENT_DWELL for a in ACTIONS}
 
 
 def tables(cfg: ActionConfig) -> Tables:
     """The templates ``cfg.programs`` runs for the run's actions: v1 as declared (``N_STEPS``);
     v2 the same segments with the final rest ``cfg.rest_hold`` steps longer, so that a goal read
     at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after ``measure``; v3
-    as v2 with rake's dwell after the transit (``with_rake_dwell``)."""
-    specs = registry()
-    tb = spec_tables(with_rake_dwell(specs) if is_v3(cfg) else specs)
+    as v2 with rake's dwell after the transit, v4 with every built-in's (``dwells``)."""
+    tb = spec_tables(registry(), dwells(cfg))
     if cfg.programs == "v1":
         return tb
     steps = tb.steps.copy()
     steps[:, -1] += int(cfg.rest_hold)
-    return tb._replace(steps=steps, n_steps=N_STEPS + int(cfg.rest_hold), hold=int(cfg.rest_hold))
+    return tb._replace(steps=steps, n_steps=tb.n_steps + int(cfg.rest_hold), hold=int(cfg.rest_hold))
 
 
 def run_steps(cfg: ActionConfig) -> np.ndarray:

@@ -79,7 +79,7 @@ def _jitted(cfg: ActionConfig):
         d = jax.vmap(lambda q, v: initial_data(st, cfg, aid, q, v))(qpos, qvel)
         return d.qpos, d.eq_active
 
-    v2 = cfg.programs != "v1"  # v2 and v3 execute alike (v3 plans differently)
+    v2 = cfg.programs != "v1"  # v2-v4 execute alike (v3 and v4 plan differently, their tables dwell)
     srows = jnp.asarray(straight_rows(cfg, tb.target))
 
     def corr(aid, q_way):  # (B, S, P - 1, 6): as simulate.make_simulate_fn's, from the plan

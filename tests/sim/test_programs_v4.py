@@ -1,0 +1,102 @@
+"""Motor programs v4: the arm at rest above the objects before every descent (the tables), the
+pads' footprint grown by ``bodies.PAD_MARGIN``, and the palm clear of the tipping reach of a toy
+a base grasp pushes across. Fast tests on the tables and on hand-built scenes
+(``programs.program``, no simulation); v3's plans are pinned in ``test_programs_v3.py``."""
+import dataclasses
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from relaff_jax.config.action import ActionConfig
+from relaff_jax.constants import ACTIONS, action_id
+from relaff_jax.sim import bodies, guard, planning, programs
+from relaff_jax.sim import objects as lib
+from relaff_jax.sim.actions.tables import DESCENT_DWELL, RAKE_DWELL, run_steps, tables
+
+from helpers.scenes import posed as scene, posed_program as prog
+
+V3 = ActionConfig(programs="v3")
+V4 = dataclasses.replace(V3, programs="v4")
+
+
+def test_v4_holds_the_first_waypoint_before_every_descent():
+    t3, t4 = tables(V3), tables(V4)
+    assert t4.steps.shape[1] == t3.steps.shape[1] + 1  # one segment more: the dwell
+    assert (t4.steps.sum(axis=1) == t4.n_steps).all() and t4.hold == t3.hold
+    for a, name in enumerate(ACTIONS):
+        n = int(np.count_nonzero(t3.steps[a] > 1))  # the declared segments (the padding is 1-step dwells)
+        if name == "rake":  # v3's dwell already: the same segments, measuring step and run
+            np.testing.assert_array_equal(t4.steps[a][:n - 1], t3.steps[a][:n - 1])
+            assert t4.measure[a] == t3.measure[a]
+            continue
+        # the transit as in v3, then DESCENT_DWELL steps at waypoint 0 with the same fingers
+        assert t4.steps[a][0] == t3.steps[a][0] and t4.steps[a][1] == DESCENT_DWELL, name
+        assert t4.target[a][:2].tolist() == [0, 0] and t4.closed[a][1] == t4.closed[a][0], name
+        # then v3's segments, each as long, the measuring step DESCENT_DWELL later
+        np.testing.assert_array_equal(t4.steps[a][2:n], t3.steps[a][1:n - 1])
+        np.testing.assert_array_equal(t4.target[a][2:n + 1], t3.target[a][1:n])
+        np.testing.assert_array_equal(t4.closed[a][2:n + 1], t3.closed[a][1:n])
+        assert t4.measure[a] == t3.measure[a] + DESCENT_DWELL, name
+    assert RAKE_DWELL == DESCENT_DWELL  # one dwell for every program
+    np.testing.assert_array_equal(run_steps(V4) - run_steps(V3),
+                                  np.where(np.asarray(ACTIONS) == "rake", 0, DESCENT_DWELL))
+
+
+def test_v4_guard_starts_at_the_descent_after_the_dwell():
+    seg, rows = guard.guard_tables(V4)
+    for a in ("lift", "take", "pour", "slide", "pull", "push", "unobstruct"):
+        i = action_id(a)
+        assert np.flatnonzero(seg[i]).tolist() == [2, 3], a  # the descent and the dwell at the grasp
+        assert np.flatnonzero(rows[i]).tolist() == [2, 3, 4, 5, 6], a
+    for a in ("move", "rake"):
+        assert not seg[action_id(a)].any() and not rows[action_id(a)].any()
+
+
+def test_pads_footprint_margin_hand_worked():
+    # unobstruct's grasp of a brick, a block on the table beside it along the closing axis, its
+    # near face GAP beyond the outer face of a pad's footprint (the pad's pre-grasp place): v3
+    # tests the exact footprint and grasps; v4 grows it by PAD_MARGIN and refuses a gap inside it
+    _, arm, (toy, obst) = prog("unobstruct", V3, "block", "brick", (0.7, 0.0, 0.0), (0.7, 0.0, 0.0))
+    g = bodies.top_down_grasp(arm, V3, obst)
+    u = np.asarray(g.closing)
+
+    def ok(cfg, gap):
+        off = float(g.opening) + arm.pad_thickness + gap + float(toy.half_width(g.closing))
+        return bool(prog("unobstruct", cfg, "block", "brick", tuple(np.array([0.7, 0.0, 0.0]) + off * u),
+                         (0.7, 0.0, 0.0))[0].ok)
+
+    m = bodies.PAD_MARGIN
+    assert ok(V3, 0.5 * m) and not ok(V4, 0.5 * m)
+    assert ok(V3, 1.5 * m) and ok(V4, 1.5 * m)
+
+
+def test_palm_clears_a_toy_pushed_across_hand_worked():
+    # a toy car turned a quarter on a cup (5 cm along the closing axis, the cup 9 cm): centred, the
+    # pads close on the cup's walls and never meet it; 9 mm over the cup's side, the pad on that
+    # side pushes it across the open top (pull 10054 of the paper v3 dataset)
+    cup = lib.get("cup").height
+    st = planning.setup(V4)
+
+    def plan(cfg, shift):
+        t = (0.7 + shift, 0.0, cup)  # the closing axis is world x here
+        pr, arm, (car, cup_b) = prog("pull", cfg, "toy_car", "cup", t, (0.7, 0.0, 0.0), tyaw=np.pi / 2)
+        p, q = scene(st.world, "toy_car", "cup", t, (0.7, 0.0, 0.0), np.pi / 2)
+        sc = programs._scene(st.geo, jnp.int32(p), jnp.asarray(q))
+        g = bodies.clear_grasp(arm, cfg, bodies.top_down_grasp(arm, cfg, cup_b), cup_b, car, jnp.zeros(3))
+        assert np.allclose(np.abs(np.asarray(g.closing)), [1.0, 0.0, 0.0])
+        half, cup_half = float(car.half_width(g.closing)), float(cup_b.half_width(g.closing))
+        return pr, bool(programs.pushed_across(arm, g, sc)), half, cup_half
+
+    centred3, pushed, half, cup_half = plan(V3, 0.0)
+    centred4, _, _, _ = plan(V4, 0.0)
+    assert not pushed and bool(centred4.ok)
+    np.testing.assert_array_equal(np.asarray(centred4.targets.pos), np.asarray(centred3.targets.pos))
+    shift = cup_half + 0.009 - half  # 9 mm past the cup's side
+    over3, pushed, _, _ = plan(V3, shift)
+    over4, _, _, _ = plan(V4, shift)
+    assert pushed
+    assert bool(over3.ok) and float(over3.targets.pos[1, 2]) == pytest.approx(0.07, abs=1e-4)  # fingertips at 5 cm
+    # v4: the palm 2 cm above the car's diagonal (from the cup's rim) leaves the pads less than
+    # min_grip of the cup: refused
+    assert not bool(over4.ok)
