@@ -127,7 +127,7 @@ def test_versions_config_and_sidecar():
     d = templates.stored_config(V2)
     assert d["programs"] == "v2" and d["rest_hold"] == V2.rest_hold
     with pytest.raises(UserError, match="action.programs"):
-        ActionConfig(programs="v4")
+        ActionConfig(programs="v5")
     with pytest.raises(UserError, match="action.squeeze_max"):
         ActionConfig(squeeze_max=80.0)
     t1, t2 = templates.tables(V1), templates.tables(V2)
