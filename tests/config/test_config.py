@@ -1,6 +1,7 @@
 """The config tree and its one override path (hand-worked cases)."""
 import copy
 import dataclasses
+import json
 
 import pytest
 
@@ -73,6 +74,20 @@ def test_presets():
     assert [p.experiment.forest.engine for p in (tiny, quick, study, paper)] == ["fast", "compiled", "compiled", "compiled"]
     with pytest.raises(UserError, match="unknown preset"):
         runconfig.preset("fast")
+
+
+def test_the_quick_preset_differs_from_its_experiment_preset_by_speed_only():
+    """``relaff reproduce --preset quick`` runs ``experiment_preset("quick")``'s protocol with
+    the compiled engine: a results folder of either is the other's (no result-changing key
+    differs), and the tests' tiny preset keeps the fast engine."""
+    from relaff_jax.config.experiment import experiment_preset, result_differences
+
+    quick, exp = runconfig.preset("quick").experiment, experiment_preset("quick")
+    assert (quick.forest.engine, exp.forest.engine, runconfig.preset("tiny").experiment.forest.engine) == \
+        ("compiled", "fast", "fast")
+    stored = json.loads(json.dumps(to_dict(exp)))  # as a results folder's experiment.json holds it
+    assert result_differences(stored, quick) == []
+    assert to_dict(quick) != to_dict(exp)  # the engine is compared: not the same tree
 
 
 def test_result_differences_ignore_the_forest_engine_and_analysis_keys_a_folder_lacks():
