@@ -74,7 +74,7 @@ def preset(name: str) -> RunConfig:
     (``dataset.engine=native``: a newcomer's first result, docs/reproduce.md "Presets"; its
     times, native and MJX: ``quick_native_s``, ``quick_mjx_s`` in docs/figures.json):
     100 samples per action, n = 2 and every n in 4..25, 2 repetitions, the paper's forests
-    built by the compiled engine (the fast engine's forests, bit for bit, at a third of its CPU);
+    built by the compiled engine (the fast engine's forests, bit for bit, at a seventh of its CPU);
     the learning pools shrink to the data (``ExperimentConfig.shrink_to_data``). Its
     intervals are too wide to compare with the paper; its report says so.
     ``tiny``: for tests: 24 samples per action, n = 2 and every n in 4..10 (the data hold no
@@ -100,8 +100,8 @@ def preset(name: str) -> RunConfig:
             "dataset.n_samples": 100, "dataset.rollout_batch": 64, "dataset.max_rollouts": 20_000,
             "dataset.distance_bins": 10, "dataset.borrow_fraction": 0.05, "dataset.feature_batch": 16,
             "reproduce.examples_per_action": 2, "dataset.engine": "native",
-            # the same forests as the fast engine (docs/learning.md), ~3x less CPU per forest; its
-            # numba compile is paid once per install (cached on disk), not per run
+            # the same forests as the fast engine (docs/learning.md), the experiment stage at about a
+            # seventh of its CPU; its numba compile is paid once per install (cached on disk), not per run
             "experiment.forest.engine": "compiled"})
     if name == "tiny":
         exp = override(experiment_preset("quick"), {"sizes": (2,) + tuple(range(4, 11)), "reps_pca": 2, "reps_rhf": 2,
