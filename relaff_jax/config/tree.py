@@ -73,7 +73,8 @@ def preset(name: str) -> RunConfig:
     spaces, every bootstrapping condition), its motor programs run by MuJoCo C
     (``dataset.engine=native``: a newcomer's first result, docs/reproduce.md "Presets"; its
     times, native and MJX: ``quick_native_s``, ``quick_mjx_s`` in docs/figures.json):
-    100 samples per action, n = 2 and every n in 4..25, 2 repetitions, the paper's forests;
+    100 samples per action, n = 2 and every n in 4..25, 2 repetitions, the paper's forests
+    built by the compiled engine (the fast engine's forests, bit for bit, at a seventh of its CPU);
     the learning pools shrink to the data (``ExperimentConfig.shrink_to_data``). Its
     intervals are too wide to compare with the paper; its report says so.
     ``tiny``: for tests: 24 samples per action, n = 2 and every n in 4..10 (the data hold no
@@ -98,7 +99,10 @@ def preset(name: str) -> RunConfig:
         return override(RunConfig(experiment=experiment_preset("quick")), {
             "dataset.n_samples": 100, "dataset.rollout_batch": 64, "dataset.max_rollouts": 20_000,
             "dataset.distance_bins": 10, "dataset.borrow_fraction": 0.05, "dataset.feature_batch": 16,
-            "reproduce.examples_per_action": 2, "dataset.engine": "native"})
+            "reproduce.examples_per_action": 2, "dataset.engine": "native",
+            # the same forests as the fast engine (docs/learning.md), the experiment stage at about a
+            # seventh of its CPU; its numba compile is paid once per install (cached on disk), not per run
+            "experiment.forest.engine": "compiled"})
     if name == "tiny":
         exp = override(experiment_preset("quick"), {"sizes": (2,) + tuple(range(4, 11)), "reps_pca": 2, "reps_rhf": 2,
                                                     "forest.base_trees": 8, "forest.max_trees": 8})

@@ -1,6 +1,7 @@
 """The config tree and its one override path (hand-worked cases)."""
 import copy
 import dataclasses
+import json
 
 import pytest
 
@@ -68,10 +69,25 @@ def test_presets():
     assert {p.dataset.population for p in (tiny, quick, study)} == {"all"}
     assert tiny.experiment.forest.max_trees == 8
     assert quick.experiment.sizes == (2,) + tuple(range(4, 26))
-    # the long presets build the same forests with the compiled engine, the short ones need no numba compile
-    assert [p.experiment.forest.engine for p in (tiny, quick, study, paper)] == ["fast", "fast", "compiled", "compiled"]
+    # the same forests with either engine: the compiled one where a run fits thousands of forests
+    # (its numba compile is cached on disk), the fast one for the tests' tiny runs
+    assert [p.experiment.forest.engine for p in (tiny, quick, study, paper)] == ["fast", "compiled", "compiled", "compiled"]
     with pytest.raises(UserError, match="unknown preset"):
         runconfig.preset("fast")
+
+
+def test_the_quick_preset_differs_from_its_experiment_preset_by_speed_only():
+    """``relaff reproduce --preset quick`` runs ``experiment_preset("quick")``'s protocol with
+    the compiled engine: a results folder of either is the other's (no result-changing key
+    differs), and the tests' tiny preset keeps the fast engine."""
+    from relaff_jax.config.experiment import experiment_preset, result_differences
+
+    quick, exp = runconfig.preset("quick").experiment, experiment_preset("quick")
+    assert (quick.forest.engine, exp.forest.engine, runconfig.preset("tiny").experiment.forest.engine) == \
+        ("compiled", "fast", "fast")
+    stored = json.loads(json.dumps(to_dict(exp)))  # as a results folder's experiment.json holds it
+    assert result_differences(stored, quick) == []
+    assert to_dict(quick) != to_dict(exp)  # the engine is compared: not the same tree
 
 
 def test_result_differences_ignore_the_forest_engine_and_analysis_keys_a_folder_lacks():
