@@ -12,7 +12,7 @@ from relaff_jax.config.action import ActionConfig
 from relaff_jax.constants import ACTIONS, action_id
 from relaff_jax.sim import bodies, guard, pad_sweep, planning, programs
 from relaff_jax.sim import objects as lib
-from relaff_jax.sim.actions.tables import DESCENT_DWELL, RAKE_DWELL, run_steps, tables
+from relaff_jax.sim.actions.tables import DESCENT_DWELL, RAKE_DWELL, TOOL_TRANSIT, run_steps, tables
 
 from helpers.scenes import posed as scene, posed_program as prog
 
@@ -26,9 +26,11 @@ def test_v4_holds_the_first_waypoint_before_every_descent():
     assert (t4.steps.sum(axis=1) == t4.n_steps).all() and t4.hold == t3.hold
     for a, name in enumerate(ACTIONS):
         n = int(np.count_nonzero(t3.steps[a] > 1))  # the declared segments (the padding is 1-step dwells)
-        if name == "rake":  # v3's dwell already: the same segments, measuring step and run
-            np.testing.assert_array_equal(t4.steps[a][:n - 1], t3.steps[a][:n - 1])
-            assert t4.measure[a] == t3.measure[a]
+        if name == "rake":  # v3's dwell already; the held tool's transit TOOL_TRANSIT long, then v3's segments
+            assert t3.steps[a][0] == 150 and t4.steps[a][0] == TOOL_TRANSIT
+            np.testing.assert_array_equal(t4.steps[a][1:n - 1], t3.steps[a][1:n - 1])
+            np.testing.assert_array_equal(t4.target[a][:n], t3.target[a][:n])
+            assert t4.measure[a] == t3.measure[a] + TOOL_TRANSIT - 150
             continue
         # the transit as in v3, then DESCENT_DWELL steps at waypoint 0 with the same fingers
         assert t4.steps[a][0] == t3.steps[a][0] and t4.steps[a][1] == DESCENT_DWELL, name
@@ -40,7 +42,7 @@ def test_v4_holds_the_first_waypoint_before_every_descent():
         assert t4.measure[a] == t3.measure[a] + DESCENT_DWELL, name
     assert RAKE_DWELL == DESCENT_DWELL  # one dwell for every program
     np.testing.assert_array_equal(run_steps(V4) - run_steps(V3),
-                                  np.where(np.asarray(ACTIONS) == "rake", 0, DESCENT_DWELL))
+                                  np.where(np.asarray(ACTIONS) == "rake", TOOL_TRANSIT - 150, DESCENT_DWELL))
 
 
 def test_v4_guard_starts_at_the_descent_after_the_dwell():
