@@ -7,7 +7,8 @@ else ``$JAX_COMPILATION_CACHE_DIR`` (JAX's own setting) if set; else
 ``$XDG_CACHE_HOME/relaff_jax/jax`` (``~/.cache/relaff_jax/jax``). ``RELAFF_COMPILE_CACHE=0``
 (or off / false / no) or ``--no-compile-cache`` turns it off. A cached program is the
 program XLA compiled, so results do not depend on the cache (docs/reproduce.md, "Compilation
-cache"). Library users keep JAX's own default (off); only the command line calls this.
+cache"). ``enable_traces`` keeps traced programs beside it (``sim/traced_cache.py``). Library
+users keep JAX's own default (off) and no traced programs; only the command line calls these.
 """
 from __future__ import annotations
 
@@ -16,8 +17,11 @@ import sys
 from pathlib import Path
 
 ENV = "RELAFF_COMPILE_CACHE"
+TRACES_ENV = "RELAFF_TRACE_STORE"  # off: no traced programs kept (sim/traced_cache.py; the test session's)
+MIN_SECONDS_ENV = "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"  # JAX's: cache programs that compiled in this long
 _OFF = ("0", "off", "false", "no")
 _ON = ("1", "on", "true", "yes")
+_traces: Path | None = None  # the traced programs' folder, once the command turned the store on
 
 
 def cache_dir(environ=None) -> Path | None:
@@ -53,6 +57,9 @@ def configure(disable: bool = False) -> Path | None:
     else:
         os.environ["JAX_ENABLE_COMPILATION_CACHE"] = "true"
         os.environ["JAX_COMPILATION_CACHE_DIR"] = str(d)
+        # every program, not only those whose compile took over JAX's default 1 s (the small
+        # glue programs between batches, dozens of shapes)
+        os.environ.setdefault(MIN_SECONDS_ENV, "0")
         # Each program loaded from the cache makes XLA print an E-level "cpu_aot_loader" line
         # about +prefer-no-gather/scatter, tuning hints it mistakes for CPU features (noise:
         # docs/journal/2026-12-05.md, "--smoke on the idle machine"); read when jaxlib loads, so only before JAX is imported.
@@ -63,4 +70,21 @@ def configure(disable: bool = False) -> Path | None:
         jax.config.update("jax_enable_compilation_cache", d is not None)
         if d is not None:
             jax.config.update("jax_compilation_cache_dir", str(d))
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", float(os.environ[MIN_SECONDS_ENV]))
     return d
+
+
+def enable_traces(d: Path | None) -> Path | None:
+    """The ``relaff`` command's: keep traced programs in ``d/traced`` (``sim/traced_cache.py``)
+    for this process, ``d`` being the compilation cache ``configure`` returned; off when ``d``
+    is None or ``$RELAFF_TRACE_STORE`` is off (``0``/off/false/no: the test session sets it, so
+    no test reads another's trace). Returns the folder, or None."""
+    global _traces
+    off = os.environ.get(TRACES_ENV, "").strip().lower() in _OFF
+    _traces = None if d is None or off else Path(d) / "traced"
+    return _traces
+
+
+def traces_dir() -> Path | None:
+    """The folder ``enable_traces`` turned on in this process, or None (a library's default)."""
+    return _traces

@@ -87,6 +87,12 @@ def _origins() -> dict[str, str]:
     return out
 
 
+def any_executed() -> bool:
+    """Whether a plugin file was executed in this process (even one whose registrations were
+    undone since: what it ran may have changed any module)."""
+    return bool(_LOADED)
+
+
 def loaded_files() -> tuple[tuple[str, str], ...]:
     """``(path, sha256)`` of the plugin files executed in this process whose registrations all
     still stand (a test may have undone some), for its worker processes (``load_files``)."""

@@ -15,6 +15,11 @@ if "JAX_COMPILATION_CACHE_DIR" not in os.environ:
     _cache = tempfile.mkdtemp(prefix="relaff-jax-cache-")
     os.environ["JAX_COMPILATION_CACHE_DIR"] = _cache
     atexit.register(shutil.rmtree, _cache, ignore_errors=True)
+# No traced program is kept or read (relaff_jax/sim/traced_cache.py) by this session or the
+# commands it starts: they share one compilation cache, and a test that monkeypatches a module
+# changes what a trace would be without changing its file name (tests/sim/test_traced_cache.py
+# turns the store on in a private folder).
+os.environ["RELAFF_TRACE_STORE"] = "0"
 
 
 def _preload_libusb() -> None:

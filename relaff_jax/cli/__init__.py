@@ -151,7 +151,8 @@ def _run(argv: list[str] | None) -> int:
     # loaded when the command runs: every command's parser (--help) imports this module
     from relaff_jax import compile_cache
 
-    compile_cache.configure(disable=args.no_compile_cache)  # before any JAX work (docs/reproduce.md)
+    # before any JAX work (docs/reproduce.md); traced programs kept with the compiled ones
+    compile_cache.enable_traces(compile_cache.configure(disable=args.no_compile_cache))
     try:
         return int(args.func(args) or 0)
     except UserError as e:

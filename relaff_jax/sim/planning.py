@@ -70,6 +70,10 @@ class Plan(NamedTuple):
     ik_error: jax.Array
 
 
+# a Plan can leave a traced program stored on disk (relaff_jax/traced_cache.py)
+jax.export.register_namedtuple_serialization(Plan, serialized_name="relaff_jax.sim.planning.Plan")
+
+
 def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     """``plan_fn(action_id (), pair (B,), qpos (B, nq)) -> Plan`` for any of the run's actions
     (``action_id`` indexes ``actions.names()``; traced, so one compile serves all; the target

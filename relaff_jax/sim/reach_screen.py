@@ -46,6 +46,7 @@ from .actions.rules import plan_program
 from .programs import toy_grasp_target, toy_reachable
 from .actions.tables import tables
 from .templates import N_TARGETS, ActionConfig
+from .traced_cache import stored_jit
 
 POS_MARGIN = 2e-3  # m, beyond ik_pos_tol
 ANG_MARGIN = 2e-3  # rad, beyond ik_ang_tol
@@ -129,8 +130,9 @@ def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
 
 @functools.lru_cache(maxsize=4)
 def jitted_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
-    """``make_screen_fn(cfg)`` jitted, cached (one compile per batch shape, all actions)."""
-    return jax.jit(make_screen_fn(cfg))
+    """``make_screen_fn(cfg)`` jitted, cached (one compile per batch shape, all actions), its
+    trace kept on disk with the compilation cache (``traced_cache.stored_jit``)."""
+    return stored_jit(make_screen_fn(cfg), "screen", cfg)
 
 
 @functools.lru_cache(maxsize=4)
@@ -141,7 +143,7 @@ def jitted_parts(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable
     unobstruct uses them: its program and its toy are screened apart."""
     st = setup(cfg)
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
-    return jax.jit(make_plan_fn(cfg)), jax.jit(reach)
+    return stored_jit(make_plan_fn(cfg), "plan", cfg), stored_jit(reach, "toy_reach", cfg)
 
 
 on_change(jitted_screen_fn.cache_clear)

@@ -36,6 +36,7 @@ from .planning import Plan
 from .reach_screen import prepare_screened
 from .simulate import make_prepare_fn, make_simulate_fn
 from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config: for reproduce)
+from .traced_cache import stored_jit
 
 from relaff_jax.constants import SIM_ENGINES
 from relaff_jax.errors import UserError
@@ -66,8 +67,9 @@ def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
 @functools.lru_cache(maxsize=4)
 def jitted_stage_fns(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
     """The jitted ``make_prepare_fn(cfg)`` and ``make_simulate_fn(cfg)``, cached: each compiles
-    once per batch shape and serves all nine actions (the action index is traced)."""
-    return jax.jit(make_prepare_fn(cfg)), jax.jit(make_simulate_fn(cfg))
+    once per batch shape and serves all nine actions (the action index is traced). The
+    planner's trace is kept on disk with the compilation cache (``traced_cache.stored_jit``)."""
+    return stored_jit(make_prepare_fn(cfg), "prepare", cfg), jax.jit(make_simulate_fn(cfg))
 
 
 def jitted_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:

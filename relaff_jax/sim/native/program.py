@@ -34,6 +34,7 @@ from relaff_jax.sim.simulate import initial_data
 from relaff_jax.sim.straight import corrections, stopped_corrections, straight_rows
 from relaff_jax.sim.actions.tables import run_steps, tables
 from relaff_jax.sim.templates import ActionConfig
+from relaff_jax.sim.traced_cache import stored_jit
 
 
 class ProgramInputs(NamedTuple):
@@ -71,7 +72,8 @@ class ProgramInputs(NamedTuple):
 
 @functools.lru_cache(maxsize=4)
 def _jitted(cfg: ActionConfig):
-    """The jitted JAX pieces (compiled once per batch shape): initial data, commands, reach."""
+    """The jitted JAX pieces (compiled once per batch shape): initial data, commands, reach,
+    labels, corrections."""
     st = setup(cfg)
     tb = tables(cfg)
 
@@ -93,8 +95,11 @@ def _jitted(cfg: ActionConfig):
 
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
     specs = registry()
-    rules = jax.vmap(lambda o: goal_row(specs, cfg, o))
-    return jax.jit(init), jax.jit(ctrl), jax.jit(reach), jax.jit(rules), jax.jit(corr)
+    rules = jax.vmap(lambda *o: goal_row(specs, cfg, Outcome(*o)))  # the Outcome's fields as arguments
+    # traces kept on disk with the compilation cache (sim/traced_cache.py)
+    return (stored_jit(init, "native_init", cfg), stored_jit(ctrl, "native_ctrl", cfg),
+            stored_jit(reach, "toy_reach", cfg), stored_jit(rules, "native_rules", cfg),
+            stored_jit(corr, "native_corr", cfg))
 
 
 on_change(_jitted.cache_clear)
@@ -251,5 +256,5 @@ def native_labels(cfg: ActionConfig, aid: int, pair: np.ndarray, com0: np.ndarra
         after = np.zeros(len(pair), bool)
     f32 = lambda x: np.asarray(x, np.float32)
     o = (f32(com0), f32(com_m), f32(com_end), f32(direction), np.asarray(before, bool), after)
-    label = _padded(lambda *x: rules(Outcome(*x)), *o)[:, aid] & np.asarray(feasible, bool)
+    label = _padded(rules, *o)[:, aid] & np.asarray(feasible, bool)
     return label, after
