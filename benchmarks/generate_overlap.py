@@ -136,6 +136,15 @@ def same(a: list[dict], b: list[dict]) -> bool:
     return all(x.keys() == y.keys() and all(np.array_equal(x[f], y[f]) for f in x) for x, y in zip(a, b))
 
 
+def table(rows) -> str:
+    out = ["| action | executed programs | before: CPU s | wall s | cores busy | after: CPU s | wall s | cores busy "
+           "| wall before / after | CPU before / after | outputs |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
+    for a, c0, w0, c1, w1, sim in rows:
+        out.append(f"| {a} | {sim} | {c0:.1f} | {w0:.1f} | {c0 / w0:.2f} | {c1:.1f} | {w1:.1f} | {c1 / w1:.2f} | "
+                   f"{w0 / w1:.2f} | {c0 / c1:.2f} | equal |")
+    return "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--actions", nargs="+", default=["lift", "take", "rake"], choices=ACTIONS)
@@ -163,11 +172,8 @@ def main() -> None:
         outside = cpu0 - sum(timers.sums[label][0] for _, _, label in PARTS if not label.startswith("-"))
         print(f"| the rest (placement, ids, Python) | {outside:.2f} | {outside / cpu0:.1%} | | |", flush=True)
         rows.append((a, cpu0, wall0, cpu1, wall1, sum(int(r["simulated"].sum()) for r in ref)))
-    print("\n| action | executed programs | before: CPU s | wall s | cores busy | after: CPU s | wall s | cores busy "
-          "| wall before / after | CPU before / after | outputs |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
-    for a, c0, w0, c1, w1, sim in rows:
-        print(f"| {a} | {sim} | {c0:.1f} | {w0:.1f} | {c0 / w0:.2f} | {c1:.1f} | {w1:.1f} | {c1 / w1:.2f} | "
-              f"{w0 / w1:.2f} | {c0 / c1:.2f} | equal |")
+        print(f"\n{a}, before against after:\n" + table(rows[-1:]), flush=True)
+    print("\nAll actions:\n" + table(rows))
     print(f"load average after {os.getloadavg()[0]:.2f}")
 
 
