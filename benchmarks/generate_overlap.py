@@ -27,8 +27,10 @@ import time
 
 import numpy as np
 
-import relaff_jax  # noqa: F401  (XLA flags before JAX work)
-import mujoco.batch
+from relaff_jax import compile_cache  # XLA flags before JAX work
+
+compile_cache.configure()  # as the command does: compiled programs from the cache
+import mujoco.batch  # noqa: E402
 from relaff_jax.constants import ACTIONS
 from relaff_jax.data.tasks import PrepareAhead, chunk_key
 from relaff_jax.sim import labels, rollouts
