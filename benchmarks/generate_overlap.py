@@ -168,8 +168,6 @@ def main() -> None:
         timers = Timers()
         ref, cpu0, wall0 = clocked(lambda: before(fn, keys, args.batch, timers))
         new, cpu1, wall1 = clocked(lambda: after(fn, 1, args.batches, args.batch))
-        if differing(ref, new):
-            raise SystemExit(f"{a}: the two paths' rollouts differ in {differing(ref, new)}")
         print(f"\n{a}: where the 'before' path's {cpu0:.1f} CPU s ({wall0:.1f} s wall, "
               f"{cpu0 / wall0:.2f} cores busy) go\n\n| part | CPU s | share of CPU | wall s | cores busy |\n"
               f"|---|---:|---:|---:|---:|")
@@ -177,6 +175,8 @@ def main() -> None:
             print(f"| {label} | {c:.2f} | {c / cpu0:.1%} | {w:.2f} | {c / w if w else 0:.2f} |")
         outside = cpu0 - sum(timers.sums[label][0] for _, _, label in PARTS if not label.startswith("-"))
         print(f"| the rest (placement, ids, Python) | {outside:.2f} | {outside / cpu0:.1%} | | |", flush=True)
+        if differing(ref, new):
+            raise SystemExit(f"{a}: the two paths' rollouts differ in {differing(ref, new)}")
         rows.append((a, cpu0, wall0, cpu1, wall1, sum(int(r["simulated"].sum()) for r in ref)))
         print(f"\n{a}, before against after:\n" + table(rows[-1:]), flush=True)
     print("\nAll actions:\n" + table(rows))
