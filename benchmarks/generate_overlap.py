@@ -142,6 +142,35 @@ def differing(a: list[dict], b: list[dict]) -> list[str]:
                    if f not in x or f not in y or bits(np.asarray(x[f])) != bits(np.asarray(y[f]))})
 
 
+def reader_rows(scenes: int = 512, steps: int = 211) -> str:
+    """The two rest readers alone on the same synthetic motions (``scenes`` scenes that move
+    until a random step, then stay still; v2's window and hold): CPU seconds each, and
+    whether every scene's read step, state and ``settled`` agree."""
+    from types import SimpleNamespace
+
+    from relaff_jax.config.action import ActionConfig
+
+    cfg = ActionConfig()
+    inp = SimpleNamespace(measure=cfg.rest_window, v2=True)
+    rng = np.random.default_rng(0)
+    move = rng.normal(size=(scenes, steps, 2, 3)) * 1e-3
+    move[np.arange(steps)[None, :] >= rng.integers(0, steps, scenes)[:, None]] = 0.0
+    com, qpos = np.cumsum(move, axis=1), rng.normal(size=(scenes, steps, 14)).astype(np.float32)
+    out, cpu = [], []
+    for cls in (PerSceneRestReader, native_program.RestReader):
+        c0 = time.process_time()
+        r = cls(cfg, inp)
+        for t in range(steps):
+            r.add(t, com[:, t], qpos[:, t])
+            if r.done:
+                break
+        out.append((*r.result(), r.read_steps()))
+        cpu.append(time.process_time() - c0)
+    agree = all(np.array_equal(x, y) for x, y in zip(*out))
+    return (f"| rest reader alone, {scenes} scenes, up to {steps} steps | {cpu[0]:.2f} | {cpu[1]:.3f} | "
+            f"{cpu[0] / cpu[1]:.0f} | {'equal' if agree else 'DIFFER'} |")
+
+
 def table(rows) -> str:
     out = ["| action | executed programs | before: CPU s | wall s | cores busy | after: CPU s | wall s | cores busy "
            "| wall before / after | CPU before / after | outputs |", "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|"]
@@ -160,6 +189,8 @@ def main() -> None:
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; load average before {os.getloadavg()[0]:.2f}; "
           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; batch {args.batch}, {args.batches} timed "
           f"batches per path, native engine, default programs")
+    print("\n| piece | before: CPU s | after: CPU s | ratio | outputs |\n|---|---:|---:|---:|---|\n" + reader_rows(),
+          flush=True)
     rows = []
     for a in args.actions:
         fn = rollouts.make_rollout_fn(a, args.batch, engine="native")
