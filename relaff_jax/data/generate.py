@@ -25,7 +25,10 @@ worker thread in flight, written to ``chunks/.pending`` and moved into place by 
 in index order, so the stopping point and the selection are those of the run without a
 cluster; chunks simulated past the stopping point are waited for and discarded (counted in
 the summary's ``discarded_chunks``). ``rollout_fn`` must then be picklable, best a
-``relaff_jax.cluster.Remote`` (built once per worker).
+``relaff_jax.cluster.Remote`` (built once per worker). Without a client, a rollout function
+with two halves (``prepare``/``execute``, ``sim.rollouts.RolloutFn``) has chunk ``k + 1``'s
+first half run on a background thread while chunk ``k`` executes (``tasks.PrepareAhead``;
+the same calls on the same keys, so the same chunks).
 """
 from __future__ import annotations
 
@@ -51,7 +54,7 @@ from relaff_jax.data.selection import select_balanced
 from relaff_jax.data.store import (check_rollout_ids, chunk_dirs_exist, chunk_indices, chunk_path, clean_tmp,
                                    mismatch, prepare_dir, read_chunk, read_sidecar, remove_created, sha256,
                                    writer_lock)
-from relaff_jax.data.tasks import PENDING, discard_pending, promote, rollout_chunk
+from relaff_jax.data.tasks import PENDING, PrepareAhead, discard_pending, promote, rollout_chunk
 from relaff_jax.data.validate import check_schema, schema_of
 
 # The settle each engine's rollout_fn uses, recorded in the sidecar and compared on resume
@@ -196,7 +199,9 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
     clean_tmp(pending)
     # without a cluster chunks are written in place, as always (unless a cluster run left some pending)
     stage = pending if client is not None or pending.is_dir() else cdir
-    runner = Ordered(client, lambda j: (rollout_chunk, (rollout_fn, seed, j, batch, object_names, str(stage), schema)),
+    # without a cluster the next chunk is prepared while this one executes (tasks.PrepareAhead)
+    ahead = PrepareAhead(rollout_fn, seed, batch, max_chunks) if client is None and PrepareAhead.supports(rollout_fn) else None
+    runner = Ordered(client, lambda j: (rollout_chunk, (rollout_fn, seed, j, batch, object_names, str(stage), schema, ahead)),
                      max_chunks, window)
     try:
         while True:
@@ -242,6 +247,8 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         raise
     finally:
         bar.close()
+        if ahead is not None:
+            ahead.close()
     runner.finish()  # chunks past the stopping point: wait until written, then drop them
     discarded = discard_pending(pending)
     met = sel.borrowed <= dcfg.borrow_fraction * sel.n_negative

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import threading
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -37,23 +38,86 @@ def _write_once(path: Path, arrays: Mapping[str, np.ndarray], extra: Mapping[str
             raise
 
 
+def chunk_key(seed: int, k: int):
+    """The PRNG key of dataset chunk ``k``: ``fold_in(PRNGKey(seed), k)``."""
+    import jax
+
+    return jax.random.fold_in(jax.random.PRNGKey(seed), k)
+
+
 def rollout_chunk(rollout_fn: Callable, seed: int, k: int, batch: int, object_names: Sequence[str] | None,
-                  pending: str, ref: Mapping[str, list] | None = None) -> dict[str, Any]:
-    """Simulate dataset chunk ``k`` (key ``fold_in(PRNGKey(seed), k)``) into ``pending``;
+                  pending: str, ref: Mapping[str, list] | None = None,
+                  ahead: "PrepareAhead | None" = None) -> dict[str, Any]:
+    """Simulate dataset chunk ``k`` (key ``chunk_key(seed, k)``) into ``pending``;
     returns ``label``, ``cog_distance`` and ``schema`` (arrays without ``rollout``). A chunk
-    whose schema differs from ``ref`` (the earlier chunks', when known) is not written."""
+    whose schema differs from ``ref`` (the earlier chunks', when known) is not written.
+    ``ahead`` (the driver without a cluster): chunk ``k``'s first half comes from it, and chunk
+    ``k + 1``'s is begun there before chunk ``k`` executes."""
     path = chunk_path(Path(pending), k)
     if path.is_dir():
         return read_rollout_chunk(path, k, batch)
-    import jax
-
-    key = jax.random.fold_in(jax.random.PRNGKey(seed), k)
-    arrays = standardize_rollouts(rollout_fn(key, batch), batch, object_names)
+    if ahead is None:
+        out = rollout_fn(chunk_key(seed, k), batch)
+    else:
+        prepared = ahead.take(k)
+        ahead.begin(k + 1)
+        out = rollout_fn.execute(prepared)
+    arrays = standardize_rollouts(out, batch, object_names)
     schema = schema_of(arrays)
     check_schema(f"chunk {k} from rollout_fn", schema, ref)
     arrays["rollout"] = k * batch + np.arange(batch, dtype=np.int64)
     _write_once(path, arrays, {"chunk": k, "batch": batch, "positives": int(arrays["label"].sum())})
     return _for_driver(arrays, schema)
+
+
+class PrepareAhead:
+    """Prepares dataset chunks one ahead on a background thread, for a rollout function with
+    two halves (``rollout_fn.prepare(key, batch)``, ``rollout_fn.execute(prepared)``, e.g.
+    ``sim.rollouts.RolloutFn``): while chunk ``k`` executes in the driver (MuJoCo C on its
+    thread pool, with Python between its steps), chunk ``k + 1`` is sampled, settled and
+    planned beside it, so that both cores stay busy. The halves are the same calls on the same
+    keys as ``rollout_fn(key, batch)``: a chunk's bits do not depend on this.
+
+    ``begin(j)`` starts chunk ``j``'s first half (nothing past ``limit`` or already begun);
+    ``take(j)`` waits for it and raises what it raised (one not begun is prepared in the caller);
+    ``close()`` drops what is not taken: the first half writes nothing, so a chunk begun past
+    the stopping point costs only its CPU (at most one per dataset), and a thread still
+    running then is a daemon that finishes on its own without holding up the process."""
+
+    def __init__(self, rollout_fn: Callable, seed: int, batch: int, limit: int):
+        self.fn, self.seed, self.batch, self.limit = rollout_fn, seed, batch, int(limit)
+        self.jobs: dict[int, tuple[threading.Thread, dict]] = {}
+
+    @staticmethod
+    def supports(rollout_fn: Any) -> bool:
+        return callable(getattr(rollout_fn, "prepare", None)) and callable(getattr(rollout_fn, "execute", None))
+
+    def begin(self, j: int) -> None:
+        if j >= self.limit or j in self.jobs:
+            return
+        box: dict = {}
+
+        def work():
+            try:
+                box["value"] = self.fn.prepare(chunk_key(self.seed, j), self.batch)
+            except BaseException as e:  # noqa: BLE001 - raised again by take()
+                box["error"] = e
+
+        thread = threading.Thread(target=work, name=f"prepare-chunk-{j}", daemon=True)
+        thread.start()
+        self.jobs[j] = (thread, box)
+
+    def take(self, j: int) -> Any:
+        if j not in self.jobs:  # the first chunk of a run: prepared here
+            return self.fn.prepare(chunk_key(self.seed, j), self.batch)
+        thread, box = self.jobs.pop(j)
+        thread.join()
+        if "error" in box:
+            raise box["error"]
+        return box["value"]
+
+    def close(self) -> None:
+        self.jobs.clear()
 
 
 def read_rollout_chunk(path: Path, k: int, batch: int) -> dict[str, Any]:

@@ -7,7 +7,8 @@ traced) and ``make_rollout_fn(action, batch, config, engine=...)``, the sampler 
 ``dataset.generate_dataset``: sample pairs of the action's pairing (``allowed_pairs``), place
 and settle them (``scenes.py`` on the arm-less world), plan, simulate the feasible programs,
 label (``make_batch_prepare_fn`` then ``execute_batch``, also usable apart: the benchmark
-executes one prepared batch with several engines). Two engines execute the programs (``ENGINES``): ``"mjx"`` (default; it also runs on an
+executes one prepared batch with several engines; the ``RolloutFn`` it returns keeps the two
+halves, which the dataset driver runs one chunk apart, ``data.tasks.PrepareAhead``). Two engines execute the programs (``ENGINES``): ``"mjx"`` (default; it also runs on an
 accelerator) and ``"native"`` (MuJoCo C on a thread pool, ``native.batch.execute_native``);
 sampling and planning are the same JAX code for both; the native engine also settles the
 scenes in MuJoCo C (``native.settle``), so its scenes are C's (docs/scenes.md, "Native settle").
@@ -156,10 +157,22 @@ def make_rollout_fn(action: str, batch: int, config: ActionConfig | None = None,
     # the native engine settles in C too (native.settle); MJX's settle stays MJX's, bit for bit
     prepare = make_batch_prepare_fn(action, cfg, settle="native" if engine == "native" else "mjx", nthread=nthread)
 
-    def rollout_fn(key, batch_size: int) -> dict[str, np.ndarray]:
-        return execute_batch(prepare(key, batch_size), cfg, engine, sim_batch, nthread)
+    return RolloutFn(prepare, functools.partial(execute_batch, cfg=cfg, engine=engine, sim_batch=sim_batch,
+                                                nthread=nthread))
 
-    return rollout_fn
+
+class RolloutFn:
+    """``rollout_fn(key, batch_size) = execute(prepare(key, batch_size))``, with its two halves
+    apart: ``prepare`` (sample, place, settle, screen and plan: ``make_batch_prepare_fn``) and
+    ``execute`` (run the feasible programs and label: ``execute_batch``). The dataset driver
+    prepares the next chunk while this one executes (``data.tasks.PrepareAhead``); a chunk's
+    result does not depend on when its halves ran."""
+
+    def __init__(self, prepare: Callable, execute: Callable):
+        self.prepare, self.execute = prepare, execute
+
+    def __call__(self, key, batch_size: int) -> dict[str, np.ndarray]:
+        return self.execute(self.prepare(key, batch_size))
 
 
 class Prepared(NamedTuple):

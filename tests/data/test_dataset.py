@@ -169,6 +169,58 @@ def test_resume_after_kill_is_identical(built, tmp_path):
     assert again["rollouts"] == summary["rollouts"]
 
 
+class TwoHalves:
+    """A rollout function with two halves (``prepare``, ``execute``), as ``sim.rollouts.RolloutFn``:
+    the synthetic draws, made by ``execute``; records the thread each chunk was prepared on;
+    ``execute`` raises ``Killed`` after ``kill_after`` chunks, ``prepare`` at chunk ``fail_at``."""
+
+    def __init__(self, kill_after=None, fail_at=None):
+        self.draw, self.kill_after, self.fail_at = synthetic_rollout_fn(), kill_after, fail_at
+        self.threads, self.executed = [], 0
+
+    def prepare(self, key, b):
+        import threading
+
+        self.threads.append(threading.current_thread().name)
+        if self.fail_at is not None and len(self.threads) > self.fail_at:
+            raise Killed("simulated failure of a prepared half")
+        return key, b
+
+    def execute(self, prepared):
+        if self.kill_after is not None and self.executed >= self.kill_after:
+            raise Killed("simulated kill")
+        self.executed += 1
+        return self.draw(*prepared)
+
+    def __call__(self, key, b):
+        return self.execute(self.prepare(key, b))
+
+
+def test_next_chunk_prepared_ahead_gives_the_same_dataset_and_resumes(built, tmp_path):
+    """Without a cluster a two-halved rollout function's next chunk is prepared on a background
+    thread while this one executes: the same dataset as one call per chunk; a kill in an
+    execution or a failure in a prepared half keeps every chunk written before it, and the
+    rerun finishes the same dataset; at most one chunk is prepared past the stopping point."""
+    path, summary = built
+    whole = tmp_path / "whole"
+    fn = TwoHalves()
+    res = gen(whole, fn=fn)
+    assert res["rollouts"] == summary["rollouts"] and fn.executed == summary["chunks"]
+    assert fn.threads[0] == "MainThread" and all(t.startswith("prepare-chunk-") for t in fn.threads[1:])
+    assert len(fn.threads) == summary["chunks"] + 1  # the one prepared past the stopping point
+    part = tmp_path / "part"
+    with pytest.raises(Killed):
+        gen(part, fn=TwoHalves(kill_after=2))
+    with pytest.raises(Killed, match="prepared half"):
+        gen(part, fn=TwoHalves(fail_at=1))  # chunk 2 was prepared in the driver, chunk 3 on the thread
+    assert sorted(p.name for p in (part / "chunks").iterdir()) == [f"chunk_{k:06d}" for k in range(3)]
+    gen(part, fn=TwoHalves())
+    for other in (whole, part):
+        a, b = ds.load_rollouts(path), ds.load_rollouts(other)
+        for k in a:
+            np.testing.assert_array_equal(a[k], b[k])
+
+
 def test_cap_borrowing_records_and_warns(tmp_path):
     # positives only at small distances with no negatives there: borrowing is unavoidable
     def fn(key, b):

@@ -121,6 +121,43 @@ def test_read_at_rest_hand_worked():
     assert int(i) == 9 and not bool(ok)  # never at rest: the hold's last step, unsettled
 
 
+@pytest.mark.parametrize("programs,window,hold", [("v1", 10, 0), ("v2", 10, 200), ("v2", 3, 12), ("v2", 1, 5)])
+def test_rest_reader_equals_read_at_rest_per_scene(programs, window, hold):
+    """The C executors' step-by-step reader (all scenes at once) gives every scene the read
+    step, state and ``settled`` of ``labels.read_at_rest`` on its own collected steps, bit for
+    bit, also where a run stops early (v2: once every scene is read)."""
+    from types import SimpleNamespace
+    from relaff_jax.sim.native.program import RestReader
+
+    cfg = dataclasses.replace(V2, programs=programs, rest_window=window, rest_hold=hold)
+    v2, measure, b = programs != "v1", 30, 40
+    rng = np.random.default_rng(window + hold)
+    speed = cfg.scene.rest_speed * cfg.phys.timestep
+    # per scene: moves (steps around the threshold, ties included) until a random step, then still
+    stop = rng.integers(measure - window - 2, measure + hold + 3, b)
+    steps = rng.choice([0.0, 0.5, 1.0, 2.0], size=(b, 260, 2, 3)) * speed / np.sqrt(3)
+    steps[np.arange(260)[None, :] >= stop[:, None]] = 0.0
+    steps[::7, :, 1] = 0.0  # some scenes' other object never moves
+    com = 0.3 + np.cumsum(steps, axis=1)
+    qpos = rng.normal(size=(b, 260, 14)).astype(np.float32)
+    reader = RestReader(cfg, SimpleNamespace(measure=measure, v2=v2))
+    t_end = 259
+    for t in range(260):
+        reader.add(t, com[:, t], qpos[:, t])
+        if v2 and reader.done:
+            t_end = t
+            break
+    got_com, got_q, got_settled = reader.result()
+    lo = measure - window
+    for i in range(b):
+        c = com[i, lo:min(t_end, lo + window + hold) + 1]
+        j, ok = labels.read_at_rest(c, window, cfg.scene.rest_speed, cfg.phys.timestep, np)
+        assert bool(got_settled[i]) == bool(ok) and reader.read_steps()[i] == lo + int(j)
+        np.testing.assert_array_equal(got_com[i], c[int(j)])
+        np.testing.assert_array_equal(got_q[i], qpos[i, lo + int(j)])
+    assert got_settled.any() and (v2 or not got_settled.all() or hold == 0)
+
+
 def test_versions_config_and_sidecar():
     assert "programs" not in templates.stored_config(V1)
     assert not set(templates.stored_config(V1)) & {"rest_hold", "palm_margin", "squeeze_min"}

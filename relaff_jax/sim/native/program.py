@@ -26,7 +26,7 @@ import numpy as np
 from relaff_jax.sim import arm as A
 from relaff_jax.sim.actions.registry import on_change, registry
 from relaff_jax.sim.actions.rules import goal_row
-from relaff_jax.sim.labels import Outcome, read_at_rest
+from relaff_jax.sim.labels import Outcome
 from relaff_jax.sim.planning import setup
 from relaff_jax.sim.programs import toy_reachable
 from relaff_jax.sim.guard import guard_tables, stopped_way
@@ -164,26 +164,41 @@ class RestReader:
     ``done`` once every scene's read step is known (v2: a run may stop there); ``result()``
     gives (com_read (B, 2, 3), qpos_read (B, nq), settled (B,)). v1 reads the measuring step
     (``settled``: were the objects at rest there); v2 the first step at rest from it on, within
-    ``cfg.rest_hold`` steps. Both C executors use it, so they agree bit for bit."""
+    ``cfg.rest_hold`` steps. Both C executors use it, so they agree bit for bit.
+
+    It reads ``read_at_rest``'s rule step by step, for all B scenes at once: each new step's
+    displacement is computed once, with the same float64 operations ``read_at_rest`` applies
+    to that step (so the same bits), and a scene's read step is the first collected step ``j
+    >= window`` with no moving step among the ``window`` before it (``tests/sim/
+    test_native_engine.py`` checks it against ``read_at_rest`` scene by scene)."""
 
     def __init__(self, cfg: ActionConfig, inp: ProgramInputs):
         self.cfg, self.lo = cfg, inp.measure - cfg.rest_window
         self.hold = cfg.rest_hold if inp.v2 else 0
         self.com, self.q, self.done = [], [], False
+        self.moving: list[np.ndarray] = []  # (B,) bool per collected step after the first: j-1 -> j moved
+        self.first: np.ndarray | None = None  # (B,) index of the first calm step, -1 while none
 
     def add(self, t: int, com: np.ndarray, qpos: np.ndarray) -> None:
         if t < self.lo or t > self.lo + self.cfg.rest_window + self.hold:
             return
         self.com.append(np.array(com, np.float64))
         self.q.append(np.array(qpos))
-        if len(self.com) > self.cfg.rest_window:
-            i, settled = self._read()
-            self.done = bool(np.all(settled)) or len(self.com) == self.cfg.rest_window + 1 + self.hold
+        if self.first is None:
+            self.first = np.full(len(self.com[0]), -1)
+        if len(self.com) > 1:  # labels.read_at_rest's ``step`` and ``moving`` of this one step
+            step = np.sqrt(np.sum((self.com[-1] - self.com[-2]) ** 2, axis=-1))  # (B, 2)
+            self.moving.append(np.max(step, axis=-1) >= self.cfg.scene.rest_speed * self.cfg.phys.timestep)
+        j, w = len(self.com) - 1, self.cfg.rest_window
+        if j >= w:
+            calm = ~np.any(self.moving[j - w:j], axis=0) if w else np.ones(len(self.first), bool)
+            self.first[(self.first < 0) & calm] = j
+            self.done = bool(np.all(self.first >= 0)) or len(self.com) == w + 1 + self.hold
 
     def _read(self) -> tuple[np.ndarray, np.ndarray]:
-        com = np.stack(self.com, axis=1)  # (B, T, 2, 3)
-        out = [read_at_rest(c, self.cfg.rest_window, self.cfg.scene.rest_speed, self.cfg.phys.timestep, np) for c in com]
-        return np.array([i for i, _ in out]), np.array([s for _, s in out], bool)
+        """(B,) the index into the collected steps each scene is read at, and (B,) settled."""
+        settled = self.first >= 0
+        return np.where(settled, self.first, len(self.com) - 1), settled
 
     def result(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         i, settled = self._read()
