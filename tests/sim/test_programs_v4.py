@@ -10,7 +10,7 @@ import pytest
 
 from relaff_jax.config.action import ActionConfig
 from relaff_jax.constants import ACTIONS, action_id
-from relaff_jax.sim import bodies, guard, planning, programs
+from relaff_jax.sim import bodies, guard, planning, programs, sweep
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim.actions.tables import DESCENT_DWELL, RAKE_DWELL, run_steps, tables
 
@@ -100,3 +100,28 @@ def test_palm_clears_a_toy_pushed_across_hand_worked():
     # v4: the palm 2 cm above the car's diagonal (from the cup's rim) leaves the pads less than
     # min_grip of the cup: refused
     assert not bool(over4.ok)
+
+
+def test_move_sweeps_over_a_low_base_it_crosses_hand_worked():
+    # a block on a 1.5 cm lid: v3 sweeps with the fingertips 1 cm above the table, into the lid's
+    # side, which they ride up onto (move 4143: 33 N on the lid for 1 s); v4 raises them to 1 cm
+    # above the lid's top and sweeps the block off it. The same block beside the lid (the sweep
+    # never crosses it), on a placemat below the fingertips and on a pallet board well above them
+    # (pushed along): v4 plans as v3.
+    tip = lambda pr, arm: float(pr.targets.pos[1, 2]) - arm.tip_below_tcp
+    lid = lib.get("lid").height
+    on3, arm, (_, lid_b) = prog("move", V3, "block", "lid", (0.7, 0.0, lid), (0.7, 0.0, 0.0))
+    on4, _, _ = prog("move", V4, "block", "lid", (0.7, 0.0, lid), (0.7, 0.0, 0.0))
+    top = float(lid_b.z_range()[1])
+    assert tip(on3, arm) == pytest.approx(0.01, abs=1e-6) and top - 0.01 <= sweep.STEP_ABOVE
+    assert tip(on4, arm) == pytest.approx(top + V4.tip_clearance + 0.005, abs=1e-6) and bool(on4.ok)
+    # the whole sweep at that height, from free table beside the lid across it
+    np.testing.assert_allclose(np.asarray(on4.targets.pos[1:3, 2]), float(on4.targets.pos[1, 2]))
+    assert bool(sweep.sweep_crosses(arm, on4.targets.pos[1], on4.targets.pos[2], on4.direction, lid_b))
+    for other, t, o in (("lid", (0.7, 0.3, 0.0), (0.7, 0.0, 0.0)),
+                        ("placemat", (0.7, 0.0, lib.get("placemat").height), (0.7, 0.0, 0.0)),
+                        ("pallet_board", (0.7, 0.0, lib.get("pallet_board").height), (0.7, 0.0, 0.0))):
+        p3, _, (_, ob) = prog("move", V3, "block", other, t, o)
+        p4, _, _ = prog("move", V4, "block", other, t, o)
+        np.testing.assert_array_equal(np.asarray(p4.targets.pos), np.asarray(p3.targets.pos))
+        assert bool(p4.ok) == bool(p3.ok), other
