@@ -220,7 +220,9 @@ def _program_move(arm, cfg, toy, oth, radius, inner) -> Program:
 
     The program knows where the toy is, not what it stands on: if the toy's side lies over
     the other object, the descent point moves out along the sweep line until it is over free
-    table, and the sweep then meets the other object first."""
+    table, and the sweep then meets the other object first. v3 raises the sweep over the tops
+    near the palm (``sweep.sweep_raise``); v4 also lifts fingertips that would ride onto a low
+    base they cross to above its top (``sweep.step_raise``)."""
     c = toy.centre
     c = jnp.array([c[0], c[1], 0.0])
     towards = oth.centre - toy.centre

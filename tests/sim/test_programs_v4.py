@@ -1,6 +1,6 @@
 """Motor programs v4: the arm at rest above the objects before every descent (the tables), the
-pads' footprint grown by ``bodies.PAD_MARGIN``, and the palm clear of the tipping reach of a toy
-a base grasp pushes across. Fast tests on the tables and on hand-built scenes
+pads' footprint grown by ``bodies.PAD_MARGIN``, the palm clear of the tipping reach of a toy
+a base grasp pushes across, and move's fingertips over a low base the sweep crosses. Fast tests on the tables and on hand-built scenes
 (``programs.program``, no simulation); v3's plans are pinned in ``test_programs_v3.py``."""
 import dataclasses
 
