@@ -249,8 +249,13 @@ def _program_move(arm, cfg, toy, oth, radius, inner) -> Program:
                 tip = cfg.tip_clearance + 0.005 + raise_by
                 lift = step_raise(cfg, tip, oth.z_range()[1],
                                   sweep_crosses(arm, *_sweep_ends(arm, cfg, toy, oth, c, d, half), d, oth))
-                raise_by = raise_by + lift + sweep_raise(cfg, palm + raise_by + lift, tops, depth)
-            ok = ~falls_onto_fingers(cfg, toy, oth, inner, raise_by)
+                palm_raise = raise_by + sweep_raise(cfg, palm + raise_by + lift, tops, depth)
+                # the fallen-toy refusal answers a raise for the palm; over a step alone the toy
+                # slides off upright in front of the fingertips (C replays: 21 cars off plates and lids)
+                ok = ~(falls_onto_fingers(cfg, toy, oth, inner, palm_raise + lift) & (palm_raise > 0))
+                raise_by = palm_raise + lift
+            else:
+                ok = ~falls_onto_fingers(cfg, toy, oth, inner, raise_by)
             tcp_z = tcp_z + raise_by
         else:
             tcp_z = tcp_z + jnp.maximum(clear(toy.z_range()[1]), jnp.where(over, clear(oth.z_range()[1]), 0.0))

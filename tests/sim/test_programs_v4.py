@@ -115,6 +115,10 @@ def test_move_sweeps_over_a_low_base_it_crosses_hand_worked():
     top = float(lid_b.z_range()[1])
     assert tip(on3, arm) == pytest.approx(0.01, abs=1e-6) and top - 0.01 <= sweep.STEP_ABOVE
     assert tip(on4, arm) == pytest.approx(top + V4.tip_clearance + 0.005, abs=1e-6) and bool(on4.ok)
+    # a car (4 cm) on the lid: raised the same and swept, not refused as a toy fallen near the
+    # fingertips (v3's refusal is for a raise that clears the palm)
+    car, _, _ = prog("move", V4, "toy_car", "lid", (0.7, 0.0, lid), (0.7, 0.0, 0.0))
+    assert tip(car, arm) == pytest.approx(top + V4.tip_clearance + 0.005, abs=1e-6) and bool(car.ok)
     # the whole sweep at that height, from free table beside the lid across it
     np.testing.assert_allclose(np.asarray(on4.targets.pos[1:3, 2]), float(on4.targets.pos[1, 2]))
     assert bool(sweep.sweep_crosses(arm, on4.targets.pos[1], on4.targets.pos[2], on4.direction, lid_b))
