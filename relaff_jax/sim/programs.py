@@ -18,6 +18,7 @@ from . import arm as A
 from .bodies import (DOWN, Body, Geometry, Grasp, ball_extent, between_pads, bodies, clear_grasp, perp,
                      squeeze_command, squeezed_half, stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
+from .pad_sweep import carry_meets_toy, wall_between_pads
 from .sweep import falls_onto_fingers, step_raise, sweep_crosses, sweep_raise, sweep_tops
 from .templates import N_TARGETS, ActionConfig, is_v3 as _v3, is_v4
 
@@ -131,7 +132,8 @@ def _take_grasp(arm: A.Arm, cfg: ActionConfig, toy: Body) -> Grasp:
 
 def _toy_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Array]:
     """Take's grasp and closing command (v2: palm clear, squeeze for the toy's weight; v3: the
-    squeeze from the body the pads end on, ``bodies.squeezed_half``)."""
+    squeeze from the body the pads end on, ``bodies.squeezed_half``; v4: refused where the pads
+    would end on the other object's wall and the toy together, ``pad_sweep.wall_between_pads``)."""
     g = _take_grasp(arm, cfg, sc.toy)
     if cfg.programs == "v1":
         return g, jnp.asarray(cfg.arm.grip_closed, jnp.float32)
@@ -139,6 +141,8 @@ def _toy_grasp(arm: A.Arm, cfg: ActionConfig, sc: Scene) -> tuple[Grasp, jax.Arr
     half = jnp.where(sc.toy_radius > 0, sc.toy_radius, sc.toy.half_width(g.closing))  # a ball's is its radius
     if _v3(cfg):  # the pads end on the widest body between them: the toy, or a cup around it
         half = squeezed_half(arm, g, half, sc.oth)
+    if is_v4(cfg):  # ... and not on a wall that stands between them with the toy
+        g = g._replace(fits=g.fits & ~wall_between_pads(arm, g, sc.oth, sc.inner))
     return g, squeeze_command(arm, cfg, half, sc.toy_mass)
 
 
@@ -177,11 +181,14 @@ def _program_drag(arm, cfg, sc: Scene, *, direction: jax.Array, distance: float,
     up = jnp.maximum(_transit_z(arm, cfg, toy, oth), g.tcp_z + 0.05)
     z = jnp.array([0.0, 0.0, 1.0])
     end = g.xy + direction * distance
+    ok = g.fits
+    if is_v4(cfg):  # the pads' way from the grasp to the end stays off a toy standing beside the base
+        ok = ok & ~carry_meets_toy(arm, g, oth, toy, end)
     targets = [top_down(g.xy + z * up, g.closing), top_down(g.xy + z * g.tcp_z, g.closing),
                top_down(g.xy + z * (g.tcp_z + raise_by), g.closing),
                top_down(end + z * (g.tcp_z + raise_by), g.closing), top_down(end + z * g.tcp_z, g.closing),
                top_down(end + z * (g.tcp_z + 0.10), g.closing)]
-    return Program(stack_targets(targets), g.opening, g.fits, direction, squeeze)
+    return Program(stack_targets(targets), g.opening, ok, direction, squeeze)
 
 
 def exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax.Array:

@@ -1,7 +1,8 @@
 """Motor programs v4: the arm at rest above the objects before every descent (the tables), the
 pads' footprint grown by ``bodies.PAD_MARGIN``, the palm clear of the tipping reach of a toy
-a base grasp pushes across, and move's fingertips over a low base the sweep crosses. Fast tests on the tables and on hand-built scenes
-(``programs.program``, no simulation); v3's plans are pinned in ``test_programs_v3.py``."""
+a base grasp pushes across, and move's fingertips over a low base the sweep crosses. Fast tests
+on the tables and on hand-built scenes (``programs.program``, no simulation); v3's plans are
+pinned in ``test_programs_v3.py``."""
 import dataclasses
 
 import jax.numpy as jnp
@@ -10,9 +11,9 @@ import pytest
 
 from relaff_jax.config.action import ActionConfig
 from relaff_jax.constants import ACTIONS, action_id
-from relaff_jax.sim import bodies, guard, planning, programs, sweep
+from relaff_jax.sim import bodies, guard, pad_sweep, planning, programs, sweep
 from relaff_jax.sim import objects as lib
-from relaff_jax.sim.actions.tables import DESCENT_DWELL, RAKE_DWELL, run_steps, tables
+from relaff_jax.sim.actions.tables import DESCENT_DWELL, RAKE_DWELL, TOOL_TRANSIT, run_steps, tables
 
 from helpers.scenes import posed as scene, posed_program as prog
 
@@ -26,9 +27,11 @@ def test_v4_holds_the_first_waypoint_before_every_descent():
     assert (t4.steps.sum(axis=1) == t4.n_steps).all() and t4.hold == t3.hold
     for a, name in enumerate(ACTIONS):
         n = int(np.count_nonzero(t3.steps[a] > 1))  # the declared segments (the padding is 1-step dwells)
-        if name == "rake":  # v3's dwell already: the same segments, measuring step and run
-            np.testing.assert_array_equal(t4.steps[a][:n - 1], t3.steps[a][:n - 1])
-            assert t4.measure[a] == t3.measure[a]
+        if name == "rake":  # v3's dwell already; the held tool's transit TOOL_TRANSIT long, then v3's segments
+            assert t3.steps[a][0] == 150 and t4.steps[a][0] == TOOL_TRANSIT
+            np.testing.assert_array_equal(t4.steps[a][1:n - 1], t3.steps[a][1:n - 1])
+            np.testing.assert_array_equal(t4.target[a][:n], t3.target[a][:n])
+            assert t4.measure[a] == t3.measure[a] + TOOL_TRANSIT - 150
             continue
         # the transit as in v3, then DESCENT_DWELL steps at waypoint 0 with the same fingers
         assert t4.steps[a][0] == t3.steps[a][0] and t4.steps[a][1] == DESCENT_DWELL, name
@@ -40,7 +43,7 @@ def test_v4_holds_the_first_waypoint_before_every_descent():
         assert t4.measure[a] == t3.measure[a] + DESCENT_DWELL, name
     assert RAKE_DWELL == DESCENT_DWELL  # one dwell for every program
     np.testing.assert_array_equal(run_steps(V4) - run_steps(V3),
-                                  np.where(np.asarray(ACTIONS) == "rake", 0, DESCENT_DWELL))
+                                  np.where(np.asarray(ACTIONS) == "rake", TOOL_TRANSIT - 150, DESCENT_DWELL))
 
 
 def test_v4_guard_starts_at_the_descent_after_the_dwell():
@@ -100,6 +103,55 @@ def test_palm_clears_a_toy_pushed_across_hand_worked():
     # v4: the palm 2 cm above the car's diagonal (from the cup's rim) leaves the pads less than
     # min_grip of the cup: refused
     assert not bool(over4.ok)
+
+
+def _posed_scene(cfg, toy, other, txyz, oxyz):
+    st = planning.setup(cfg)
+    p, q = scene(st.world, toy, other, txyz, oxyz)
+    return st.arm, programs._scene(st.geo, jnp.int32(p), jnp.asarray(q))
+
+
+def test_take_refuses_a_wall_between_the_pads_hand_worked():
+    # a block in a baking pan (30 x 22 cm, 8 mm walls), take's closing axis along world y here;
+    # 7 cm off the pan's centre along it the + pad (inner face 5 cm from the block's centre)
+    # comes down 1 cm outside the pan's wall, the - pad inside: the pads would end on the block
+    # and the wall together (take 13155 and 30927 of the paper v3 dataset). Centred, both pads
+    # come down inside the opening and v4 plans as v3.
+    floor = dict(lib.get("baking_pan").parts)["base"].size[2]
+
+    def plan(cfg, dy):
+        t, o = (0.7, 0.0, floor), (0.7, -dy, 0.0)  # the block on the x axis: closing along y
+        arm, sc = _posed_scene(cfg, "block", "baking_pan", t, o)
+        g = programs._toy_grasp(arm, cfg, sc)[0]
+        assert np.allclose(np.abs(np.asarray(g.closing)), [0.0, 1.0, 0.0])
+        return prog("take", cfg, "block", "baking_pan", t, o)[0], bool(pad_sweep.wall_between_pads(arm, g, sc.oth, sc.inner))
+
+    centred3, _ = plan(V3, 0.0)
+    centred4, wall = plan(V4, 0.0)
+    assert not wall and bool(centred3.ok) and bool(centred4.ok)
+    np.testing.assert_array_equal(np.asarray(centred4.targets.pos), np.asarray(centred3.targets.pos))
+    near3, _ = plan(V3, 0.07)
+    near4, wall = plan(V4, 0.07)
+    assert wall and bool(near3.ok) and not bool(near4.ok)
+
+
+def test_drag_refuses_a_carry_over_a_standing_toy_hand_worked():
+    # push a bucket (23 cm square, 20 cm tall) along world x, its closing axis: the far pad goes
+    # 25 cm ahead with its fingertips at 11 cm (2 cm higher during the carry). A 12 cm can on the
+    # table 5 cm ahead of that pad's footprint stands in its way (push 25333 of the paper v3
+    # dataset: the pad came down on such a can at 76 N); a 5 cm block there is passed over;
+    # the can 15 cm to the side of the pads' lane is never met.
+    arm, sc = _posed_scene(V4, "toy_can", "bucket", (0.0, 0.7, 0.0), (0.7, 0.0, 0.0))
+    g = programs._base_grasp(arm, V4, sc)[0]
+    assert np.allclose(np.abs(np.asarray(g.closing)), [1.0, 0.0, 0.0])
+    far = 0.7 + float(g.opening) + arm.pad_thickness + 0.05  # 5 cm beyond the far pad's outer face
+    push = lambda cfg, toy, half, y: prog("push", cfg, toy, "bucket", (far + half, y, 0.0), (0.7, 0.0, 0.0))[0]
+    can, block = 0.0325, 0.025
+    assert bool(push(V3, "toy_can", can, 0.0).ok) and not bool(push(V4, "toy_can", can, 0.0).ok)
+    assert bool(push(V4, "block", block, 0.0).ok)
+    aside3, aside4 = push(V3, "toy_can", can, 0.15 + can), push(V4, "toy_can", can, 0.15 + can)
+    assert bool(aside3.ok) and bool(aside4.ok)
+    np.testing.assert_array_equal(np.asarray(aside4.targets.pos), np.asarray(aside3.targets.pos))
 
 
 def test_move_sweeps_over_a_low_base_it_crosses_hand_worked():

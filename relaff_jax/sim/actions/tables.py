@@ -7,6 +7,8 @@ v3's dwell in rake and v4's before every built-in's descent (``dwells``).
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from relaff_jax.constants import ACTIONS
@@ -16,13 +18,16 @@ from .registry import is_builtin, registry
 from .spec import GRASP_CODE
 
 
-def spec_tables(specs, dwell: dict[str, int] | None = None) -> Tables:
+def spec_tables(specs, dwell: dict[str, int] | None = None, transit: dict[str, int] | None = None) -> Tables:
     """v1's tables of ``specs`` (checked ``ActionSpec``s): each template padded by
     ``templates._template``, its measuring step the spec's (default: the end of its segments).
     ``dwell``: steps each built-in it names holds its first waypoint after its transit (a segment
-    inserted after the first, its measuring step as much later; ``dwells``). The padding is
-    ``N_SEGMENTS`` segments and ``N_STEPS`` steps, or more where a dwell needs them."""
-    rows = [_dwelled(s, (dwell or {}).get(s.name, 0) if is_builtin(s.name) else 0) for s in specs]
+    inserted after the first, its measuring step as much later; ``dwells``); ``transit``: the
+    length of the first segment (the transit from home) of each built-in it names, instead of
+    the template's (``transits``). The padding is ``N_SEGMENTS`` segments and ``N_STEPS`` steps,
+    or more where a dwell or a transit needs them."""
+    rows = [_dwelled(_transit(s, (transit or {}).get(s.name, 0)) if is_builtin(s.name) else s,
+                     (dwell or {}).get(s.name, 0) if is_builtin(s.name) else 0) for s in specs]
     n_seg = max([N_SEGMENTS] + [len(seg) for seg, _ in rows])
     n_steps = max([N_STEPS] + [sum(g[0] for g in seg) + n_seg - len(seg) for seg, _ in rows])
     tpl = [_template(seg, n_seg, n_steps) for seg, _ in rows]
@@ -31,6 +36,16 @@ def spec_tables(specs, dwell: dict[str, int] | None = None) -> Tables:
                   np.asarray([t.closed for t in tpl], bool), np.asarray(measure, np.int32), n_steps, 0,
                   np.asarray([GRASP_CODE[s.grasp] for s in specs], np.int32),
                   np.asarray([s.grasp == "tool" for s in specs], bool), np.asarray([s.reach for s in specs], bool))
+
+
+def _transit(spec, n: int):
+    """A spec whose first segment (the transit from home) lasts ``n`` steps (as declared for 0),
+    its measuring step as much later or earlier."""
+    seg = tuple(spec.segments)
+    if n <= 0 or n == seg[0][0]:
+        return spec
+    measure = None if spec.measure is None else spec.measure + n - seg[0][0]
+    return dataclasses.replace(spec, segments=((n,) + tuple(seg[0][1:]),) + seg[1:], measure=measure)
 
 
 def _dwelled(spec, n: int) -> tuple[tuple, int | None]:
@@ -61,6 +76,21 @@ RAKE_DWELL = 150
 DESCENT_DWELL = 150
 
 
+# v4: control steps of the held rake's transit from home to its first waypoint (``above``, the tool
+# 10 cm over the toy), instead of the template's 150. At 150 the servos lag the arm's swing with
+# the tool and overshoot ``above`` early in the dwell: in C replays of 302 v3 programs of the paper
+# dataset the tool touched the toy in 27, at steps 181-199, up to 10.6 mm deep (rake 40271: 39 N
+# held). With 300 steps no tool came within 73 mm of the toy in 124 replays of the same plans
+# (docs/actions.md, "Programs v4").
+TOOL_TRANSIT = 300
+
+
+def transits(cfg: ActionConfig) -> dict[str, int]:
+    """The transit's length each built-in runs under ``cfg.programs`` where it is not its
+    template's: v4's held rake ``TOOL_TRANSIT``; none before v4."""
+    return {"rake": TOOL_TRANSIT} if is_v4(cfg) else {}
+
+
 def dwells(cfg: ActionConfig) -> dict[str, int]:
     """The steps each built-in holds its first waypoint after the transit under ``cfg.programs``:
     none (v1, v2), rake's ``RAKE_DWELL`` (v3), and v4 the others' ``DESCENT_DWELL`` too."""
@@ -76,7 +106,7 @@ def tables(cfg: ActionConfig) -> Tables:
     v2 the same segments with the final rest ``cfg.rest_hold`` steps longer, so that a goal read
     at rest (``labels.read_at_rest``) can wait up to ``rest_hold`` steps after ``measure``; v3
     as v2 with rake's dwell after the transit, v4 with every built-in's (``dwells``)."""
-    tb = spec_tables(registry(), dwells(cfg))
+    tb = spec_tables(registry(), dwells(cfg), transits(cfg))
     if cfg.programs == "v1":
         return tb
     steps = tb.steps.copy()
