@@ -19,7 +19,7 @@ from .bodies import (DOWN, Body, Geometry, Grasp, ball_extent, between_pads, bod
                      squeeze_command, squeezed_half, stack_targets, tool_squeeze, top_down, top_down_grasp, unit_xy)
 from .geometry import axis_rotation
 from .pad_sweep import carry_meets_toy, wall_between_pads
-from .sweep import falls_onto_fingers, sweep_raise, sweep_tops
+from .sweep import falls_onto_fingers, step_raise, sweep_crosses, sweep_raise, sweep_tops
 from .templates import N_TARGETS, ActionConfig, is_v3 as _v3, is_v4
 
 from relaff_jax.constants import ACTIONS
@@ -206,6 +206,19 @@ def exit_distance(p: jax.Array, d: jax.Array, body: Body, margin: float) -> jax.
     return jnp.where(inside, jnp.maximum(t_out, 0.0), 0.0)
 
 
+def _sweep_ends(arm, cfg, toy, oth, c, d, half) -> tuple[jax.Array, jax.Array]:
+    """Move's sweep from start to end (3, xy; z 0) along ``d`` across the toy's place ``c``,
+    for the hand's footprint ``half(body)`` (half its extent along ``d`` where it meets that
+    body): the start beside the toy, stepped back along the line to free table; the end where
+    v1's ends (its start's reach: the pads beside the toy)."""
+    reach = toy.half_width(d) + half(toy) + cfg.rake_gap
+    finger = half(oth) + cfg.rake_gap  # half the hand's footprint, plus a gap
+    start = c - d * reach
+    start = start - d * exit_distance(start, d, oth, finger)
+    end = c + d * (cfg.move_distance - (toy.half_width(d) + arm.pad_thickness + cfg.rake_gap))
+    return start, end
+
+
 def _program_move(arm, cfg, toy, oth, radius, inner) -> Program:
     """Sweep the toy aside along the table: the closed gripper comes down on free table
     beside the toy, fingertips just above the table, and sweeps across the toy's place to
@@ -214,7 +227,9 @@ def _program_move(arm, cfg, toy, oth, radius, inner) -> Program:
 
     The program knows where the toy is, not what it stands on: if the toy's side lies over
     the other object, the descent point moves out along the sweep line until it is over free
-    table, and the sweep then meets the other object first."""
+    table, and the sweep then meets the other object first. v3 raises the sweep over the tops
+    near the palm (``sweep.sweep_raise``); v4 also lifts fingertips that would ride onto a low
+    base they cross to above its top (``sweep.step_raise``)."""
     c = toy.centre
     c = jnp.array([c[0], c[1], 0.0])
     towards = oth.centre - toy.centre
@@ -235,22 +250,28 @@ def _program_move(arm, cfg, toy, oth, radius, inner) -> Program:
         gap = arm.pad_thickness + cfg.rake_gap
         over = exit_distance(c - d * (toy.half_width(d) + gap), d, oth, gap) > 0
         if _v3(cfg):
-            raise_by = sweep_raise(cfg, palm, *sweep_tops(cfg, toy, oth, over, radius))
-            ok = ~falls_onto_fingers(cfg, toy, oth, inner, raise_by)
+            tops, depth = sweep_tops(cfg, toy, oth, over, radius)
+            raise_by = sweep_raise(cfg, palm, tops, depth)
+            if is_v4(cfg):  # fingertips that would ride onto a low base they cross pass over it
+                tip = cfg.tip_clearance + 0.005 + raise_by
+                lift = step_raise(cfg, tip, oth.z_range()[1],
+                                  sweep_crosses(arm, *_sweep_ends(arm, cfg, toy, oth, c, d, half), d, oth))
+                palm_raise = raise_by + sweep_raise(cfg, palm + raise_by + lift, tops, depth)
+                # the fallen-toy refusal answers a raise for the palm; over a step alone the toy
+                # slides off upright in front of the fingertips (C replays: 21 cars off plates and lids)
+                ok = ~(falls_onto_fingers(cfg, toy, oth, inner, palm_raise + lift) & (palm_raise > 0))
+                raise_by = palm_raise + lift
+            else:
+                ok = ~falls_onto_fingers(cfg, toy, oth, inner, raise_by)
             tcp_z = tcp_z + raise_by
         else:
             tcp_z = tcp_z + jnp.maximum(clear(toy.z_range()[1]), jnp.where(over, clear(oth.z_range()[1]), 0.0))
         # ... and the hand's footprint is the palm's (5 cm) where a body reaches up to the palm
         palm_z = tcp_z - arm.tip_below_tcp + arm.palm_above_tip - cfg.palm_margin
         half = lambda b: jnp.where(b.z_range()[1] > palm_z, float(arm.palm_half[1]), arm.pad_thickness)
-    reach = toy.half_width(d) + half(toy) + cfg.rake_gap
-    finger = half(oth) + cfg.rake_gap  # half the hand's footprint, plus a gap
-    start = c - d * reach
-    start = start - d * exit_distance(start, d, oth, finger)
+    start, end = _sweep_ends(arm, cfg, toy, oth, c, d, half)
     up = _transit_z(arm, cfg, toy, oth)
     z = jnp.array([0.0, 0.0, 1.0])
-    # the sweep ends where v1's does (its start's reach: the pads beside the toy)
-    end = c + d * (cfg.move_distance - (toy.half_width(d) + arm.pad_thickness + cfg.rake_gap))
     targets = [top_down(start + z * up, d), top_down(start + z * tcp_z, d), top_down(end + z * tcp_z, d),
                top_down(end + z * (tcp_z + 0.10), d)]
     return Program(stack_targets(targets), jnp.asarray(0.0), ok, d,

@@ -1,12 +1,13 @@
-"""Move's v3 sweep height (``programs._program_move``): the tops its palm keeps off and the
-fixed point that raises it over them, and the refusal of a raised sweep whose fingertips would
-meet a toy fallen off a flat base. Single scene, pure JAX; docs/actions.md, "Programs v3"."""
+"""Move's sweep height (``programs._program_move``): v3's tops its palm keeps off and the fixed
+point that raises it over them, and the refusal of a raised sweep whose fingertips would meet a
+toy fallen off a flat base; v4's raise of the fingertips over a low base the sweep crosses.
+Single scene, pure JAX; docs/actions.md, "Programs v3" and "Programs v4"."""
 from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
 
-from .bodies import Body
+from .bodies import Body, perp, unit_xy
 from .templates import ActionConfig
 
 # m, v3: a top this much beyond move's palm_margin band still counts as inside it (settled tops
@@ -58,3 +59,41 @@ def falls_onto_fingers(cfg: ActionConfig, toy: Body, oth: Body, inner: jax.Array
     inside = jnp.any(inner[:2] > 0) & (zmin < oth.z_range()[1] - cfg.tip_clearance)
     on_flat = (zmin > cfg.tip_clearance) & ~inside
     return on_flat & (raise_by > 0) & (jnp.abs(tip - lying) < cfg.palm_margin)
+
+
+# m, v4: a body the sweep crosses whose top lies from STEP_BELOW below to STEP_ABOVE above the
+# fingertips (both inclusive) is a step the pads ride up onto rather than push along. C replays of
+# v4 sweeps across flat bases (docs/actions.md, "Programs v4"): the pads sagged up to 1.1 mm onto a
+# baking sheet's top level with them and never touched tops 2 or 4 mm below; they climbed a 5 mm
+# side (a lid's) once in 61 and no side 1-3 cm high in 80
+STEP_BELOW = 0.0015
+STEP_ABOVE = 0.006
+
+
+def sweep_crosses(arm, start: jax.Array, end: jax.Array, d: jax.Array, body: Body) -> jax.Array:
+    """v4: does the closed pads' footprint (``pad_thickness`` either side of the tcp along the
+    sweep's direction ``d``, ``pad_half_x`` across it), swept from ``start`` to ``end`` (3,; the
+    sweep runs along ``d``), overlap the body's footprint rectangle? Two rectangles overlap
+    unless one of their four edge directions separates them."""
+    q = perp(d)
+    reach = jnp.stack([jnp.abs(jnp.dot(end - start, d)) / 2 + arm.pad_thickness, arm.pad_half_x])
+    ax = unit_xy(body.mat[:, 0])
+    ay = perp(ax)
+    half = jnp.stack([body.half_width(ax), body.half_width(ay)])
+    rel = (body.centre - (start + end) / 2)[:2]
+    apart = jnp.asarray(False)
+    for u in (d, q, ax, ay):
+        ra = reach[0] * jnp.abs(jnp.dot(d, u)) + reach[1] * jnp.abs(jnp.dot(q, u))
+        rb = half[0] * jnp.abs(jnp.dot(ax, u)) + half[1] * jnp.abs(jnp.dot(ay, u))
+        apart = apart | (jnp.abs(jnp.dot(rel, u[:2])) > ra + rb)
+    return ~apart
+
+
+def step_raise(cfg: ActionConfig, tip: jax.Array, top: jax.Array, crosses: jax.Array) -> jax.Array:
+    """v4: how far to raise move's sweep (m, >= 0) whose fingertips, ``tip`` above the table,
+    cross (``crosses``) a body whose ``top`` is a step they would ride onto (``STEP_BELOW`` below
+    to ``STEP_ABOVE`` above them): the fingertips then pass as high above that top as they pass
+    above the table (``tip_clearance`` + 5 mm), sweeping the toy off it rather than dragging
+    the base along under the pads."""
+    step = crosses & (top >= tip - STEP_BELOW) & (top <= tip + STEP_ABOVE)
+    return jnp.where(step, top + cfg.tip_clearance + 0.005 - tip, 0.0)

@@ -107,8 +107,9 @@ def is_v3(cfg: ActionConfig) -> bool:
 
 def is_v4(cfg: ActionConfig) -> bool:
     """Programs v4: v3 with the dwell before every descent, the held rake's slower transit
-    (``actions.tables``), the grasp rules of ``bodies.PAD_MARGIN`` and ``programs.pushed_across``
-    and the pads' sweep rules of ``pad_sweep`` (v3 keeps its plans bit for bit)."""
+    (``actions.tables``), the grasp rules of ``bodies.PAD_MARGIN`` and ``programs.pushed_across``,
+    the pads' sweep rules of ``pad_sweep`` and move's sweep over a low base
+    (``sweep.step_raise``) (v3 keeps its plans bit for bit)."""
     return cfg.programs == "v4"
 
 

@@ -1,7 +1,8 @@
 """Motor programs v4: the arm at rest above the objects before every descent (the tables), the
-pads' footprint grown by ``bodies.PAD_MARGIN``, and the palm clear of the tipping reach of a toy
-a base grasp pushes across. Fast tests on the tables and on hand-built scenes
-(``programs.program``, no simulation); v3's plans are pinned in ``test_programs_v3.py``."""
+pads' footprint grown by ``bodies.PAD_MARGIN``, the palm clear of the tipping reach of a toy
+a base grasp pushes across, and move's fingertips over a low base the sweep crosses. Fast tests
+on the tables and on hand-built scenes (``programs.program``, no simulation); v3's plans are
+pinned in ``test_programs_v3.py``."""
 import dataclasses
 
 import jax.numpy as jnp
@@ -10,7 +11,7 @@ import pytest
 
 from relaff_jax.config.action import ActionConfig
 from relaff_jax.constants import ACTIONS, action_id
-from relaff_jax.sim import bodies, guard, pad_sweep, planning, programs
+from relaff_jax.sim import bodies, guard, pad_sweep, planning, programs, sweep
 from relaff_jax.sim import objects as lib
 from relaff_jax.sim.actions.tables import DESCENT_DWELL, RAKE_DWELL, TOOL_TRANSIT, run_steps, tables
 
@@ -104,7 +105,6 @@ def test_palm_clears_a_toy_pushed_across_hand_worked():
     assert not bool(over4.ok)
 
 
-
 def _posed_scene(cfg, toy, other, txyz, oxyz):
     st = planning.setup(cfg)
     p, q = scene(st.world, toy, other, txyz, oxyz)
@@ -152,3 +152,32 @@ def test_drag_refuses_a_carry_over_a_standing_toy_hand_worked():
     aside3, aside4 = push(V3, "toy_can", can, 0.15 + can), push(V4, "toy_can", can, 0.15 + can)
     assert bool(aside3.ok) and bool(aside4.ok)
     np.testing.assert_array_equal(np.asarray(aside4.targets.pos), np.asarray(aside3.targets.pos))
+
+
+def test_move_sweeps_over_a_low_base_it_crosses_hand_worked():
+    # a block on a 1.5 cm lid: v3 sweeps with the fingertips 1 cm above the table, into the lid's
+    # side, which they ride up onto (move 4143: 33 N on the lid for 1 s); v4 raises them to 1 cm
+    # above the lid's top and sweeps the block off it. The same block beside the lid (the sweep
+    # never crosses it), on a placemat below the fingertips and on a pallet board well above them
+    # (pushed along): v4 plans as v3.
+    tip = lambda pr, arm: float(pr.targets.pos[1, 2]) - arm.tip_below_tcp
+    lid = lib.get("lid").height
+    on3, arm, (_, lid_b) = prog("move", V3, "block", "lid", (0.7, 0.0, lid), (0.7, 0.0, 0.0))
+    on4, _, _ = prog("move", V4, "block", "lid", (0.7, 0.0, lid), (0.7, 0.0, 0.0))
+    top = float(lid_b.z_range()[1])
+    assert tip(on3, arm) == pytest.approx(0.01, abs=1e-6) and top - 0.01 <= sweep.STEP_ABOVE
+    assert tip(on4, arm) == pytest.approx(top + V4.tip_clearance + 0.005, abs=1e-6) and bool(on4.ok)
+    # a car (4 cm) on the lid: raised the same and swept, not refused as a toy fallen near the
+    # fingertips (v3's refusal is for a raise that clears the palm)
+    car, _, _ = prog("move", V4, "toy_car", "lid", (0.7, 0.0, lid), (0.7, 0.0, 0.0))
+    assert tip(car, arm) == pytest.approx(top + V4.tip_clearance + 0.005, abs=1e-6) and bool(car.ok)
+    # the whole sweep at that height, from free table beside the lid across it
+    np.testing.assert_allclose(np.asarray(on4.targets.pos[1:3, 2]), float(on4.targets.pos[1, 2]))
+    assert bool(sweep.sweep_crosses(arm, on4.targets.pos[1], on4.targets.pos[2], on4.direction, lid_b))
+    for other, t, o in (("lid", (0.7, 0.3, 0.0), (0.7, 0.0, 0.0)),
+                        ("placemat", (0.7, 0.0, lib.get("placemat").height), (0.7, 0.0, 0.0)),
+                        ("pallet_board", (0.7, 0.0, lib.get("pallet_board").height), (0.7, 0.0, 0.0))):
+        p3, _, (_, ob) = prog("move", V3, "block", other, t, o)
+        p4, _, _ = prog("move", V4, "block", other, t, o)
+        np.testing.assert_array_equal(np.asarray(p4.targets.pos), np.asarray(p3.targets.pos))
+        assert bool(p4.ok) == bool(p3.ok), other
