@@ -112,9 +112,7 @@ def load_or_export(fn: Callable, name: str, key: Any, specs: tuple, where: Path)
     path = where / file_name(name, key, specs)
     try:
         return export.deserialize(bytearray(path.read_bytes()))
-    except FileNotFoundError:
-        pass
-    except Exception:  # damaged or written by another serialization: trace it again
+    except Exception:  # missing, damaged or written by another serialization: trace it again
         pass
     exp = export.export(jax.jit(fn))(*specs)
     try:

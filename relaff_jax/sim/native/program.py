@@ -170,7 +170,7 @@ class RestReader:
     displacement is computed once, with the same float64 operations ``read_at_rest`` applies
     to that step (so the same bits), and a scene's read step is the first collected step ``j
     >= window`` with no moving step among the ``window`` before it (``tests/sim/
-    test_native_engine.py`` checks it against ``read_at_rest`` scene by scene)."""
+    test_programs_v2.py`` checks it against ``read_at_rest`` scene by scene)."""
 
     def __init__(self, cfg: ActionConfig, inp: ProgramInputs):
         self.cfg, self.lo = cfg, inp.measure - cfg.rest_window
