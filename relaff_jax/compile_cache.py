@@ -62,11 +62,20 @@ def configure(disable: bool = False) -> Path | None:
         os.environ.setdefault(MIN_SECONDS_ENV, "0")
         # Each program loaded from the cache makes XLA print an E-level "cpu_aot_loader" line
         # about +prefer-no-gather/scatter, tuning hints it mistakes for CPU features (noise:
-        # docs/journal/2026-12-05.md, "--smoke on the idle machine"); read when jaxlib loads, so only before JAX is imported.
-        os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
+        # docs/journal/2026-12-05.md, "--smoke on the idle machine"). jaxlib reads the variable
+        # when it loads; a process that imported JAX first (a plugin file, a script calling
+        # cli.main) gets the same level set at run time below. "1" is JAX's own default, which
+        # importing JAX writes to the environment that child processes (a test's command) inherit,
+        # so only another value counts as the user's and wins (0 shows the lines).
+        if os.environ.get("TF_CPP_MIN_LOG_LEVEL", "1") == "1":
+            os.environ["TF_CPP_MIN_LOG_LEVEL"] = "3"
     if "jax" in sys.modules:
         import jax
 
+        if d is not None and os.environ["TF_CPP_MIN_LOG_LEVEL"] == "3":
+            from jaxlib import utils as _xla_utils  # jax.config's "jax_logging_level" would also reset Python's loggers
+
+            _xla_utils.absl_set_min_log_level(3)
         jax.config.update("jax_enable_compilation_cache", d is not None)
         if d is not None:
             jax.config.update("jax_compilation_cache_dir", str(d))

@@ -41,3 +41,22 @@ def test_configure_turns_jax_cache_on_and_off_in_a_fresh_process(tmp_path):
     assert any((tmp_path / "c").iterdir())
     off = subprocess.run([sys.executable, "-c", code, "off"], env=env, capture_output=True, text=True, check=True)
     assert off.stdout.split()[:2] == ["None", "False"]
+
+
+def test_programs_loaded_from_the_cache_print_nothing(tmp_path):
+    """XLA logs an E-level ``cpu_aot_loader`` false alarm for each program it loads from the
+    cache on these CPUs. configure() silences it also in a process that imported JAX first and
+    inherited JAX's ``TF_CPP_MIN_LOG_LEVEL=1`` (a test's or a script's command); a user's other
+    value is kept."""
+    code = ("import sys, os, jax, jax.numpy as jnp; from relaff_jax import compile_cache as cc; cc.configure();"
+            "jax.jit(lambda x: jnp.cos(x) * 5 + 1)(jnp.arange(7.0)).block_until_ready();"
+            "print(os.environ['TF_CPP_MIN_LOG_LEVEL'])")
+    env = dict(os.environ, RELAFF_COMPILE_CACHE=str(tmp_path / "c"), TF_CPP_MIN_LOG_LEVEL="1")
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
+    for _ in range(2):  # the second run loads the program the first one stored
+        run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+        assert (run.stdout.strip(), run.stderr) == ("3", "")
+    assert any((tmp_path / "c").iterdir())
+    run = subprocess.run([sys.executable, "-c", code], env=dict(env, TF_CPP_MIN_LOG_LEVEL="0"), capture_output=True,
+                         text=True, check=True)
+    assert run.stdout.strip() == "0" and "pjrt_executable" in run.stderr  # the user asked to see XLA's log
