@@ -32,11 +32,12 @@ from . import world as wd
 from .actions.registry import action_id, on_change, spec
 from .bodies import geometry
 from .native.batch import default_threads, execute_native
-from .native.settle import settle_batch
+from .native.settle import settle_batch, still_batch
 from .planning import Plan
 from .reach_screen import prepare_screened
 from .simulate import make_prepare_fn, make_simulate_fn
-from .templates import ActionConfig, stored_config  # noqa: F401 (stored_config: for reproduce)
+from .still import make_still_fn
+from .templates import ActionConfig, is_v4, stored_config  # noqa: F401 (stored_config: for reproduce)
 from .traced_cache import stored_jit
 
 from relaff_jax.constants import SIM_ENGINES
@@ -209,14 +210,16 @@ def make_batch_prepare_fn(action: str, cfg: ActionConfig, settle: str = "mjx",
     prepare_fn, _ = jitted_stage_fns(cfg)
     allowed = allowed_pairs(scene_world, action)
     names = np.asarray([(t, o) for t, o, _ in scene_world.pairs])
+    threads = default_threads() if nthread is None else int(nthread)
+    # v4: no program on a scene that does not stay still after settling (sim/still.py)
+    still_fn = jitted_still_fn(scene_world) if is_v4(cfg) and settle == "mjx" else None
 
     def prepare(key, batch_size: int) -> Prepared:
         kp, ks, kid = jax.random.split(key, 3)
         pair = sc.sample_pairs(kp, allowed, scene_world, int(batch_size))
         qpos0, intended = place_fn(ks, pair)
         if settle == "native":
-            scenes = settle_batch(scene_world, *jax.device_get((pair, qpos0, intended)), cfg.scene,
-                                  default_threads() if nthread is None else int(nthread))
+            scenes = settle_batch(scene_world, *jax.device_get((pair, qpos0, intended)), cfg.scene, threads)
         else:
             scenes = settle_fn(pair, qpos0, intended)
         if cfg.arm.reach_screen:  # the IK only where the arm might reach (reach_screen.py)
@@ -226,11 +229,26 @@ def make_batch_prepare_fn(action: str, cfg: ActionConfig, settle: str = "mjx",
             plan, before = prepare_fn(aid, pair, jnp.asarray(scenes.qpos))
             s, plan, before = jax.device_get((scenes, plan, before))
         p = np.asarray(pair)
+        if is_v4(cfg):
+            feasible = np.asarray(plan.feasible, bool).copy()
+            if still_fn is not None:  # MJX: every scene, one compiled shape
+                feasible &= np.asarray(jax.device_get(still_fn(pair, jnp.asarray(s.qpos), jnp.asarray(s.qvel))))
+            elif feasible.any():  # MuJoCo C: only where a program would run
+                run = np.flatnonzero(feasible)
+                feasible[run] = still_batch(scene_world, p[run], np.asarray(s.qpos)[run], np.asarray(s.qvel)[run],
+                                            nthread=threads)
+            plan = plan._replace(feasible=feasible)
         base = int(jax.random.bits(kid, (), jnp.uint32))
         ids = np.int64(base) * int(batch_size) + np.arange(int(batch_size), dtype=np.int64)
         return Prepared(action, p, s, plan, np.asarray(before, bool), ids, names[p])
 
     return prepare
+
+
+@functools.lru_cache(maxsize=4)
+def jitted_still_fn(world: wd.World):
+    """The jitted MJX stillness check (``still.make_still_fn``) of one scene world."""
+    return jax.jit(make_still_fn(world))
 
 
 def execute_batch(prep: Prepared, cfg: ActionConfig, engine: str = "mjx", sim_batch: int = 16,

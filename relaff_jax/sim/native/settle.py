@@ -17,9 +17,26 @@ import numpy as np
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 from relaff_jax.sim.native.reference import relation_native
+from relaff_jax.sim.still import STILL_STEPS, still_numpy
 
 # What a native dataset records as its settle (sidecar ``settle``): bump when it changes.
 SETTLE_NAME = "mujoco_c_batch/1"
+
+
+def _step_held(world: wd.World, batch, pair: np.ndarray, steps: int) -> None:
+    """``steps`` mj_step calls of every scene of ``batch``, a held rake pinned after each step
+    as MJX's settle pins it (the rake stays in the gripper: no gravity, no drift)."""
+    oq, od = world.obj_qpos, world.obj_dof
+    qpos, qvel = batch.bind("qpos"), batch.bind("qvel")
+    held = np.flatnonzero([world.pairs[int(p)][2] == "toy+rake" for p in pair])
+    if len(held):
+        obj7 = qpos[held, oq:oq + 7].copy()
+        for _ in range(steps):
+            batch.step()
+            qpos[held, oq:oq + 7] = obj7
+            qvel[held, od:od + 6] = 0.0
+    else:
+        batch.step(nstep=steps)  # the same mj_step calls, one dispatch
 
 
 def settle_batch(world: wd.World, pair: np.ndarray, qpos0: np.ndarray, intended: np.ndarray,
@@ -41,17 +58,8 @@ def settle_batch(world: wd.World, pair: np.ndarray, qpos0: np.ndarray, intended:
     qpos, qvel, xipos = batch.bind("qpos"), batch.bind("qvel"), batch.bind("xipos")
     qpos[:] = q0
     qvel[:] = 0.0
-    oq, od, td = world.obj_qpos, world.obj_dof, world.toy_dof
-    held = np.flatnonzero([world.pairs[int(p)][2] == "toy+rake" for p in pair])
-    if len(held):
-        obj7 = q0[held, oq:oq + 7]
-        for _ in range(cfg.settle_steps):
-            batch.step()
-            # the rake stays in the gripper: hold it at its pose, as MJX's settle does
-            qpos[held, oq:oq + 7] = obj7
-            qvel[held, od:od + 6] = 0.0
-    else:
-        batch.step(nstep=cfg.settle_steps)  # the same mj_step calls, one dispatch
+    od, td = world.obj_dof, world.toy_dof
+    _step_held(world, batch, pair, cfg.settle_steps)
     batch.forward()
     q, v, com = qpos.copy(), qvel.copy(), xipos.copy()
     rel = np.zeros(n, np.int32)
@@ -69,3 +77,19 @@ def settle_batch(world: wd.World, pair: np.ndarray, qpos0: np.ndarray, intended:
     return sc.Scenes(pair=pair, qpos0=np.asarray(qpos0), qpos=q.astype(np.float32), qvel=v.astype(np.float32),
                      relation=rel, intended=np.asarray(intended), cog_distance=cog.astype(np.float32),
                      at_rest=speed < cfg.rest_speed)
+
+
+def still_batch(world: wd.World, pair: np.ndarray, qpos: np.ndarray, qvel: np.ndarray,
+                steps: int = STILL_STEPS, nthread: int = 1) -> np.ndarray:
+    """Programs v4's stillness check in MuJoCo C (``sim/still.py``): each settled scene,
+    ``qpos`` (B, nq) and ``qvel`` (B, nv) as ``settle_batch`` gives them, simulated ``steps`` more
+    steps; (B,) bool, True where both objects stayed within ``STILL_MOVE`` and ``STILL_TURN_DEG``."""
+    pair = np.asarray(pair)
+    q0 = np.asarray(qpos, np.float64)
+    models = [world.mj_models[int(p)] for p in pair]
+    batch = mujoco.batch.Batch(models[0], nsim=len(pair), nthread=int(nthread))
+    batch.set_models(models)
+    batch.bind("qpos")[:] = q0
+    batch.bind("qvel")[:] = np.asarray(qvel, np.float64)
+    _step_held(world, batch, pair, steps)
+    return still_numpy(world, q0, batch.bind("qpos").copy())
