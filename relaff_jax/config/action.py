@@ -10,10 +10,11 @@ from relaff_jax.config.constraints import (FRACTION, AnyOf, Boolean, Check, Inte
                                            count, length)
 from relaff_jax.config.node import Node
 
-# ActionConfig.programs: the motor programs' versions (v1: before issue 43; v3: v2 with move's
-# sweep raised to a fixed point and base grasps refused that would press the toy too hard; v4:
-# v3 with the arm at rest before each descent, the pads' footprint grown by the tracking error
-# and the palm clear of a toy a base grasp pushes across)
+# ActionConfig.programs: the motor programs' versions (v1: the first; v2: grasps that fit the
+# object, bounded squeeze, goals read at rest; v3: v2 with move's sweep raised to a fixed point
+# and base grasps refused that would press the toy too hard; v4, the default: v3 with the arm at
+# rest before each descent, the pads' and palm's rules of docs/actions.md "Programs v4" and a
+# stillness check of the settled scene)
 PROGRAMS = ("v1", "v2", "v3", "v4")
 # ActionConfig fields only v2, v3 and v4 read; a v1 dataset's sidecar leaves them out (templates.stored_config)
 V2_FIELDS = ("palm_margin", "min_grip", "squeeze_min", "squeeze_max", "squeeze_safety", "rest_hold", "rest_window",
@@ -212,17 +213,19 @@ class ActionConfig(Node):
     # other actions read the end, now the program's end (docs/actions.md, "Tuning").
     stop_at_program_end: bool = True
     # Which motor programs (docs/actions.md, "Programs v1 and v2", "Programs v3", "Programs v4"):
-    # "v4" is v3 with the arm at rest at the pre-grasp pose before it descends, the pads'
-    # footprint grown by the arm's tracking error, and the palm clear of the tipping reach of
-    # a toy a base grasp pushes across (not yet the default: the paper study runs v3); "v3" (the
-    # default) is v2 with move's sweep raised over every top and rim, a base or obstacle grasp refused
+    # "v4" (the default) is v3 with the arm at rest at the pre-grasp pose before it descends,
+    # the pads' footprint grown by the arm's tracking error, the palm clear of the tipping reach
+    # of a toy a base grasp pushes across, take's pads kept off a container's wall, a drag's pads
+    # kept off a toy in their way, the held rake's slower swing, move's fingertips over a low
+    # base, and no program on a scene that does not stay still after settling; "v3" is v2 with
+    # move's sweep raised over every top and rim, a base or obstacle grasp refused
     # where the pads would press the toy beyond the force bound, the squeeze commanded from the
     # widest body between the pads, and rake on one IK branch with its turn, axis and hand-ahead
     # refusals and a dwell before the descent; "v2" grasps below an object's top by at most what
     # the pads allow, refuses a grasp that would put the palm on an object, squeezes with a force
     # from the held objects' weight, and reads every goal once the objects are at rest; "v1" the
-    # first programs, bit for bit. v1 and v2 stay one --set away to compare labels.
-    programs: str = "v3"
+    # first programs, bit for bit. v1, v2 and v3 stay one --set away to compare labels.
+    programs: str = "v4"
     palm_margin: float = 0.02  # v2: the palm's underside this far above every object under it
     min_grip: float = 0.02  # v2: the pads overlap the grasped object by at least this height
     squeeze_min: float = 5.0  # N, v2: the least squeeze per pad

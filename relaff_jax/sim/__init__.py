@@ -9,6 +9,7 @@ Modules, in pipeline order:
 - ``world``: ``build_world``: one batched MJX model for every pair.
 - ``contacts``: ``contacts(d)``, the one reader of MJX's contact list.
 - ``scenes``: placement sampling, settling, relation labels (``Scenes``).
+- ``still``: programs v4's check that a settled scene stays still (MJX; C in ``native/settle``).
 - ``geometry``: rotations (``quat_to_mat``, ``axis_rotation``).
 - ``arm_model``: the arm's names and ``Arm`` tables from a compiled model.
 - ``kinematics``: forward kinematics and the IK (``solve_ik``, ``solve_ik_path``).
@@ -17,7 +18,7 @@ Modules, in pipeline order:
 - ``templates``: the timing templates of the nine motor programs.
 - ``bodies``: the settled objects as the programs see them (boxes, grasps).
 - ``programs``: the nine motor programs (tcp targets) and unobstruct's reachability.
-- ``sweep``: move's sweep height under programs v3 (tops, fixed point, refusal).
+- ``sweep``: move's sweep height under programs v3 and v4 (tops, fixed point, refusal, step).
 - ``planning``: ``setup`` (action world, home pose) and ``make_plan_fn`` (batched IK).
 - ``labels``: the outcome rules of Table I (``goals``).
 - ``simulate``: planned programs executed in MJX with grasp locks, then labelled.

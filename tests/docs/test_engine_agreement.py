@@ -19,7 +19,7 @@ from relaff_jax.sim.scenes import RELATIONS  # noqa: E402
 
 
 def test_action_config_takes_action_keys_only():
-    assert E.action_config([]).programs == "v3"
+    assert E.action_config([]).programs == "v4"
     assert E.action_config(["action.programs=v1"]).programs == "v1"
     with pytest.raises(ValueError, match="action.\\* keys only"):
         E.action_config(["programs=v1"])
@@ -63,10 +63,10 @@ def test_json_resumes_finished_actions_only_for_the_same_setting(tmp_path, monke
     calls = []
     monkeypatch.setattr(E, "action_row", lambda action, n, batch, seed, cfg: calls.append((action, cfg.programs)) or row)
     js = tmp_path / "a.json"
-    setting = dict(n=8, seed=0, batch=64, programs="v3", set=[])
+    setting = dict(n=8, seed=0, batch=64, programs="v4", set=[])
     atomic_write_json(js, {"setting": setting, "actions": {"lift": row}})
     E.main(["8", "lift", "take", "--json", str(js)])
-    assert calls == [("take", "v3")]  # lift kept
+    assert calls == [("take", "v4")]  # lift kept
     assert set(read_json(js)["actions"]) == {"lift", "take"}
     assert "lift       scenes   64 feasible    2 agree    1 (0.500)" in capsys.readouterr().out
     E.main(["8", "lift", "--json", str(js), "--set", "action.programs=v1"])  # another setting: redone

@@ -16,7 +16,7 @@ from relaff_jax.sim.native.probe import Probe
 from relaff_jax.sim import world as wd
 from relaff_jax.config.action import ActionConfig
 
-V2 = ActionConfig()
+V2 = ActionConfig(programs="v3")  # the guard as v2 and v3 lay it out (v4, one dwell later: test_programs_v4.py)
 V1 = dataclasses.replace(V2, programs="v1")
 OFF = dataclasses.replace(V2, guard_depth=1.0)  # no contact is a metre deep: the guard never stops
 
