@@ -9,7 +9,7 @@ from relaff_jax.constants import action_id
 from relaff_jax.sim import planning, simulate
 from relaff_jax.sim.templates import N_SEGMENTS, N_STEPS
 
-V2 = ActionConfig()
+V2 = ActionConfig(programs="v3")  # the templates' N_SEGMENTS layout (v4 adds a dwell segment)
 RAKE = action_id("rake")
 
 
