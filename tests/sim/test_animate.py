@@ -75,12 +75,13 @@ def test_rollout_gif_of_a_settled_scene(tmp_path, scene_world, settle):
                                     every=40, progress=lambda *a: heard.append(a))
     from relaff_jax.constants import action_id
     from relaff_jax.sim import templates
+    from relaff_jax.sim.actions.tables import DESCENT_DWELL, run_steps
 
     # a frame every 40 steps of the program (the CLI's default is 10; fewer frames keep the
-    # test short), which stops at its end (560 of lift's 815 steps, and v2's 200 more to read
-    # the goal at rest)
-    n_run = int(templates.run_steps(templates.ActionConfig())[action_id("lift")])
-    assert n_run == 560 + templates.ActionConfig().rest_hold
+    # test short), which stops at its end (560 of lift's template steps, v4's dwell before the
+    # descent, and the 200 more to read the goal at rest)
+    n_run = int(run_steps(templates.ActionConfig())[action_id("lift")])
+    assert n_run == 560 + DESCENT_DWELL + templates.ActionConfig().rest_hold
     assert frames["frames_xpos"].shape[0] == 1 + n_run // 40
     # every phase is announced and finished; the frames are counted one by one
     phases = list(dict.fromkeys(h[0] for h in heard))
