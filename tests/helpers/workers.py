@@ -16,22 +16,33 @@ import os
 
 import pytest
 
-# file -> unit name: files that use the same expensive session fixture (helpers/fixtures.py)
+# file -> unit name: files that use the same expensive session fixture (helpers/fixtures.py),
+# or that compile the same program, which one then loads from the compilation cache instead of
+# both compiling it at once on the two workers ("plan_one": the planner of one scene of the
+# default programs, jax.jit(planning.make_plan_fn(cfg)) at batch 1, tens of CPU seconds)
 GROUPS = {
     "tests/docs/test_notebooks.py": "scene_run",
     "tests/report/test_reproduce_report.py": "scene_run",
+    "tests/sim/test_animate.py": "plan_one",
+    "tests/sim/test_guarded_descent.py": "plan_one",
 }
 
 # units started first, longest first (the whole suite's --durations on an idle machine: the
 # tiny preset end to end ~360 s, two processes generating ~160 s, the native audit ~90 s, the
-# notebooks on the scene_run folder, the screened plan ~65 s); the rest follow in collection order
+# notebooks on the scene_run folder, the screened plan ~65 s); the rest follow in collection order.
+# Units that compile the same programs do not start together, so the later one loads them from
+# the session's compilation cache (conftest.py): the first two units handed to each worker are
+# its first and third (gw0: the end to end, then scene_run; gw1: the actions, then the two
+# generate processes). The end to end compiles the batch-8 planner that the generate processes
+# and the native audit load; the actions' MJX programs (batch 8) are the ones notebook 01's
+# kernel loads (tests/docs/test_notebooks.py).
 FIRST = (
     "tests/e2e/test_reproduce_e2e.py",
-    "tests/data/test_generate_processes.py",
+    "tests/sim/test_actions.py",
     "scene_run",
+    "tests/data/test_generate_processes.py",
     "tests/data/test_audit.py",
     "tests/sim/test_reach_screen.py",
-    "tests/sim/test_actions.py",
     "tests/sim/test_programs_v2.py",
 )
 
