@@ -27,19 +27,19 @@ GROUPS = {
     "tests/sim/test_guarded_descent.py": "plan_one",
 }
 
-# units started first, longest first (the whole suite's --durations on an idle machine: the
+# units started first, the longest ones (the whole suite's --durations on an idle machine: the
 # tiny preset end to end ~360 s, two processes generating ~160 s, the native audit ~90 s, the
 # notebooks on the scene_run folder, the screened plan ~65 s); the rest follow in collection order.
-# Units that compile the same programs do not start together, so the later one loads them from
-# the session's compilation cache (conftest.py): the first two units handed to each worker are
-# its first and third (gw0: the end to end, then scene_run; gw1: the actions, then the two
-# generate processes). The end to end compiles the batch-8 planner that the generate processes
-# and the native audit load; the actions' MJX programs (batch 8) are the ones notebook 01's
-# kernel loads (tests/docs/test_notebooks.py).
+# Ordered so that units compiling the same programs do not compile them at once on both workers,
+# the later one loading them from the session's compilation cache (conftest.py). Each worker is
+# handed two units at the start, gw0 the first and third, gw1 the second and fourth: the end to
+# end compiles the batch-8 planner (and its settle) that the generate processes, the native
+# audit and test_actions.py load after it; notebook 01's kernel (scene_run) compiles the MJX
+# programs at batch 8 that test_actions.py, on the other worker after the end to end, loads.
 FIRST = (
     "tests/e2e/test_reproduce_e2e.py",
-    "tests/sim/test_actions.py",
     "scene_run",
+    "tests/sim/test_actions.py",
     "tests/data/test_generate_processes.py",
     "tests/data/test_audit.py",
     "tests/sim/test_reach_screen.py",
