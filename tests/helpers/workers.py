@@ -31,11 +31,12 @@ GROUPS = {
 # tiny preset end to end ~360 s, two processes generating ~160 s, the native audit ~90 s, the
 # notebooks on the scene_run folder, the screened plan ~65 s); the rest follow in collection order.
 # Ordered so that units compiling the same programs do not compile them at once on both workers,
-# the later one loading them from the session's compilation cache (conftest.py). Each worker is
-# handed two units at the start, gw0 the first and third, gw1 the second and fourth: the end to
-# end compiles the batch-8 planner (and its settle) that the generate processes, the native
-# audit and test_actions.py load after it; notebook 01's kernel (scene_run) compiles the MJX
-# programs at batch 8 that test_actions.py, on the other worker after the end to end, loads.
+# the later one loading them from the session's compilation cache (conftest.py). xdist hands
+# one worker the first unit and, as that unit has a single test, the third; the other worker
+# the second, then the rest in order as it runs out. So the end to end compiles the batch-8
+# planner (and its settle) that the generate processes, the native audit and test_actions.py
+# load after it; notebook 01's kernel (scene_run) compiles the MJX programs at batch 8 that
+# test_actions.py, on the other worker after the end to end, loads.
 FIRST = (
     "tests/e2e/test_reproduce_e2e.py",
     "scene_run",
