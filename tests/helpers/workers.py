@@ -33,18 +33,20 @@ GROUPS = {
 # Ordered so that units compiling the same programs do not compile them at once on both workers,
 # the later one loading them from the session's compilation cache (conftest.py). xdist hands
 # one worker the first unit and, as that unit has a single test, the third; the other worker
-# the second, then the rest in order as it runs out. So the end to end compiles the batch-8
-# planner (and its settle) that the generate processes, the native audit and test_actions.py
-# load after it; notebook 01's kernel (scene_run) compiles the MJX programs at batch 8 that
-# test_actions.py, on the other worker after the end to end, loads.
+# the second, then the rest in order as it runs out. The end to end compiles the batch-8 MJX
+# settle and planner while the other worker runs programs_v2 (v1 and v2 planners, settled in C:
+# nothing in common); test_actions.py then loads them and compiles the batch-8 MJX action
+# programs that notebook 01's kernel (scene_run, after the end to end) loads, which keeps the
+# notebook's cells short (nbclient's timeout); the generate processes and the native audit
+# load the planner.
 FIRST = (
     "tests/e2e/test_reproduce_e2e.py",
+    "tests/sim/test_programs_v2.py",
     "scene_run",
     "tests/sim/test_actions.py",
     "tests/data/test_generate_processes.py",
     "tests/data/test_audit.py",
     "tests/sim/test_reach_screen.py",
-    "tests/sim/test_programs_v2.py",
 )
 
 
