@@ -33,12 +33,12 @@ GROUPS = {
 # Ordered so that units compiling the same programs do not compile them at once on both workers,
 # the later one loading them from the session's compilation cache (conftest.py). xdist hands
 # one worker the first unit and, as that unit has a single test, the third; the other worker
-# the second, then the rest in order as it runs out. The end to end compiles the batch-8 MJX
-# settle and planner while the other worker runs programs_v2 (v1 and v2 planners, settled in C:
-# nothing in common); test_actions.py then loads them and compiles the batch-8 MJX action
-# programs that notebook 01's kernel (scene_run, after the end to end) loads, which keeps the
-# notebook's cells short (nbclient's timeout); the generate processes and the native audit
-# load the planner.
+# the second, then the rest in order as it runs out. The end to end compiles the batch-8
+# planner (its scenes settled in C) while the other worker runs programs_v2 (v1 and v2
+# planners: nothing in common); then test_actions.py compiles the batch-8 MJX settle and action
+# programs that scene_run (after the end to end) and notebook 01's kernel load, which keeps
+# the notebook's cells short (nbclient's timeout), and its rollout test, the generate processes
+# and the native audit load the planner.
 FIRST = (
     "tests/e2e/test_reproduce_e2e.py",
     "tests/sim/test_programs_v2.py",
