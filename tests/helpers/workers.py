@@ -16,15 +16,10 @@ import os
 
 import pytest
 
-# file -> unit name: files that use the same expensive session fixture (helpers/fixtures.py),
-# or that compile the same program, which one then loads from the compilation cache instead of
-# both compiling it at once on the two workers ("plan_one": the planner of one scene of the
-# default programs, jax.jit(planning.make_plan_fn(cfg)) at batch 1, tens of CPU seconds)
+# file -> unit name: files that use the same expensive session fixture (helpers/fixtures.py)
 GROUPS = {
     "tests/docs/test_notebooks.py": "scene_run",
     "tests/report/test_reproduce_report.py": "scene_run",
-    "tests/sim/test_animate.py": "plan_one",
-    "tests/sim/test_guarded_descent.py": "plan_one",
 }
 
 # units started first, the longest ones (the whole suite's --durations on an idle machine: the
