@@ -23,7 +23,9 @@ def two_datasets(tmp_path_factory):
     """``relaff generate take`` (native engine, 8 samples, seed 5) in two processes: two folders.
 
     The second process loads the first one's compiled programs from the session's JAX cache
-    (conftest.py), so the cost is one compile of the take planner and two short simulations."""
+    (conftest.py), so the cost is at most one compile of the take planner and two short
+    simulations (none in the whole suite, where the end-to-end test compiled it before:
+    helpers/workers.py)."""
     root = tmp_path_factory.mktemp("take")
     env = dict(os.environ, JAX_PLATFORMS="cpu")
     cmd = [sys.executable, "-m", "relaff_jax.cli", "generate", "take", "--samples", "8", "--batch", "8",

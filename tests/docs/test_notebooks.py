@@ -67,7 +67,8 @@ def test_03_learning_and_bootstrapping(scene_run, monkeypatch):
 @pytest.mark.slow  # compiles the settle and the action programs in a fresh kernel: minutes
 def test_01_scenes_and_actions(monkeypatch, tmp_path):
     # 8 scenes: the batch shape of tests/sim/test_actions.py, whose programs the kernel loads
-    # from the session's compilation cache (conftest.py) instead of compiling them again
+    # from the session's compilation cache (conftest.py) instead of compiling them again (in the
+    # whole suite that file runs first: helpers/workers.py)
     monkeypatch.setenv("RELAFF_NB_SCENES", "8")
     nb = execute("01_scenes_and_actions.ipynb", tmp_path, monkeypatch)
     text = outputs(nb)

@@ -22,17 +22,26 @@ GROUPS = {
     "tests/report/test_reproduce_report.py": "scene_run",
 }
 
-# units started first, longest first (the whole suite's --durations on an idle machine: the
+# units started first, the longest ones (the whole suite's --durations on an idle machine: the
 # tiny preset end to end ~360 s, two processes generating ~160 s, the native audit ~90 s, the
-# notebooks on the scene_run folder, the screened plan ~65 s); the rest follow in collection order
+# notebooks on the scene_run folder, the screened plan ~65 s); the rest follow in collection order.
+# Ordered so that units compiling the same programs do not compile them at once on both workers,
+# the later one loading them from the session's compilation cache (conftest.py). xdist hands
+# one worker the first unit and, as that unit has a single test, the third; the other worker
+# the second, then the rest in order as it runs out. The end to end compiles the batch-8
+# planner (its scenes settled in C) while the other worker runs programs_v2 (v1 and v2
+# planners: nothing in common); then test_actions.py compiles the batch-8 MJX settle and action
+# programs that scene_run (after the end to end) and notebook 01's kernel load, which keeps
+# the notebook's cells short (nbclient's timeout), and its rollout test, the generate processes
+# and the native audit load the planner.
 FIRST = (
     "tests/e2e/test_reproduce_e2e.py",
-    "tests/data/test_generate_processes.py",
+    "tests/sim/test_programs_v2.py",
     "scene_run",
+    "tests/sim/test_actions.py",
+    "tests/data/test_generate_processes.py",
     "tests/data/test_audit.py",
     "tests/sim/test_reach_screen.py",
-    "tests/sim/test_actions.py",
-    "tests/sim/test_programs_v2.py",
 )
 
 
