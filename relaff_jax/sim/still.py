@@ -4,8 +4,9 @@ Settling stops after ``SceneConfig.settle_steps`` and calls a scene at rest when
 origins are slower than ``rest_speed``. A can leaning on a plate's rim passes that test (its
 origin, at its bottom, moves 6 mm/s while it turns) and then falls flat in the next 0.4 s, with
 no arm near it: its program was planned for a leaning can and its pads landed on the lying one
-(move 8873 of the v4 audit, docs/actions.md "Programs v4"). So v4 simulates every settled scene
-``STILL_STEPS`` more steps, from its settled positions and velocities, and refuses the program
+(move 8873 of the v4 audit, docs/actions.md "Programs v4"). So v4 simulates each settled scene
+whose program is feasible (MJX: every scene of the batch, one compiled shape) ``STILL_STEPS``
+more steps, from its settled positions and velocities, and refuses the program
 of a scene in which either object's origin moves more than ``STILL_MOVE`` or it turns more than
 ``STILL_TURN_DEG`` (``rollouts.make_batch_prepare_fn``). The scene itself stays as settled.
 
@@ -24,10 +25,10 @@ from mujoco import mjx
 from . import world as wd
 from .scenes import pair_table
 
-# Measured on the 9,216 settled scenes of the v4 move audit (/work/runs/v3v4/s2000c, journal
-# 2026-12-07): over 0.5 s after settling, 4 scenes moved 21-58 mm and turned 38-119 degrees (a can
-# falling off a rim, a ball rolling off a lid, a car tipping off a board); every other one moved
-# at most 3.0 mm and turned at most 4.3 degrees. The bounds sit in that gap.
+# Measured on the 9,216 settled scenes of the v4 move audit (journal 2026-12-07, "Programs v4: a
+# settled scene must stay still"): over 0.5 s after settling, 4 scenes moved 21-58 mm and turned
+# 38-119 degrees (a can falling off a rim, a ball rolling off a lid, a car tipping off a board);
+# every other one moved at most 3.0 mm and turned at most 4.3 degrees. The bounds sit in that gap.
 STILL_STEPS = 125  # control steps: 0.5 s at the default 4 ms step
 STILL_MOVE = 0.01  # m an object's origin may move over STILL_STEPS
 STILL_TURN_DEG = 10.0  # degrees an object may turn over STILL_STEPS
