@@ -256,6 +256,23 @@ def relation_of(world: wd.World, table: PairTable, cfg: SceneConfig, pair: jax.A
     return jnp.where(inside, INSIDE, jnp.where(supported, ON_TOP, BESIDE))
 
 
+def step_held(world: wd.World, table, step, models, pair: jax.Array, data, steps: int):
+    """``steps`` MJX steps (``lax.scan`` over time of the vmapped ``step``) of the batch ``data``
+    of ``pair`` (B,), a held rake pinned at its pose after each step: it stays in the gripper (no
+    gravity, no drift). The settle's and ``still.make_still_fn``'s time loop."""
+    oq, od = world.obj_qpos, world.obj_dof
+    held = jnp.asarray(table.pairing)[pair] == 2
+    obj7 = data.qpos[:, oq:oq + 7]
+
+    def body(d, _):
+        d = step(models, d)
+        q = jnp.where(held[:, None], d.qpos.at[:, oq:oq + 7].set(obj7), d.qpos)
+        v = jnp.where(held[:, None], d.qvel.at[:, od:od + 6].set(0.0), d.qvel)
+        return d.replace(qpos=q, qvel=v), None
+
+    return jax.lax.scan(body, data, None, length=steps)[0]
+
+
 def make_settle_fn(world: wd.World, cfg: SceneConfig = SceneConfig()):
     """Build ``settle_fn(pair, qpos0, intended) -> Scenes`` (pure; the caller jits it).
 
@@ -269,24 +286,14 @@ def make_settle_fn(world: wd.World, cfg: SceneConfig = SceneConfig()):
     table = pair_table(world)
     step = wd.batched_step(world)
     d0 = mjx.make_data(world.mj_model)
-    oq, od = world.obj_qpos, world.obj_dof
+    od = world.obj_dof
     td = world.toy_dof
     masks = contact_masks(world)
 
     def settle_fn(pair: jax.Array, qpos0: jax.Array, intended: jax.Array) -> Scenes:
-        held = jnp.asarray(table.pairing)[pair] == 2
-        obj7 = qpos0[:, oq:oq + 7]
         models = wd.scene_models(world, pair)
         data = jax.vmap(lambda q: d0.replace(qpos=q))(qpos0)
-
-        def body(d, _):
-            d = step(models, d)
-            # The rake stays in the gripper: hold it at its pose (no gravity, no drift).
-            q = jnp.where(held[:, None], d.qpos.at[:, oq:oq + 7].set(obj7), d.qpos)
-            v = jnp.where(held[:, None], d.qvel.at[:, od:od + 6].set(0.0), d.qvel)
-            return d.replace(qpos=q, qvel=v), None
-
-        data, _ = jax.lax.scan(body, data, None, length=cfg.settle_steps)
+        data = step_held(world, table, step, models, pair, data, cfg.settle_steps)
         data = jax.vmap(mjx.forward, in_axes=(world.model_axes, 0))(models, data)
         rel = jax.vmap(lambda p, d: relation_of(world, table, cfg, p, d, masks))(pair, data)
         cog = jnp.linalg.norm(data.xipos[:, world.toy_body] - data.xipos[:, world.obj_body], axis=-1)

@@ -23,7 +23,7 @@ import numpy as np
 from mujoco import mjx
 
 from . import world as wd
-from .scenes import pair_table
+from .scenes import pair_table, step_held
 
 # Measured on the 9,216 settled scenes of the v4 move audit (journal 2026-12-07, "Programs v4: a
 # settled scene must stay still"): over 0.5 s after settling, 4 scenes moved 21-58 mm and turned
@@ -54,21 +54,11 @@ def make_still_fn(world: wd.World, steps: int = STILL_STEPS):
     table = pair_table(world)
     step = wd.batched_step(world)
     d0 = mjx.make_data(world.mj_model)
-    oq, od = world.obj_qpos, world.obj_dof
 
     def still_fn(pair: jax.Array, qpos: jax.Array, qvel: jax.Array) -> jax.Array:
-        held = jnp.asarray(table.pairing)[pair] == 2
-        obj7 = qpos[:, oq:oq + 7]
         models = wd.scene_models(world, pair)
         data = jax.vmap(lambda q, v: d0.replace(qpos=q, qvel=v))(qpos, qvel)
-
-        def body(d, _):
-            d = step(models, d)
-            q = jnp.where(held[:, None], d.qpos.at[:, oq:oq + 7].set(obj7), d.qpos)
-            v = jnp.where(held[:, None], d.qvel.at[:, od:od + 6].set(0.0), d.qvel)
-            return d.replace(qpos=q, qvel=v), None
-
-        data, _ = jax.lax.scan(body, data, None, length=steps)
+        data = step_held(world, table, step, models, pair, data, steps)
         return stayed_still(world, qpos, data.qpos)
 
     return still_fn
