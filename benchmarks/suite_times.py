@@ -10,7 +10,8 @@ on a loaded machine are inflated by the load. A run still going is read from its
 
 Prints: the session (wall from start to end, the tests' summed wall and CPU, each worker's
 busy time, the load average at both ends); one row per folder (or file) with its share; the
-slowest tests by CPU seconds. ``--against OLD.json`` puts another run's folders beside these,
+slowest tests by CPU seconds; where a record has them, JAX's tracing, lowering and compile (or
+cache load) seconds in the test processes, and the functions whose traces cost most. ``--against OLD.json`` puts another run's folders beside these,
 CPU and wall, with the ratio new/old.
 """
 from __future__ import annotations
@@ -107,6 +108,24 @@ def table_against(new: list[dict], old: list[dict], by: str) -> list[str]:
     return lines
 
 
+def table_jax(tests: list[dict], top: int) -> list[str]:
+    """JAX's seconds in the test processes (absent from records made before they were kept)."""
+    if not any("jax_trace_s" in t for t in tests):
+        return []
+    sums = {k: sum(t.get(k, 0.0) for t in tests) for k in ("jax_trace_s", "jax_lower_s", "jax_compile_s")}
+    lines = [f"JAX in the test processes: tracing {sums['jax_trace_s']:.0f} s, lowering {sums['jax_lower_s']:.0f} s, "
+             f"compile or cache load {sums['jax_compile_s']:.0f} s (wall)", "",
+             "| traced function | traces over 1 s | seconds | tests tracing it most |", "|---|---:|---:|---|"]
+    by: dict[str, list] = defaultdict(list)
+    for t in tests:
+        for name, s in t.get("traced", {}).items():
+            by[name].append((s, t["nodeid"]))
+    for name, hits in sorted(by.items(), key=lambda kv: -sum(s for s, _ in kv[1]))[:top]:
+        most = ", ".join(n.split("::", 1)[-1] for _, n in sorted(hits, reverse=True)[:3])
+        lines.append(f"| {name} | {len(hits)} | {sum(s for s, _ in hits):.1f} | {most} |")
+    return lines
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("record", type=Path, help="the RELAFF_TEST_TIMES file")
@@ -118,6 +137,9 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--top must be >= 0, got {args.top}")
     rec = load(args.record)
     out = session_lines(rec) + [""] + table_by(rec["tests"], args.by) + [""] + table_slowest(rec["tests"], args.top)
+    jax_lines = table_jax(rec["tests"], args.top)
+    if jax_lines:
+        out += [""] + jax_lines
     if args.against is not None:
         out += ["", f"against {args.against}:"] + table_against(rec["tests"], load(args.against)["tests"], args.by)
     print("\n".join(out))

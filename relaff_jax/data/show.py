@@ -21,6 +21,7 @@ from relaff_jax.sim import world as wd
 from relaff_jax.config import override_under
 from relaff_jax.data import audit as A
 from relaff_jax.sim.animate import animate_sample
+from relaff_jax.sim.reach_screen import PLAN_CHUNK  # generation plans in calls of at most this many rows
 
 
 def show_sample(tree: Any, folder: str | os.PathLike, index: int, out: str | os.PathLike, *,
@@ -77,7 +78,7 @@ def _rollout_gif(folder: Any, ds: dict, index: int, out: Path, progress: Any, ov
     title = (f"{ds['action']} sample {index}: {ds['toy'][index]} + {ds['other'][index]}, {ds['relation'][index]}\n"
              f"dataset label {label}, simulated by {ENGINE_NAMES.get(engine, engine)}")
     frames = animate_sample(str(ds["action"]), int(row["pair"][0]), row["qpos_settled"][0], out, title=title,
-                            cfg=cfg, progress=progress, qvel=qvel[0])
+                            cfg=cfg, progress=progress, qvel=qvel[0], batch=min(int(meta["batch"]), PLAN_CHUNK))
     if overrides:
         why = "the dataset's settled state with the --set action keys " + ", ".join(sorted(overrides))
     elif bool(same[0]):

@@ -1,7 +1,7 @@
 """A sample's motor program as an animation: why its label is what it is.
 
 Takes one settled scene (pair, object state) and an action; plans the program with the JAX
-planner (``planning.make_plan_fn``), replays it in MuJoCo C (``native.reference.replay_native``,
+planner generation uses (``rollouts.jitted_stage_fns``, in a call of a dataset's batch), replays it in MuJoCo C (``native.reference.replay_native``,
 recording every geom's pose), and draws each recorded frame with the project's ray caster
 (``perception.rollout_view``: every primitive as it is, spheres round, shaded, coloured by
 geom, from a camera framed on the two objects) under a title that names the engines and
@@ -18,7 +18,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from relaff_jax.sim.actions.registry import action_id
 from relaff_jax.sim.native.reference import replay_native
-from relaff_jax.sim.planning import make_plan_fn, setup
+from relaff_jax.sim.planning import setup
 from relaff_jax.sim.templates import ActionConfig
 from relaff_jax.io import atomic_write_bytes
 from relaff_jax.perception import rollout_view as rv
@@ -33,8 +33,13 @@ def _say(progress, phase: str, done: int, total: int) -> None:
 
 def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, every: int = 10,
                    progress: Callable[[str, int, int], None] | None = None,
-                   qvel: np.ndarray | None = None) -> dict[str, Any]:
+                   qvel: np.ndarray | None = None, batch: int = 8) -> dict[str, Any]:
     """Plan and replay one scene's program in MuJoCo C, recording every ``every`` steps.
+
+    The plan is generation's jitted planner called on ``batch`` copies of the scene (the rows
+    of a dataset's planner calls, ``min(rollout_batch, reach_screen.PLAN_CHUNK)``: the program
+    its rollouts were planned by, which the compilation cache keeps; default 8, the tiny
+    preset's); a plan does not depend on the other rows of its call.
 
     ``progress(phase, done, total)``, if given, hears each phase begin and end ("planning":
     the IK's compile dominates, minutes on two cores; "replaying in MuJoCo C").
@@ -48,14 +53,19 @@ def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, ev
     import jax
     import jax.numpy as jnp
 
+    from relaff_jax.sim.rollouts import jitted_stage_fns
+
+    if int(batch) < 1:
+        raise ValueError(f"batch must be >= 1, got {batch}")
     cfg = cfg if cfg is not None else ActionConfig()
     q = np.asarray(qpos, np.float32)[None]
     p = np.asarray([pair], np.int32)
+    rows = np.zeros(int(batch), int)
     _say(progress, "planning (compiles the IK first)", 0, 1)
-    plan = jax.jit(make_plan_fn(cfg))(action_id(action), jnp.asarray(p), jnp.asarray(q))
+    plan, _ = jitted_stage_fns(cfg)[0](action_id(action), jnp.asarray(p[rows]), jnp.asarray(q[rows]))
+    plan = jax.device_get(plan)
     _say(progress, "planning (compiles the IK first)", 1, 1)
-    result = {"q_way": np.asarray(plan.q_way), "grip_way": np.asarray(plan.grip_way),
-              "feasible": np.asarray(plan.feasible)}
+    result = {k: np.asarray(getattr(plan, k))[:1] for k in ("q_way", "grip_way", "feasible")}
     qvel = np.zeros((1, 12), np.float32) if qvel is None else np.asarray(qvel, np.float32).reshape(1, 12)
     _say(progress, "replaying in MuJoCo C", 0, 1)
     rep = replay_native(action, cfg, p, q, qvel, result, record_every=every)
@@ -113,10 +123,10 @@ def write_gif(frames: dict[str, Any], out: str | Path, title: str = "", fps: flo
 def animate_sample(action: str, pair: int, qpos: np.ndarray, out: str | Path, title: str = "",
                    cfg: Any = None, every: int = 10,
                    progress: Callable[[str, int, int], None] | None = None,
-                   qvel: np.ndarray | None = None) -> dict[str, Any]:
+                   qvel: np.ndarray | None = None, batch: int = 8) -> dict[str, Any]:
     """``rollout_frames`` then ``write_gif``; returns the frames dict (label, feasible,
     seconds_per_frame, ...); ``progress(phase, done, total)`` hears every phase (see both)."""
-    frames = rollout_frames(action, pair, qpos, cfg, every, progress, qvel)
+    frames = rollout_frames(action, pair, qpos, cfg, every, progress, qvel, batch)
     write_gif(frames, out, title=title, progress=progress)
     return frames
 

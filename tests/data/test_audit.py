@@ -189,8 +189,8 @@ def test_audit_of_a_native_dataset_reproduces_its_labels(tmp_path):
     """The replay of a native dataset reproduces every stored label and settled state exactly;
     the JSON has its schema; audit.json is written and reused; a run folder lists its datasets."""
     run = tmp_path / "run"
-    d = run / "data" / "pour"
-    p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "generate", "pour", "--samples", "6", "--out", str(d),
+    d = run / "data" / "lift"
+    p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "generate", "lift", "--samples", "6", "--out", str(d),
                         "--engine", "native", "--batch", "8", "--seed", "3"], capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
     p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(run), "--json", "--sample", "5"],
@@ -209,7 +209,7 @@ def test_audit_of_a_native_dataset_reproduces_its_labels(tmp_path):
     assert stored == a and A.stored_audit(d, 5, 0) == a and A.stored_audit(d, 6, 0) is None
     p = subprocess.run([sys.executable, "-m", "relaff_jax.cli", "audit", str(d), "--sample", "5"],
                        capture_output=True, text=True)  # the stored audit, as a table
-    rows = [x for x in p.stdout.splitlines() if x.startswith("pour ")]
+    rows = [x for x in p.stdout.splitlines() if x.startswith("lift ")]
     assert p.returncode == 0 and len(rows) == 1 and "100%" in rows[0], p.stdout
 
 

@@ -62,3 +62,29 @@ def test_a_running_record_is_read_from_its_parts(tmp_path, capsys):
     assert "| tests/sim/test_a.py | 1 | 10.0 | 8.0 | 1.0 | 69.2 % |" in out
     with pytest.raises(SystemExit, match="no record at"):
         suite_times.main([str(tmp_path / "none.json")])
+
+
+def test_jax_table_sums_the_events_and_names_the_costliest_traces(capsys):
+    tests = [dict(TESTS[0], jax_trace_s=20.0, jax_lower_s=2.0, jax_compile_s=5.5, traced={"prepare_fn": 19.0}),
+             dict(TESTS[1], jax_trace_s=8.0, jax_lower_s=0.5, jax_compile_s=1.0,
+                  traced={"prepare_fn": 6.0, "screen_fn": 1.5})]
+    lines = suite_times.table_jax(tests, 5)
+    assert lines[0] == "JAX in the test processes: tracing 28 s, lowering 2 s, compile or cache load 6 s (wall)"
+    assert lines[4] == "| prepare_fn | 2 | 25.0 | test_1, test_2 |"
+    assert lines[5] == "| screen_fn | 1 | 1.5 | test_2 |"
+    assert suite_times.table_jax(TESTS, 5) == []  # a record made before these were kept
+
+
+def test_the_times_plugin_hears_jax_trace_events():
+    from helpers import times
+
+    before = dict(times._jax["sums"]), dict(times._jax["traced"])
+    try:
+        times._on_jax_event("/jax/core/compile/jaxpr_trace_duration", 2.5, fun_name="prepare_fn")
+        times._on_jax_event("/jax/core/compile/jaxpr_trace_duration", 0.5, fun_name="small")
+        times._on_jax_event("/jax/other", 9.0)
+        assert times._jax["sums"]["jax_trace_s"] == pytest.approx(before[0]["jax_trace_s"] + 3.0)
+        assert times._jax["traced"]["prepare_fn"] == pytest.approx(before[1].get("prepare_fn", 0.0) + 2.5)
+        assert "small" not in times._jax["traced"] or before[1].get("small")
+    finally:
+        times._jax["sums"], times._jax["traced"] = before

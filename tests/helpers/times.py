@@ -5,6 +5,11 @@ waited for (``RUSAGE_CHILDREN``), setup and teardown included (a module fixture'
 the test that first needs it). A pytest plugin loaded by tests/conftest.py; without the variable
 it does nothing. ``benchmarks/suite_times.py FILE.json`` prints the tables.
 
+Each row also holds what JAX spent in the test's process (``jax.monitoring``'s duration events,
+wall seconds): tracing (``jax_trace_s``), lowering to MLIR (``jax_lower_s``) and the backend's
+compile or its load from the compilation cache (``jax_compile_s``), and the functions traced for
+more than a second (``traced``: name -> seconds). Child processes' JAX time is not seen.
+
 Each process appends one JSON line per test to ``FILE.json.<worker>.jsonl`` as the test ends
 (readable while the run goes on, kept if a worker dies); at the end of the session the main
 process merges them into ``FILE.json`` (written atomically) and removes the parts.
@@ -19,6 +24,30 @@ from pathlib import Path
 import pytest
 
 ENV = "RELAFF_TEST_TIMES"
+
+# jax.monitoring's duration events -> the row's field; summed per process while a test runs
+JAX_EVENTS = {"/jax/core/compile/jaxpr_trace_duration": "jax_trace_s",
+              "/jax/core/compile/jaxpr_to_mlir_module_duration": "jax_lower_s",
+              "/jax/core/compile/backend_compile_duration": "jax_compile_s"}
+TRACED_MIN_S = 1.0  # a traced function is named in the row from this many seconds
+_jax: dict = {"sums": dict.fromkeys(JAX_EVENTS.values(), 0.0), "traced": {}}
+
+
+def _on_jax_event(event: str, duration: float, **kwargs) -> None:
+    field = JAX_EVENTS.get(event)
+    if field is None:
+        return
+    _jax["sums"][field] += duration
+    if field == "jax_trace_s" and duration >= TRACED_MIN_S:
+        name = str(kwargs.get("fun_name", "?"))
+        _jax["traced"][name] = _jax["traced"].get(name, 0.0) + duration
+
+
+def pytest_configure(config):
+    if os.environ.get(ENV):
+        import jax.monitoring
+
+        jax.monitoring.register_event_duration_secs_listener(_on_jax_event)
 
 
 def _worker() -> str:
@@ -53,8 +82,12 @@ def pytest_runtest_protocol(item, nextitem):
         yield
         return
     start, wall0, cpu0, kids0 = time.time(), time.perf_counter(), time.process_time(), _children_cpu()
+    jax0 = dict(_jax["sums"])
+    _jax["traced"] = {}
     yield
-    row = {"nodeid": item.nodeid, "worker": _worker(), "start": start,
+    jax_row = {k: round(v - jax0[k], 3) for k, v in _jax["sums"].items()}
+    jax_row["traced"] = {k: round(v, 2) for k, v in _jax["traced"].items()}
+    row = {**jax_row, "nodeid": item.nodeid, "worker": _worker(), "start": start,
            "wall_s": time.perf_counter() - wall0, "cpu_s": time.process_time() - cpu0,
            "children_cpu_s": _children_cpu() - kids0, "slow": item.get_closest_marker("slow") is not None,
            "outcome": getattr(item, "_relaff_outcome", "passed")}

@@ -3,7 +3,6 @@ pad lands on an object. Fast tests check the tables and the landing rule by hand
 one replays a take whose pads come down on a cup in MuJoCo C, with and without the guard."""
 import dataclasses
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -15,10 +14,13 @@ from relaff_jax.sim.native import reference as native
 from relaff_jax.sim.native.probe import Probe
 from relaff_jax.sim import world as wd
 from relaff_jax.config.action import ActionConfig
+from relaff_jax.sim.actions.tables import tables
 
 V2 = ActionConfig(programs="v3")  # the guard as v2 and v3 lay it out (v4, one dwell later: test_programs_v4.py)
 V1 = dataclasses.replace(V2, programs="v1")
-OFF = dataclasses.replace(V2, guard_depth=1.0)  # no contact is a metre deep: the guard never stops
+# the slow replay runs the default programs (v4: the guard one dwell later), as the tool does
+DEFAULT = ActionConfig()
+OFF = dataclasses.replace(DEFAULT, guard_depth=1.0)  # no contact is a metre deep: the guard never stops
 
 
 def test_guard_tables_by_hand():
@@ -77,42 +79,57 @@ def test_landing_rule_by_hand():
     np.testing.assert_array_equal(np.asarray(guard.stopped_way(jnp.asarray(q), jnp.asarray(rows), jnp.full(6, -1.0))), out)
 
 
-def _cup_take(cfg):
+def _cup_scene():
     """A 9 cm cup turned 45 degrees on a book, taken: its diagonal (12.7 cm) is wider than
-    take's fixed 10 cm opening, so the pads come down on its walls. Settled in C, planned by
-    JAX, replayed in C; returns the plan's tcp height at the grasp, the tcp height per step
-    and the physics readings (``native.forces``)."""
-    st = planning.setup(cfg)
-    w = st.world
+    take's fixed 10 cm opening, so the pads come down on its walls. Settled in C and planned
+    by JAX (``plan_rows``: the session's batch-8 planner; the guard does not change a plan,
+    only its execution). Returns pair (1,), qpos (1, 14) and the plan."""
+    from helpers.scenes import plan_rows
+
+    w = planning.setup(DEFAULT).world
     q = np.array(w.mj_model.qpos0, np.float64)[:14]
     yaw = np.pi / 4
     q[0:7] = [0.7, 0.0, 0.03, np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
     q[7:14] = [0.7, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]
     pair = np.array([w.pair_id("cup", "book")])
-    qs, _ = native.settle_native(wd.build_world(cfg.phys), pair, q[None])
+    qs, _ = native.settle_native(wd.build_world(DEFAULT.phys), pair, q[None])
     qpos = qs[:, :14]
-    plan = jax.device_get(jax.jit(planning.make_plan_fn(cfg))(action_id("take"), jnp.asarray(pair),
-                                                              jnp.asarray(qpos, jnp.float32)))
-    res = {k: np.asarray(getattr(plan, k)) for k in ("q_way", "grip_way", "feasible", "direction")}
+    res = plan_rows("take", DEFAULT, pair, qpos)
     assert res["feasible"].all()
+    return pair, qpos, res
+
+
+def _take_steps(cfg):
+    """Take's grasp waypoint (the row of ``q_way`` the descent ends at) and the last step
+    before the fingers close (the end of the dwell at the grasp), from ``cfg``'s tables."""
+    aid = action_id("take")
+    seg = np.flatnonzero(guard.guard_tables(cfg)[0][aid])  # the descent, then the dwell at the grasp
+    return int(seg[0]) + 1, int(tables(cfg).steps[aid][:seg[-1] + 1].sum()) - 1
+
+
+def _cup_take(cfg, pair, qpos, res):
+    """The cup scene's take replayed in C under ``cfg``; returns the plan's tcp height at the
+    grasp, the tcp height per step and the physics readings (``native.forces``)."""
+    st = planning.setup(cfg)
+    w = st.world
     tcp = []
     site = st.arm.tcp_site
     probe_z = lambda b, t, m, d: tcp.append(float(d.site_xpos[site][2]))
     probe = Probe(1, w.toy_body, w.obj_body, cfg.phys.timestep)
     both = lambda b, t, m, d: (probe(b, t, m, d), probe_z(b, t, m, d))
     out = native.replay_native("take", cfg, pair, qpos, np.zeros((1, 12)), res, observe=both)
-    grasp_z = float(A.fk_tcp(st.arm, jnp.asarray(res["q_way"][0, 2]))[0][2])  # waypoint 2: the grasp
+    grasp_z = float(A.fk_tcp(st.arm, jnp.asarray(res["q_way"][0, _take_steps(cfg)[0]]))[0][2])
     return grasp_z, np.array(tcp), probe.result(out["read_step"]), out
 
 
-@pytest.mark.slow  # settles, plans and replays one take twice in C (~2 min idle, 12 min at load 15)
+@pytest.mark.slow  # settles and plans one take, replays it twice in C
 def test_take_descent_stops_where_the_pads_land_and_the_press_stays_bounded():
     from relaff_jax.sim.physics_bounds import PALM_CONTACT_STEPS, press_ok
 
-    z_on, tcp_on, r_on, _ = _cup_take(V2)
-    z_off, tcp_off, r_off, _ = _cup_take(OFF)
-    assert z_on == z_off  # the same plan: only the execution differs
-    dwell_end = sum(templates.TEMPLATES["take"].seg_steps[:3]) - 1  # the last step before closing
+    scene_plan = _cup_scene()  # one plan: the guard changes only the execution
+    z_on, tcp_on, r_on, _ = _cup_take(DEFAULT, *scene_plan)
+    z_off, tcp_off, r_off, _ = _cup_take(OFF, *scene_plan)
+    dwell_end = _take_steps(DEFAULT)[1]  # the last step before closing
     # without the guard the servos drive the pads down the cup to within 1 cm of the planned
     # grasp; with it the tcp stays where the pads met the cup's walls, centimetres above
     assert tcp_off[dwell_end] < z_off + 0.01

@@ -213,27 +213,31 @@ def test_squeeze_from_the_body_the_pads_end_on_hand_worked():
     assert bool(programs.program("lift", st.arm, V3, st.geo, jnp.int32(p), jnp.asarray(q)).ok)
 
 
-@pytest.mark.slow  # settles, plans (v2 and v3) and replays 3 scenes in C twice (~2 min)
+@pytest.mark.slow  # settles, plans and replays 3 scenes in C
 def test_squeeze_stays_within_the_bound_in_c():
+    """The squeeze from the body the pads end on (v3, kept by the default v4) stays within the
+    press bound on the scenes where v2's squeeze pressed a cup's walls at a kN/m servo 1-2 cm
+    short of its command (docs/arm.md; the hand-worked squeeze: above). The session's
+    batch-8 planner of the default programs, not one compiled for v2 and v3."""
     from relaff_jax.sim.physics_bounds import press_ok
     from helpers.scenes import replay_built
 
-    def run(action, cfg):
-        w = planning.setup(cfg).world
-        rows = [v[1:] for v in SQUEEZE_SCENES.values() if v[0] == action]
-        return replay_built(action, cfg, [scene(w, *r) for r in rows])
+    default = ActionConfig()
 
-    plan3, take3 = run("take", V3)
-    plan2, take2 = run("take", V2)
-    assert plan3["feasible"].all() and plan2["feasible"].all()
-    # v2 pressed the cup's walls (a kN/m servo 1-2 cm short of its command); v3 within the bound
-    assert not press_ok(take2["press"], take2["weight"]).any(), take2["press"]
-    assert press_ok(take3["press"], take3["weight"]).all(), take3["press"]
-    assert not take3["label"].any() and not take2["label"].any()  # the cup comes along: not taken
-    plan3, lift3 = run("lift", V3)
-    assert plan3["feasible"].all()
-    assert press_ok(lift3["press"], lift3["weight"]).all(), lift3["press"]
-    assert lift3["label"].all()  # the car pushed back onto the book, the pair lifted
+    def run(action):
+        w = planning.setup(default).world
+        rows = [v[1:] for v in SQUEEZE_SCENES.values() if v[0] == action]
+        return replay_built(action, default, [scene(w, *r) for r in rows])
+
+    plan, take = run("take")
+    assert plan["feasible"].all()
+    assert press_ok(take["press"], take["weight"]).all(), take["press"]
+    assert not take["label"].any()  # the cup comes along: not taken
+    # the lift of the car past the book's edge (v3: pushed back onto the book within the bound)
+    # is refused by v4 at plan time, the car in the palm's tipping reach (test_programs_v4.py);
+    # the default's lift squeezes are checked on sampled scenes (test_programs_v2.py, bounds)
+    plan, _ = run("lift")
+    assert not plan["feasible"].any()
 
 
 # scenes whose v2 programs are pinned: (action, toy, other, toy position, other position, toy yaw)
