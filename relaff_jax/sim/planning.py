@@ -13,7 +13,7 @@ transit (the waypoints first put on one IK branch, ``branch.one_branch``), the a
 from __future__ import annotations
 
 import functools
-from typing import Callable, NamedTuple
+from typing import Any, Callable, NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -51,10 +51,13 @@ def setup(cfg: ActionConfig = ActionConfig()) -> Setup:
     return Setup(world, arm, geometry(world), np.asarray(home.q))
 
 
-def home_grip(cfg: ActionConfig) -> np.ndarray:
+def home_grip(cfg: ActionConfig, arm: Any = None) -> np.ndarray:
     """(A,) finger command at the start: closed on the held rake's handle
-    (``bodies.tool_squeeze``), else half open."""
-    return np.where(tables(cfg).held, tool_squeeze(setup(cfg).arm, cfg), 0.06).astype(np.float32)
+    (``bodies.tool_squeeze``), else half open. ``arm``: ``setup(cfg).arm``, passed by a
+    function being traced (``setup`` jits its own IK, which must not run inside a trace: the
+    cached setup may have been evicted since the function was built)."""
+    arm = setup(cfg).arm if arm is None else arm
+    return np.where(tables(cfg).held, tool_squeeze(arm, cfg), 0.06).astype(np.float32)
 
 
 class Plan(NamedTuple):
@@ -81,7 +84,7 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     st = setup(cfg)
     tb = tables(cfg)
     q_home = jnp.asarray(st.q_home, jnp.float32)
-    grip_home = jnp.asarray(home_grip(cfg))
+    grip_home = jnp.asarray(home_grip(cfg, st.arm))
     branches = [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
     straight = straight_rows(cfg, tb.target)
     v3 = is_v3(cfg)

@@ -52,7 +52,7 @@ def initial_data(st: Setup, cfg: ActionConfig, action_id: jax.Array, qpos_obj: j
     held = jnp.asarray(tables(cfg).held)[action_id]  # the rake scenes'
     qpos = A.set_arm_qpos(st.arm, d0.qpos.at[:nqo].set(qpos_obj), q_home, _finger_home(held))
     qvel = d0.qvel.at[:nvo].set(qvel_obj)
-    ctrl = A.make_ctrl(st.arm, q_home, jnp.asarray(home_grip(cfg))[action_id])
+    ctrl = A.make_ctrl(st.arm, q_home, jnp.asarray(home_grip(cfg, st.arm))[action_id])
     # the rake is attached to the hand (weld "tool_grip") only in rake scenes
     eq = jnp.zeros(d0.eq_active.shape, bool).at[welds(st.world).tool].set(held)
     return d0.replace(qpos=qpos, qvel=qvel, ctrl=ctrl, eq_active=eq)
