@@ -41,7 +41,7 @@ import numpy as np
 from . import arm as A
 from relaff_jax.config.action import ArmConfig
 from .planning import Plan, home_grip, make_plan_fn, setup
-from .actions.registry import on_change, registry
+from .actions.registry import per_action_list, registry
 from .actions.rules import plan_program
 from .programs import toy_grasp_target, toy_reachable
 from .actions.tables import tables
@@ -128,14 +128,14 @@ def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     return screen_fn
 
 
-@functools.lru_cache(maxsize=4)
+@per_action_list(maxsize=4)
 def jitted_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     """``make_screen_fn(cfg)`` jitted, cached (one compile per batch shape, all actions), its
     trace kept on disk with the compilation cache (``traced_cache.stored_jit``)."""
     return stored_jit(make_screen_fn(cfg), "screen", cfg)
 
 
-@functools.lru_cache(maxsize=4)
+@per_action_list(maxsize=4)
 def jitted_parts(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
     """The two halves of ``simulate.make_prepare_fn`` apart, jitted and cached:
     ``plan_fn(action_id, pair (B,), qpos (B, 14)) -> Plan`` (``planning.make_plan_fn``) and
@@ -144,10 +144,6 @@ def jitted_parts(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable
     st = setup(cfg)
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
     return stored_jit(make_plan_fn(cfg), "plan", cfg), stored_jit(reach, "toy_reach", cfg)
-
-
-on_change(jitted_screen_fn.cache_clear)
-on_change(jitted_parts.cache_clear)
 
 
 def _in_chunks(fn: Callable, rows: np.ndarray, chunk: int, *arrays: np.ndarray) -> Iterator[tuple[np.ndarray, Any]]:

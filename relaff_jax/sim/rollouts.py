@@ -29,7 +29,7 @@ import numpy as np
 
 from . import scenes as sc
 from . import world as wd
-from .actions.registry import action_id, on_change, spec
+from .actions.registry import action_id, per_action_list, spec
 from .bodies import geometry
 from .native.batch import default_threads, execute_native
 from .native.settle import settle_batch, still_batch
@@ -66,7 +66,7 @@ def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     return action_fn
 
 
-@functools.lru_cache(maxsize=4)
+@per_action_list(maxsize=4)  # built for the run's action list
 def jitted_stage_fns(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
     """The jitted ``make_prepare_fn(cfg)`` and ``make_simulate_fn(cfg)``, cached: each compiles
     once per batch shape and serves all nine actions (the action index is traced). The
@@ -85,9 +85,6 @@ def jitted_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         return simulate_fn(action_id, pair, qpos, qvel, plan, before)
 
     return action_fn
-
-
-on_change(jitted_stage_fns.cache_clear)  # built for another action list
 
 
 # ----------------------------------------------------------------- dataset rollouts

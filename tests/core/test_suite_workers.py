@@ -54,11 +54,18 @@ def test_files_sharing_a_session_fixture_form_one_unit():
     assert _users("scene_run") and set(_users("scene_run")) == {f for f, g in W.GROUPS.items() if g == "scene_run"}
 
 
-def test_first_units_exist_and_lead_the_order():
-    for unit in W.FIRST:
+def test_lanes_exist_and_each_worker_runs_its_own_first():
+    laned = [u for lane in W.LANES for u in lane]
+    assert len(laned) == len(set(laned))  # a unit in one lane only
+    for unit in laned:
         assert unit in W.GROUPS.values() or (ROOT / unit).is_file(), unit
-    units = ["tests/a/test_a.py", W.FIRST[2], "tests/b/test_b.py", W.FIRST[0]]
-    assert W.order_units(units) == [W.FIRST[0], W.FIRST[2], "tests/a/test_a.py", "tests/b/test_b.py"]
+    a, b = W.LANES
+    queued = ["tests/x/test_x.py", b[1], a[2], "tests/y/test_y.py", b[0]]
+    assert W.next_unit(queued, a) == a[2]  # its lane's first still queued
+    assert W.next_unit(queued, b) == b[0]
+    assert W.next_unit(queued, ()) == "tests/x/test_x.py"  # a third worker: the first in no lane
+    assert W.next_unit([b[1], "tests/y/test_y.py"], a) == "tests/y/test_y.py"  # lane done: no lane's first
+    assert W.next_unit([b[1]], a) == b[1]  # then the other lane's
     assert W.unit_of("tests/docs/test_notebooks.py::test_x[1]") == "scene_run"
     assert W.unit_of("tests/sim/test_arm.py::TestA::test_b") == "tests/sim/test_arm.py"
 

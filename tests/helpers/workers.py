@@ -5,8 +5,9 @@ tests/conftest.py; without xdist it does nothing).
 - One work unit per test file, so a file's module fixtures are built once. Files that share a
   session fixture of ``helpers.fixtures`` that simulates form one unit (``GROUPS``), so it is
   built once too (a session fixture is per worker).
-- The units that take longest start first (``FIRST``), so that the run does not end with one
-  worker on a long file while the other idles.
+- Each worker runs its lane first (``LANES``): one lane holds the units that run the default
+  motor programs in the worker's process, after the end to end traced them there; the other
+  starts with long units that simulate no arm. Then both take the rest as they run out.
 - Each worker is pinned to its share of the CPUs (``pin_worker``), so the processes and threads
   a test starts (``--jobs 2``, a LocalCluster, MuJoCo's batch threads, XLA's pool) stay on that
   worker's cores and two workers never run more CPU-bound threads than there are cores.
@@ -22,27 +23,41 @@ GROUPS = {
     "tests/report/test_reproduce_report.py": "scene_run",
 }
 
-# units started first, the longest ones (the whole suite's --durations on an idle machine: the
-# tiny preset end to end ~360 s, two processes generating ~160 s, the native audit ~90 s, the
-# notebooks on the scene_run folder, the screened plan ~65 s); the rest follow in collection order.
-# Ordered so that units compiling the same programs do not compile them at once on both workers,
-# the later one loading them from the session's compilation cache (conftest.py). xdist hands
-# one worker the first unit and, as that unit has a single test, the third; the other worker
-# the second, then the rest in order as it runs out. The end to end compiles the batch-8
-# planner (its scenes settled in C) while the other worker runs programs_v2 (v1 and v2
-# planners: nothing in common); then test_actions.py compiles the batch-8 MJX settle and action
-# programs that scene_run (after the end to end) and notebook 01's kernel load, which keeps
-# the notebook's cells short (nbclient's timeout), and its rollout test, the generate processes
-# and the native audit load the planner.
-FIRST = (
+# Two lanes, one per worker (the first worker to ask takes lane A, the second lane B; a third
+# takes no lane). Each runs its own units first, in order, then both take the rest in collection
+# order as they run out. Lane A holds the units that run the default programs at batch 8 in the
+# worker's own process, after the tiny end to end (run in process) has traced and compiled
+# them: the later units reuse that process's traced programs (a planner's trace is 20-30 s, the
+# compile 50 s) and nothing is traced or compiled on both workers at once. Lane B starts with
+# long units that simulate no arm, then the units whose child processes plan with the default
+# programs (they load them from the session's compilation cache, written by then: the end to
+# end's generate stage is its first ~300 s), then scene_run, whose notebook kernels load the
+# MJX programs tests/sim/test_actions.py compiles on lane A.
+LANE_A = (
     "tests/e2e/test_reproduce_e2e.py",
-    "tests/sim/test_programs_v2.py",
-    "scene_run",
     "tests/sim/test_actions.py",
+    "tests/sim/test_programs_v2.py",
+    "tests/sim/test_guarded_descent.py",
+    "tests/sim/test_programs_v3.py",
+    "tests/sim/test_animate.py",
+    "tests/sim/test_native_engine.py",
+    "tests/sim/test_reach_screen.py",
+    "tests/sim/test_still.py",
+)
+LANE_B = (
+    "tests/learn/test_engine.py",
+    "tests/perception/test_perception.py",
+    "tests/sim/test_arm.py",
+    "tests/learn/test_intervals.py",
+    "tests/sim/test_arm_sim.py",
+    "tests/perception/test_features.py",
+    "tests/sim/test_scenes.py",
     "tests/data/test_generate_processes.py",
     "tests/data/test_audit.py",
-    "tests/sim/test_reach_screen.py",
+    "tests/sim/test_action_plugins.py",
+    "scene_run",
 )
+LANES = (LANE_A, LANE_B)
 
 
 def unit_of(nodeid: str) -> str:
@@ -51,10 +66,14 @@ def unit_of(nodeid: str) -> str:
     return GROUPS.get(path, path)
 
 
-def order_units(units: list[str]) -> list[str]:
-    """``units`` (collection order, no repeats) with ``FIRST``'s present ones in front, in its order."""
-    first = [u for u in FIRST if u in units]
-    return first + [u for u in units if u not in first]
+def next_unit(queued: list[str], lane: tuple[str, ...]) -> str:
+    """The unit a worker of ``lane`` runs next, of the ``queued`` ones (collection order): its
+    lane's first still queued, else the first queued in no lane, else the first queued."""
+    for unit in lane:
+        if unit in queued:
+            return unit
+    laned = {u for ln in LANES for u in ln}
+    return next((u for u in queued if u not in laned), queued[0])
 
 
 def worker_cpus(cpus: list[int], worker: int, count: int) -> list[int] | None:
@@ -95,17 +114,17 @@ def _scheduler_class():
     from xdist.scheduler import LoadScopeScheduling
 
     class FileGroupScheduling(LoadScopeScheduling):
-        """xdist's load-by-scope with a scope per file or group, longest units first."""
+        """xdist's load-by-scope with a scope per file or group, each worker its lane first."""
 
         def _split_scope(self, nodeid: str) -> str:
             return unit_of(nodeid)
 
         def _assign_work_unit(self, node) -> None:
-            # the queue is complete before the first unit is handed out: put FIRST's units in front
-            if not getattr(self, "_ordered", False):
-                units = order_units(list(self.workqueue))
-                self.workqueue = type(self.workqueue)((u, self.workqueue[u]) for u in units)
-                self._ordered = True
+            lanes = self.__dict__.setdefault("_lanes", {})
+            if node not in lanes:  # the first worker to ask takes lane A, the second lane B
+                lanes[node] = LANES[len(lanes)] if len(lanes) < len(LANES) else ()
+            unit = next_unit(list(self.workqueue), lanes[node])
+            self.workqueue.move_to_end(unit, last=False)  # xdist hands out the queue's first unit
             super()._assign_work_unit(node)
 
     return FileGroupScheduling
@@ -113,7 +132,7 @@ def _scheduler_class():
 
 @pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
-    """``--dist loadfile``: this suite's units (``GROUPS``) in this suite's order (``FIRST``)."""
+    """``--dist loadfile``: this suite's units (``GROUPS``), each worker its lane first (``LANES``)."""
     if config.getvalue("dist") != "loadfile":
         return None
     return _scheduler_class()(config, log)

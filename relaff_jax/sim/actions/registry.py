@@ -10,9 +10,10 @@ modules defining its rules), so a dataset never silently changes meaning. No JAX
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
-from typing import Any
+from typing import Any, Callable
 
 from relaff_jax import plugins
 from relaff_jax.constants import ACTIONS, TOY_MANIPULATED
@@ -34,19 +35,32 @@ class UserAction:
 
 _USER: dict[str, UserAction] = {}
 _entry_points_loaded = False
-_ON_CHANGE: list = []  # the caches of compiled programs, cleared when the action list changes
 
 
-def on_change(clear):
-    """Call ``clear()`` whenever an action is registered or removed (a cache of compiled
-    programs built for another action list)."""
-    _ON_CHANGE.append(clear)
-    return clear
+def action_list_key() -> tuple[tuple[str, int], ...]:
+    """The registered user actions, each by name and the identity of its spec: what a program
+    built from ``registry()`` depends on beyond its arguments (the built-ins never change)."""
+    return tuple((name, id(u.spec)) for name, u in _USER.items())
 
 
-def _changed() -> None:
-    for clear in _ON_CHANGE:
-        clear()
+def per_action_list(maxsize: int) -> Callable[[Callable], Callable]:
+    """``functools.lru_cache(maxsize)`` keyed also by ``action_list_key()``: a cache of programs
+    built for one action list is not reused under another, and the nine's are found again once
+    a user action is removed (a test registering one and removing it does not make the next
+    test trace the planner again). A cached program keeps the specs it was built from, so
+    their identities are not reused while its entry lives. ``.cache_clear()`` empties it."""
+    def wrap(fn: Callable) -> Callable:
+        cached = functools.lru_cache(maxsize=maxsize)(lambda key, *args, **kwargs: fn(*args, **kwargs))
+
+        @functools.wraps(fn)
+        def keyed(*args, **kwargs):
+            _load_entry_points()
+            return cached(action_list_key(), *args, **kwargs)
+
+        keyed.cache_clear = cached.cache_clear
+        return keyed
+
+    return wrap
 
 
 def register_action(spec: ActionSpec) -> ActionSpec:
@@ -63,14 +77,12 @@ def register_action(spec: ActionSpec) -> ActionSpec:
         raise UserError(f"action {spec.name!r} from {origin}: field name: clashes with the one from {was.origin}; "
                         "choose another name")
     _USER[spec.name] = UserAction(spec, origin, sha)
-    _changed()
     return spec
 
 
 def unregister(name: str) -> None:
     """Forget user action ``name`` (tests; a built-in cannot be removed)."""
-    if _USER.pop(name, None) is not None:
-        _changed()
+    _USER.pop(name, None)
 
 
 def _load_entry_points() -> None:

@@ -16,7 +16,6 @@ step and read contacts:
 """
 from __future__ import annotations
 
-import functools
 from typing import NamedTuple
 
 import jax
@@ -24,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from relaff_jax.sim import arm as A
-from relaff_jax.sim.actions.registry import on_change, registry
+from relaff_jax.sim.actions.registry import per_action_list, registry
 from relaff_jax.sim.actions.rules import goal_row
 from relaff_jax.sim.labels import Outcome
 from relaff_jax.sim.planning import setup
@@ -70,7 +69,7 @@ class ProgramInputs(NamedTuple):
     corr: np.ndarray
 
 
-@functools.lru_cache(maxsize=4)
+@per_action_list(maxsize=4)
 def _jitted(cfg: ActionConfig):
     """The jitted JAX pieces (compiled once per batch shape): initial data, commands, reach,
     labels, corrections."""
@@ -100,9 +99,6 @@ def _jitted(cfg: ActionConfig):
     return (stored_jit(init, "native_init", cfg), stored_jit(ctrl, "native_ctrl", cfg),
             stored_jit(reach, "toy_reach", cfg), stored_jit(rules, "native_rules", cfg),
             stored_jit(corr, "native_corr", cfg))
-
-
-on_change(_jitted.cache_clear)
 
 
 def _padded(fn, *arrays):

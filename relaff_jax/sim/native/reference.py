@@ -9,7 +9,6 @@ replay is the reference of the batched native engine (``native.batch``).
 """
 from __future__ import annotations
 
-import functools
 from typing import Callable
 
 import jax
@@ -23,12 +22,11 @@ from relaff_jax.sim import world as wd
 from relaff_jax.sim.guard import hold_joints, pad_landing_np
 from relaff_jax.sim.native.program import (RestReader, native_labels, pad_hit, program_inputs, reachable, stop_descent,
                              weld_relpose_np)
-from relaff_jax.sim.actions.registry import action_id, on_change
+from relaff_jax.sim.actions.registry import action_id, per_action_list
 from relaff_jax.sim.planning import make_plan_fn, setup
 from relaff_jax.sim.simulate import welds
 from relaff_jax.sim.actions.tables import tables
 from relaff_jax.sim.templates import ActionConfig
-
 
 
 def relation_native(world: wd.World, pair: int, m: mujoco.MjModel, d: mujoco.MjData,
@@ -119,12 +117,9 @@ def landing(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bool
     return False
 
 
-@functools.lru_cache(maxsize=2)
+@per_action_list(maxsize=2)
 def _plan_fn(cfg: ActionConfig):
     return jax.jit(make_plan_fn(cfg))
-
-
-on_change(_plan_fn.cache_clear)
 
 
 def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray,
