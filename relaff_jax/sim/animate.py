@@ -65,7 +65,7 @@ def rollout_frames(action: str, pair: int, qpos: np.ndarray, cfg: Any = None, ev
     plan, _ = jitted_stage_fns(cfg)[0](action_id(action), jnp.asarray(p[rows]), jnp.asarray(q[rows]))
     plan = jax.device_get(plan)
     _say(progress, "planning (compiles the IK first)", 1, 1)
-    result = {k: np.asarray(getattr(plan, k))[:1] for k in ("q_way", "grip_way", "feasible")}
+    result = {k: np.asarray(getattr(plan, k))[:1] for k in ("q_way", "grip_way", "feasible", "direction")}
     qvel = np.zeros((1, 12), np.float32) if qvel is None else np.asarray(qvel, np.float32).reshape(1, 12)
     _say(progress, "replaying in MuJoCo C", 0, 1)
     rep = replay_native(action, cfg, p, q, qvel, result, record_every=every)

@@ -26,9 +26,10 @@ GROUPS = {
 # Two lanes, one per worker (the first worker to ask takes lane A, the second lane B; a third
 # takes no lane). Each runs its own units first, in order, then both take the rest in collection
 # order as they run out. Lane A holds the units that run the default programs at batch 8 in the
-# worker's own process, after the tiny end to end (run in process) has traced and compiled
-# them: the later units reuse that process's traced programs (a planner's trace is 20-30 s, the
-# compile 50 s) and nothing is traced or compiled on both workers at once. Lane B starts with
+# worker's own process (or there and in child processes: the generate processes' audit), after
+# the tiny end to end (run in process) has traced and compiled them: the later units reuse that
+# process's traced programs (a planner's trace is 20-30 s, the compile 50 s) and nothing is
+# traced or compiled on both workers at once. Lane B starts with
 # long units that simulate no arm, then the units whose child processes plan with the default
 # programs (they load them from the session's compilation cache, written by then: the end to
 # end's generate stage is its first ~300 s), then scene_run, whose notebook kernels load the
@@ -36,6 +37,7 @@ GROUPS = {
 LANE_A = (
     "tests/e2e/test_reproduce_e2e.py",
     "tests/sim/test_actions.py",
+    "tests/data/test_generate_processes.py",
     "tests/sim/test_programs_v2.py",
     "tests/sim/test_guarded_descent.py",
     "tests/sim/test_programs_v3.py",
@@ -52,7 +54,6 @@ LANE_B = (
     "tests/sim/test_arm_sim.py",
     "tests/perception/test_features.py",
     "tests/sim/test_scenes.py",
-    "tests/data/test_generate_processes.py",
     "tests/data/test_audit.py",
     "tests/sim/test_action_plugins.py",
     "scene_run",

@@ -11,8 +11,6 @@ from __future__ import annotations
 
 from typing import Callable
 
-import jax
-import jax.numpy as jnp
 import mujoco
 import numpy as np
 
@@ -20,10 +18,11 @@ from relaff_jax.sim import arm as A
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 from relaff_jax.sim.guard import hold_joints, pad_landing_np
-from relaff_jax.sim.native.program import (RestReader, native_labels, pad_hit, program_inputs, reachable, stop_descent,
+from relaff_jax.sim.native.program import (RestReader, _padded, native_labels, pad_hit, program_inputs, reachable, stop_descent,
                              weld_relpose_np)
-from relaff_jax.sim.actions.registry import action_id, per_action_list
-from relaff_jax.sim.planning import make_plan_fn, setup
+from relaff_jax.sim.actions.registry import action_id
+from relaff_jax.sim.planning import setup
+from relaff_jax.sim.reach_screen import jitted_parts
 from relaff_jax.sim.simulate import welds
 from relaff_jax.sim.actions.tables import tables
 from relaff_jax.sim.templates import ActionConfig
@@ -117,11 +116,6 @@ def landing(d: mujoco.MjData, arm: A.Arm, cfg: ActionConfig, geoms: set) -> bool
     return False
 
 
-@per_action_list(maxsize=2)
-def _plan_fn(cfg: ActionConfig):
-    return jax.jit(make_plan_fn(cfg))
-
-
 def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.ndarray,
                   qvel: np.ndarray, result: dict, record_every: int = 0,
                   observe: Callable[[int, int, mujoco.MjModel, mujoco.MjData], None] | None = None
@@ -148,7 +142,11 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     if "direction" in result:
         direction = np.asarray(result["direction"])
     else:
-        direction = np.asarray(_plan_fn(cfg)(aid, jnp.asarray(pair), jnp.asarray(qpos, jnp.float32)).direction)
+        # the generation's plan function (the screened path's), rows padded to a power of two
+        # >= 8: the shapes a run compiles, not one per call size
+        plan_fn = jitted_parts(cfg)[0]
+        direction = _padded(lambda p, q: plan_fn(aid, p, q).direction, pair.astype(np.int32),
+                            np.asarray(qpos, np.float32))
     before = reachable(cfg, pair, qpos) if tables(cfg).reach[aid] else np.zeros(len(pair), bool)
     inp = program_inputs(cfg, aid, qpos, qvel, result["q_way"], result["grip_way"])
     nqo = qpos.shape[-1]
