@@ -1,8 +1,9 @@
 """A sample's motor program as an animation: why its label is what it is.
 
 Takes one settled scene (pair, object state) and an action; plans the program with the JAX
-planner generation uses (``rollouts.jitted_stage_fns``, in a call of a dataset's batch), replays it in MuJoCo C (``native.reference.replay_native``,
-recording every geom's pose), and draws each recorded frame with the project's ray caster
+planner generation uses (``rollouts.jitted_stage_fns``, in a call of a dataset's planner rows),
+replays it in MuJoCo C (``native.reference.replay_native``, recording every geom's pose), and
+draws each recorded frame with the project's ray caster
 (``perception.rollout_view``: every primitive as it is, spheres round, shaded, coloured by
 geom, from a camera framed on the two objects) under a title that names the engines and
 marks an infeasible program. No OpenGL is needed. Writes a GIF.

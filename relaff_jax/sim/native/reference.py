@@ -18,8 +18,8 @@ from relaff_jax.sim import arm as A
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
 from relaff_jax.sim.guard import hold_joints, pad_landing_np
-from relaff_jax.sim.native.program import (RestReader, _padded, native_labels, pad_hit, program_inputs, reachable, stop_descent,
-                             weld_relpose_np)
+from relaff_jax.sim.native.program import (RestReader, _padded, native_labels, pad_hit, program_inputs, reachable,
+                                           stop_descent, weld_relpose_np)
 from relaff_jax.sim.actions.registry import action_id
 from relaff_jax.sim.planning import setup
 from relaff_jax.sim.reach_screen import jitted_parts
