@@ -10,6 +10,7 @@ from relaff_jax.constants import SIM_ENGINES
 
 POPULATIONS = ("all", "feasible")  # which rollouts may be selected (data.selection)
 NEGATIVES = ("cog", "uniform")  # how negatives are drawn
+UNSETTLED = ("refuse", "keep")  # a rollout whose objects never came to rest: no label, or its last step's
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,6 +42,12 @@ class DatasetConfig(Node):
         the borrowing (recorded, warned). With the population "feasible" the matched
         negatives are feasible stacked pairs that fail, which may be rare: without this the
         generator would run to the cap.
+    unsettled: ``UNSETTLED``: ``"refuse"`` (a rollout whose objects were still moving when the
+        bounded rest hold ended, ``settled`` False, has no outcome to read: it is never
+        selected, and the refusals are counted) or ``"keep"`` (its goal read at the hold's
+        last step, as datasets made before this setting). A program not executed counts as
+        settled; rollouts without a ``settled`` field (a rollout function with no rest read)
+        are all taken, and ``unsettled_refused`` is recorded as null.
     """
 
     max_rollouts: int = 200_000
@@ -53,6 +60,7 @@ class DatasetConfig(Node):
     population: str = "all"
     negatives: str = "cog"
     match_patience: float = 4.0
+    unsettled: str = "refuse"
 
     _path = "dataset"
     _constraints = {
@@ -60,5 +68,5 @@ class DatasetConfig(Node):
         "borrow_fraction": FRACTION, "n_samples": count(2, 10**15),  # past the rollout cap: sample_bound says so, with the time
         "rollout_batch": count(1, 1 << 20), "feature_batch": count(1, 1 << 16),
         "engine": Options(SIM_ENGINES), "population": Options(POPULATIONS), "negatives": Options(NEGATIVES),
-        "match_patience": Interval(float, 1.0, 1e6),
+        "match_patience": Interval(float, 1.0, 1e6), "unsettled": Options(UNSETTLED),
     }

@@ -28,6 +28,7 @@ import numpy as np
 
 from relaff_jax.constants import RELATIONS
 from relaff_jax.data.errors import DatasetError
+from relaff_jax.data.layout import stored_scheme
 from relaff_jax.data.load import load_rollouts
 from relaff_jax.data.store import read_sidecar
 
@@ -108,9 +109,10 @@ def anatomy(path: str | os.PathLike) -> dict[str, Any]:
         raise DatasetError(f"{path}: the rollouts have no 'feasible' field, so reach and relation cannot be told apart")
     out = anatomy_of(r["label"], r["feasible"], r["relation"], r["cog_distance"], r["selected"])
     sel = meta.get("selection", {})
-    scheme = meta.get("selection_scheme", {})
-    out.update(action=meta["action"], path=str(path), population=scheme.get("population", "all"),
-               negatives=scheme.get("negatives", "cog"), borrowed=sel.get("borrowed"),
+    scheme = stored_scheme(meta.get("selection_scheme", {}))
+    out.update(action=meta["action"], path=str(path), population=scheme["population"],
+               negatives=scheme["negatives"], unsettled=scheme["unsettled"],
+               unsettled_refused=sel.get("unsettled_refused"), borrowed=sel.get("borrowed"),
                borrowed_share=(sel["borrowed"] / sel["n_negative"]) if sel.get("n_negative") else None,
                matching_met=sel.get("matching_met", True), quantiles=list(QUANTILES))
     return out
@@ -123,7 +125,9 @@ def _f(x: float | None, spec: str = ".3f") -> str:
 def format_anatomy(d: Mapping[str, Any]) -> str:
     """Human-readable table of an ``anatomy`` dict."""
     s, r = d["selection"], d["rollouts"]
-    lines = [f"dataset {d['path']}: action {d['action']}, population {d['population']}, negatives {d['negatives']}",
+    refused = "" if d["unsettled_refused"] is None else f" ({d['unsettled_refused']} refused)"
+    lines = [f"dataset {d['path']}: action {d['action']}, population {d['population']}, negatives {d['negatives']}, "
+             f"unsettled {d['unsettled']}{refused}",
              f"rollouts {r['n']} ({r['feasible']} feasible, {r['positives']} positive); "
              f"selection {s['n']} ({s['feasible']} feasible, {s['positives']} positive)",
              f"negatives infeasible in the selection: {_f(s['negatives_infeasible_share'], '.1%')} "

@@ -45,16 +45,18 @@ from relaff_jax import io as rio
 from relaff_jax import provenance
 from relaff_jax.cluster.tasks import Ordered
 from relaff_jax.config import to_dict
-from relaff_jax.data.layout import (CHUNKS, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, check_action, check_int, jsonable_config, selection_scheme, stored_scheme)
+from relaff_jax.data.features import remove_features
+from relaff_jax.data.layout import (CHUNKS, FEATURES, FEATURES_SIDECAR, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, check_action, check_int, jsonable_config, selection_scheme, stored_scheme)
 from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, RolloutCapError
 from relaff_jax.data.load import load_dataset
 from relaff_jax.data.progress import progress_bar
 from relaff_jax.data.selection import select_balanced
+from relaff_jax.data.stopping import eligible_rows, first_stop, stops
 from relaff_jax.data.store import (check_rollout_ids, chunk_dirs_exist, chunk_indices, chunk_path, clean_tmp,
                                    mismatch, prepare_dir, read_chunk, read_sidecar, remove_created, sha256,
                                    writer_lock)
-from relaff_jax.data.tasks import PENDING, PrepareAhead, discard_pending, promote, rollout_chunk
+from relaff_jax.data.tasks import PENDING, PrepareAhead, discard_pending, drop_chunks, promote, rollout_chunk
 from relaff_jax.data.validate import check_schema, schema_of
 
 # The settle each engine's rollout_fn uses, recorded in the sidecar and compared on resume
@@ -160,13 +162,20 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
                 f"folder (or finish it with the version that began it)")
         meta["settle"] = settled
         _check_objects(path, meta, header)
-        diff = mismatch(meta, header, ("action", "n_samples", "seed", "batch", "config", "object_names", "selection_scheme"))
+        diff = mismatch(meta, header, ("action", "n_samples", "seed", "batch", "config", "object_names"))
         if diff:
             raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff))
-        if meta["status"] == "complete":
+        # the same rollouts under another selection scheme: selected again from the stored chunks
+        old, new = meta["selection_scheme"], header["selection_scheme"]
+        changed = [f"{k} {old.get(k)!r} -> {new[k]!r}" for k in sorted(new) if old.get(k) != new[k]]
+        reselect = bool(changed)
+        if reselect:
+            print(f"{path}: selecting again from the stored rollouts ({', '.join(changed)})", file=sys.stderr)
+        elif meta["status"] == "complete":
             load_dataset(path)  # verifies chunks and index
             return _summary(meta, new_chunks=0)
     else:
+        reselect = False
         meta = dict(header, status="generating", counts={"chunks": 0, "rollouts": 0, "positives": 0})
         meta["versions"] = provenance.versions()
         meta["dataset_config"] = to_dict(dcfg)
@@ -179,7 +188,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         raise CorruptDatasetError(
             f"{path}: sidecar records {meta['counts']['chunks']} chunks but only {len(done)} exist (truncated)"
         )
-    labels, dists, eligible, schema = [], [], [], None
+    labels, dists, eligible, refused, schema = [], [], [], [], None
     for k in done:
         arrays, _ = read_chunk(chunk_path(cdir, k))
         check_rollout_ids(chunk_path(cdir, k), arrays, k, batch)
@@ -188,9 +197,26 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         schema = schema or schema_of(arrays)
         labels.append(arrays["label"])
         dists.append(arrays["cog_distance"])
-        eligible.append(_eligible(arrays, dcfg.population, f"chunk {k}"))
-    k0 = len(done)
+        ok_k, refused_k = eligible_rows(arrays, dcfg, f"chunk {k}")
+        eligible.append(ok_k)
+        refused.append(refused_k)
     max_chunks = math.ceil(dcfg.max_rollouts / batch)
+    if reselect:  # stop where a run under this scheme from the start would have: the same dataset
+        k_stop = first_stop(labels, dists, eligible, n, seed, dcfg, max_chunks)
+        if k_stop is not None and k_stop < len(done):
+            # counts first, the old scheme kept: a kill while removing leaves a rerun that selects again
+            done, labels, dists, eligible, refused = (x[:k_stop] for x in (done, labels, dists, eligible, refused))
+            meta["counts"].update(chunks=k_stop, rollouts=k_stop * batch, positives=int(sum(l.sum() for l in labels)))
+            rio.atomic_write_json(path / SIDECAR, meta)
+            extra = chunk_indices(cdir)[k_stop:]
+            drop_chunks(cdir, extra)
+            print(f"{path}: {len(extra)} chunks past this scheme's stopping point removed", file=sys.stderr)
+        if (path / FEATURES_SIDECAR).exists() or (path / FEATURES).exists():  # they belong to the old selection
+            remove_features(path)
+            print(f"{path}: the old selection's features removed", file=sys.stderr)
+        meta["selection_scheme"], meta["status"] = header["selection_scheme"], "generating"
+        rio.atomic_write_json(path / SIDECAR, meta)
+    k0 = len(done)
     # the bar counts samples of a balanced selection in hand, negatives matched included, so
     # it does not stand at 100 % while negatives are still being matched
     bar = progress_bar(progress, n, f"{action} samples" if done else f"{action}: compiling, first chunk", unit="sample")
@@ -215,8 +241,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
                 meta["counts"]["in_hand"] = in_hand
                 rio.atomic_write_json(path / SIDECAR, meta)
             at_cap = k >= max_chunks
-            patience_out = sel is not None and k >= _patience_chunks(labels, eligible, n, dcfg.match_patience)
-            if sel is not None and (at_cap or patience_out or sel.borrowed <= dcfg.borrow_fraction * sel.n_negative):
+            if stops(sel, k, labels, eligible, n, dcfg, max_chunks):
                 break
             if at_cap:
                 rate = lab.mean() if lab.size else float("nan")
@@ -236,7 +261,9 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
                 promote(stage, cdir, k)
             labels.append(got["label"])
             dists.append(got["cog_distance"])
-            eligible.append(_eligible(got, dcfg.population, f"chunk {k} from rollout_fn"))
+            ok_k, refused_k = eligible_rows(got, dcfg, f"chunk {k} from rollout_fn")
+            eligible.append(ok_k)
+            refused.append(refused_k)
             k += 1
             npos = int(sum(l.sum() for l in labels))
             meta["counts"].update(chunks=k, rollouts=k * batch, positives=npos)
@@ -276,6 +303,8 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         "population": dcfg.population,
         "negatives": dcfg.negatives,
         "eligible_rollouts": int(ok.sum()),
+        "unsettled": dcfg.unsettled,
+        "unsettled_refused": None if None in refused else int(sum(refused)),
         "at_cap": bool(k >= max_chunks),
         "selected": sel.selected.tolist(),
     }
@@ -283,7 +312,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
     meta["status"] = "complete"
     meta["selection"] = {key: index[key] for key in ("n", "n_positive", "n_negative", "chunks", "rollouts", "borrowed",
                                                      "borrowed_share", "matching_met", "population", "negatives",
-                                                     "eligible_rollouts", "at_cap")}
+                                                     "eligible_rollouts", "unsettled", "unsettled_refused", "at_cap")}
     meta["selection"]["sha256"] = sha256(sel.selected.astype(np.int64))
     rio.atomic_write_json(path / SIDECAR, meta)
     summary = dict(_summary(meta, new_chunks=k - k0), discarded_chunks=discarded)
@@ -310,26 +339,6 @@ def samples_in_hand(sel, label: np.ndarray, eligible: np.ndarray, n: int, borrow
         return min(pos, n // 2) + min(neg, n - n // 2)
     owed = max(0, sel.borrowed - math.floor(borrow_fraction * sel.n_negative))
     return n - owed
-
-
-def _eligible(arrays: Mapping[str, Any], population: str, where: str) -> np.ndarray:
-    """(B,) bool: the rollouts of a chunk the population admits."""
-    label = np.asarray(arrays["label"])
-    if population == "all":
-        return np.ones(label.shape, bool)
-    if "feasible" not in arrays:
-        raise DatasetError(f"{where} has no 'feasible' field, which dataset.population={population!r} needs "
-                           f"(the rollout function must return whether each motor program was executable)")
-    return np.asarray(arrays["feasible"], bool)
-
-
-def _patience_chunks(labels: Sequence[np.ndarray], eligible: Sequence[np.ndarray], n: int, patience: float) -> int:
-    """``ceil(patience * k1)``, k1 the first chunk count whose eligible rollouts hold a balanced
-    selection (a count condition only, so a resumed run stops where an unbroken one does)."""
-    pos = np.cumsum([int((l & e).sum()) for l, e in zip(labels, eligible)])
-    neg = np.cumsum([int((~l & e).sum()) for l, e in zip(labels, eligible)])
-    first = np.flatnonzero((pos >= n // 2) & (neg >= n - n // 2))
-    return math.ceil(patience * (int(first[0]) + 1)) if len(first) else 2**62
 
 
 def _summary(meta: Mapping[str, Any], new_chunks: int) -> dict[str, Any]:

@@ -54,7 +54,9 @@ def info(path: str | os.PathLike) -> dict[str, Any]:
     ``rollouts_`` prefix over every rollout; ``rollouts``, ``chunks``, ``batch``, ``seed``,
     ``borrowed`` (negatives taken outside their distance bin), ``borrowed_share``,
     ``matching_met`` (False: the matching was given up at the cap or ``match_patience``),
-    ``population`` and ``negatives`` (the selection's settings), ``config``, ``versions``; and
+    ``population``, ``negatives`` and ``unsettled`` (the selection's settings),
+    ``unsettled_refused`` (executed rollouts never at rest, refused; None: not recorded or not
+    known), ``config``, ``versions``; and
     ``features``: None, or {status, chunks, arrays {name: {shape, dtype}}, unseen_samples
     (samples with any unseen flag set), unseen_by_column}.
     """
@@ -83,7 +85,8 @@ def info(path: str | os.PathLike) -> dict[str, Any]:
     out["borrowed_share"] = sel_meta.get("borrowed_share")
     out["matching_met"] = sel_meta.get("matching_met", True if sel_meta else None)
     scheme = stored_scheme(meta.get("selection_scheme", {}))
-    out["population"], out["negatives"] = scheme["population"], scheme["negatives"]
+    out["population"], out["negatives"], out["unsettled"] = scheme["population"], scheme["negatives"], scheme["unsettled"]
+    out["unsettled_refused"] = sel_meta.get("unsettled_refused")
     out["features"] = None
     fmeta = read_features_sidecar(path)
     if fmeta is not None:
@@ -115,7 +118,8 @@ def format_info(d: Mapping[str, Any]) -> str:
             f"from {d['rollouts']} rollouts in {d['chunks']} chunks; "
             f"{d['borrowed']} negatives borrowed across distance bins"
         )
-        lines.append(f"population {d['population']}, negatives {d['negatives']}"
+        refused = "" if d["unsettled_refused"] is None else f" ({d['unsettled_refused']} refused)"
+        lines.append(f"population {d['population']}, negatives {d['negatives']}, unsettled {d['unsettled']}{refused}"
                      + ("" if d["matching_met"] is not False else
                         f"; ** distance matching NOT met: {d['borrowed_share']:.1%} of the negatives borrowed **"))
     else:

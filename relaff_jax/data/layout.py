@@ -49,13 +49,16 @@ def check_int(name: str, value: Any, lo: int, hi: int | None = None) -> int:
 def selection_scheme(cfg: DatasetConfig) -> dict[str, Any]:
     """The settings the selection depends on, as recorded in the sidecar and compared on resume."""
     return {"distance_bins": cfg.distance_bins, "borrow_fraction": cfg.borrow_fraction,
-            "population": cfg.population, "negatives": cfg.negatives, "match_patience": cfg.match_patience}
+            "population": cfg.population, "negatives": cfg.negatives, "match_patience": cfg.match_patience,
+            "unsettled": cfg.unsettled}
 
 
 def stored_scheme(scheme: Mapping[str, Any]) -> dict[str, Any]:
     """A sidecar's ``selection_scheme`` with the defaults of settings added after it was written
-    (a dataset made before ``population`` existed was selected from all rollouts)."""
-    return {"population": "all", "negatives": "cog", "match_patience": DatasetConfig.match_patience, **scheme}
+    (a dataset made before ``population`` existed was selected from all rollouts, one made
+    before ``unsettled`` kept the rollouts still moving at the hold's end)."""
+    return {"population": "all", "negatives": "cog", "match_patience": DatasetConfig.match_patience,
+            "unsettled": "keep", **scheme}
 
 
 def jsonable_config(config_dict: Mapping[str, Any] | None) -> Any:

@@ -4,7 +4,8 @@ Takes the chunk's recipe (the rollout or feature function, its index, seed/batch
 features, the chunk's own samples) and the *pending* folder; writes the chunk there
 atomically (``store.write_chunk``) and returns only what the driver needs to go on: labels
 ``(batch,) bool`` and COG distances ``(batch,) metres`` of a dataset chunk (the selection),
-the schema of its arrays, and ``feasible`` (the selection's population) when they have it. The same functions run in the driver (no cluster) or on a Dask
+the schema of its arrays, and ``feasible`` (the selection's population) and ``settled`` (its
+rest rule) when they have them. The same functions run in the driver (no cluster) or on a Dask
 worker (``relaff_jax.cluster.Ordered``).
 
 Pending chunks (``chunks/.pending/chunk_K``, ``features/.pending/chunk_F``) may finish in any
@@ -129,10 +130,11 @@ def read_rollout_chunk(path: Path, k: int, batch: int) -> dict[str, Any]:
 
 
 def _for_driver(arrays: Mapping[str, Any], schema: Mapping[str, list]) -> dict[str, Any]:
-    """What the driver's selection reads of a chunk (``feasible`` when the rollouts have it)."""
+    """What the driver's selection reads of a chunk (``feasible``, ``settled`` when the rollouts have them)."""
     out = {"label": arrays["label"], "cog_distance": arrays["cog_distance"], "schema": schema}
-    if "feasible" in arrays:
-        out["feasible"] = arrays["feasible"]
+    for k in ("feasible", "settled"):
+        if k in arrays:
+            out[k] = arrays[k]
     return out
 
 
@@ -169,3 +171,10 @@ def discard_pending(pending: Path) -> int:
     n = sum(1 for p in pending.iterdir() if CHUNK_RE.match(p.name))
     shutil.rmtree(pending, ignore_errors=True)
     return n
+
+
+def drop_chunks(cdir: Path, indices: Sequence[int]) -> None:
+    """Remove finished chunks ``indices`` (the last ones), the highest first: a kill on the way
+    leaves the chunks before it whole, with no gap."""
+    for k in sorted(indices, reverse=True):
+        shutil.rmtree(chunk_path(cdir, k))

@@ -133,8 +133,10 @@ def _check_log(log: dict, want: dict, root: Path) -> dict:
     diff = [d for d in diff if d not in added and d not in speed and d not in removed
             and not (d[0] == "config.seed" and "seed" in want)]
     if (added or speed or removed) and not diff:
-        # settings that did not exist when the run began, requested at their defaults (which
-        # keep the old behaviour), and settings that change no result (the forest engine): the
+        # settings that did not exist when the run began, requested at their defaults (most
+        # keep the old behaviour; dataset.unsettled changes a selection, and the dataset then
+        # selects again from its stored rollouts, the later stages following), and settings
+        # that change no result (the forest engine): the
         # same run; the log records the requested values from now on, and when a speed setting changed
         log["config"] = want["config"]
         log.setdefault("added_settings", []).extend(k.removeprefix("config.") for k, _, _ in added)

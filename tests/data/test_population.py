@@ -20,10 +20,11 @@ from relaff_jax.cli import main
 CFG = {"physics": {"dt": 0.002}}
 
 
-def reach_rollout_fn(feasible_close_negatives: bool = True, with_feasible: bool = True):
+def reach_rollout_fn(feasible_close_negatives: bool = True, with_feasible: bool = True, with_settled: bool = False):
     """Half the scenes out of reach (label False); stacked pairs at 0.02-0.2 m are positive when
     feasible (except 1 in 5 when ``feasible_close_negatives``); beside pairs at 0.3-1.5 m are
-    negative."""
+    negative. ``with_settled``: 1 in 5 executed programs ends with its objects still moving
+    (``settled`` False), drawn after the rest so the other fields stay the same."""
 
     def fn(key, b):
         rng = np.random.default_rng(np.asarray(key).tolist())
@@ -37,6 +38,8 @@ def reach_rollout_fn(feasible_close_negatives: bool = True, with_feasible: bool 
                "toy": np.full(b, "ball"), "other": np.full(b, "plate")}
         if with_feasible:
             out["feasible"] = feasible
+        if with_settled:  # a program not executed counts as settled (sim.rollouts)
+            out["settled"] = ~feasible | (rng.random(b) >= 0.2)
         return out
 
     return fn
@@ -96,9 +99,59 @@ def test_feasible_population_is_feasible_and_balanced(tmp_path):
     a = ds.anatomy(tmp_path / "f")
     assert a["selection"]["negatives_infeasible_share"] == 0.0
     assert a["selection"]["feasible"] == 40
-    # the same folder resumed with the other population is refused, naming the setting
-    with pytest.raises(ds.DatasetMismatchError, match="selection_scheme"):
-        gen(tmp_path / "f", population="all")
+    ds.add_features(tmp_path / "f", lambda smp: {"d2": np.asarray(smp["cog_distance"]) * 2}, 8)
+    assert ds.load_dataset(tmp_path / "f")["d2"].shape == (40,)
+    # resumed with the other population, the folder is selected again from its rollouts and
+    # becomes the dataset a run of that population makes from the start (it stops earlier);
+    # the old selection's features go with it
+    gen(tmp_path / "f", population="all")
+    assert not (tmp_path / "f" / "features.json").exists()
+    assert "d2" not in ds.load_dataset(tmp_path / "f")
+    gen(tmp_path / "all", population="all")
+    assert_same_dataset(tmp_path / "f", tmp_path / "all")
+    assert json.loads((tmp_path / "f" / ds.SIDECAR).read_text())["selection"]["population"] == "all"
+    # and back: the feasible population needs chunks the removal dropped; simulated again
+    gen(tmp_path / "f", population="feasible")
+    gen(tmp_path / "feas", population="feasible")
+    assert_same_dataset(tmp_path / "f", tmp_path / "feas")
+
+
+def assert_same_dataset(a, b):
+    ra, rb = ds.load_rollouts(a), ds.load_rollouts(b)
+    assert ra["selected"].tolist() == rb["selected"].tolist()
+    assert ra["label"].tolist() == rb["label"].tolist()
+    sa, sb = (json.loads((p / ds.SELECTION).read_text()) for p in (a, b))
+    assert sa == sb
+
+
+def test_unsettled_rollouts_are_refused_and_counted(tmp_path):
+    fn = reach_rollout_fn(with_settled=True)
+    gen(tmp_path / "r", population="feasible", fn=fn)
+    r = ds.load_rollouts(tmp_path / "r")
+    sel = r["selected"]
+    assert sel.sum() == 40 and r["settled"][sel].all() and r["feasible"][sel].all()
+    moving = r["feasible"] & ~r["settled"]
+    assert moving.sum() > 0  # there was something to refuse
+    index = json.loads((tmp_path / "r" / ds.SELECTION).read_text())
+    assert index["unsettled"] == "refuse"
+    assert index["unsettled_refused"] == int(moving.sum())
+    assert index["eligible_rollouts"] == int((r["feasible"] & r["settled"]).sum())
+    # kept: the same rollouts, and unsettled ones may be selected (the former behaviour)
+    gen(tmp_path / "k", population="feasible", fn=fn, unsettled="keep")
+    k = ds.load_rollouts(tmp_path / "k")
+    assert (k["selected"] & ~k["settled"]).any()
+    assert json.loads((tmp_path / "k" / ds.SELECTION).read_text())["unsettled_refused"] == 0
+    # the population "all" refuses only executed programs still moving (unexecuted count as settled)
+    gen(tmp_path / "a", fn=fn)
+    a = json.loads((tmp_path / "a" / ds.SELECTION).read_text())
+    ra = ds.load_rollouts(tmp_path / "a")
+    assert a["unsettled_refused"] == int((~ra["settled"]).sum()) == int((ra["feasible"] & ~ra["settled"]).sum())
+
+
+def test_rollouts_without_a_rest_read_are_all_taken(tmp_path):
+    gen(tmp_path / "n", population="feasible")  # the fixture without ``settled``
+    index = json.loads((tmp_path / "n" / ds.SELECTION).read_text())
+    assert index["unsettled"] == "refuse" and index["unsettled_refused"] is None
 
 
 def test_all_population_negatives_are_mostly_out_of_reach(tmp_path):
@@ -191,7 +244,8 @@ def test_report_reach_section(tmp_path):
     blocks = reach_blocks(anat, {"take": "no 'feasible' field"}, tmp_path)
     table = next(b for b in blocks if b[0] == "table")
     s = anat["lift"]["selection"]
-    assert table[2][0][:4] == ["lift", "all", "cog", 200]
-    assert table[2][0][5] == f"{100 * s['negatives_infeasible_share']:.0f} %"
+    # the fixture has no rest read: "refuse" with nothing known to refuse ("-")
+    assert table[2][0][:5] == ["lift", "all", "cog", "refuse (-)", 200]
+    assert table[2][0][6] == f"{100 * s['negatives_infeasible_share']:.0f} %"
     assert any(b[0] == "img" for b in blocks)
     assert any("take (no 'feasible' field)" in str(b) for b in blocks)
