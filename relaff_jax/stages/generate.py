@@ -15,6 +15,7 @@ from typing import Any
 
 from relaff_jax import data as D
 from relaff_jax import io as rio
+from relaff_jax.data.layout import selection_scheme, stored_scheme
 from relaff_jax.data.status import write_manifest
 from relaff_jax.data.store import read_sidecar
 from relaff_jax.provenance import record_config
@@ -64,7 +65,16 @@ def _expected(run: Run, action: str) -> dict[str, Any]:
 
 
 def action_status(run: Run, action: str) -> Status:
-    return Status(*D.dataset_status(run.paths.dataset(action), _expected(run, action), verify=run.verify))
+    st = Status(*D.dataset_status(run.paths.dataset(action), _expected(run, action), verify=run.verify))
+    if st.state != "complete":
+        return st
+    # the same rollouts selected under another scheme (a setting added since, e.g. dataset.unsettled):
+    # not stale, the generate stage selects again from them (data.generate)
+    stored = stored_scheme(read_sidecar(run.paths.dataset(action)).get("selection_scheme", {}))
+    changed = [k for k, v in selection_scheme(run.cfg.dataset).items() if stored.get(k) != v]
+    if changed:
+        return Status("partial", f"selected with other {', '.join(changed)}; to be selected again from its rollouts")
+    return st
 
 
 def status(run: Run) -> Status:

@@ -376,6 +376,30 @@ def test_one_damaged_dataset_is_redone_alone(base, tmp_path):
         np.testing.assert_array_equal(a, results_of(out0)[s])
 
 
+def test_a_dataset_of_another_selection_scheme_is_selected_again(base, tmp_path):
+    """A dataset selected before ``dataset.unsettled`` existed (its sidecar's scheme without
+    it reads as "keep"): not stale, the generate stage selects it again from its rollouts and
+    the features follow. The stand-ins return no ``settled``, so the selection is the same
+    and the experiment is skipped."""
+    out0, *_ = base
+    out = tmp_path / "run"
+    shutil.copytree(out0, out)
+    side = out / "data" / "pour" / D.SIDECAR
+    meta = json.loads(side.read_text())
+    del meta["selection_scheme"]["unsettled"]
+    side.write_text(json.dumps(meta))
+    st = R.status(out)
+    assert st["generate"].state == "partial" and "unsettled" in st["generate"].why
+    log = run(out)
+    assert statuses(log) == {"generate": "ran", "features": "ran", "experiment": "skipped", "report": "skipped"}
+    gen = log["runs"][-1]["stages"]["generate"]["actions"]
+    assert [gen[a]["status"] for a in ACTS] == ["skipped", "skipped", "ran"]
+    assert json.loads(side.read_text())["selection_scheme"]["unsettled"] == "refuse"
+    new, old = D.load_dataset(out / "data" / "pour"), D.load_dataset(out0 / "data" / "pour")
+    for k in sorted(k for k, v in new.items() if isinstance(v, np.ndarray)):
+        np.testing.assert_array_equal(new[k], old[k])
+
+
 def test_a_second_run_in_the_same_folder_is_refused(base, tmp_path):
     """While one reproduce holds the folder, another is refused at once and writes nothing."""
     from relaff_jax import io as rio
