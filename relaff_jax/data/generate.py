@@ -207,6 +207,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
             # counts first, the old scheme kept: a kill while removing leaves a rerun that selects again
             done, labels, dists, eligible, refused = (x[:k_stop] for x in (done, labels, dists, eligible, refused))
             meta["counts"].update(chunks=k_stop, rollouts=k_stop * batch, positives=int(sum(l.sum() for l in labels)))
+            meta["status"] = "generating"  # the old selection no longer matches the chunks
             rio.atomic_write_json(path / SIDECAR, meta)
             extra = chunk_indices(cdir)[k_stop:]
             drop_chunks(cdir, extra)
