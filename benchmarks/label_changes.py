@@ -70,7 +70,8 @@ def main(argv=None) -> int:
     pct = lambda v: "-" if v is None else f"{v:.1%}"
     cnt = lambda v: "-" if v is None else str(v)  # "-": not recorded (made before the setting) or not known
     print(f"a = {args.run_a}, b = {args.run_b}\n")
-    print("| action | rollouts a -> b | executed a -> b | positives among executed a -> b | borrowed a -> b | refused unsettled a / b |")
+    print("| action | rollouts a -> b | executed a -> b | positives among executed a -> b | borrowed a -> b "
+          "| refused unsettled a / b |")
     print("|---|---|---|---|---|---|")
     for x, d in out.items():
         a, b = d["a"], d["b"]
@@ -78,8 +79,8 @@ def main(argv=None) -> int:
               f"{pct(a['positive_rate_executed'])} -> {pct(b['positive_rate_executed'])} | "
               f"{pct(a['borrowed_share'])} -> {pct(b['borrowed_share'])} | {cnt(a['unsettled_refused'])} / {cnt(b['unsettled_refused'])} |")
     print("\nOn the rollouts both hold (the same placements):\n")
-    print("| action | rollouts | executed a -> b | executed by both | labels changed (to positive / to negative) | "
-          "by relation: " + " / ".join(RELATIONS) + " |")
+    print("| action | rollouts | executed a -> b | executed by both | labels changed (to positive / to negative) "
+          "| by relation: " + " / ".join(RELATIONS) + " |")
     print("|---|---:|---|---:|---|---|")
     for x, d in out.items():
         s = d["same_placements"]

@@ -85,7 +85,8 @@ def info(path: str | os.PathLike) -> dict[str, Any]:
     out["borrowed_share"] = sel_meta.get("borrowed_share")
     out["matching_met"] = sel_meta.get("matching_met", True if sel_meta else None)
     scheme = stored_scheme(meta.get("selection_scheme", {}))
-    out["population"], out["negatives"], out["unsettled"] = scheme["population"], scheme["negatives"], scheme["unsettled"]
+    for k in ("population", "negatives", "unsettled"):
+        out[k] = scheme[k]
     out["unsettled_refused"] = sel_meta.get("unsettled_refused")
     out["features"] = None
     fmeta = read_features_sidecar(path)

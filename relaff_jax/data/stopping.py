@@ -50,9 +50,9 @@ def stops(sel, k: int, labels: Sequence[np.ndarray], eligible: Sequence[np.ndarr
 
 def first_stop(labels, dists, eligible, n: int, seed: int, dcfg: DatasetConfig, max_chunks: int) -> int | None:
     """The fewest of the stored chunks at which a run of this scheme would stop, or None."""
+    cat = lambda xs, dt: np.concatenate(xs) if xs else np.zeros(0, dt)
     for k in range(len(labels) + 1):
         lab, ok = labels[:k], eligible[:k]
-        cat = lambda xs, dt: np.concatenate(xs) if xs else np.zeros(0, dt)
         sel = select_balanced(cat(lab, bool), cat(dists[:k], float), n, seed, dcfg.distance_bins,
                               eligible=cat(ok, bool), negatives=dcfg.negatives)
         if stops(sel, k, lab, ok, n, dcfg, max_chunks):

@@ -62,10 +62,12 @@ def reach_blocks(anat: Mapping[str, Mapping[str, Any]], missing: Mapping[str, st
         s = d["selection"]
         match = _pct(d["borrowed_share"]) + ("" if d["matching_met"] else " (not met)")
         refused = "-" if d.get("unsettled_refused") is None else str(d["unsettled_refused"])
-        rows.append([a, d["population"], d["negatives"], f'{d.get("unsettled", "keep")} ({refused})', s["n"], match, _pct(s["negatives_infeasible_share"]),
-                     fmt(s["oracle_feasible_acc"]), fmt(s["oracle_relation_acc"]), fmt(s["oracle_feasible_relation_acc"])])
-    blocks.append(("table", ["action", "population", "negatives", "unsettled (refused)", "samples", "borrowed", "negatives infeasible",
-                             "label = feasible", "relation", "feasible + relation"], rows))
+        unsettled = f'{d.get("unsettled", "keep")} ({refused})'
+        rows.append([a, d["population"], d["negatives"], unsettled, s["n"], match,
+                     _pct(s["negatives_infeasible_share"]), fmt(s["oracle_feasible_acc"]), fmt(s["oracle_relation_acc"]),
+                     fmt(s["oracle_feasible_relation_acc"])])
+    blocks.append(("table", ["action", "population", "negatives", "unsettled (refused)", "samples", "borrowed",
+                             "negatives infeasible", "label = feasible", "relation", "feasible + relation"], rows))
     if missing:
         blocks.append(("p", "No anatomy for " + "; ".join(f"{a} ({why})" for a, why in missing.items()) + "."))
     if (out / F.FIG_REACH).exists():
@@ -129,7 +131,7 @@ def reach_json(anat: Mapping[str, Mapping[str, Any]], res: Mapping[str, Any], cf
     for a, d in anat.items():
         s = d["selection"]
         out["datasets"][a] = {k: d[k] for k in ("population", "negatives", "borrowed", "borrowed_share", "matching_met")}
-        out["datasets"][a].update(unsettled=d.get("unsettled"), unsettled_refused=d.get("unsettled_refused"))
+        out["datasets"][a].update({k: d.get(k) for k in ("unsettled", "unsettled_refused")})
         out["datasets"][a].update({k: s[k] for k in ("n", "negatives_infeasible_share", "oracle_feasible_acc",
                                                      "oracle_relation_acc", "oracle_feasible_relation_acc")})
     for space in res["meta"]["spaces"]:
