@@ -46,7 +46,7 @@ from relaff_jax import provenance
 from relaff_jax.cluster.tasks import Ordered
 from relaff_jax.config import to_dict
 from relaff_jax.data.features import remove_features
-from relaff_jax.data.layout import (CHUNKS, FEATURES, FEATURES_SIDECAR, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, check_action, check_int, jsonable_config, selection_scheme, stored_scheme)
+from relaff_jax.data.layout import (CHUNKS, FEATURES, FEATURES_SIDECAR, FORMAT, FORMAT_VERSION, SELECTION, SIDECAR, check_action, check_int, jsonable_config, scheme_changes, selection_scheme, stored_scheme)
 from relaff_jax.config.dataset import DatasetConfig
 from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMismatchError, RolloutCapError
 from relaff_jax.data.load import load_dataset
@@ -166,8 +166,7 @@ def _generate_locked(path, header, rollout_fn, dcfg, object_names, progress, cli
         if diff:
             raise DatasetMismatchError(f"{path}: holds a different dataset; " + "; ".join(diff))
         # the same rollouts under another selection scheme: selected again from the stored chunks
-        old, new = meta["selection_scheme"], header["selection_scheme"]
-        changed = [f"{k} {old.get(k)!r} -> {new[k]!r}" for k in sorted(new) if old.get(k) != new[k]]
+        changed = scheme_changes(meta["selection_scheme"], header["selection_scheme"])
         reselect = bool(changed)
         if reselect:
             print(f"{path}: selecting again from the stored rollouts ({', '.join(changed)})", file=sys.stderr)

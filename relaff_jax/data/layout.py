@@ -61,6 +61,14 @@ def stored_scheme(scheme: Mapping[str, Any]) -> dict[str, Any]:
             "unsettled": "keep", **scheme}
 
 
+def scheme_changes(stored: Mapping[str, Any], wanted: Mapping[str, Any]) -> list[str]:
+    """``"key old -> new"`` for each selection setting a sidecar's scheme (``stored_scheme``
+    applied to it) and the wanted one (``selection_scheme``) differ in; [] when none. The
+    generator selects again where this is not empty, and the reproduce status says so."""
+    old = stored_scheme(stored)
+    return [f"{k} {old.get(k)!r} -> {wanted[k]!r}" for k in sorted(wanted) if old.get(k) != wanted[k]]
+
+
 def jsonable_config(config_dict: Mapping[str, Any] | None) -> Any:
     """``config_dict`` as it reads back from JSON (tuples become lists), for resume checks."""
     try:

@@ -15,7 +15,7 @@ from typing import Any
 
 from relaff_jax import data as D
 from relaff_jax import io as rio
-from relaff_jax.data.layout import selection_scheme, stored_scheme
+from relaff_jax.data.layout import scheme_changes, selection_scheme
 from relaff_jax.data.status import write_manifest
 from relaff_jax.data.store import read_sidecar
 from relaff_jax.provenance import record_config
@@ -70,10 +70,11 @@ def action_status(run: Run, action: str) -> Status:
         return st
     # the same rollouts selected under another scheme (a setting added since, e.g. dataset.unsettled):
     # not stale, the generate stage selects again from them (data.generate)
-    stored = stored_scheme(read_sidecar(run.paths.dataset(action)).get("selection_scheme", {}))
-    changed = [k for k, v in selection_scheme(run.cfg.dataset).items() if stored.get(k) != v]
+    changed = scheme_changes(read_sidecar(run.paths.dataset(action)).get("selection_scheme", {}),
+                             selection_scheme(run.cfg.dataset))
     if changed:
-        return Status("partial", f"selected with other {', '.join(changed)}; to be selected again from its rollouts")
+        return Status("partial", f"selected with other settings ({', '.join(changed)}); to be selected again from its "
+                                 "rollouts")
     return st
 
 
