@@ -48,7 +48,7 @@ def cmd_experiment(args: argparse.Namespace) -> int:
 
     with options.cluster(args, args.out) as client:  # the same stage function reproduce runs
         paths = experiment_folder(tree, args.data or args.synthetic, args.out, seed=tree.seed, jobs=args.jobs,
-                                  client=client, progress=not args.no_progress)
+                                  client=client, progress=not args.no_progress, reuse=args.reuse)
     for space, p in paths.items():
         print(f"{space}: {p}")
     return 0
@@ -122,6 +122,10 @@ def register(subparsers) -> None:
     p.add_argument("--plugins", nargs="+", metavar="FILE.py", default=None,
                    help="Python files registering conditions (@relaff_jax.learn.register_condition), run where "
                         "experiment.conditions_pca / conditions_rhf name them; see docs/extending.md")
+    p.add_argument("--reuse", metavar="RESULTS", default=None,
+                   help="another reading's experiment folder (same data, seed and protocol but for "
+                        "experiment.dbn_repeats): its prep and every condition whose forests that setting does not "
+                        "change are read from it instead of refitted, with the same bits (relaff_jax.learn.reuse)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_experiment)
     r = subparsers.add_parser(

@@ -36,7 +36,8 @@ SUBSETS = ("positives", "feasible negatives", "infeasible negatives")
 def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequence[tuple[int, tuple[int, ...]]],
                    train_order: np.ndarray, test_idx: np.ndarray, sizes: Sequence[int], repeats: int | Mapping[int, int],
                    n_conditions: int, forest: ForestConfig, seed_keys: Sequence[int],
-                   loo_size: int | None = None, loo_conditions: Sequence[int] = ()) -> dict[str, np.ndarray]:
+                   loo_size: int | None = None, loo_conditions: Sequence[int] = (),
+                   only: frozenset[int] | None = None) -> dict[str, np.ndarray]:
     """Outcomes of one (target, repetition) over a chunk of sizes.
 
     X: (M, D) target-pool states in the target's order; y: (M,) labels; boot: (R, M) 0/1
@@ -49,7 +50,8 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
     elsewhere, or everywhere when ``loo_size`` is not in ``sizes``). Conditions not in the
     plan stay NaN (``correct`` False). Conditions with the same rows and repeats share one learner.
     Forest seeds come from ``seed_keys`` + (n, first condition with these rows) and, for the
-    leave-one-out forests, + (held-out position + 1).
+    leave-one-out forests, + (held-out position + 1). ``only``: fit just the learners of these
+    conditions (the others stay NaN; ``reuse.refit``), with the seeds they have in the whole plan.
     """
     acc = np.full((n_conditions, len(sizes)), np.nan)
     correct = np.zeros((n_conditions, len(sizes), len(test_idx)), bool)
@@ -103,6 +105,8 @@ def block_outcomes(X: np.ndarray, y: np.ndarray, boot: np.ndarray, plan: Sequenc
         if key in first:
             continue
         first[key] = cond
+        if only is not None and not any(c in only for c, r in plan if learner_key(r, repeats, c) == key):
+            continue  # another reading's block gives this learner's outcomes
         rep = key[1]
         inputs = boot[list(rows)]
         if not np.all(np.isfinite(inputs)):
@@ -168,7 +172,7 @@ def subset_accuracy(correct: np.ndarray, subset: np.ndarray) -> np.ndarray:
 
 
 def run_block_to_file(path: str, X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys,
-                      loo_size=None, loo_conditions=(), keep_outcomes=True, subset=None):
+                      loo_size=None, loo_conditions=(), keep_outcomes=True, subset=None, only=None, donor=None):
     """``block_outcomes``, saved atomically to ``path`` (a finished block; the per scene
     outcomes bit-packed, or left out (``correct: (C, S, 0)``) without ``keep_outcomes``), with
     ``acc_subset: (C, S, N_SUBSETS)``, the accuracy on each test subset (``subset: (T,)``
@@ -177,9 +181,19 @@ def run_block_to_file(path: str, X, y, boot, plan, train_order, test_idx, sizes,
     Returns the block as saved (what ``read_block(..., packed=True)`` gives back): ``acc``,
     ``loo``, ``acc_subset``, ``bits: (C, S, ceil(T / 8))`` uint8 the outcomes bit-packed along
     the scenes (``np.packbits``) and ``n_test`` T (0 without ``keep_outcomes``): an eighth of
-    the unpacked outcomes to send back from a worker process and to hold in the sweep."""
+    the unpacked outcomes to send back from a worker process and to hold in the sweep.
+
+    ``only`` and ``donor`` (``learn.reuse``): fit only the conditions in ``only`` and take every
+    other condition's outcomes from the block file ``donor`` (another reading's, same sizes)."""
     out = block_outcomes(X, y, boot, plan, train_order, test_idx, sizes, repeats, n_conditions, forest, seed_keys,
-                         loo_size, loo_conditions)
+                         loo_size, loo_conditions, only)
+    if donor is not None:
+        got = read_block(Path(donor), n_conditions, sizes)
+        if got is None or got["correct"].shape[-1] != len(test_idx):
+            raise RuntimeError(f"{donor}: the block to reuse is gone or unreadable; rerun without --reuse")
+        keep = [c for c in range(n_conditions) if c not in set(only or ())]
+        for k in ("acc", "correct", "loo"):
+            out[k][keep] = got[k][keep]
     sub = np.full(len(test_idx), -1) if subset is None else np.asarray(subset)
     acc_subset = np.where(np.isfinite(out["acc"])[..., None], subset_accuracy(out["correct"], sub), np.nan)
     correct = out["correct"] if keep_outcomes else out["correct"][..., :0]
@@ -216,13 +230,15 @@ class BlockJob:
     loo_conditions: Sequence[int]  # the candidates given a leave-one-out accuracy (every DB1, CB1)
     keep_outcomes: bool  # keep every test scene's outcome (bit-packed)
     subset: np.ndarray  # (T,) int codes into ``SUBSETS`` of the test scenes
+    only: frozenset[int] | None = None  # fit only these conditions (``learn.reuse``) ...
+    donor: str | None = None  # ... and read the others from this block file
 
 
 def run_block_job(target: Target, job: BlockJob) -> dict[str, np.ndarray]:
     """``run_block_to_file`` of one block: what the sweep runs on a worker."""
     return run_block_to_file(job.path, target.X, target.y, target.boot, job.plan, job.train_order, job.test_idx,
                              job.sizes, job.repeats, job.n_conditions, job.learner, job.seed_keys, job.loo_size,
-                             job.loo_conditions, job.keep_outcomes, job.subset)
+                             job.loo_conditions, job.keep_outcomes, job.subset, job.only, job.donor)
 
 
 def read_block(path: Path, n_conditions: int, sizes: Sequence[int], packed: bool = False) -> dict[str, np.ndarray] | None:

@@ -41,6 +41,7 @@ from relaff_jax.constants import SPACES
 from relaff_jax.sim.actions.registry import action_id, record as action_record  # noqa: E402 (the run's actions; no JAX)
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
+from relaff_jax.learn import reuse as reuse_mod
 from relaff_jax.learn import user_conditions
 from relaff_jax.learn.blocks import SUBSETS, BlockJob, Target, read_block, run_block_job
 from relaff_jax.config.experiment import ExperimentConfig, result_differences
@@ -69,11 +70,14 @@ from relaff_jax.config import streams
 
 def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.PathLike, cfg: ExperimentConfig,
                    spaces: Sequence[str] = SPACES, seed: int = 0, jobs: int = 1, progress: bool = True,
-                   data_desc: Sequence[str] = (), client: Any = None) -> dict[str, Path]:
+                   data_desc: Sequence[str] = (), client: Any = None,
+                   reuse: str | os.PathLike | None = None) -> dict[str, Path]:
     """Run (or resume) the protocol; write ``out/<space>/results.npz``; return their paths.
 
     ``out/experiment.json`` records config, seed, actions and a data fingerprint; resuming
-    with different ones is an error (start a new ``out`` instead).
+    with different ones is an error (start a new ``out`` instead). ``reuse``: another
+    reading's experiment folder whose unchanged conditions are read, not refitted
+    (``learn.reuse``: the same bits).
     """
     check_config(cfg)
     spaces = list(dict.fromkeys(spaces))
@@ -84,7 +88,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
     for a in actions:  # every action's pools fit its data: refused before experiment.json is written
         split_pools(len(datasets[a]["label"]), action_id(a), cfg, seed)
     out = Path(out)
-    meta = {
+    meta: dict[str, Any] = {
         "format": FORMAT_VERSION,
         "config": to_dict(cfg),
         "seed": int(seed),
@@ -96,6 +100,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
     specs = {a: action_record(a) for a in actions if action_record(a) is not None}
     if specs:  # a user action's spec (its datasets record it too); none for the nine
         meta["action_specs"] = specs
+    donor = reuse_mod.open_donor(reuse, out, meta, cfg) if reuse is not None else None
     meta_path = L.meta(out)
     if meta_path.exists():
         # same protocol, seed, actions and data; a space may be added to a finished one
@@ -117,21 +122,28 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
     else:
         # the pools' real sizes (a preset may shrink them to the data), for the report's protocol table
         pools = {a: dict(zip(("source", "corr", "test"), pool_sizes(len(datasets[a]["label"]), cfg))) for a in actions}
+        reused = {"reused_from": str(donor.out.resolve())} if donor else {}
         rio.atomic_write_json(meta_path, dict(meta, data=list(map(str, data_desc)), pool_sizes=pools,
-                                              started=time.strftime("%Y-%m-%d %H:%M:%S")))
+                                              started=time.strftime("%Y-%m-%d %H:%M:%S"), **reused))
     paths = {}
     for space in spaces:
-        paths[space] = run_space(datasets, L.space_dir(out, space), cfg, space, actions, seed, jobs, progress, client)
+        paths[space] = run_space(datasets, L.space_dir(out, space), cfg, space, actions, seed, jobs, progress, client,
+                                 donor if donor and space in donor.spaces else None)
     return paths
 
 
 def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: ExperimentConfig, space: str,
-              actions: list[str], seed: int, jobs: int, progress: bool, client: Any = None) -> Path:
+              actions: list[str], seed: int, jobs: int, progress: bool, client: Any = None,
+              donor: reuse_mod.Donor | None = None) -> Path:
     """One space of ``run_experiment`` in ``sdir``: prep (reused if saved), every block not yet
     on disk, then ``sdir/results.npz``; returns its path. ``client``: run the forests as tasks
-    on that Dask cluster (the same bits)."""
+    on that Dask cluster (the same bits). ``donor``: another reading's folder giving the prep
+    and every condition whose learner is unchanged (``learn.reuse``)."""
     t0 = time.perf_counter()
     prep_path = sdir / L.PREP
+    dsdir = L.space_dir(donor.out, space) if donor else None
+    if donor and not prep_path.exists() and (dsdir / L.PREP).exists():
+        rio.atomic_write_bytes(prep_path, (dsdir / L.PREP).read_bytes())  # it reads no key the readings differ in
     if prep_path.exists():
         with np.load(prep_path) as z:
             prep = {k: z[k] for k in z.files}
@@ -151,9 +163,14 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
     plans = [condition_plan(actions, ti, corr, cfg, space) + ext.plans.get(t, []) for ti, t in enumerate(actions)]
     reps_of = [{**condition_repeats(p, cfg, space, a), **{c: 1 for c, _ in ext.plans.get(t, [])}}
                for p, t in zip(plans, actions)]  # per condition (DBn's may differ; a user's: 1)
+    loo_conds = loo_conditions(a, len(cfg.thresholds))
+    if donor:  # per target, the conditions the donor's blocks cannot give
+        dplans = [condition_plan(actions, ti, corr, donor.cfg, space) + ext.plans.get(t, []) for ti, t in enumerate(actions)]
+        refits = [reuse_mod.refit(p, r, dp, {**condition_repeats(dp, donor.cfg, space, a),
+                                             **{c: 1 for c, _ in ext.plans.get(t, [])}}, loo_conds)
+                  for p, r, dp, t in zip(plans, reps_of, dplans, actions)]
     acc = np.full((a, n_cond, len(sizes), reps), np.nan)
     loo = np.full((a, n_cond, reps), np.nan)
-    loo_conds = loo_conditions(a, len(cfg.thresholds))
     loo_n = cfg.select_size if cfg.online_select else 0
     labels_of = {t: np.asarray(datasets[t]["label"]).astype(bool)[prep[f"target:{t}"]] for t in actions}
     tests = {t: draw_rep(labels_of[t], int(prep[f"test_size:{t}"]), max(sizes), seed, action_id(t), 0,
@@ -181,6 +198,21 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                     _store(acc, correct, loo, acc_subset, got, ti, s0, len(chunk), r)
                     done_fits += fits
                     continue
+                dpath = L.block(dsdir, t, r, ci) if donor else None
+                dgot = read_block(dpath, n_cond, chunk, packed=True) if donor else None
+                if dgot is not None and dgot["n_test"] != n_test[ti]:
+                    dgot = None
+                if dgot is not None and not refits[ti]:  # nothing changed: the donor's block is this one
+                    rio.atomic_write_bytes(path, dpath.read_bytes())
+                    _store(acc, correct, loo, acc_subset, dgot, ti, s0, len(chunk), r)
+                    total_fits -= fits
+                    continue
+                only = refits[ti] if dgot is not None else None
+                if only is not None:  # the fits this block still makes
+                    total_fits -= fits
+                    fits = block_fits([pc for pc in plans[ti] if pc[0] in only], len(chunk),
+                                      loo_n if loo_n in chunk else 0, loo_conds, reps_of[ti])
+                    total_fits += fits
                 if t not in target_data:
                     ds = datasets[t]
                     target_data[t] = Target(_states(ds, pool, t, space, cfg), np.asarray(ds["label"]).astype(bool)[pool],
@@ -192,7 +224,8 @@ def run_space(datasets: Mapping[str, Mapping[str, Any]], sdir: Path, cfg: Experi
                 job = BlockJob(path=str(path), plan=plans[ti], train_order=train_order, test_idx=test_idx, sizes=chunk,
                                repeats=reps_of[ti], n_conditions=n_cond, learner=learner_of(cfg),
                                seed_keys=(seed, streams.SWEEP_FOREST, streams.SPACE_CODE[space], action_id(t), r), loo_size=loo_n or None,
-                               loo_conditions=loo_conds, keep_outcomes=cfg.keep_outcomes, subset=subsets[t])
+                               loo_conditions=loo_conds, keep_outcomes=cfg.keep_outcomes, subset=subsets[t],
+                               only=only, donor=None if only is None else str(dpath))
                 calls.append((run_block_job, (target_data[t], job), {}))
                 weights.append(fits)
                 keys.append((ti, s0, len(chunk), r))

@@ -33,7 +33,8 @@ COMMAND = "experiment"  # the command the folder's config record names
 
 def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str, Mapping[str, Any]] | int,
                       out: str | os.PathLike, *, seed: int = 0, jobs: int = 0, client: Any = None,
-                      progress: bool = True, data_desc: Sequence[str] | None = None) -> dict[str, Path]:
+                      progress: bool = True, data_desc: Sequence[str] | None = None,
+                      reuse: str | os.PathLike | None = None) -> dict[str, Path]:
     """Run (or resume) the experiment of ``tree`` on ``data`` in ``out``; record the tree there.
     Returns ``{space: OUT/SPACE/results.npz}``.
 
@@ -47,7 +48,8 @@ def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str
       (``learn.synthetic_datasets(N, seed)``, a dry run of the stage).
     seed: the seed of the test draws, training orders and forests. jobs: worker processes
       (0: every core). client: a ``distributed.Client``: sweep blocks run as its tasks, with
-      the same bits. progress: a progress bar on stderr.
+      the same bits. progress: a progress bar on stderr. reuse: another reading's results
+      folder whose unchanged conditions are read, not refitted (``learn.reuse``).
     Mistakes a user can fix (a missing folder, an output that cannot be written) are
     ``UserError``s raised before any dataset is read or any forest fitted.
     """
@@ -58,6 +60,8 @@ def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str
         if not Path(d).is_dir():
             raise UserError(f"{d}: no such dataset directory")
     check_writable_dir(Path(out), "--out")
+    if reuse is not None and not Path(reuse).is_dir():
+        raise UserError(f"--reuse {reuse}: no such folder")
     # by name here: this module's own load_datasets would shadow it at the top
     from relaff_jax.learn.datasets import load_datasets
     # loaded when the stage runs: reproduce --status and the command's checks read this module
@@ -72,7 +76,7 @@ def experiment_folder(tree: Any, data: Sequence[str | os.PathLike] | Mapping[str
         datasets, desc = load_datasets(folders), [str(d) for d in folders]
     jobs = jobs if jobs and jobs > 0 else (os.cpu_count() or 1)
     paths = run_experiment(datasets, out, tree.experiment, list(tree.reproduce.spaces), seed=seed, jobs=jobs,
-                           progress=progress, data_desc=desc, client=client)
+                           progress=progress, data_desc=desc, client=client, reuse=reuse)
     ran = tuple(a for a in names() if a in datasets)  # run_experiment checked they are the run's actions
     record_config(out, override(tree, {"reproduce.actions": ran}), COMMAND)
     return paths
