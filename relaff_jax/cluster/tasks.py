@@ -4,7 +4,8 @@
   task(k)``; ``get(k)`` returns its result, keeping pieces ``k .. k + window - 1`` (below
   ``limit``) submitted so the workers stay busy while the driver consumes results in index
   order. ``client=None`` runs ``get(k)`` in this process, one piece at a time (the run
-  without a cluster). ``finish()`` waits for the pieces still in flight (tasks already
+  without a cluster), or, given ``pool`` (a ``concurrent.futures`` executor), ``window``
+  pieces at once on its threads. ``finish()`` waits for the pieces still in flight (tasks already
   running on a worker cannot be stopped) and returns their indices, so the caller can discard
   what they wrote; ``cancel()`` drops them.
 - ``map_calls(client, calls, on_result)``: every ``(fn, args, kwargs)`` of ``calls`` as one
@@ -32,8 +33,10 @@ _LIVE: "weakref.WeakSet[Ordered]" = weakref.WeakSet()  # runners with tasks on a
 class Ordered:
     """Tasks ``task(k) -> (fn, args)`` for ``k < limit``, submitted in order, read in order."""
 
-    def __init__(self, client: Any, task: Callable[[int], tuple], limit: int, window: int | None = None):
+    def __init__(self, client: Any, task: Callable[[int], tuple], limit: int, window: int | None = None,
+                 pool: Any = None):
         self.client, self.task, self.limit = client, task, int(limit)
+        self.pool = pool if client is None else None
         if client is not None and window is None:
             window = nthreads(client)
         self.window = max(1, int(window or 1))
@@ -43,13 +46,14 @@ class Ordered:
 
     def get(self, k: int) -> Any:
         """The result of piece ``k`` (raises what the task raised)."""
-        if self.client is None:
+        if self.client is None and self.pool is None:
             fn, args = self.task(k)
             return fn(*args)
         for j in range(k, min(k + self.window, self.limit)):
             if j not in self.futures:
                 fn, args = self.task(j)
-                self.futures[j] = self.client.submit(fn, *args, pure=False, key=f"{getattr(fn, '__name__', 'task')}-{j}-{id(self)}")
+                self.futures[j] = self.pool.submit(fn, *args) if self.pool is not None else \
+                    self.client.submit(fn, *args, pure=False, key=f"{getattr(fn, '__name__', 'task')}-{j}-{id(self)}")
         fut = self.futures.pop(k)
         return fut.result()
 
@@ -57,7 +61,10 @@ class Ordered:
         """Wait for the pieces still in flight (their errors ignored); their indices."""
         if not self.futures:
             return []
-        from distributed import wait
+        if self.pool is not None:
+            from concurrent.futures import wait
+        else:
+            from distributed import wait
 
         wait(list(self.futures.values()))
         done = sorted(self.futures)
@@ -67,6 +74,8 @@ class Ordered:
     def cancel(self) -> None:
         if self.futures and self.client is not None:
             self.client.cancel(list(self.futures.values()))
+        for fut in self.futures.values() if self.pool is not None else ():
+            fut.cancel()  # a piece already running on a thread finishes; its result is dropped
         self.futures.clear()
 
 

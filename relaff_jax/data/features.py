@@ -29,7 +29,9 @@ from relaff_jax.data.errors import CorruptDatasetError, DatasetError, DatasetMis
 from relaff_jax.data.load import load_dataset, load_feature_chunks, read_features_sidecar
 from relaff_jax.data.progress import progress_bar
 from relaff_jax.data.store import chunk_indices, chunk_path, clean_tmp, mismatch, read_chunk, read_sidecar, writer_lock
-from relaff_jax.data.tasks import PENDING, discard_pending, feature_chunk, promote
+from relaff_jax.data.tasks import PENDING, discard_pending, feature_chunk, feature_piece, promote, write_piece
+
+MAX_THREADS = 4  # compute threads by default: beyond the cores, more threads only hold more memory
 from relaff_jax.data.validate import check_schema
 
 
@@ -42,6 +44,7 @@ def add_features(
     *,
     overwrite: bool = False,
     client: Any = None,
+    threads: int | None = None,
 ) -> dict[str, Any]:
     """Compute per-sample features of a finished dataset in resumable chunks and store them.
 
@@ -54,11 +57,17 @@ def add_features(
     and compared on resume; a mismatch is an error unless ``overwrite`` removes the old features.
     ``overwrite`` never reads the old feature chunks, so it also recovers corrupt ones
     (``status.features_status`` tells which state the features are in). ``client``: a
-    ``distributed.Client`` to compute the chunks on (None: in this process).
+    ``distributed.Client`` to compute the chunks on (None: in this process). ``threads``:
+    without a cluster, chunks computed at once on this process's threads (None: one per core
+    this process may use, at most ``MAX_THREADS``); each chunk's features do not depend on it,
+    and one writer writes the chunks in index order, so a killed run leaves no gap. JAX runs
+    one chunk's programs while another waits on its read-back: on two cores two threads gave
+    ~1.5x one's scenes/s (journal 2026-12-07).
     Returns ``{"n", "chunks", "new_chunks", "features": {name: shape}}``.
     """
     path = Path(path)
     batch = check_int("batch", batch, 1)
+    threads = compute_threads(threads) if client is None else 1
     if not callable(compute_fn):
         raise DatasetError("compute_fn must be callable")
     config = jsonable_config(config_dict)
@@ -107,15 +116,19 @@ def add_features(
         # without a cluster chunks are written in place, as always (unless a cluster run left some pending)
         stage = pending if client is not None or pending.is_dir() else fdir
 
-        # Without a cluster, chunk f is written on this thread while chunk f + 1's perception
-        # runs (orbax's save is ~1/4 of a chunk's time); chunks land and count in order.
+        # Without a cluster, chunk f is written on the writer thread while later chunks' perception
+        # runs (orbax's save is ~1/4 of a chunk's time) on `threads` compute threads; chunks land
+        # and count in order.
         writer = ThreadPoolExecutor(1, thread_name_prefix="feature-writer") if client is None else None
+        pool = ThreadPoolExecutor(threads, thread_name_prefix="feature-compute") if threads > 1 else None
 
         def task(f: int) -> tuple:
             lo, hi = f * batch, min((f + 1) * batch, n)
             idx = np.minimum(np.arange(lo, lo + batch), hi - 1)  # pad by repeating the last sample
-            return feature_chunk, (compute_fn, {k: v[idx] for k, v in samples.items()}, f, batch, lo, hi, str(stage),
-                                   schema, writer)
+            rows = {k: v[idx] for k, v in samples.items()}
+            if pool is not None:  # computed on a pool thread, written by the driver in index order
+                return feature_piece, (compute_fn, rows, f, batch, lo, hi, str(stage), schema)
+            return feature_chunk, (compute_fn, rows, f, batch, lo, hi, str(stage), schema, writer)
 
         def landed(f: int, got: dict) -> None:  # chunk f is on disk: count it
             if "written" in got:
@@ -126,11 +139,13 @@ def add_features(
             rio.atomic_write_json(fside, fmeta)
             bar.update(min((f + 1) * batch, n) - f * batch)
 
-        runner = Ordered(client, task, n_chunks)
+        runner = Ordered(client, task, n_chunks, window=threads if pool is not None else None, pool=pool)
         last = None
         try:
             for f in range(len(done), n_chunks):
                 got = runner.get(f)
+                if "arrays" in got:  # a pool thread's piece: written in index order
+                    got = {"schema": got["schema"], **write_piece(stage, f, got, writer)}
                 check_schema(f"feature chunk {f}", got["schema"], schema)
                 schema = schema or got["schema"]
                 if last is not None:
@@ -142,6 +157,8 @@ def add_features(
             runner.cancel()  # tasks already running still finish into features/.pending, kept for a rerun
             raise
         finally:
+            if pool is not None:  # no perception left running behind a return or a raise
+                pool.shutdown(wait=True, cancel_futures=True)
             if writer is not None:
                 writer.shutdown(wait=True)  # a write in flight finishes (atomically) before we return or raise
             bar.close()
@@ -151,6 +168,15 @@ def add_features(
         fmeta["features"] = {k: {"shape": list(a.shape), "dtype": a.dtype.str} for k, a in feats.items()}
         rio.atomic_write_json(fside, fmeta)
         return {"n": n, "chunks": n_chunks, "new_chunks": n_chunks - len(done), "features": {k: list(a.shape) for k, a in feats.items()}}
+
+
+def compute_threads(threads: int | None) -> int:
+    """Chunks computed at once without a cluster: ``threads``, or one per usable core (at most
+    ``MAX_THREADS``)."""
+    if threads is None:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        return max(1, min(cores, MAX_THREADS))
+    return check_int("threads", threads, 1)
 
 
 def remove_features(path: Path) -> None:

@@ -145,6 +145,17 @@ def feature_chunk(compute_fn: Callable, samples: Mapping[str, np.ndarray], f: in
     from ``ref``). With ``writer`` (a one-thread ``concurrent.futures`` executor, in the
     driver only) the write runs there, so that the next chunk's perception overlaps it, and
     ``written`` is its future: the chunk is on disk once that future is done."""
+    got = feature_piece(compute_fn, samples, f, batch, lo, hi, pending, ref)
+    if "arrays" not in got:
+        return got
+    return {"schema": got["schema"], **write_piece(Path(pending), f, got, writer)}
+
+
+def feature_piece(compute_fn: Callable, samples: Mapping[str, np.ndarray], f: int, batch: int, lo: int, hi: int,
+                  pending: str, ref: Mapping[str, list] | None = None) -> dict[str, Any]:
+    """``feature_chunk``'s computation without its write: ``{"schema", "arrays", "extra"}``, or
+    ``{"schema"}`` alone when ``pending`` already holds chunk ``f``. What the driver's compute
+    threads run (``data.features``), so that the one writer writes the chunks in index order."""
     path = chunk_path(Path(pending), f)
     if path.is_dir():
         arrays, _ = read_chunk(path)
@@ -152,11 +163,17 @@ def feature_chunk(compute_fn: Callable, samples: Mapping[str, np.ndarray], f: in
     arrays = standardize_features(compute_fn(dict(samples)), batch, set(samples))
     arrays = {k: a[: hi - lo] for k, a in arrays.items()}
     check_schema(f"feature chunk {f}", schema_of(arrays), ref)
-    extra = {"chunk": f, "batch": batch, "start": lo, "stop": hi}
+    return {"schema": schema_of(arrays), "arrays": arrays, "extra": {"chunk": f, "batch": batch, "start": lo, "stop": hi}}
+
+
+def write_piece(pending: Path, f: int, got: Mapping[str, Any], writer: Any = None) -> dict[str, Any]:
+    """Write ``feature_piece``'s chunk ``f`` into ``pending``: on ``writer`` (then ``{"written":
+    future}``) or here (``{}``)."""
+    path = chunk_path(pending, f)
     if writer is not None:
-        return {"schema": schema_of(arrays), "written": writer.submit(_write_once, path, arrays, extra)}
-    _write_once(path, arrays, extra)
-    return {"schema": schema_of(arrays)}
+        return {"written": writer.submit(_write_once, path, got["arrays"], got["extra"])}
+    _write_once(path, got["arrays"], got["extra"])
+    return {}
 
 
 def promote(pending: Path, cdir: Path, k: int) -> None:

@@ -640,6 +640,41 @@ def test_add_features_bad_input(built, tmp_path):
         ds.add_features(tmp_path, feature_fn(), batch=8, progress=False)
 
 
+def test_add_features_threads(built, tmp_path):
+    """Chunks computed on several threads: the arrays of one thread; a chunk finished early waits
+    for those before it, so a failure leaves no chunk after a gap."""
+    import threading
+    import time
+
+    one, three = copy(built, tmp_path / "one"), copy(built, tmp_path / "three")
+    ds.add_features(one, feature_fn(), batch=8, progress=False, threads=1)
+    ds.add_features(three, feature_fn(), batch=8, progress=False, threads=3)
+    a, b = ds.load_dataset(one), ds.load_dataset(three)
+    for k in ("pca", "rhf", "unseen"):
+        np.testing.assert_array_equal(a[k], b[k])
+    assert ds.info(three)["features"]["chunks"] == 5
+    base, calls, lock = feature_fn(), [], threading.Lock()
+
+    def first_fails_late(s):  # the first call sleeps, then fails; the others finish meanwhile
+        with lock:
+            calls.append(len(calls))
+            me = calls[-1]
+        if me == 0:
+            time.sleep(0.5)
+            raise Killed("simulated kill")
+        return base(s)
+
+    p = copy(built, tmp_path / "fail")
+    with pytest.raises(Killed):
+        ds.add_features(p, first_fails_late, batch=8, progress=False, threads=3)
+    assert len(calls) >= 3  # chunks 1 and 2 were computed beside chunk 0
+    assert not list((p / "features").glob("chunk_*"))  # and not written: chunk 0 never landed
+    ds.add_features(p, feature_fn(), batch=8, progress=False, threads=2)  # the rerun completes it
+    np.testing.assert_array_equal(ds.load_dataset(p)["rhf"], a["rhf"])
+    with pytest.raises(ds.DatasetError, match="threads must be >= 1"):
+        ds.add_features(p, feature_fn(), batch=8, progress=False, threads=0)
+
+
 def test_progress_bar_and_report(tmp_path, capsys):
     res = ds.generate_dataset(tmp_path / "p", "take", synthetic_rollout_fn(), 0, {}, progress=True,
                               dataset_config=dataclasses.replace(EXACT, n_samples=6, rollout_batch=8))
