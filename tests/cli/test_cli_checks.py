@@ -200,6 +200,7 @@ def test_a_config_mistake_is_reported_before_jax_is_imported(tmp_path, argv):
     ["features", "{tmp}/none"],
     ["show", "{tmp}/none"],
     ["experiment", "--data", "{tmp}/none", "--out", "{tmp}/e"],
+    ["experiment", "--synthetic", "10", "--out", "{tmp}/e", "--reuse", "{tmp}/none"],
     ["report", "{tmp}/none", "--out", "{tmp}/r"],
     ["real", "segment", "{tmp}/none"],
     ["real", "show", "{tmp}/none.pcd"],
