@@ -116,6 +116,30 @@ def test_feasible_population_is_feasible_and_balanced(tmp_path):
     assert_same_dataset(tmp_path / "f", tmp_path / "feas")
 
 
+def test_a_kill_while_selecting_again_leaves_a_folder_the_rerun_selects(tmp_path, monkeypatch):
+    """Killed after one of the chunks past the new stopping point was removed: the rerun
+    removes the rest and ends with the dataset a run of the new scheme makes."""
+    import relaff_jax.data.generate as G
+
+    gen(tmp_path / "f", population="feasible")
+    gen(tmp_path / "all", population="all")
+    real_drop = G.drop_chunks
+    dropped = []
+
+    def drop_one_then_die(cdir, indices):
+        real_drop(cdir, sorted(indices)[-1:])  # the highest first, as drop_chunks does
+        dropped.append(len(indices))
+        raise KeyboardInterrupt("killed while removing chunks")
+
+    monkeypatch.setattr(G, "drop_chunks", drop_one_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        gen(tmp_path / "f", population="all")
+    assert dropped and dropped[0] > 1  # there were several to remove; one went
+    monkeypatch.setattr(G, "drop_chunks", real_drop)
+    gen(tmp_path / "f", population="all")
+    assert_same_dataset(tmp_path / "f", tmp_path / "all")
+
+
 def assert_same_dataset(a, b):
     ra, rb = ds.load_rollouts(a), ds.load_rollouts(b)
     assert ra["selected"].tolist() == rb["selected"].tolist()
