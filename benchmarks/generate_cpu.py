@@ -4,9 +4,10 @@ motor programs against the rest (C settle, placement, reach screen, plans in JAX
 The native rollout function (``rollouts.make_rollout_fn(action, batch, engine="native")``,
 what ``relaff generate --engine native`` runs per chunk) on ``--batches`` batches after one
 untimed batch (compiles), with ``rollouts.execute_native`` (the C execution of the feasible
-programs, its marshalling included) and ``rollouts.settle_batch`` (the C settle) wrapped by
-timers. CPU seconds are the process's (every thread: the C batches run on ``nthread``
-threads), wall seconds beside. "rest" = the whole call minus execution and settle.
+programs, its marshalling included), ``rollouts.settle_batch`` (the C settle) and
+``rollouts.still_batch`` (the C stillness check of a settled scene) wrapped by timers. CPU seconds are the process's (every thread: the C batches run on ``nthread``
+threads), wall seconds beside. "rest" = the whole call minus the three MuJoCo C parts; the
+last row sums the actions.
 
     python benchmarks/generate_cpu.py [--actions lift take ...] [--batch 64] [--batches 2]
 """
@@ -38,19 +39,20 @@ class Timer:
 
 
 def measure(action: str, batch: int, batches: int) -> dict:
-    ex, st = Timer(rollouts.execute_native), Timer(rollouts.settle_batch)
-    rollouts.execute_native, rollouts.settle_batch = ex, st
+    ex, st, sl = Timer(rollouts.execute_native), Timer(rollouts.settle_batch), Timer(rollouts.still_batch)
+    rollouts.execute_native, rollouts.settle_batch, rollouts.still_batch = ex, st, sl
     try:
         fn = rollouts.make_rollout_fn(action, batch, engine="native")
         fn(rollouts.bench_batch_key(3, batch, 0), batch)  # compiles
-        ex.cpu = ex.wall = st.cpu = st.wall = 0.0
+        ex.cpu = ex.wall = st.cpu = st.wall = sl.cpu = sl.wall = 0.0
         c0, t0 = time.process_time(), time.perf_counter()
         for i in range(batches):
             fn(rollouts.bench_batch_key(3, batch, 1 + i), batch)
         cpu, wall = time.process_time() - c0, time.perf_counter() - t0
     finally:
-        rollouts.execute_native, rollouts.settle_batch = ex.fn, st.fn
-    return dict(cpu=cpu, wall=wall, exec_cpu=ex.cpu, exec_wall=ex.wall, settle_cpu=st.cpu, settle_wall=st.wall)
+        rollouts.execute_native, rollouts.settle_batch, rollouts.still_batch = ex.fn, st.fn, sl.fn
+    return dict(cpu=cpu, wall=wall, exec_cpu=ex.cpu, exec_wall=ex.wall, settle_cpu=st.cpu, settle_wall=st.wall,
+                still_cpu=sl.cpu)
 
 
 def main() -> None:
@@ -61,13 +63,19 @@ def main() -> None:
     args = ap.parse_args()
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; load average before {os.getloadavg()[0]:.2f}; "
           f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; batch {args.batch}, {args.batches} timed batches")
-    print("| action | CPU s | C execution | C settle | rest (place, screen, plan, Python) | execution share of CPU "
-          "| wall s |\n|---|---:|---:|---:|---:|---:|---:|")
+    print("| action | CPU s | C execution | C settle | C stillness check | rest (place, screen, plan, Python) "
+          "| execution share of CPU | MuJoCo C share | wall s |\n|---|---:|---:|---:|---:|---:|---:|---:|---:|")
+    tot = dict(cpu=0.0, c=0.0, ex=0.0)
     for a in args.actions:
         d = measure(a, args.batch, args.batches)
-        rest = d["cpu"] - d["exec_cpu"] - d["settle_cpu"]
-        print(f"| {a} | {d['cpu']:.2f} | {d['exec_cpu']:.2f} | {d['settle_cpu']:.2f} | {rest:.2f} | "
-              f"{d['exec_cpu'] / d['cpu']:.1%} | {d['wall']:.2f} |", flush=True)
+        c = d["exec_cpu"] + d["settle_cpu"] + d["still_cpu"]
+        tot["cpu"] += d["cpu"]
+        tot["c"] += c
+        tot["ex"] += d["exec_cpu"]
+        print(f"| {a} | {d['cpu']:.2f} | {d['exec_cpu']:.2f} | {d['settle_cpu']:.2f} | {d['still_cpu']:.2f} | "
+              f"{d['cpu'] - c:.2f} | {d['exec_cpu'] / d['cpu']:.1%} | {c / d['cpu']:.1%} | {d['wall']:.2f} |", flush=True)
+    print(f"| all | {tot['cpu']:.2f} | | | | {tot['cpu'] - tot['c']:.2f} | {tot['ex'] / tot['cpu']:.1%} | "
+          f"{tot['c'] / tot['cpu']:.1%} | |")
     print(f"load average after {os.getloadavg()[0]:.2f}")
 
 
