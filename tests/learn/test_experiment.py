@@ -14,25 +14,14 @@ from relaff_jax.learn.checks import check_config
 from relaff_jax import learn as L
 from relaff_jax.cli import learn as cli_learn
 from relaff_jax.config import override
+from helpers.experiments import ACTS3, TINY, synthetic3, tiny_cfg
 from relaff_jax.learn import folder, sweep
 from relaff_jax.provenance import derive_seed
-
-# Small forests keep the sweep tests fast; the paper's forest settings are tested in test_learning.
-TINY = {
-    "sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 1, "test_size": 60, "source_size": 60,
-    "corr_scenes": 20, "forest.base_trees": 6, "forest.max_trees": 6, "sizes_per_block": 2,
-    "online_select": False,  # the leave-one-out forests are counted and checked in their own tests
-}
-ACTS3 = ("lift", "pull", "take")
-
-
-def tiny_cfg(**kw):
-    return override(experiment_preset("quick"), dict(TINY, **kw))
 
 
 @pytest.fixture(scope="module")
 def data3():
-    return L.synthetic_datasets(200, seed=3, actions=ACTS3)
+    return synthetic3()
 
 
 # --------------------------------------------------------------------- bootstrap factor

@@ -5,24 +5,13 @@ import pytest
 
 from relaff_jax import learn as L
 from relaff_jax.learn.sweep import run_experiment
-from relaff_jax.config.experiment import ForestConfig, experiment_preset
-from relaff_jax.config import override
-
-TINY = {
-    "sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 1, "test_size": 60, "source_size": 60,
-    "corr_scenes": 20, "forest.base_trees": 6, "forest.max_trees": 6, "sizes_per_block": 2,
-    "online_select": False,
-}
-ACTS3 = ("lift", "pull", "take")
-
-
-def tiny_cfg(**kw):
-    return override(experiment_preset("quick"), dict(TINY, **kw))
+from relaff_jax.config.experiment import ForestConfig
+from helpers.experiments import synthetic3, tiny_cfg
 
 
 @pytest.fixture(scope="module")
 def data3():
-    return L.synthetic_datasets(200, seed=3, actions=ACTS3)
+    return synthetic3()
 
 
 def test_dbn_repeats_changes_dbn_and_nothing_else(data3, tmp_path):

@@ -3,30 +3,23 @@ the results equal a run that fits everything."""
 import numpy as np
 import pytest
 
-from relaff_jax import learn as L
-from relaff_jax.config import override
-from relaff_jax.config.experiment import experiment_preset
+from helpers.experiments import synthetic3, tiny_cfg
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as F
 from relaff_jax.learn.reuse import refit, signatures
 from relaff_jax.learn.sweep import run_experiment
 
-TINY = {
-    "sizes": (2, 4, 10, 25), "reps_pca": 2, "reps_rhf": 1, "test_size": 60, "source_size": 60,
-    "corr_scenes": 20, "forest.base_trees": 6, "forest.max_trees": 6, "sizes_per_block": 2,
-    "select_size": 10,
-}
-ACTS3 = ("lift", "pull", "take")
 NOT_RESULTS = ("seconds", "seconds_prep", "new_fits")
 
 
 def cfg_of(**kw):
-    return override(experiment_preset("quick"), dict(TINY, **kw))
+    """The small protocol with the online choice's leave-one-out forests (a learner property the reuse compares)."""
+    return tiny_cfg(online_select=True, select_size=10, **kw)
 
 
 @pytest.fixture(scope="module")
 def data3():
-    return L.synthetic_datasets(200, seed=3, actions=ACTS3)
+    return synthetic3()
 
 
 @pytest.fixture(scope="module")
