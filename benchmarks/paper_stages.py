@@ -22,13 +22,12 @@ its reference in the same run, and the paper preset's wall time, measured and pr
 - report: its bootstrap over test scenes (``resampled_means`` + ``half_curves``), the
   reference path against the fast one, one paper-shaped PCA target (``--report-sizes`` sizes).
 
-Projection: the paper run of 2026-12-03 (``PAPER_RUN_S``, ``PAPER_RUN_ROLLOUTS``) is the
-measured row; the projected row takes its rollouts per action at this run's rates (actions not
-timed at their mean) plus one compile, 90,000 feature scenes at this run's rate, its
-experiment times ``EXPERIMENT_RATIO`` (the fit kernel's rework on the stage's slice), and its report
-divided by ``REPORT_RATIO`` (benchmarks/report_stage.py, reference against new on a
-paper-shaped stand-in; this run's resampling ratio is printed as a check). One process,
-as run (the experiment's two workers included).
+Projection: the paper preset on programs v4 (``PAPER_RUN_ROLLOUTS``, ``PAPER_RUN_S``: its datasets'
+rollouts per action and its features, experiment and report stages measured on idle cores on
+2026-12-07); the projected row takes those rollouts per action at this run's rates (actions not
+timed at their mean) plus one compile, and the three later stages as measured (this run's
+slices of them are printed as checks). One process, as run (the experiment's two workers
+included).
 ``--smoke`` (lift, batch 64, two timed batches, 8 forests per cell, one chunk of 32 scenes,
 a report target of 3 sizes) runs in under 5 minutes once JAX's persistent compilation cache
 (``--xla-cache``) holds its programs; batch 64 is slower per rollout than the preset's 1024,
@@ -66,21 +65,15 @@ from relaff_jax.sim import world as wd  # noqa: E402
 from relaff_jax.sim.native.batch import default_threads, execute_native  # noqa: E402
 from relaff_jax.sim.planning import Plan  # noqa: E402
 
-# The paper preset as run on this machine (docs/journal/2026-12-03.md, "The paper preset, run": seed 0,
-# --engine native, the compiled forest engine, outcomes kept, 2026-12-03): rollouts per action
-# and seconds per stage; the report's is the re-run with the outcomes bit-packed, machine idle.
-PAPER_RUN_ROLLOUTS = {"lift": 20_480, "move": 31_744, "pull": 20_480, "push": 34_816, "rake": 14_336,
-                      "take": 181_248, "pour": 46_080, "slide": 54_272, "unobstruct": 45_056}
-PAPER_RUN_S = {"data": 7_014, "features": 1_457, "experiment": 2_850, "report": 1_942}
+# The paper preset on programs v4 (docs/journal/2026-12-07.md): rollouts per action of its datasets
+# (seed 0, population feasible, 10,000 samples each; chunks of 1,024), and the seconds of its
+# features, experiment and report stages measured in one stretch on two idle cores
+# ("The paper preset's features, experiment and report stages on idle cores"). Its generate stage
+# was not measured in one stretch (its datasets were made over three sessions).
+PAPER_RUN_ROLLOUTS = {"lift": 23_552, "move": 47_104, "pull": 24_576, "push": 40_960, "rake": 50_176,
+                      "take": 38_912, "pour": 65_536, "slide": 60_416, "unobstruct": 21_504}
+PAPER_RUN_S = {"features": 327, "experiment": 1_118, "report": 287}
 PAPER_SCENES = 90_000
-# The report stage, reference over new, on a paper-shaped stand-in of the paper run's results
-# (benchmarks/report_stage.py, docs/journal/2026-12-04.md "Report stage": 455.5 against
-# 181.6 s in one run, every report file byte-identical). The paper run's 1,942 s over this.
-REPORT_RATIO = 2.51
-# The experiment stage after the fit kernel's rework, over before: benchmarks/experiment_stage.py
-# --ref (both versions in one run, all 314 result arrays equal; docs/journal/2026-12-04.md "Fit kernel
-# faster, same bits", 2026-12-04: 5,494 against 9,630 CPU s). The paper run's 2,850 s times this.
-EXPERIMENT_RATIO = 0.57
 
 
 def _execute(action, cfg, pair, s, plan, before, nthread):
@@ -294,20 +287,21 @@ def print_quick(what: str, quick: dict) -> None:
 
 
 def project(rollout: list[dict], feats: dict) -> dict:
-    """Seconds per stage of the paper preset: ``measured`` (the paper run, ``PAPER_RUN_S``)
-    and ``projected`` from this run's parts: data = the run's rollouts per action at this run's
-    whole-batch rate of the native rollout function (an action not measured at the mean rate
-    of those measured) + one compile (programs are shared by the nine actions); features =
-    90,000 scenes at this run's rate of the stage's feature function; experiment = the run's
-    times ``EXPERIMENT_RATIO`` (the fit kernel's rework, measured on the stage's slice);
-    report = the run's over ``REPORT_RATIO``."""
+    """Seconds per stage of the paper preset: ``measured`` (``PAPER_RUN_S``: the v4 run's
+    features, experiment and report stages on idle cores) and ``projected``: data = the v4
+    datasets' rollouts per action at this run's whole-batch rate of the native rollout function
+    (an action not measured at the mean rate of those measured; one call after another, so an
+    upper bound of the stage, which prepares the next chunk beside this one's execution) + one
+    compile (programs are shared by the nine actions); features, experiment and report = the
+    measured ones (this run's slices of them are printed as checks, not projected: a slice of
+    the feature function on one thread understates the stage's two threads, and the
+    experiment's and report's slices do not scale to the whole by a known factor). ``feats`` is
+    accepted for the caller's symmetry and not read."""
     rate = {d["action"]: d["per_s"] for d in rollout}
     mean = float(np.mean(list(rate.values())))
     data = sum(r / rate.get(a, mean) for a, r in PAPER_RUN_ROLLOUTS.items())
     data += max(0.0, rollout[0]["first_s"] - rollout[0]["batch"] / rollout[0]["per_s"])
-    report = PAPER_RUN_S["report"] / REPORT_RATIO
-    new = {"data": data, "features": PAPER_SCENES / feats["rates"]["new"],
-           "experiment": PAPER_RUN_S["experiment"] * EXPERIMENT_RATIO, "report": report}
+    new = {"data": data, **PAPER_RUN_S}
     out = {"measured": dict(PAPER_RUN_S), "projected": new}
     for v in out.values():
         v["total"] = sum(v.values())
@@ -436,11 +430,12 @@ def main() -> None:
     print(f"\nreport resampling, one PCA target, {rep['sizes']} sizes, {rep['resamples']} resamples: reference "
           f"{rep['ref']:.1f} s, fast {rep['new']:.1f} s, reference / fast {rep['ratio']:.2f}, same bits {rep['identical']}")
     proj = project(rollout, feats)
-    print("\npaper preset, seconds (measured: the paper run of 2026-12-03, docs/reproduce.md; projected: this run's "
-          "rates for data and features, its experiment x EXPERIMENT_RATIO, its report / REPORT_RATIO):")
+    print("\npaper preset on programs v4, seconds (measured: its features, experiment and report stages on idle "
+          "cores, 2026-12-07; projected: data at this run's rates, the other stages as measured):")
     print("| | data (native) | features | experiment | report | total | hours |\n|---|---:|---:|---:|---:|---:|---:|")
     for which, p in proj.items():
-        print(f"| {which} | {p['data']:.0f} | {p['features']:.0f} | {p['experiment']:.0f} | {p['report']:.0f} | "
+        data = f"{p['data']:.0f}" if "data" in p else "not measured"
+        print(f"| {which} | {data} | {p['features']:.0f} | {p['experiment']:.0f} | {p['report']:.0f} | "
               f"{p['total']:.0f} | {p['total'] / 3600:.2f} |")
     lift = next((d for d in rollout if d["action"] == "lift"), rollout[0])
     sp = forest[("pca", 25)]
