@@ -114,7 +114,8 @@ def run(run: Run, forced: bool) -> dict:
     compute = None
     for i, action in enumerate(acts):
         run.progress.set(f"{action} ({i + 1}/{len(acts)})")
-        st = action_status(run, action)
+        # a forced stage recomputes whatever is there: its old chunks are not read (verified) first
+        st = Status("absent", "forced") if forced else action_status(run, action)
         if st.state == "complete" and not forced:
             items[action] = {"status": "skipped"}
             continue
@@ -125,6 +126,6 @@ def run(run: Run, forced: bool) -> dict:
         add_features(cfg, run.paths.dataset(action), fseed, progress=False, client=run.client,
                      overwrite=forced or st.state in ("stale", "corrupt"), compute=(compute, config_dict))
         dt = time.perf_counter() - t0
-        items[action] = {"status": "ran", "seconds": round(dt, 2), "was": st.state}
+        items[action] = {"status": "ran", "seconds": round(dt, 2), "was": "forced" if forced else st.state}
         run.progress.message(f"features {action}: {cfg.dataset.n_samples} scenes in {dt:.0f} s")
     return items

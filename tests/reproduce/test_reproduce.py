@@ -211,6 +211,8 @@ def test_forced_stage_with_identical_output_keeps_the_later_ones(base):
     # the features are recomputed, bit for bit the same: experiment and report see the same inputs
     assert statuses(log) == {"generate": "skipped", "features": "ran", "experiment": "skipped", "report": "skipped"}
     assert log["runs"][-1]["force"] == ["features"]
+    # recomputed without reading the old chunks first: each action's record says it was forced
+    assert {v["was"] for v in log["runs"][-1]["stages"]["features"]["actions"].values()} == {"forced"}
     for s, a in results_of(out).items():
         np.testing.assert_array_equal(a, acc[s])
 
