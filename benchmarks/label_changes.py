@@ -22,11 +22,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from relaff_jax.constants import ACTIONS  # noqa: E402
+from relaff_jax.constants import ACTIONS, RELATIONS  # noqa: E402
 from relaff_jax.data.load import load_rollouts  # noqa: E402
 from relaff_jax.data.store import read_sidecar  # noqa: E402
-
-RELATIONS = ("beside", "on_top", "inside")
 
 
 def compare_action(a: dict, b: dict) -> dict:

@@ -286,7 +286,7 @@ def print_quick(what: str, quick: dict) -> None:
           "stages (s): " + ", ".join(f"{k} {v:.0f}" for k, v in quick["stages"].items()), flush=True)
 
 
-def project(rollout: list[dict], feats: dict) -> dict:
+def project(rollout: list[dict]) -> dict:
     """Seconds per stage of the paper preset: ``measured`` (``PAPER_RUN_S``: the v4 run's
     features, experiment and report stages on idle cores) and ``projected``: data = the v4
     datasets' rollouts per action at this run's whole-batch rate of the native rollout function
@@ -295,8 +295,7 @@ def project(rollout: list[dict], feats: dict) -> dict:
     compile (programs are shared by the nine actions); features, experiment and report = the
     measured ones (this run's slices of them are printed as checks, not projected: a slice of
     the feature function on one thread understates the stage's two threads, and the
-    experiment's and report's slices do not scale to the whole by a known factor). ``feats`` is
-    accepted for the caller's symmetry and not read."""
+    experiment's and report's slices do not scale to the whole by a known factor)."""
     rate = {d["action"]: d["per_s"] for d in rollout}
     mean = float(np.mean(list(rate.values())))
     data = sum(r / rate.get(a, mean) for a, r in PAPER_RUN_ROLLOUTS.items())
@@ -429,7 +428,7 @@ def main() -> None:
     stamp("report stage done")
     print(f"\nreport resampling, one PCA target, {rep['sizes']} sizes, {rep['resamples']} resamples: reference "
           f"{rep['ref']:.1f} s, fast {rep['new']:.1f} s, reference / fast {rep['ratio']:.2f}, same bits {rep['identical']}")
-    proj = project(rollout, feats)
+    proj = project(rollout)
     print("\npaper preset on programs v4, seconds (measured: its features, experiment and report stages on idle "
           "cores, 2026-12-07; projected: data at this run's rates, the other stages as measured):")
     print("| | data (native) | features | experiment | report | total | hours |\n|---|---:|---:|---:|---:|---:|---:|")

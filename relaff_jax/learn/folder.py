@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Sequence
 
 from relaff_jax import io as rio
+from relaff_jax.config.experiment import result_differences
 from relaff_jax.constants import SPACES
 
 META = "experiment.json"
@@ -55,6 +56,22 @@ def block_chunk(path: str | os.PathLike) -> int | None:
     """The size-chunk index of a block file's name (None if the name is not a block's)."""
     ci = Path(path).stem.rsplit("_c", 1)[-1]
     return int(ci) if ci.isdigit() else None
+
+
+def meta_differences(old: dict, now: dict, cfg) -> list[str]:
+    """What makes the experiment recorded in ``old`` (a stored ``experiment.json``) another one
+    than ``now`` (the record a run of ``cfg``, an ``ExperimentConfig``, would write): ``format``,
+    ``seed``, ``actions``, ``plugins``, ``action_specs``, ``config.KEY`` for each result key
+    (``config.experiment.result_differences``) and ``SPACE data`` for each of ``now``'s spaces
+    whose data fingerprint differs. The sweep's resume check and ``--reuse``'s share it."""
+    now = rio.jsonable(now)
+    diff = [k for k in ("format", "seed", "actions") if old.get(k) != now[k]]
+    diff += ["plugins"] if old.get("plugins", {}) != now["plugins"] else []
+    diff += ["action_specs"] if old.get("action_specs", {}) != now.get("action_specs", {}) else []
+    diff += [f"config.{k}" for k in result_differences(old.get("config"), cfg)]
+    diff += [f"{s} data" for s in now["spaces"] if s in old.get("fingerprint", {})
+             and old["fingerprint"][s] != now["fingerprint"][s]]
+    return diff
 
 
 def is_complete(out: str | os.PathLike, spaces: Sequence[str] = SPACES) -> bool:

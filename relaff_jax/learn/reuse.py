@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from relaff_jax import io as rio
-from relaff_jax.config.experiment import ADDED_AS_BEFORE, ExperimentConfig, result_differences
+from relaff_jax.config.experiment import ADDED_AS_BEFORE, ExperimentConfig
 from relaff_jax.errors import UserError
 from relaff_jax.learn import folder as L
 
@@ -53,20 +53,14 @@ def open_donor(donor: str | os.PathLike, out: str | os.PathLike, meta: Mapping[s
     if donor.resolve() == Path(out).resolve():
         raise UserError(f"--reuse {donor}: is the output folder itself; give another reading's folder")
     old = rio.read_json(L.meta(donor))
-    now = rio.jsonable(dict(meta))
-    diff = [k for k in ("format", "seed", "actions") if old.get(k) != now[k]]
-    diff += ["plugins"] if old.get("plugins", {}) != now["plugins"] else []
-    diff += ["action_specs"] if old.get("action_specs", {}) != now.get("action_specs", {}) else []
-    diff += [f"{s} data" for s in now["spaces"] if s in old.get("fingerprint", {})
-             and old["fingerprint"][s] != now["fingerprint"][s]]
-    keys = result_differences(old.get("config"), cfg)
-    diff += [f"config.{k}" for k in keys if k not in CONDITION_SCOPED]
+    scoped = {f"config.{k}" for k in CONDITION_SCOPED}
+    diff = [d for d in L.meta_differences(old, dict(meta), cfg) if d not in scoped]
     if diff:
         raise UserError(f"--reuse {donor}: its experiment differs in {diff}; a folder can be reused only where "
                         f"nothing but {', '.join('experiment.' + k for k in CONDITION_SCOPED)} differs")
     stored = old.get("config", {})
     were = {k: stored.get(k, ADDED_AS_BEFORE.get(k)) for k in CONDITION_SCOPED}
-    return Donor(donor, dataclasses.replace(cfg, **were), tuple(s for s in old.get("spaces", ()) if s in now["spaces"]))
+    return Donor(donor, dataclasses.replace(cfg, **were), tuple(s for s in old.get("spaces", ()) if s in meta["spaces"]))
 
 
 def signatures(plan: Sequence[tuple[int, tuple[int, ...]]], repeats: Mapping[int, int],

@@ -44,7 +44,7 @@ from relaff_jax.learn import folder as L
 from relaff_jax.learn import reuse as reuse_mod
 from relaff_jax.learn import user_conditions
 from relaff_jax.learn.blocks import SUBSETS, BlockJob, Target, read_block, run_block_job
-from relaff_jax.config.experiment import ExperimentConfig, result_differences
+from relaff_jax.config.experiment import ExperimentConfig
 from relaff_jax.learn.checks import check_config
 from relaff_jax.learn.datasets import check_datasets, fingerprint
 from relaff_jax.learn.draws import draw_rep
@@ -108,11 +108,7 @@ def run_experiment(datasets: Mapping[str, Mapping[str, Any]], out: str | os.Path
         now = rio.jsonable(meta)
         # the forest engine, and settings only the analysis reads added after a run began, do
         # not make it another run (config.result_differences)
-        diff = [k for k in ("format", "seed", "actions") if old.get(k) != now[k]]
-        diff += ["plugins"] if old.get("plugins", {}) != now["plugins"] else []
-        diff += ["action_specs"] if old.get("action_specs", {}) != now.get("action_specs", {}) else []
-        diff += [f"config.{k}" for k in result_differences(old.get("config"), cfg)]
-        diff += [f"{s} data" for s in spaces if s in old.get("fingerprint", {}) and old["fingerprint"][s] != now["fingerprint"][s]]
+        diff = L.meta_differences(old, now, cfg)
         if diff:
             raise UserError(f"{out} holds an experiment with different {diff}; use a new --out to start another")
         if set(spaces) - set(old["spaces"]):

@@ -17,7 +17,7 @@ def test_projection_hand_worked():
     (``PAPER_RUN_*``, which a test cannot know independently, so it is read, not copied)."""
     rollout = [dict(action="lift", per_s=100.0, first_s=30.0, batch=1000, n=2000),
                dict(action="take", per_s=200.0, first_s=5.0, batch=1000, n=2000)]
-    got = P.project(rollout, {"rates": {"new": 100.0}})
+    got = P.project(rollout)
     runs = P.PAPER_RUN_ROLLOUTS
     # lift at 100 /s, take at 200 /s, the other seven at the mean 150 /s, plus one compile:
     # the first call's 30 s less one batch at the rate (10 s)
@@ -31,7 +31,7 @@ def test_projection_hand_worked():
     assert got["projected"]["total"] == pytest.approx(data + later)
     assert got["measured"] == dict(P.PAPER_RUN_S, total=later)  # no data stage measured in one stretch
     # a faster rollout rate projects a shorter data stage and leaves the other stages alone
-    fast = P.project([dict(r, per_s=2 * r["per_s"]) for r in rollout], {"rates": {"new": 100.0}})
+    fast = P.project([dict(r, per_s=2 * r["per_s"]) for r in rollout])
     assert fast["projected"]["data"] < got["projected"]["data"]
     assert {k: fast["projected"][k] for k in ("features", "experiment", "report")} == \
         {k: got["projected"][k] for k in ("features", "experiment", "report")}
