@@ -2,14 +2,16 @@
 
 Takes dataset folders ``{action: DIR}`` whose samples keep their scenes (``pair``,
 ``qpos_settled``); ``example_scenes`` writes ``per_action`` pictures per action (positives
-and negatives alternating) under ``out`` and returns ``(action, relative path, caption)``.
-JAX, MuJoCo and the perception stage load only when pictures are drawn.
+and negatives alternating) under ``out`` and returns ``(action, relative path, caption)``;
+``examples_beside`` draws them in a process of their own while the caller writes the rest of
+the report (the drawing is one core's matplotlib and the analysis another's). JAX, MuJoCo and
+the perception stage load only when pictures are drawn.
 """
 from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -48,3 +50,42 @@ def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_ac
                                 jax.random.PRNGKey(rid % 2**31), title=caption)
             shown.append((action, f"{out.name}/{name}", caption))
     return shown
+
+
+MIN_CORES = 2  # below this a second process would only take the report's core
+
+
+def examples_beside(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_action: int,
+                    cores: int | None = None) -> Callable[[], list[tuple[str, str, str]]]:
+    """Start ``example_scenes(data_dirs, out, per_action)`` in a spawned process (on ``cores``
+    >= ``MIN_CORES``, default this process's; else nothing starts) and return the function that
+    waits for its list (drawing here if nothing started; an error in the drawing is raised
+    there). The process loads this process's plugin files and uses its compilation cache (the
+    environment carries it); the pictures are the same files either way."""
+    from relaff_jax.data.audit_replay import default_jobs
+
+    cores = default_jobs() if cores is None else cores
+    if per_action < 1 or cores < MIN_CORES:
+        return lambda: example_scenes(data_dirs, out, per_action)
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    from relaff_jax.plugins import loaded_files
+
+    pool = ProcessPoolExecutor(1, mp_context=get_context("spawn"))
+    job = pool.submit(_in_child, loaded_files(), {a: str(d) for a, d in data_dirs.items()}, str(out), per_action)
+
+    def wait() -> list[tuple[str, str, str]]:
+        try:
+            return job.result()
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    return wait
+
+
+def _in_child(plugins, data_dirs: dict[str, str], out: str, per_action: int) -> list[tuple[str, str, str]]:
+    from relaff_jax.plugins import load_files
+
+    load_files(plugins)  # (path, sha256) pairs: a file changed since the parent read it is refused
+    return example_scenes({a: Path(d) for a, d in data_dirs.items()}, Path(out), per_action)

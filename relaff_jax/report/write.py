@@ -11,7 +11,7 @@ optionally the dataset folders ``{action: DIR}`` and a run log; analyses every s
 * ``findings.json`` (``findings.py``);
 * with datasets: ``fig_datasets.png``, ``fig_reach.png``, ``reach.json`` (what the labels
   consist of, ``reach.py``), ``fig_audit.png`` (their stored physics audits, ``audit.py``) and
-  ``examples/*.png`` (``examples.py``);
+  ``examples/*.png`` (``examples.py``, drawn in a second process meanwhile);
 * ``report.md`` and the self-contained ``report.html`` (``sections.py``, ``document.py``).
 """
 from __future__ import annotations
@@ -32,7 +32,7 @@ from relaff_jax.report.affordances import blocks as affordance_blocks, csv_text 
 from relaff_jax.report.audit import audit_blocks, stored_audits
 from relaff_jax.report import sections as S
 from relaff_jax.report.document import render_html, render_markdown
-from relaff_jax.report.examples import example_scenes
+from relaff_jax.report.examples import examples_beside
 from relaff_jax.report.figures import dataset_figure, write_figures
 from relaff_jax.report.findings import FindingRules, findings
 from relaff_jax.report.robustness import by_reading
@@ -65,13 +65,6 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
       kept to check the default ones against).
     """
     t0 = time.perf_counter()
-    res = load_results(results_dir)
-    cfg = res["config"]
-    spaces = list(res["meta"]["spaces"])
-    an = {s: analyse(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference) for s in spaces}
-    for s in spaces:  # a user's registered conditions, beside Table II's rows (none: empty)
-        an[s]["user"] = user_rows(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference)
-    main = "pca" if "pca" in an else spaces[0]
     infos: dict[str, Any] = {}
     anat: dict[str, Any] = {}
     missing: dict[str, str] = {}
@@ -82,8 +75,17 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
                 anat[act] = anatomy(d)
             except DatasetError as e:  # e.g. rollouts without a 'feasible' field
                 missing[act] = str(e)
+    res = load_results(results_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    if data_dirs:  # the example scenes, drawn in a process of their own while the rest is made here
+        examples = examples_beside(data_dirs, out / F.EXAMPLES, examples_per_action)
+    cfg = res["config"]
+    spaces = list(res["meta"]["spaces"])
+    an = {s: analyse(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference) for s in spaces}
+    for s in spaces:  # a user's registered conditions, beside Table II's rows (none: empty)
+        an[s]["user"] = user_rows(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference)
+    main = "pca" if "pca" in an else spaces[0]
 
     # tables, figures and the summary
     rio.atomic_write_text(out / F.TABLE2_CSV, table2_csv(an[main], paper=main == "pca"))
@@ -106,7 +108,7 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
             reach_figure(anat, out / F.FIG_REACH)
         data_blocks += reach_blocks(anat, missing, out) + subset_blocks(res, cfg) + predictor_blocks(res)
         data_blocks += audit_blocks(*stored_audits(data_dirs), out)
-        data_blocks += S.example_blocks(example_scenes(data_dirs, out / F.EXAMPLES, examples_per_action))
+        data_blocks += S.example_blocks(examples())
     rio.atomic_write_json(out / F.REACH, finite(reach_json(anat, res, cfg)))
 
     # the document

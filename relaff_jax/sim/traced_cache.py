@@ -36,6 +36,7 @@ import functools
 import hashlib
 import json
 import os
+import threading
 from pathlib import Path
 from typing import Any, Callable
 
@@ -127,17 +128,38 @@ class _Stored:
         self.fn, self.name, self.key = fn, name, key
         self.jitted = jax.jit(fn)
         self.calls: dict = {}
+        # one trace and one compile per argument shape, whichever thread calls first (a
+        # warm-up on the generate stage's background thread, sim/warm.py): a second caller
+        # waits for the first's program instead of tracing and compiling it again
+        self.lock = threading.Lock()
 
     def __call__(self, *args):
         where = folder()
-        if where is None:
-            return self.jitted(*args)
-        specs = tuple(_spec(a) for a in args)
+        try:
+            specs = tuple(_spec(a) for a in args)
+        except TypeError:
+            if where is not None:
+                raise
+            return self.jitted(*args)  # jax.jit's own rules, as without the store
         sig = (where, tuple((s.shape, str(s.dtype)) for s in specs))
         call = self.calls.get(sig)
-        if call is None:
-            call = self.calls[sig] = jax.jit(load_or_export(self.fn, self.name, self.key, specs, where).call)
-        return call(*(np.asarray(a, s.dtype) if not isinstance(a, jax.Array) else a for a, s in zip(args, specs)))
+        if call is not None:
+            return call(*self._args(args, specs, where))
+        with self.lock:
+            call = self.calls.get(sig)
+            if call is None:  # the first call of this shape: traced (or read) and compiled here
+                call = self.jitted if where is None else jax.jit(
+                    load_or_export(self.fn, self.name, self.key, specs, where).call)
+                out = call(*self._args(args, specs, where))
+                self.calls[sig] = call
+                return out
+        return call(*self._args(args, specs, where))
+
+    @staticmethod
+    def _args(args: tuple, specs: tuple, where: Path | None) -> list:
+        if where is None:
+            return list(args)
+        return [np.asarray(a, s.dtype) if not isinstance(a, jax.Array) else a for a, s in zip(args, specs)]
 
 
 def stored_jit(fn: Callable, name: str, key: Any = ()) -> Callable:

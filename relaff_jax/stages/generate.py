@@ -23,7 +23,7 @@ from relaff_jax.stages.protocol import Run, ReproduceError, Status
 from relaff_jax.config.action import ActionConfig
 from relaff_jax.sim import object_library as ol
 from relaff_jax.sim.actions import record as spec_record
-from relaff_jax.data import audit as A
+from relaff_jax.stages import audits
 from relaff_jax.sim.actions import record
 from relaff_jax.cluster import cancel_all, nthreads, Remote
 
@@ -107,8 +107,9 @@ def generate_one(tree: Any, action: str, out: Any, seed: int, *, client: Any = N
     return summary
 
 
-def _one(run: Run, action: str, window: int | None) -> dict:
-    """Generate one action's dataset (resuming); what the run log records for it."""
+def _one(run: Run, action: str, window: int | None, beside: audits.Beside | None = None) -> dict:
+    """Generate one action's dataset (resuming); what the run log records for it. Its audit is
+    handed to ``beside`` (which the caller collects into ``item["audit"]``), or run here."""
     cfg = run.cfg
     t0 = time.perf_counter()
     s = generate_one(cfg, action, run.paths.dataset(action), run.log["seeds"]["datasets"][action], client=run.client,
@@ -123,31 +124,22 @@ def _one(run: Run, action: str, window: int | None) -> dict:
         extra = f"; {s['discarded_chunks']} chunks simulated past the stopping point discarded"
     if s.get("matching_met") is False:
         extra += f"; distance matching NOT met ({s['borrowed']} negatives borrowed)"
-    item["audit"] = audit_one(run, action)
     run.progress.message(f"generate {action}: {cfg.dataset.n_samples} samples from {s['rollouts']} rollouts "
                          f"(positive rate {s['positive_rate']:.1%}) in {dt:.0f} s{extra}")
+    if beside is not None:
+        beside.submit(action)
+    else:
+        item["audit"] = audit_one(run, action)
     return item
 
 
 def audit_one(run: Run, action: str) -> dict:
     """The physics audit of one finished dataset (``data.audit.ensure_audit``: a MuJoCo C
     replay of ``DEFAULT_SAMPLE`` of its rollouts, stored as ``audit.json``; a stored one is
-    reused), right after its generation, whose compiled planner it shares; what the run log
-    records of it. A dataset the audit cannot replay (no recorded action config or simulation
-    fields) is recorded as not audited."""
-    t0 = time.perf_counter()
-    try:
-        a = A.ensure_audit(run.paths.dataset(action), A.DEFAULT_SAMPLE, 0)
-    except D.DatasetError as e:  # e.g. rollouts of a stand-in simulation: nothing to replay
-        run.progress.message(f"audit {action}: not audited ({e})")
-        return {"status": "not audited", "why": str(e)}
-    c = a["checks"]
-    run.progress.message(f"audit {action}: {a['n_audited']} rollouts replayed in MuJoCo C, palm from above "
-                         f"{c['palm_contact']['count']} (side {c['palm_contact']['side_count']}), peak force {c['force']['weights']['max'] or 0:.0f} weights, "
-                         f"moving at measuring {c['moving']['count']}, label agreement "
-                         f"{a['replay']['agree']}/{a['replay']['n']} in {time.perf_counter() - t0:.0f} s")
-    return {"n": a["n_audited"], "seconds": round(time.perf_counter() - t0, 2),
-            "failing": {k: v["count"] for k, v in c.items()}, "label_agreement": a["replay"]["label_agreement"]}
+    reused), here and now; what the run log records of it. A dataset the audit cannot replay (no
+    recorded action config or simulation fields) is recorded as not audited. The stage itself
+    audits each dataset beside the next action's generation (``stages/audits.py``)."""
+    return audits.record(run, action, *audits.audit(run.paths.dataset(action)))
 
 
 def run(run: Run, forced: bool) -> dict:
@@ -178,9 +170,22 @@ def run(run: Run, forced: bool) -> dict:
         else:
             todo.append(action)
     if run.client is None or len(todo) < 2:
-        for action in todo:
-            run.progress.set(f"{action} ({acts.index(action) + 1}/{len(acts)})")
-            items[action] = _one(run, action, None)
+        with audits.Beside(run) as beside:  # each audit beside the next action's generation
+            if todo and beside.pool is not None and getattr(run.rollout_factory, "func", None) is default_rollout_factory:
+                from relaff_jax.sim.warm import unobstruct_warmups  # the simulation loads when the stage runs
+
+                beside.warm(unobstruct_warmups(cfg.action, cfg.dataset.rollout_batch, todo))
+            if todo and cfg.experiment.forest.engine == "compiled":  # the experiment's kernels, compiled or loaded
+                from relaff_jax.learn.forest.compiled.forest import warm
+
+                beside.warm_elsewhere(warm, cfg.experiment.forest)
+            for action in todo:
+                run.progress.set(f"{action} ({acts.index(action) + 1}/{len(acts)})")
+                items[action] = _one(run, action, None, beside)
+            if todo:
+                run.progress.set("the last physics audits")
+            for action, a in beside.finish().items():
+                items[action]["audit"] = a
         return dict(sorted(items.items(), key=lambda kv: acts.index(kv[0])))
     from concurrent.futures import ThreadPoolExecutor
 

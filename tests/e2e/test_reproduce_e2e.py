@@ -10,7 +10,10 @@ skipped as up to date, and the report made again (its stamp covers the datasets'
 audit records its own seconds) has the same findings (the interruption is a KeyboardInterrupt
 raised after the first chunk, in process, so that the compiled programs are reused; that a
 rerun experiment gives the same results: tests/reproduce/test_reproduce.py, which SIGKILLs a
-run of numpy stand-ins).
+run of numpy stand-ins). Then two datasets made again with each audit on its background
+thread beside the next generation and the report's example scenes drawn in a second process
+(what a machine of two cores or more runs; a test worker has one core): the same datasets,
+audits, pictures and findings.
 Slow: it simulates every action (docs/reproduce.md).
 """
 import argparse
@@ -28,6 +31,9 @@ from relaff_jax import reproduce as R
 from relaff_jax.config import preset
 from relaff_jax.cli import reproduce as cli_reproduce
 from relaff_jax.stages.generate import default_rollout_factory
+from relaff_jax.stages import audits
+from relaff_jax.report import examples
+from relaff_jax.data.audit import AUDIT_FILE
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(5400)]
 
@@ -47,7 +53,7 @@ def statuses(log):
     return {s: v["status"] for s, v in log["runs"][-1]["stages"].items()}
 
 
-def test_tiny_end_to_end(tmp_path):
+def test_tiny_end_to_end(tmp_path, monkeypatch):
     out = tmp_path / "tiny"
     log = cli_run(out)
     cfg = preset("tiny")
@@ -121,3 +127,28 @@ def test_tiny_end_to_end(tmp_path):
     assert fp is not None and fp == manifest_fingerprint(out / "data" / "take")
     assert json.loads((out / "report" / "findings.json").read_text()) == \
         json.loads((out2 / "report" / "findings.json").read_text())
+
+    # the audits beside the generation and the example scenes in their own process (two cores)
+    out3 = tmp_path / "beside"
+    shutil.copytree(out, out3)
+    for a in ("move", "take"):
+        shutil.rmtree(out3 / "data" / a)
+    monkeypatch.setattr(audits, "MIN_CORES", 1)
+    monkeypatch.setattr(examples, "MIN_CORES", 1)
+    log = cli_run(out3)
+    assert statuses(log) == {"generate": "ran", "features": "ran", "experiment": "skipped", "report": "ran"}
+    gen = log["runs"][-1]["stages"]["generate"]["actions"]
+    assert {a for a, v in gen.items() if v["status"] == "ran"} == {"move", "take"}
+    for a in ("move", "take"):
+        assert gen[a]["audit"]["label_agreement"] == 1.0
+        x, y = (json.loads((o / "data" / a / AUDIT_FILE).read_text()) for o in (out, out3))
+        for k in ("seconds", "dataset"):
+            x.pop(k), y.pop(k)
+        assert x == y
+        assert manifest_fingerprint(out3 / "data" / a) == manifest_fingerprint(out / "data" / a)
+    pics = sorted(p.name for p in (out / "report" / "examples").glob("*.png"))
+    assert pics == sorted(p.name for p in (out3 / "report" / "examples").glob("*.png"))
+    for name in pics:
+        assert (out / "report" / "examples" / name).read_bytes() == (out3 / "report" / "examples" / name).read_bytes()
+    assert json.loads((out / "report" / "findings.json").read_text()) == \
+        json.loads((out3 / "report" / "findings.json").read_text())

@@ -44,6 +44,7 @@ LANE_A = (
     "tests/sim/test_animate.py",
     "tests/sim/test_native_engine.py",
     "tests/sim/test_reach_screen.py",
+    "tests/sim/test_warm.py",
     "tests/sim/test_still.py",
 )
 LANE_B = (

@@ -141,6 +141,38 @@ def test_stored_then_read_without_tracing(stored, monkeypatch):
         tc.stored_jit(toy, "toy", ("cfg", 1))(0, X[:2])
 
 
+@pytest.mark.parametrize("store", [True, False])
+def test_threads_calling_first_at_once_trace_once(store, tmp_path, monkeypatch, request):
+    """Two threads making the first call of one shape at once (the generate stage's warm-up
+    beside the generation, sim/warm.py): one traces and compiles, the other waits for its
+    program; both get jax.jit's bits. With the store on and off."""
+    import threading
+
+    if store:
+        request.getfixturevalue("stored")
+    traced, gate = [], threading.Barrier(2)
+
+    def slow_toy(k, x):
+        traced.append(1)  # runs at trace time only
+        return toy(k, x)
+
+    fn = tc.stored_jit(slow_toy, "slow_toy", ("cfg", 3))
+    outs = [None, None]
+
+    def call(i):
+        gate.wait()
+        outs[i] = fn(1, X)
+
+    threads = [threading.Thread(target=call, args=(i,)) for i in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    ref = jax.jit(toy)(1, X)
+    assert len(traced) == 1 and len(fn.calls) == 1
+    assert all(_equal(o, ref) for o in outs)
+
+
 def test_key_holds_what_shapes_the_trace(monkeypatch):
     spec = (jax.ShapeDtypeStruct((), jnp.int32), jax.ShapeDtypeStruct((4, 6), jnp.float32))
     name = tc.file_name("toy", "k", spec)

@@ -9,6 +9,7 @@ replay is the reference of the batched native engine (``native.batch``).
 """
 from __future__ import annotations
 
+import copy
 from typing import Callable
 
 import mujoco
@@ -154,8 +155,12 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     obj_geoms, toy_geoms = set(wl.obj_geoms.tolist()), set(wl.toy_geoms.tolist())
     bodies = [world.toy_body, world.obj_body]
     com0, com_m, com_end, finals, frames, settled, read_step = [], [], [], [], [], [], []
+    own: dict[int, mujoco.MjModel] = {}
     for b in range(len(pair)):
-        m = world.mj_models[int(pair[b])]
+        p = int(pair[b])
+        if p not in own:  # this replay's own copy: the grasp lock writes eq_data, and the world's
+            own[p] = copy.copy(world.mj_models[p])  # models are shared (a generation beside an audit)
+        m = own[p]  # kept for the whole replay: an observer may key its caches by id(m)
         d = mujoco.MjData(m)
         d.qpos[:], d.qvel[:], d.eq_active[:] = inp.qpos[b], inp.qvel[b], inp.eq_active[b]
         mujoco.mj_forward(m, d)

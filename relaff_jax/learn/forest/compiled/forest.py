@@ -225,3 +225,15 @@ def _value2(forest: Forest) -> np.ndarray:
     """``value`` as ``(M, 2)`` (a forest of one class gets a zero second column)."""
     v = forest.value
     return v if v.shape[1] == 2 else np.concatenate([v, np.zeros_like(v)], axis=1)
+
+
+def warm(cfg: ForestConfig = ForestConfig()) -> None:
+    """Load the kernels, or compile them into numba's cache (a new install: ~30-40 s), by
+    fitting and evaluating one small forest of ``cfg`` (the argument types of every call, so
+    later processes load what this one compiled). ``reproduce`` runs it in a process of its own
+    during the generate stage (``stages/audits.py``), so the experiment's workers load the cache
+    instead of each compiling the same kernels."""
+    rng = np.random.default_rng(0)
+    X = rng.random((40, 3), dtype=np.float32)
+    y = X[:, 0] > 0.5  # bool, as the experiment passes them (estimator.checked_inputs)
+    predict_block(fit_many([X], [y], [0], cfg), X.T, [np.arange(3)])
