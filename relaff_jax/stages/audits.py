@@ -1,9 +1,11 @@
 """The generate stage's physics audits, each beside the next action's generation.
 
-Takes the stage's ``Run``; gives ``Beside``: ``warm(fns)`` first compiles the planner's
-programs ahead of the generation (``sim/warm.py``), ``submit(action)`` audits a finished dataset
-(``data.audit.ensure_audit``, written atomically to its ``audit.json``), both on one background
-thread; ``finish()`` waits for them all and returns the audits' run-log records. An audit is one
+Takes the stage's ``Run``; gives ``Beside``: ``warm(fns)`` first compiles unobstruct's screened
+halves ahead of its generation (``sim/warm.py``) and ``submit(action)`` audits a finished
+dataset (``data.audit.ensure_audit``, written atomically to its ``audit.json``), both on one
+background thread; ``warm_elsewhere`` runs work that holds the GIL (numba's compile of the
+forest kernels) in a spawned process; ``finish()`` waits for them all and returns the audits'
+run-log records. An audit is one
 core's work (a scene-by-scene MuJoCo C replay with a Python probe), and the generation of the
 next action leaves a core idle between its C batches and planner calls, so on two cores the
 audits cost little wall time (``docs/reproduce.md``, "The quick preset's defaults"). The
