@@ -55,33 +55,47 @@ def example_scenes(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_ac
 MIN_CORES = 2  # below this a second process would only take the report's core
 
 
+class Drawing:
+    """Example scenes being drawn (``examples_beside``): call it for their list (it waits, and
+    raises the drawing's error); ``cancel()`` stops a drawing process."""
+
+    def __init__(self, draw: Callable[[], list] | None = None, pool=None, job=None):
+        self.draw, self.pool, self.job = draw, pool, job
+
+    def __call__(self) -> list[tuple[str, str, str]]:
+        if self.pool is None:
+            return self.draw()
+        try:
+            return self.job.result()
+        finally:
+            self.pool.shutdown(wait=True, cancel_futures=True)
+
+    def cancel(self) -> None:
+        if self.pool is not None:
+            for proc in list(getattr(self.pool, "_processes", {}).values()):
+                proc.terminate()  # each picture is written atomically: none is left half-written
+            self.pool.shutdown(wait=False, cancel_futures=True)
+
+
 def examples_beside(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_action: int,
-                    cores: int | None = None) -> Callable[[], list[tuple[str, str, str]]]:
+                    cores: int | None = None) -> Drawing:
     """Start ``example_scenes(data_dirs, out, per_action)`` in a spawned process (on ``cores``
-    >= ``MIN_CORES``, default this process's; else nothing starts) and return the function that
-    waits for its list (drawing here if nothing started; an error in the drawing is raised
-    there). The process loads this process's plugin files and uses its compilation cache (the
+    >= ``MIN_CORES``, default this process's; else nothing starts and calling the result draws
+    here). The process loads this process's plugin files and uses its compilation cache (the
     environment carries it); the pictures are the same files either way."""
     from relaff_jax.data.audit_replay import default_jobs
 
     cores = default_jobs() if cores is None else cores
     if per_action < 1 or cores < MIN_CORES:
-        return lambda: example_scenes(data_dirs, out, per_action)
+        return Drawing(lambda: example_scenes(data_dirs, out, per_action))
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
 
     from relaff_jax.plugins import loaded_files
 
     pool = ProcessPoolExecutor(1, mp_context=get_context("spawn"))
-    job = pool.submit(_in_child, loaded_files(), {a: str(d) for a, d in data_dirs.items()}, str(out), per_action)
-
-    def wait() -> list[tuple[str, str, str]]:
-        try:
-            return job.result()
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
-
-    return wait
+    return Drawing(pool=pool, job=pool.submit(_in_child, loaded_files(), {a: str(d) for a, d in data_dirs.items()},
+                                              str(out), per_action))
 
 
 def _in_child(plugins, data_dirs: dict[str, str], out: str, per_action: int) -> list[tuple[str, str, str]]:

@@ -78,8 +78,19 @@ def write_report(results_dir: str | os.PathLike, out_dir: str | os.PathLike,
     res = load_results(results_dir)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    if data_dirs:  # the example scenes, drawn in a process of their own while the rest is made here
-        examples = examples_beside(data_dirs, out / F.EXAMPLES, examples_per_action)
+    # the example scenes, drawn in a process of their own while the rest is made here
+    examples = examples_beside(data_dirs, out / F.EXAMPLES, examples_per_action) if data_dirs else None
+    try:
+        return _document(results_dir, res, out, data_dirs, infos, anat, missing, examples, info, rules, reference, t0)
+    except BaseException:
+        if examples is not None:
+            examples.cancel()  # a failed or stopped report does not wait for its pictures
+        raise
+
+
+def _document(results_dir, res, out: Path, data_dirs, infos: dict, anat: dict, missing: dict, examples, info,
+              rules: FindingRules, reference: bool, t0: float) -> Path:
+    """``write_report`` once its inputs are read: analyses, tables, figures and the document."""
     cfg = res["config"]
     spaces = list(res["meta"]["spaces"])
     an = {s: analyse(res[s], cfg, seed=int(res["meta"]["seed"]), reference=reference) for s in spaces}

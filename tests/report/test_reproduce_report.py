@@ -304,6 +304,42 @@ def test_full_report(scene_run, tmp_path):
     assert cli.main(["compare", f"a={out}"]) == 2  # one reading is refused
 
 
+def test_example_scenes_in_a_second_process_and_a_failed_report_stops_it(scene_run, tmp_path, monkeypatch):
+    """On two cores the example scenes are drawn in a spawned process (``examples_beside``):
+    the same PNG files as drawn here; a report that fails while they are drawn stops that
+    process instead of waiting for it."""
+    import signal
+
+    from relaff_jax.report import examples as X
+    from relaff_jax.report import write as W
+
+    data_dirs = {"lift": scene_run / "data" / "lift", "take": scene_run / "data" / "take"}
+    here = X.example_scenes(data_dirs, tmp_path / "here", 1)
+    d = X.examples_beside(data_dirs, tmp_path / "there", 1, cores=2)
+    assert d.pool is not None and d() == [(a, p.replace("here/", "there/"), c) for a, p, c in here]
+    for _, p, _ in here:
+        assert (tmp_path / p).read_bytes() == (tmp_path / p.replace("here/", "there/")).read_bytes()
+
+    started = []
+
+    def beside(*a, **k):
+        drawing = X.examples_beside(*a, **k, cores=2)
+        started.append(list(drawing.pool._processes.values()))  # spawned at submit
+        return drawing
+
+    def failing(*a, **k):
+        raise RuntimeError("analysis failed")
+
+    monkeypatch.setattr(W, "examples_beside", beside)
+    monkeypatch.setattr(W, "analyse", failing)
+    with pytest.raises(RuntimeError, match="analysis failed"):
+        write_report(scene_run / "results", tmp_path / "failed", data_dirs, examples_per_action=2)
+    assert len(started) == 1 and len(started[0]) == 1
+    proc = started[0][0]
+    proc.join(30)
+    assert proc.exitcode == -signal.SIGTERM  # stopped, not left to finish its drawing
+
+
 def test_cli_report_takes_the_datasets(scene_run, tmp_path, capsys):
     """``relaff report RESULTS --data DIR...``: each folder's action read from its sidecar, as
     ``write_report``'s ``data_dirs``, so the datasets' statistics and figures are in the report;
