@@ -247,3 +247,65 @@ def test_early_stop_in_c(planned, action):
     else:
         np.testing.assert_array_equal(a["com_end"], a["com_m"])  # stopped at the measuring step
         assert not np.array_equal(a["qpos_final"], b["qpos_final"])
+
+
+def test_stretch_ends_hand_worked():
+    """``_stretch_end`` stops a stretch at the next step needing a decision, where the closing
+    flag flips (with a grasp), at the rest window's ends, and after ``STRETCH_AFTER_MEASURE``
+    steps once the run may stop; ``_checks`` names the steps needing one."""
+    from types import SimpleNamespace as NS
+    T = 100
+    guard, closing = np.zeros(T, bool), np.zeros(T, bool)
+    guard[10:14] = True
+    closing[20:30] = True
+    inp = NS(guard=guard, closing=closing, n_run=T, measure=40)
+    stopped, eq = np.zeros(3, bool), np.zeros((3, 2))
+    grasp = (1, None, "toy")
+    lo, hi = 35, 80
+    end = lambda t, g=grasp: native_batch._stretch_end(inp, t, g, stopped, eq, lo, hi)
+    assert native_batch._checks(inp, 10, grasp, stopped, eq)  # a descent still going
+    assert end(0) == 10
+    assert not native_batch._checks(inp, 10, grasp, np.ones(3, bool), eq)  # every descent stopped
+    assert native_batch._checks(inp, 20, grasp, stopped, eq)  # a grasp not locked
+    assert native_batch._checks(inp, 20, None, stopped, eq) is False  # no grasp: nothing to lock
+    assert end(14) == 20
+    assert end(14, None) == 35  # no grasp: the closing flag does not cut; the window's start does
+    locked = eq.copy()
+    locked[:, 1] = 1.0
+    assert native_batch._stretch_end(inp, 20, grasp, stopped, locked, lo, hi) == 30  # locked: to the flip
+    assert end(30) == 35
+    cap = native_batch.STRETCH_AFTER_MEASURE
+    assert end(35) == 40 + cap  # in the window: at most the cap past the measuring step
+    assert end(40) == 40 + cap
+    assert end(70) == 80 + 1  # hi is the window's last step
+    assert end(81) == T
+
+
+@pytest.mark.slow  # shares the plan compile of the replay test
+def test_stretches_equal_one_step_at_a_time(planned, monkeypatch):
+    """The stretches stepped in one ``Batch.rollout`` call give the bits of stepping every
+    control step alone (every step made a decision step), for a toy lock with a guarded
+    descent, a base lock and a plain push; and they do replace most single steps."""
+    import mujoco.batch
+    calls = {"step": 0, "rollout": 0}
+    step, rollout = mujoco.batch.Batch.step, mujoco.batch.Batch.rollout
+
+    def counted(name, fn):
+        def call(self, *a, **k):
+            calls[name] += 1
+            return fn(self, *a, **k)
+        return call
+    monkeypatch.setattr(mujoco.batch.Batch, "step", counted("step", step))
+    monkeypatch.setattr(mujoco.batch.Batch, "rollout", counted("rollout", rollout))
+    for action in ("take", "pour", "push"):
+        pair, q, qvel, plan, before = planned[action]
+        calls.update(step=0, rollout=0)
+        fast = native_batch.execute_native(action, CFG, pair, q, qvel, plan, before)
+        n_single, n_rollout = calls["step"], calls["rollout"]
+        with monkeypatch.context() as m:
+            m.setattr(native_batch, "_checks", lambda *a: True)
+            slow = native_batch.execute_native(action, CFG, pair, q, qvel, plan, before)
+        assert calls["rollout"] == n_rollout, action  # the one-step run made no rollout
+        for f in FIELDS:
+            np.testing.assert_array_equal(fast[f], slow[f], err_msg=f"{action} {f}")
+        assert n_rollout > 0 and n_single < calls["step"] - n_single, (action, n_single, calls["step"])

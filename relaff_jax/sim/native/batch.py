@@ -82,42 +82,98 @@ def default_threads() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def _pad_contacts(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel, pad: str, body: str):
-    """One pad's contacts with ``body`` ("toy" / "obj") from ``sensordata`` (n, S) and
-    ``geom_xmat`` (n, G, 9) of the same forward pass: dist (n, K), normal (n, K, 3), the pad's
-    closing axis (n, 3), valid (n, K)."""
-    n = sd.shape[0]
-    s = m.sensor(f"{pad}_{body}")
-    k = SLOTS[body]
-    block = sd[:, s.adr[0]:s.adr[0] + 5 * k].reshape(n, k, 5)  # found, dist, normal (3)
-    found = block[:, 0, 0]
-    if np.any(found > k):
-        raise RuntimeError(f"contact sensor {pad}_{body}: {int(found.max())} contacts > {k} slots")
-    valid = np.arange(k)[None, :] < found[:, None]
-    axis = gxmat[:, m.geom(pad).id].reshape(n, 3, 3)[:, :, 1]
-    return block[:, :, 1], block[:, :, 2:5], axis, valid
+class _Pads:
+    """The four pad contact sensors' places in ``sensordata`` and the pads' geom ids, looked up
+    once per chunk (every model of a batch has the same sensors at the same addresses)."""
+
+    def __init__(self, m: mujoco.MjModel):
+        self.adr = {(pad, body): int(m.sensor(f"{pad}_{body}").adr[0]) for pad, body in PAD_SENSORS}
+        self.geom = {pad: int(m.geom(pad).id) for pad, _ in PAD_SENSORS}
+
+    def any_contact(self, sd: np.ndarray, rows: np.ndarray, pads: tuple[str, ...], body: str) -> bool:
+        """Does any of ``rows`` (n,) bool have a contact of every pad in ``pads`` with ``body``?
+        Without one neither test can hold (``pad_hit`` and ``pad_landing_np`` read valid
+        contacts only), so a step without one needs no test. Raises as ``contacts`` when a
+        sensor found more contacts than its slots."""
+        for pad in pads:
+            found = sd[:, self.adr[pad, body]]
+            if np.any(found > SLOTS[body]):
+                raise RuntimeError(f"contact sensor {pad}_{body}: {int(found.max())} contacts > {SLOTS[body]} slots")
+            rows = rows & (found > 0)
+        return bool(rows.any())
+
+    def contacts(self, sd: np.ndarray, gxmat: np.ndarray, pad: str, body: str):
+        """One pad's contacts with ``body`` ("toy" / "obj") from ``sensordata`` (n, S) and
+        ``geom_xmat`` (n, G, 9) of the same forward pass: dist (n, K), normal (n, K, 3), the
+        pad's closing axis (n, 3), valid (n, K)."""
+        n, k, a = sd.shape[0], SLOTS[body], self.adr[pad, body]
+        block = sd[:, a:a + 5 * k].reshape(n, k, 5)  # found, dist, normal (3)
+        found = block[:, 0, 0]
+        if np.any(found > k):
+            raise RuntimeError(f"contact sensor {pad}_{body}: {int(found.max())} contacts > {k} slots")
+        valid = np.arange(k)[None, :] < found[:, None]
+        axis = gxmat[:, self.geom[pad]].reshape(n, 3, 3)[:, :, 1]
+        return block[:, :, 1], block[:, :, 2:5], axis, valid
 
 
-def _touching(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel, body: str, cfg: ActionConfig) -> np.ndarray:
+def _touching(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel | _Pads, body: str,
+              cfg: ActionConfig) -> np.ndarray:
     """(n,) bool: do both pads grip ``body`` ("toy" / "obj")?"""
-    hits = [pad_hit(*_pad_contacts(sd, gxmat, m, pad, body), cfg) for pad in ("arm_pad_l", "arm_pad_r")]
+    pads = m if isinstance(m, _Pads) else _Pads(m)
+    hits = [pad_hit(*pads.contacts(sd, gxmat, pad, body), cfg) for pad in ("arm_pad_l", "arm_pad_r")]
     return hits[0] & hits[1]
 
 
-def _landing(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel, cfg: ActionConfig) -> np.ndarray:
+def _landing(sd: np.ndarray, gxmat: np.ndarray, m: mujoco.MjModel | _Pads, cfg: ActionConfig) -> np.ndarray:
     """(n,) bool: does a pad land on either object (``guard.pad_landing_np``)?"""
-    return np.any([pad_landing_np(*_pad_contacts(sd, gxmat, m, pad, body), cfg)
+    pads = m if isinstance(m, _Pads) else _Pads(m)
+    return np.any([pad_landing_np(*pads.contacts(sd, gxmat, pad, body), cfg)
                    for pad in ("arm_pad_l", "arm_pad_r") for body in ("toy", "obj")], axis=0)
 
 
+# the longest stretch stepped in one call once a run may stop (v2's read step found): a bound
+# on the steps simulated past it, which change no result
+STRETCH_AFTER_MEASURE = 16
+
+
+def _checks(inp, t: int, grasp, stopped: np.ndarray, eq: np.ndarray) -> bool:
+    """Does control step t need a decision before it: a guarded step with a descent still
+    going, or a closing step with a scene not yet locked (``_run_chunk``'s two tests)?"""
+    if inp.guard[t] and not stopped.all():
+        return True
+    return grasp is not None and bool(inp.closing[t]) and not bool(np.all(eq[:, grasp[0]] != 0))
+
+
+def _stretch_end(inp, t: int, grasp, stopped: np.ndarray, eq: np.ndarray, lo: int, hi: int) -> int:
+    """The end (exclusive) of the stretch of steps from t that need no decision: it stops at
+    the next step that needs one, where the closing flag changes (with a grasp), where the
+    recorded rest window [lo, hi] begins or ends, and in the window at most
+    ``STRETCH_AFTER_MEASURE`` steps past the measuring step or the stretch's start, whichever
+    is later (from there the run may stop)."""
+    end = t + 1
+    cap = inp.n_run if not lo <= t <= hi else min(inp.n_run, max(t, inp.measure) + STRETCH_AFTER_MEASURE)
+    while end < cap and not _checks(inp, end, grasp, stopped, eq) and (t < lo) == (end < lo) \
+            and (t <= hi) == (end <= hi) and (grasp is None or inp.closing[end] == inp.closing[t]):
+        end += 1
+    return end
+
+
 def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: int, nqo: int) -> dict:
-    """Execute programs ``rows`` of ``inp`` (``native.program.ProgramInputs``) in one batch."""
+    """Execute programs ``rows`` of ``inp`` (``native.program.ProgramInputs``) in one batch.
+
+    Steps that need a decision (a guarded descent still going, a grasp not yet locked on every
+    scene) are stepped one at a time, as ``reference.replay_native``; the stretches between
+    them are stepped in one ``Batch.rollout`` call each, with the same commands (set before
+    every ``mj_step``, as one step at a time), recording the centres of mass and ``qpos``
+    where the rest reader needs them. The batch keeps every simulation's state (``qacc``'s
+    warm start included) between calls, so the stretches give the steps' bits."""
     world = setup(cfg).world
     wl = welds(world)
     bodies = [world.toy_body, world.obj_body]
     own = [copy.copy(models[r]) for r in rows]  # each simulation owns its model: the lock's eq_data
     batch = mujoco.batch.Batch(own[0], nsim=len(rows), nthread=nthread)
     batch.set_models(own)
+    pads = _Pads(own[0])
     qpos, qvel, ctrl, eq = (batch.bind(f) for f in ("qpos", "qvel", "ctrl", "eq_active"))
     xipos, xpos, xquat, gxmat, sd = (batch.bind(f) for f in ("xipos", "xpos", "xquat", "geom_xmat", "sensordata"))
     qpos[:], qvel[:], eq[:] = inp.qpos[rows], inp.qvel[rows], inp.eq_active[rows]
@@ -125,12 +181,33 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
     com0 = xipos[:, bodies].copy()
     com_m = None
     rest = RestReader(cfg, inp)
+    lo, hi = rest.lo, rest.lo + cfg.rest_window + rest.hold  # the steps the rest reader reads
     grasp = {1: (wl.obj, world.obj_body, "obj"), 2: (wl.toy, world.toy_body, "toy")}.get(inp.grasp)
     stopped = np.zeros(len(rows), bool)
     q_arm, v_arm = setup(cfg).arm.qpos_arm, setup(cfg).arm.qvel_arm
-    for t in range(inp.n_run):
-        if inp.guard[t]:  # the descent stops where a pad lands (guard.py)
-            for i in np.flatnonzero(~stopped & _landing(sd, gxmat, own[0], cfg)):
+    t = 0
+    while t < inp.n_run:
+        if not _checks(inp, t, grasp, stopped, eq):
+            end = _stretch_end(inp, t, grasp, stopped, eq, lo, hi)
+            if grasp is not None and not inp.closing[t]:
+                eq[:, grasp[0]] = 0.0
+            read = lo <= t <= hi or t == inp.measure
+            rec = batch.rollout(end - t, control=inp.ctrl[rows, t:end], record=("xipos", "qpos") if read else ())
+            for k in range(end - t):
+                if t + k == inp.measure:
+                    com_m = rec["xipos"][:, k, bodies].copy()
+                if read:
+                    rest.add(t + k, rec["xipos"][:, k, bodies], rec["qpos"][:, k, :nqo])
+                if inp.v2 and rest.done:
+                    break
+            t = end
+            if inp.v2 and rest.done:
+                break
+            continue
+        going = ~stopped
+        if inp.guard[t] and any(pads.any_contact(sd, going, (pad,), body) for pad, body in PAD_SENSORS):
+            # the descent stops where a pad lands (guard.py)
+            for i in np.flatnonzero(going & _landing(sd, gxmat, pads, cfg)):
                 stopped[i] = True
                 stop_descent(cfg, inp, int(rows[i]), t, hold_joints(qpos[i, q_arm], qvel[i, v_arm]))
         # the grasp lock of simulate.run_program_locked, on the pads' contact sensors (the
@@ -139,7 +216,8 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
             row, body, name = grasp
             if inp.closing[t]:
                 active = eq[:, row] != 0
-                lock = active | _touching(sd, gxmat, own[0], name, cfg)
+                grips = pads.any_contact(sd, ~active, ("arm_pad_l", "arm_pad_r"), name)
+                lock = active | _touching(sd, gxmat, pads, name, cfg) if grips else active
                 new = np.flatnonzero(lock & ~active)
                 if len(new):
                     rel = weld_relpose_np(xpos[new, wl.hand_body], xquat[new, wl.hand_body], xpos[new, body],
@@ -157,6 +235,7 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
         rest.add(t, xipos[:, bodies], qpos[:, :nqo])
         if inp.v2 and rest.done:  # every scene's read step is known: the rest changes nothing
             break
+        t += 1
     com_r, q_r, settled = rest.result()
     if inp.v2:  # every goal and the final state at the read step
         return dict(com0=com0, com_m=com_r, com_end=com_r, qpos_final=q_r.astype(np.float32), settled=settled)
