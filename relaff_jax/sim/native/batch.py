@@ -191,7 +191,7 @@ def _run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nthread: 
             end = _stretch_end(inp, t, grasp, stopped, eq, lo, hi)
             if grasp is not None and not inp.closing[t]:
                 eq[:, grasp[0]] = 0.0
-            read = lo <= t <= hi or t == inp.measure
+            read = lo <= t <= hi  # the whole stretch is in the window or out of it; measure is in it
             rec = batch.rollout(end - t, control=inp.ctrl[rows, t:end], record=("xipos", "qpos") if read else ())
             for k in range(end - t):
                 if t + k == inp.measure:
