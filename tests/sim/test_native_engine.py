@@ -309,3 +309,24 @@ def test_stretches_equal_one_step_at_a_time(planned, monkeypatch):
         for f in FIELDS:
             np.testing.assert_array_equal(fast[f], slow[f], err_msg=f"{action} {f}")
         assert n_rollout > 0 and n_single < calls["step"] - n_single, (action, n_single, calls["step"])
+
+
+@pytest.mark.slow  # shares the plan compile of the replay test
+def test_benchmark_former_chunk_equals_the_engine(planned, monkeypatch):
+    """``benchmarks/native_stretches.py`` times the engine against the chunk function it replaced,
+    kept verbatim there: that copy still runs and gives the engine's bits (else the benchmark's
+    ratio would compare other work)."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "native_stretches.py"
+    spec = importlib.util.spec_from_file_location("native_stretches", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    for action in ("lift", "unobstruct"):  # a guarded base grasp; the toy reached before and after
+        pair, q, qvel, plan, before = planned[action]
+        new = native_batch.execute_native(action, CFG, pair, q, qvel, plan, before)
+        with monkeypatch.context() as m:
+            m.setattr(native_batch, "_run_chunk", bench.former_run_chunk)
+            old = native_batch.execute_native(action, CFG, pair, q, qvel, plan, before)
+        for f in FIELDS:
+            np.testing.assert_array_equal(new[f], old[f], err_msg=f"{action} {f}")
