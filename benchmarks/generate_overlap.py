@@ -65,6 +65,7 @@ PARTS = [  # (module or class, attribute, label) of the "before" path's split
     (rollouts, "execute_native", "execution, all of it"),
     (native_batch, "program_inputs", "- initial states and commands (JAX)"),
     (mujoco.batch.Batch, "step", "- mujoco.batch steps (C; the settle's counted here too)"),
+    (mujoco.batch.Batch, "rollout", "- mujoco.batch rollouts (C: the stretches between decision steps)"),
     (native_batch, "_landing", "- landing tests (Python, numpy)"),
     (native_batch, "_touching", "- grasp tests (Python, numpy)"),
     (PerSceneRestReader, "add", "- rest reader (Python, numpy)"),
