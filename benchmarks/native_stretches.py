@@ -8,20 +8,19 @@ replaced (``former_run_chunk``, kept here verbatim: one step at a time, every pa
 looked up by name and read at every guarded or closing step).
 For each action this captures the C execution's inputs of one native rollout batch
 (``rollouts.make_rollout_fn(action, batch, engine="native")``, seed 3 as
-``generate_cpu.py``), then runs ``execute_native`` on them both ways, alternating, for
+``generate_cpu.py``), then runs ``execute_native`` on them the three ways, alternating, for
 ``--rounds`` rounds, asserts every output field equal, and prints the best CPU (process, all
-threads) and wall seconds of each and their ratio.
+threads) and wall seconds of each and the stretches' ratio to the former.
 
     python benchmarks/native_stretches.py [--actions lift pour ...] [--batch 64] [--rounds 3]
 """
 from __future__ import annotations
 
 import argparse
+import copy
 import os
 import platform
 import time
-
-import copy
 
 import mujoco
 import mujoco.batch
@@ -118,9 +117,6 @@ def former_run_chunk(cfg: ActionConfig, models: list, inp, rows: np.ndarray, nth
         return dict(com0=com0, com_m=com_r, com_end=com_r, qpos_final=q_r.astype(np.float32), settled=settled)
     return dict(com0=com0, com_m=com_m, com_end=xipos[:, bodies].copy(),
                 qpos_final=qpos[:, :nqo].astype(np.float32), settled=settled)
-
-
-
 
 
 def captured(action: str, batch: int) -> tuple:
