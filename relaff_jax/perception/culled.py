@@ -42,6 +42,12 @@ TILE_BUCKETS = (32, 64, 128)
 # Object pixel buffer lengths the stages after the cast can run at (each compiled when first
 # used), below the cast's own buffer. Settled scenes show a median of ~2,500 object pixels.
 PIXEL_BUCKETS = (2048, 3072, 4096, 6144, 8192)
+# XLA options of the chain's programs. The package turns XLA:CPU's fusion emitters off for the
+# whole process (relaff_jax/__init__.py: MJX's kinematics need them off); the chain has no MJX,
+# and with them its scatters are emitted as loops instead of one-element updates: the RHF took
+# 0.57x the CPU time, the whole chain ~0.8x, the same bits (benchmarks/perception_emitters.py,
+# tests/perception/test_perception.py compares with make_batched_features, compiled without).
+CHAIN_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": True}
 # RHF pair tile columns (``rhf.chunk``; tiles of ``descriptors.RHF_ROWS`` x this): the
 # histograms are integer counts, so any tiling gives the same bits.
 RHF_CHUNK = 256
@@ -90,7 +96,7 @@ def make_tile_counter(geom_type, geom_seg, cfg: PerceptionConfig):
 
 
 def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = PerceptionConfig(), sub_batch: int = 4,
-                         buckets=TILE_BUCKETS, pixel_buckets=PIXEL_BUCKETS):
+                         buckets=TILE_BUCKETS, pixel_buckets=PIXEL_BUCKETS, compiler_options=None):
     """``f(size, xpos, xmat, keys) -> dict`` of numpy arrays (B, ...), the fields of
     ``SceneFeatures``, equal to ``make_batched_features(...)(...)`` bit for bit.
 
@@ -99,8 +105,13 @@ def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = Perception
     cast (``object_pixels``) at ``tile_capacity`` of the call's largest count, then the stages
     after it (``cloud_from_pixels``, ``features_from_voxels``) on the buffer cut to
     ``pixel_capacity`` of its largest object pixel count. ``f.capacities`` lists the tile
-    capacities used so far, ``f.pixel_capacities`` the buffer lengths.
+    capacities used so far, ``f.pixel_capacities`` the buffer lengths. ``compiler_options``: XLA
+    options of the cast and the stages after it (None: ``CHAIN_COMPILER_OPTIONS`` on a CPU
+    backend, none elsewhere; ``{}``: the process's own settings).
     """
+    if compiler_options is None:
+        compiler_options = CHAIN_COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
+    compiler_options = dict(compiler_options) or None
     count = make_tile_counter(geom_type, geom_seg, cfg)
     scene = scene_layout(geom_type, geom_seg)
     casts: dict[int, object] = {}
@@ -109,7 +120,7 @@ def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = Perception
     def cast(k):
         if k not in casts:
             ck = capacity_config(cfg, k)
-            casts[k] = jax.jit(jax.vmap(lambda s, x, m: object_pixels(scene(s, x, m), ck)))
+            casts[k] = jax.jit(jax.vmap(lambda s, x, m: object_pixels(scene(s, x, m), ck)), compiler_options=compiler_options)
         return casts[k]
 
     def rest(m):
@@ -120,7 +131,7 @@ def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = Perception
             def one(s, x, mat, key, pix):
                 return features_from_voxels(cloud_from_pixels(scene(s, x, mat), pix, key, cm)["voxels"], cm)
 
-            rests[m] = jax.jit(jax.vmap(one))
+            rests[m] = jax.jit(jax.vmap(one), compiler_options=compiler_options)
         return rests[m]
 
     def f(size, xpos, xmat, keys) -> dict:

@@ -101,7 +101,7 @@ SUB_BATCH = 4
 
 
 def make_feature_fn(world: wd.World, cfg: PerceptionConfig = PerceptionConfig(), seed: int = 0,
-                    sub_batch: int = SUB_BATCH, culled: bool = True):
+                    sub_batch: int = SUB_BATCH, culled: bool = True, compiler_options=None):
     """``compute(samples) -> dict of numpy arrays`` for ``relaff_jax.data.add_features``.
 
     ``samples`` needs ``pair`` (B,), ``qpos_settled`` (B, nq) and ``rollout_id`` (B,) int64;
@@ -109,13 +109,15 @@ def make_feature_fn(world: wd.World, cfg: PerceptionConfig = PerceptionConfig(),
     perceived in calls of ``sub_batch`` (the last one padded by repeating its last scene; the
     features are the same at any ``sub_batch``). ``culled`` (default): capacities sized per call
     (``perception.culled``, the same bits); False: every call at the config's capacities (the
-    reference, ``benchmarks/perception_culled.py``). Raises ``UserError`` if fields are missing or
+    reference, ``benchmarks/perception_culled.py``). ``compiler_options``: the culled chain's XLA
+    options (``culled.make_culled_features``; None: its default). Raises ``UserError`` if fields are missing or
     a scene exceeds a perception capacity.
     """
     if int(sub_batch) < 1:
         raise UserError(f"sub_batch must be >= 1, got {sub_batch}")
     feats = make_batched_features(world.mj_model.geom_type, world.geom_seg, cfg)
-    sized = make_culled_features(world.mj_model.geom_type, world.geom_seg, cfg, sub_batch=sub_batch)
+    sized = make_culled_features(world.mj_model.geom_type, world.geom_seg, cfg, sub_batch=sub_batch,
+                                 compiler_options=compiler_options)
     geoms = jitted_geoms(world)
     root = jax.random.PRNGKey(seed)
 
