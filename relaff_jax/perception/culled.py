@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import threading
+from typing import Callable
 
 import jax
 import jax.numpy as jnp
@@ -89,6 +91,86 @@ def cut(pix: dict, m: int) -> dict:
     return {name: v[:, :m] if name in BUFFER_FIELDS else v for name, v in pix.items()}
 
 
+def _layout(geom_type, geom_seg) -> tuple:
+    return tuple(int(v) for v in np.asarray(geom_type).ravel()), tuple(int(v) for v in np.asarray(geom_seg).ravel())
+
+
+def _options(compiler_options) -> tuple:
+    """``compiler_options`` as a hashable key (None: ``CHAIN_COMPILER_OPTIONS`` on a CPU backend)."""
+    if compiler_options is None:
+        compiler_options = CHAIN_COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
+    return tuple(sorted(dict(compiler_options).items()))
+
+
+class _Programs:
+    """The chain's jitted programs of one geom layout, config and XLA options, by capacity:
+    ``cast(k)`` (``object_pixels`` at k tiles) and ``rest(m)`` (the stages after the cast on a
+    buffer of m slots). One per key (``_programs``), so every ``make_culled_features`` of it
+    and ``warmups`` share the programs JAX traced and compiled."""
+
+    def __init__(self, layout: tuple, cfg: PerceptionConfig, options: tuple):
+        self.scene, self.cfg, self.options = scene_layout(*layout), cfg, dict(options) or None
+        self.casts: dict[int, object] = {}
+        self.rests: dict[int, object] = {}
+        self.lock = threading.Lock()  # two threads asking for a capacity get one program
+
+    def cast(self, k: int):
+        with self.lock:
+            if k not in self.casts:
+                ck, scene = capacity_config(self.cfg, k), self.scene
+                self.casts[k] = jax.jit(jax.vmap(lambda s, x, m: object_pixels(scene(s, x, m), ck)),
+                                        compiler_options=self.options)
+            return self.casts[k]
+
+    def rest(self, m: int):
+        with self.lock:
+            if m not in self.rests:
+                base = capacity_config(self.cfg, self.cfg.cull.max_tiles)
+                cm = dataclasses.replace(base, voxel=dataclasses.replace(base.voxel, max_object_pixels=m))
+                scene = self.scene
+
+                def one(s, x, mat, key, pix):
+                    return features_from_voxels(cloud_from_pixels(scene(s, x, mat), pix, key, cm)["voxels"], cm)
+
+                self.rests[m] = jax.jit(jax.vmap(one), compiler_options=self.options)
+            return self.rests[m]
+
+
+@functools.lru_cache(maxsize=None)
+def _programs(layout: tuple, cfg: PerceptionConfig, options: tuple) -> _Programs:
+    return _Programs(layout, cfg, options)
+
+
+def warmups(geom_type, geom_seg, cfg: PerceptionConfig = PerceptionConfig(), sub_batch: int = 4,
+            buckets=TILE_BUCKETS, pixel_buckets=PIXEL_BUCKETS, compiler_options=None) -> list[Callable[[], None]]:
+    """Functions of no argument, each tracing and compiling (or loading from the compilation
+    cache) one program of ``make_culled_features`` with these arguments at the shapes its calls
+    of ``sub_batch`` scenes have: the cast at every tile capacity of ``buckets``, then the
+    stages after it at every buffer length of ``pixel_buckets``, on placeholder scenes (zeros).
+    A compiled program depends on its arguments' shapes and dtypes, not their values, so a
+    later ``make_culled_features`` runs the programs it would have compiled itself: the same
+    bits. The generate stage runs them on its background thread while the physics runs
+    (``stages/generate.py``), so that the features stage finds them ready."""
+    programs = _programs(_layout(geom_type, geom_seg), cfg, _options(compiler_options))
+    g, sb = len(_layout(geom_type, geom_seg)[0]), int(sub_batch)
+    size, xpos, xmat = (jnp.zeros((sb, g) + s, jnp.float32) for s in ((3,), (3,), (3, 3)))
+    tiles = sorted(b for b in buckets if b < cfg.cull.max_tiles)
+    pixels = sorted(pixel_buckets)
+
+    def cast(k):
+        jax.block_until_ready(programs.cast(k)(size, xpos, xmat))
+
+    def rest(m):
+        from .from_sim import rollout_keys  # the keys as the features stage makes them
+
+        keys = rollout_keys(jax.random.PRNGKey(0), np.zeros(sb, np.int64))
+        pix = programs.cast(tiles[-1])(size, xpos, xmat)  # the largest cast's buffer holds every bucket
+        full = pix["seg"].shape[1]
+        jax.block_until_ready(programs.rest(min(m, full))(size, xpos, xmat, keys, cut(pix, m) if m < full else pix))
+
+    return [functools.partial(cast, k) for k in tiles] + [functools.partial(rest, m) for m in pixels]
+
+
 def make_tile_counter(geom_type, geom_seg, cfg: PerceptionConfig):
     """Jitted ``(size (B, G, 3), xpos (B, G, 3), xmat (B, G, 3, 3)) -> (B,) int32`` active tiles per scene."""
     scene = scene_layout(geom_type, geom_seg)
@@ -109,29 +191,19 @@ def make_culled_features(geom_type, geom_seg, cfg: PerceptionConfig = Perception
     options of the cast and the stages after it (None: ``CHAIN_COMPILER_OPTIONS`` on a CPU
     backend, none elsewhere; ``{}``: the process's own settings).
     """
-    if compiler_options is None:
-        compiler_options = CHAIN_COMPILER_OPTIONS if jax.default_backend() == "cpu" else {}
-    compiler_options = dict(compiler_options) or None
+    programs = _programs(_layout(geom_type, geom_seg), cfg, _options(compiler_options))
     count = make_tile_counter(geom_type, geom_seg, cfg)
-    scene = scene_layout(geom_type, geom_seg)
-    casts: dict[int, object] = {}
+    casts: dict[int, object] = {}  # the capacities this function used (the programs are shared)
     rests: dict[int, object] = {}
 
     def cast(k):
         if k not in casts:
-            ck = capacity_config(cfg, k)
-            casts[k] = jax.jit(jax.vmap(lambda s, x, m: object_pixels(scene(s, x, m), ck)), compiler_options=compiler_options)
+            casts[k] = programs.cast(k)
         return casts[k]
 
     def rest(m):
         if m not in rests:
-            base = capacity_config(cfg, cfg.cull.max_tiles)
-            cm = dataclasses.replace(base, voxel=dataclasses.replace(base.voxel, max_object_pixels=m))
-
-            def one(s, x, mat, key, pix):
-                return features_from_voxels(cloud_from_pixels(scene(s, x, mat), pix, key, cm)["voxels"], cm)
-
-            rests[m] = jax.jit(jax.vmap(one), compiler_options=compiler_options)
+            rests[m] = programs.rest(m)
         return rests[m]
 
     def f(size, xpos, xmat, keys) -> dict:

@@ -746,3 +746,31 @@ def test_culled_features_on_pixel_buffers_cut_to_the_cast(chain, random_scenes):
     assert sorted(f.pixel_capacities) == [int(counts.max())]
     for k, want in chain["feats"].items():
         np.testing.assert_array_equal(got[k], np.asarray(want), err_msg=k)
+
+
+def test_warmups_compile_the_programs_the_chain_then_runs(chain, random_scenes):
+    """``culled.warmups`` traces and compiles, on placeholder scenes, the cast and the stages
+    after it at the capacities given; a ``make_culled_features`` of the same layout, config and
+    options then runs those very programs (no new trace) and gives the bits of
+    ``make_batched_features``."""
+    from relaff_jax.perception import culled
+
+    scenes, seg = random_scenes
+    b = chain["batch"]
+    gt = scenes[0][0].geom_type
+    n = np.asarray(P.make_tile_counter(gt, seg, SMALL)(b.size, b.xpos, b.xmat))
+    tiles, pixels = (int(n.max()),), (int(np.asarray(chain["feats"]["n_pixels"]).sum(1).max()),)
+    assert tiles[0] < SMALL.cull.max_tiles and pixels[0] < min(SMALL.voxel.max_object_pixels, tiles[0] * SMALL.cull.tile ** 2)
+    options = {"xla_cpu_use_fusion_emitters": True, "xla_cpu_enable_fast_min_max": False}  # a key of this test's own
+    fns = culled.warmups(gt, seg, SMALL, sub_batch=1, buckets=tiles, pixel_buckets=pixels, compiler_options=options)
+    assert len(fns) == 2
+    for fn in fns:
+        fn()
+    f = P.make_culled_features(gt, seg, SMALL, sub_batch=1, buckets=tiles, pixel_buckets=pixels, compiler_options=options)
+    keys = jax.random.key_data(chain["keys"])  # raw uint32 keys, as the features stage makes them (from_sim.rollout_keys)
+    got = f(b.size, b.xpos, b.xmat, keys)
+    assert sorted(f.capacities) == list(tiles) and sorted(f.pixel_capacities) == list(pixels)
+    for program in [*f.capacities.values(), *f.pixel_capacities.values()]:
+        assert program._cache_size() == 1  # the warm-up's trace, not a second one
+    for k, want in chain["feats"].items():
+        np.testing.assert_array_equal(got[k], np.asarray(want), err_msg=k)
