@@ -43,6 +43,19 @@ def default_feature_factory(seed: int, config: Any = None, objects: Any = None, 
     return from_sim.make_feature_fn(build_world(), cfg, seed), feature_config(seed, cfg)
 
 
+def feature_warmups(cfg: Any) -> list:
+    """The features stage's perception programs compiled ahead (``perception.culled.warmups``)
+    for a ``RunConfig``'s perception, with its action's object set active, as
+    ``default_feature_factory`` builds the chain: functions of no argument that the generate
+    stage runs on its background thread (``stages/generate.py``)."""
+    from relaff_jax.perception import culled, from_sim
+    from relaff_jax.sim.world import build_world
+
+    use_scene(cfg.action.scene, cfg.action.grip_margin)
+    world = build_world()
+    return culled.warmups(world.mj_model.geom_type, world.geom_seg, cfg.perception, from_sim.SUB_BATCH)
+
+
 def feature_config(seed: int, config: Any = None) -> dict:
     """The config dict ``default_feature_factory`` stores (without building the world)."""
     return {"perception": stored_config(config if config is not None else PerceptionConfig()), "seed": seed}

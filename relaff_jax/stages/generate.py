@@ -175,6 +175,11 @@ def run(run: Run, forced: bool) -> dict:
                 from relaff_jax.sim.warm import unobstruct_warmups  # the simulation loads when the stage runs
 
                 beside.warm(unobstruct_warmups(cfg.action, cfg.dataset.rollout_batch, todo))
+            from relaff_jax.stages.features import default_feature_factory, feature_warmups
+
+            if todo and beside.pool is not None and getattr(run.feature_factory, "func", None) is default_feature_factory:
+                # the features stage's programs, compiled while the physics runs (XLA's compiles leave the GIL free)
+                beside.warm(feature_warmups(cfg))
             if todo and cfg.experiment.forest.engine == "compiled":  # the experiment's kernels, compiled or loaded
                 from relaff_jax.learn.forest.compiled.forest import warm
 
