@@ -161,9 +161,7 @@ def warmups(geom_type, geom_seg, cfg: PerceptionConfig = PerceptionConfig(), sub
         jax.block_until_ready(programs.cast(k)(size, xpos, xmat))
 
     def rest(m):
-        from .from_sim import rollout_keys  # the keys as the features stage makes them
-
-        keys = rollout_keys(jax.random.PRNGKey(0), np.zeros(sb, np.int64))
+        keys = jnp.zeros((sb, 2), jnp.uint32)  # raw keys, as from_sim.rollout_keys gives the features stage
         pix = programs.cast(tiles[-1])(size, xpos, xmat)  # the largest cast's buffer holds every bucket
         full = pix["seg"].shape[1]
         jax.block_until_ready(programs.rest(min(m, full))(size, xpos, xmat, keys, cut(pix, m) if m < full else pix))
