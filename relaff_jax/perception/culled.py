@@ -47,7 +47,7 @@ PIXEL_BUCKETS = (2048, 3072, 4096, 6144, 8192)
 # XLA options of the chain's programs. The package turns XLA:CPU's fusion emitters off for the
 # whole process (relaff_jax/__init__.py: MJX's kinematics need them off); the chain has no MJX,
 # and with them its scatters are emitted as loops instead of one-element updates: the RHF took
-# 0.57x the CPU time, the whole chain ~0.8x, the same bits (benchmarks/perception_emitters.py,
+# 0.57x the CPU time, the whole chain ~0.8x, the same bits (benchmarks/features_emitters.py,
 # tests/perception/test_perception.py compares with make_batched_features, compiled without).
 CHAIN_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": True}
 # RHF pair tile columns (``rhf.chunk``; tiles of ``descriptors.RHF_ROWS`` x this): the
