@@ -155,18 +155,21 @@ def warmups(geom_type, geom_seg, cfg: PerceptionConfig = PerceptionConfig(), sub
     g, sb = len(_layout(geom_type, geom_seg)[0]), int(sub_batch)
     size, xpos, xmat = (jnp.zeros((sb, g) + s, jnp.float32) for s in ((3,), (3,), (3, 3)))
     tiles = sorted(b for b in buckets if b < cfg.cull.max_tiles)
-    pixels = sorted(pixel_buckets)
+    keys = jnp.zeros((sb, 2), jnp.uint32)  # raw keys, as from_sim.rollout_keys gives the features stage
 
     def cast(k):
         jax.block_until_ready(programs.cast(k)(size, xpos, xmat))
 
+    @functools.cache
+    def widest():  # the largest cast's output, made once: its buffer holds every bucket below it
+        return programs.cast(tiles[-1] if tiles else cfg.cull.max_tiles)(size, xpos, xmat)
+
     def rest(m):
-        keys = jnp.zeros((sb, 2), jnp.uint32)  # raw keys, as from_sim.rollout_keys gives the features stage
-        pix = programs.cast(tiles[-1])(size, xpos, xmat)  # the largest cast's buffer holds every bucket
+        pix = widest()
         full = pix["seg"].shape[1]
         jax.block_until_ready(programs.rest(min(m, full))(size, xpos, xmat, keys, cut(pix, m) if m < full else pix))
 
-    return [functools.partial(cast, k) for k in tiles] + [functools.partial(rest, m) for m in pixels]
+    return [functools.partial(cast, k) for k in tiles] + [functools.partial(rest, m) for m in sorted(pixel_buckets)]
 
 
 def make_tile_counter(geom_type, geom_seg, cfg: PerceptionConfig):

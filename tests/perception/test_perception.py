@@ -766,11 +766,15 @@ def test_warmups_compile_the_programs_the_chain_then_runs(chain, random_scenes):
     assert len(fns) == 2
     for fn in fns:
         fn()
+    store = culled._programs(culled._layout(gt, seg), SMALL, culled._options(options))
+    warmed = [store.casts[tiles[0]], store.rests[pixels[0]]]
+    assert [p._cache_size() for p in warmed] == [1, 1]  # traced and compiled by the warm-ups themselves
     f = P.make_culled_features(gt, seg, SMALL, sub_batch=1, buckets=tiles, pixel_buckets=pixels, compiler_options=options)
     keys = jax.random.key_data(chain["keys"])  # raw uint32 keys, as the features stage makes them (from_sim.rollout_keys)
     got = f(b.size, b.xpos, b.xmat, keys)
     assert sorted(f.capacities) == list(tiles) and sorted(f.pixel_capacities) == list(pixels)
-    for program in [*f.capacities.values(), *f.pixel_capacities.values()]:
+    assert [*f.capacities.values(), *f.pixel_capacities.values()] == warmed  # the very programs warmed
+    for program in warmed:
         assert program._cache_size() == 1  # the warm-up's trace, not a second one
     for k, want in chain["feats"].items():
         np.testing.assert_array_equal(got[k], np.asarray(want), err_msg=k)
