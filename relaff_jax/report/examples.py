@@ -10,6 +10,7 @@ the perception stage load only when pictures are drawn.
 from __future__ import annotations
 
 import os
+import sys
 from pathlib import Path
 from typing import Callable, Mapping
 
@@ -65,14 +66,21 @@ class Drawing:
     def __call__(self) -> list[tuple[str, str, str]]:
         if self.pool is None:
             return self.draw()
+        from concurrent.futures.process import BrokenProcessPool
+
         try:
             return self.job.result()
+        except BrokenProcessPool:  # the process died (killed, out of memory): draw here instead
+            print("report: the example scenes' drawing process ended abruptly; drawing them in this process",
+                  file=sys.stderr, flush=True)
+            return self.draw()
         finally:
             self.pool.shutdown(wait=True, cancel_futures=True)
 
     def cancel(self) -> None:
         if self.pool is not None:
-            for proc in list(getattr(self.pool, "_processes", {}).values()):
+            # a pool that has shut down (or broken) keeps None here, not a dict
+            for proc in list((getattr(self.pool, "_processes", None) or {}).values()):
                 proc.terminate()  # each picture is written atomically: none is left half-written
             self.pool.shutdown(wait=False, cancel_futures=True)
 
@@ -94,7 +102,7 @@ def examples_beside(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_a
     from relaff_jax.plugins import loaded_files
 
     pool = ProcessPoolExecutor(1, mp_context=get_context("spawn"))
-    return Drawing(pool=pool, job=pool.submit(_in_child, loaded_files(), {a: str(d) for a, d in data_dirs.items()},
+    return Drawing(lambda: example_scenes(data_dirs, out, per_action), pool=pool, job=pool.submit(_in_child, loaded_files(), {a: str(d) for a, d in data_dirs.items()},
                                               str(out), per_action))
 
 

@@ -340,6 +340,26 @@ def test_example_scenes_in_a_second_process_and_a_failed_report_stops_it(scene_r
     assert proc.exitcode == -signal.SIGTERM  # stopped, not left to finish its drawing
 
 
+def test_a_drawing_process_that_dies_is_replaced_by_drawing_here(capsys):
+    """A drawing process killed abruptly (out of memory, a signal) leaves a broken pool: the
+    report draws the pictures in its own process instead, and stopping a broken or finished
+    drawing does not raise (it once raised AttributeError over the report's own error)."""
+    import os
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+
+    from relaff_jax.report import examples as X
+
+    pool = ProcessPoolExecutor(1, mp_context=get_context("spawn"))
+    job = pool.submit(os._exit, 3)  # the child dies without a result
+    here = [("lift", "examples/lift_0.png", "drawn here")]
+    d = X.Drawing(lambda: here, pool=pool, job=job)
+    assert d() == here
+    assert "ended abruptly" in capsys.readouterr().err
+    d.cancel()  # the pool is shut down and broken: nothing left to stop
+    X.Drawing(lambda: here).cancel()
+
+
 def test_cli_report_takes_the_datasets(scene_run, tmp_path, capsys):
     """``relaff report RESULTS --data DIR...``: each folder's action read from its sidecar, as
     ``write_report``'s ``data_dirs``, so the datasets' statistics and figures are in the report;
