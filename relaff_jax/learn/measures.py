@@ -87,17 +87,31 @@ def _score(fam_mean: np.ndarray, mask: np.ndarray) -> np.ndarray:
         return np.nanmean(np.where(mask, fam_mean, np.nan), -1)
 
 
-def _mix(cells: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """``cells (..., A, K, S)``, weights ``(..., A, K)`` -> ``(..., A, S)`` (NaN where all weights are 0)."""
-    ws = w[..., None]
-    out = (np.where(ws > 0, cells, 0.0) * ws).sum(-2)
-    return np.where(w.sum(-1)[..., None] > 0, out, np.nan)
+def _mix(cells: np.ndarray, w: np.ndarray, reference: bool = False) -> np.ndarray:
+    """``cells (..., A, K, S)``, weights ``(..., A, K)`` -> ``(..., A, S)`` (NaN where all weights are 0).
+
+    The weighted sum is ``mix_kernel.weighted_sums`` where the two share their leading shape
+    and ``S >= 2`` (the same bits in one pass); ``reference`` (or any other shape): numpy's."""
+    cells, w = np.asarray(cells, dtype=float), np.asarray(w, dtype=float)
+    ok = w.sum(-1)[..., None] > 0
+    lead = cells.shape[:-2]
+    if not reference and cells.ndim >= 3 and cells.shape[-1] >= 2 and w.shape == cells.shape[:-1] and cells.shape[-2] >= 1:
+        from relaff_jax.learn.mix_kernel import weighted_sums  # noqa: PLC0415 (numba, on first use)
+
+        n = int(np.prod(lead[:-1]))  # the leading axes as one (an explicit count: -1 is ambiguous on empty arrays)
+        out = weighted_sums(cells.reshape((n,) + cells.shape[-3:]), w.reshape((n,) + w.shape[-2:]))
+        out = out.reshape(lead[:-1] + out.shape[1:])
+    else:
+        ws = w[..., None]
+        out = (np.where(ws > 0, cells, 0.0) * ws).sum(-2)
+    return np.where(ok, out, np.nan)
 
 
-def _from_ten(cells_k: np.ndarray, chosen: np.ndarray, ran: np.ndarray, after: np.ndarray) -> np.ndarray:
+def _from_ten(cells_k: np.ndarray, chosen: np.ndarray, ran: np.ndarray, after: np.ndarray,
+              reference: bool = False) -> np.ndarray:
     """A learner that chooses at n = select_size: before it, an equal share of every candidate
     that ran (no choice yet); from it on, ``chosen (..., A, S)``."""
-    return np.where(after, chosen, _mix(cells_k, ran / np.maximum(ran.sum(-1, keepdims=True), 1)))
+    return np.where(after, chosen, _mix(cells_k, ran / np.maximum(ran.sum(-1, keepdims=True), 1), reference))
 
 
 def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, lay: dict, tol: np.ndarray,
@@ -164,9 +178,9 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
         """(best held-out, best oracle, ten held-out, ten oracle, average, ran) of one family, ``(..., A)``."""
         cells = once(("cells", key_i, idx.tobytes()), lambda: (bf, gain)[key_i][..., idx, :])
         ran, w_best, w_ten = family(mean, idx, allowed)
-        best_o = wm(_mix(cells, w_best))
-        kept = _mix(cells, w_ten)  # the learner kept at n = select_size, its whole curve
-        ten_o, ten_c = wm(kept), wm(_from_ten(cells, kept, ran, after))
+        best_o = wm(_mix(cells, w_best, reference))
+        kept = _mix(cells, w_ten, reference)  # the learner kept at n = select_size, its whole curve
+        ten_o, ten_c = wm(kept), wm(_from_ten(cells, kept, ran, after, reference))
         with _quiet():
             avg = np.nanmean(np.where(ran, once(("window", key_i, idx.tobytes()), lambda: wm(cells)), np.nan), -1)
         if halves is None:
@@ -176,10 +190,10 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
         for h in range(2):  # choose on half h, score on the other half
             ran_h, wb_h, wt_h = family(halves[..., h, :, :, :], idx, allowed, h)
             other = once(("other", key_i, h, idx.tobytes()), lambda: split[1 - h][key_i][..., idx, :])
-            held_b.append(wm(_mix(other, wb_h)))
-            kept_h = _mix(other, wt_h)
+            held_b.append(wm(_mix(other, wb_h, reference)))
+            kept_h = _mix(other, wt_h, reference)
             held_t.append(wm(kept_h))
-            held_c.append(wm(_from_ten(other, kept_h, ran_h, after)))
+            held_c.append(wm(_from_ten(other, kept_h, ran_h, after, reference)))
         with _quiet():
             return {"best": np.nanmean(held_b, 0), "best_o": best_o, "ten": np.nanmean(held_t, 0), "ten_o": ten_o,
                     "ten_c": np.nanmean(held_c, 0), "ten_co": ten_c, "avg": avg, "ran": ran}
@@ -198,7 +212,7 @@ def table2_rows(mean: np.ndarray, sizes: Sequence[int], cfg: ExperimentConfig, l
             rows.update({f"{fam} average": c["avg"], f"{fam} best": c["best"], f"{fam} best{ORACLE}": c["best_o"],
                          ten: c["ten"], ten + ORACLE: c["ten_o"], ten + ONLINE: wm(online),
                          causal: c["ten_c"], causal + ORACLE: c["ten_co"],
-                         causal + ONLINE: wm(_from_ten(cells[..., idx, :], online, c["ran"], after))})
+                         causal + ONLINE: wm(_from_ten(cells[..., idx, :], online, c["ran"], after, reference))})
         rows["DBn"] = wm(cells[..., lay["DBn"], :])
         cbn = wm(cells[..., lay["CBn"][list(cfg.thresholds).index(cfg.cbn_threshold)], :])
         rows["CBn"] = cbn if cbn_ok is None else np.where(cbn_ok, cbn, np.nan)
