@@ -74,7 +74,7 @@ PARTS = [
     ("relaff_jax.report.write", "subset_blocks", "data: subset_blocks"),
     ("relaff_jax.report.write", "stored_audits", "data: stored_audits"),
     ("relaff_jax.report.write", "audit_blocks", "data: audit_blocks"),
-    ("relaff_jax.report.write", "example_scenes", "data: example_scenes"),
+    ("relaff_jax.report.write", "examples_beside", "data: examples_beside (drawn in a second process)"),
     ("relaff_jax.report.write", "by_reading", "by_reading"),
     ("relaff_jax.report.write", "finite", "finite (json prep)"),
     ("relaff_jax.report.sections", "correlation_blocks", "correlation_blocks"),

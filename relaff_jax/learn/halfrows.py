@@ -9,10 +9,11 @@ cast the whole ``(C + 2, s, R, N)`` block to float32, then to float64, then copy
 
 * a 0/1 row's mean is its count over m (the float sum of 0/1 values is that integer exactly);
   the online rows are averaged as floats, as the reference does;
-* the bootstrap products have the bits of the reference's one ``x @ w.T`` of ``(C + 2) s R``
-  rows, computed for the rows that are not all zero only (conditions that did not run, an
-  online learner whose family did not run): ``products``, which keeps every row on the kind of
-  BLAS kernel the reference's call computes it with.
+* a resample's accuracy of a row is the row's exact sum of the resample's scene counts
+  (``sums``: integers, or multiples of 2**-30 for the online rows, exact in any order) over
+  m, computed for the rows that are not all zero only (conditions that did not run, an
+  online learner whose family did not run); the reference computes the same exact sums in
+  one ``x @ counts.T`` of ``(C + 2) s R`` rows.
 """
 from __future__ import annotations
 
@@ -49,9 +50,9 @@ def row_means(bits: np.ndarray, on: np.ndarray) -> np.ndarray:
 
 
 class Rows:
-    """The rows of ``rows_f64(bits, on)`` as ``(M, m)``, read where ``products`` needs them
-    without the float64 copy of them all (most of a block's bytes): ``take`` gathers bits, 1
-    byte each, and casts them (0/1: the same values)."""
+    """The rows of ``rows_f64(bits, on)`` as ``(M, m)`` without the float64 copy of them all
+    (most of a block's bytes): the conditions' 0/1 rows as bits ``(C s R, m)`` and the online
+    learners' ``(2 s R, m)``, in ``rows_f64``'s order."""
 
     def __init__(self, bits: np.ndarray, on: np.ndarray, work: dict | None = None):
         self.b4, self.o4, self.work = bits, on, work
@@ -61,114 +62,85 @@ class Rows:
     def __len__(self) -> int:
         return self.shape[0]
 
-    def take(self, rows: np.ndarray, out: np.ndarray) -> None:
-        """``out[:] = x[rows]``, ``rows`` increasing."""
-        k = int(np.searchsorted(rows, len(self.bits)))
-        out[:k] = np.take(self.bits, rows[:k], axis=0)
-        out[k:] = np.take(self.on, rows[k:] - len(self.bits), axis=0)
-
-    def row(self, i: int) -> np.ndarray:
-        return self.bits[i] if i < len(self.bits) else self.on[i - len(self.bits)]
-
     def whole(self) -> np.ndarray:
-        """All of them, as ``rows_f64`` gives them (the one call's fallback)."""
+        """All of them, as ``rows_f64`` gives them."""
         return rows_f64(self.b4, self.o4, self.work).reshape(self.shape)
 
 
-def resampled(bits: np.ndarray, on: np.ndarray, w: np.ndarray, v: np.ndarray, work: dict | None = None) -> np.ndarray:
-    """``(B, C + 2, s)`` bootstrap means of the half: scene weights ``w (B, m)``, repetition
-    weights ``v (B, R)``; the reference's products (``products``, of the rows read from the
-    bits, ``Rows``) and einsum (``work``: arrays reused across calls)."""
+def resampled(bits: np.ndarray, on: np.ndarray, counts: "SceneCounts", v: np.ndarray,
+              work: dict | None = None) -> np.ndarray:
+    """``(B, C + 2, s)`` bootstrap means of the half: the resamples' scene counts ``counts``
+    (``scene_counts``), repetition weights ``v (B, R)``; every row's resampled accuracy is its
+    exact count (``sums``, of the rows read from the bits, ``Rows``) over m, then the
+    repetitions are weighted (einsum; ``work``: arrays reused across calls)."""
     c, (s, r, _) = bits.shape[0] + on.shape[0], bits.shape[1:]
-    needed = np.concatenate([bits.any(-1), on.any(-1)]).reshape(-1)  # an all-zero row's product is +0 in any order
-    per_rep = products(Rows(bits, on, work), w, needed, work)  # accuracy per repetition and resample
-    return np.einsum("csrb,br->bcs", per_rep.reshape(c, s, r, len(w)), v)
+    per_rep = sums(Rows(bits, on, work), counts, work)
+    per_rep /= counts.m  # accuracy per repetition and resample: one rounding, of an exact sum
+    return np.einsum("csrb,br->bcs", per_rep.reshape(c, s, r, counts.b), v)
 
 
-_KINDS: dict = {}  # probed call shapes (rows, B, m) -> rows computed apart, and how to compute one so
-_CLEAN = 256  # the rows of our own calls are rounded up to a multiple of this (fewer shapes to probe)
+F32_EXACT = 2**24  # float32 holds every integer up to this: a 0/1 row's sum of counts is at most m
+ON_GRID = 2.0**-30  # a float32 value >= 2**-7 is a multiple of this
+ON_MIN = 2.0**-7
 
 
-def products(x: np.ndarray, w: np.ndarray, needed: np.ndarray, work: dict | None = None) -> np.ndarray:
-    """``x @ w.T`` ``(M, B)`` of ``x (M, m)`` and ``w (B, m)`` with the bits of that one call,
-    computing only the ``needed (M,)`` rows (the others must be all zero: their product is 0).
+class SceneCounts:
+    """One half's resampled scene counts ``(B, m)`` (``rng.multinomial(m, ...)``, each row
+    summing to m), as float64 and float32: both hold them exactly (m < 2**24)."""
 
-    OpenBLAS splits a call's rows into parts (by thread) and computes the last row of a part of
-    odd length with its one-row edge kernel, whose sum differs in the last bit from the other
-    rows' (``M = 1300``: rows 324, 649, 974 and 1299). ``_kinds`` probes each call shape once
-    (one 0/1 row repeated M times) for the rows it computes apart; the other needed rows are
-    computed in a call of a shape that has none, the apart ones one by one at an apart place of
-    a small call. Where a probe finds anything else (more than two kinds of rows, no small call
-    with an apart row of the same bits), the one call of ``M`` rows, as the reference."""
-    out = _buffer(work, "per_rep", (len(x), len(w)))
-    kinds = _kinds(len(x), w)
-    n_common = int((needed & ~kinds[0]).sum()) if kinds else 0
-    clean = _clean_rows(n_common, w) if kinds else None
-    if kinds is None or clean is None:
-        return np.matmul(x.whole() if isinstance(x, Rows) else x, w.T, out=out)
-    apart, small, at = kinds
-    out[:] = 0.0
-    rows = np.flatnonzero(needed & ~apart)
-    if len(rows):
-        buf = _buffer(work, "common", (clean, x.shape[1]))
-        buf[len(rows):] = 0.0
-        if isinstance(x, Rows):
-            x.take(rows, buf[: len(rows)])
+    def __init__(self, counts: np.ndarray):
+        counts = np.asarray(counts)
+        self.b, self.m = counts.shape
+        self.f64 = counts.astype(np.float64)
+        self.f32 = counts.astype(np.float32) if self.m <= F32_EXACT else None
+
+
+def sums(x, counts: SceneCounts, work: dict | None = None) -> np.ndarray:
+    """``(M, B)`` float64: every row of ``x`` (``Rows``, or an ``(M, m)`` array of the same
+    values) times the resamples' counts, ``x @ counts.T``, **exact**, so the same bits in any
+    summation order, on any BLAS and thread count:
+
+    * a 0/1 row's sum of counts is an integer at most m: exact in float32 up to 2**24, so
+      these rows are multiplied in float32 (twice float64's rate), only those not all zero
+      (conditions that did not run, a family that did not run: their sum is 0);
+    * an online learner's row holds float32 values (a mix of tied candidates' 0/1 outcomes),
+      which from 2**-7 up are multiples of 2**-30; times counts summing to m <= 2**22 every
+      partial sum is a multiple of 2**-30 below 2**22, held exactly by float64's 53 bits.
+      Rows with a smaller nonzero value (more than 128 candidates tied) are computed in
+      float64 all the same; only there may the last bit depend on the BLAS's order.
+    """
+    rows = x if isinstance(x, Rows) else None
+    arr = None if rows is not None else np.asarray(x, dtype=np.float64)
+    n_rows = len(rows) if rows is not None else len(arr)
+    out = _buffer(work, "per_rep", (n_rows, counts.b))
+    if rows is None:
+        needed = arr.any(-1)
+        out[~needed] = 0.0
+        out[needed] = arr[needed] @ counts.f64.T
+        return out
+    n_bits = len(rows.bits)
+    needed = rows.bits.any(-1)
+    out[:n_bits][~needed] = 0.0
+    if needed.any():
+        if counts.f32 is not None:
+            buf = _buffer32(work, "rows", (int(needed.sum()), counts.m))
+            buf[:] = rows.bits[needed]
+            out[:n_bits][needed] = buf @ counts.f32.T
         else:
-            np.take(x, rows, axis=0, out=buf[: len(rows)])
-        out[rows] = (buf @ w.T)[: len(rows)]
-    for i in np.flatnonzero(needed & apart):
-        one = np.zeros((small, x.shape[1]))
-        one[at] = x.row(i) if isinstance(x, Rows) else x[i]
-        out[i] = (one @ w.T)[at]
+            out[:n_bits][needed] = rows.bits[needed].astype(np.float64) @ counts.f64.T
+    on_needed = rows.on.any(-1)
+    out[n_bits:][~on_needed] = 0.0
+    if on_needed.any():
+        out[n_bits:][on_needed] = rows.on[on_needed] @ counts.f64.T
     return out
 
 
-def _threads() -> tuple:
-    """The BLAS libraries' thread counts: the row split, hence the probed kinds, depend on them."""
-    try:
-        from threadpoolctl import threadpool_info  # noqa: PLC0415 (scikit-learn's dependency)
-    except ImportError:
-        return ()
-    return tuple(i.get("num_threads") for i in threadpool_info() if i.get("user_api") == "blas")
-
-
-def _probe(rows: int, w: np.ndarray) -> np.ndarray:
-    """``(rows, B)``: one fixed 0/1 row repeated ``rows`` times, times ``w.T`` in one call."""
-    row = np.random.default_rng(0).random(w.shape[1]) < 0.5
-    return np.tile(row.astype(np.float64), (rows, 1)) @ w.T
-
-
-def _kinds(rows: int, w: np.ndarray):
-    """For a call of ``rows`` rows against ``w``: ``(apart (rows,) bool, small, at)`` (the rows
-    computed apart, and a call of ``small`` rows computing its row ``at`` the same way), or None."""
-    key = ("kinds", rows, _threads()) + w.shape
-    if key not in _KINDS:
-        p = _probe(rows, w)
-        common = _probe(8, w)
-        if not (common == common[0]).all():
-            _KINDS[key] = None
-            return None
-        apart = ~(p == common[0]).all(1)
-        found = (apart, 1, 0) if not apart.any() else None
-        if apart.any() and (p[apart] == p[apart][0]).all():
-            for small in range(2, 17):  # the first small call with an apart row of the same bits
-                q = _probe(small, w)
-                hit = np.flatnonzero((q == p[apart][0]).all(1) & ~(q == common[0]).all(1))
-                if len(hit):
-                    found = (apart, small, int(hit[0]))
-                    break
-        _KINDS[key] = found
-    return _KINDS[key]
-
-
-def _clean_rows(n: int, w: np.ndarray) -> int | None:
-    """The rows (``>= n``, a multiple of ``_CLEAN``) of a call that computes none apart, or None."""
-    for rows in range(max(_CLEAN, -(-n // _CLEAN) * _CLEAN), -(-n // _CLEAN) * _CLEAN + 4 * _CLEAN, _CLEAN):
-        key = ("clean", rows, _threads()) + w.shape
-        if key not in _KINDS:
-            k = _kinds(rows, w)
-            _KINDS[key] = k is not None and not k[0].any()
-        if _KINDS[key]:
-            return rows
-    return None
+def _buffer32(work: dict | None, key: str, shape: tuple[int, ...]) -> np.ndarray:
+    """``_buffer``'s float32 twin."""
+    n = int(np.prod(shape))
+    if work is None:
+        return np.empty(shape, np.float32)
+    key = key + "32"
+    if work.get(key) is None or work[key].size < n:
+        work[key] = np.empty(n, np.float32)
+    return work[key][:n].reshape(shape)

@@ -98,14 +98,14 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
     for t in range(a):
         n = int(n_test[t]) if n_max else 0
         if n > 0:
-            draws = []  # (half, scenes, weights (B, m)), drawn in the order (target, half)
+            draws = []  # (half, scenes, the resamples' scene counts (B, m)), drawn in the order (target, half)
             for h in range(2):
                 idx = np.flatnonzero(halves[t, :n] == h)
                 m = len(idx)
                 if m == 0:  # a test set of one scene: its other half is empty
                     out[:, h, t] = np.nan
                     continue
-                draws.append((h, idx, rng.multinomial(m, np.full(m, 1.0 / m), size=resamples) / m))
+                draws.append((h, idx, halfrows.SceneCounts(rng.multinomial(m, np.full(m, 1.0 / m), size=resamples))))
             if not reference and fast_outcomes(correct):
                 for sl in correct.size_blocks():  # the reference's blocks: the same matmul shapes
                     parts = correct.half_parts(t, sl, [idx for _, idx, _ in draws])
@@ -122,7 +122,8 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
                 blk = np.asarray(blk, dtype=np.float64)  # (C', s, R, N)
                 for h, idx, w in draws:
                     x = blk[..., idx].reshape(-1, len(idx))  # (C' s R, m)
-                    per_rep = (x @ w.T).reshape(c, -1, r, resamples)  # accuracy per repetition and resample
+                    # accuracy per repetition and resample: each row's exact sum of counts, over m
+                    per_rep = ((x @ w.f64.T) / w.m).reshape(c, -1, r, resamples)
                     out[:, h, t, :, sl] = np.einsum("csrb,br->bcs", per_rep, v)
         else:
             out[:, :, t] = np.einsum("csr,br->bcs", np.nan_to_num(acc[t]), v)[:, None]

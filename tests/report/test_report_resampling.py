@@ -78,36 +78,45 @@ def test_sparse_mix_same_bits_as_mix():
     assert (w["DB1"][0] > 0).sum(0).max() >= 3
 
 
+def _exact(x, counts):
+    """``x @ counts.T`` in integers: x's values times 2**30 are integers (0/1 rows and float32
+    mixes of up to 128 tied candidates), so int64 arithmetic gives the sums with no rounding."""
+    xi = x * 2.0**30
+    assert (xi == np.round(xi)).all()
+    return (xi.astype(np.int64) @ counts.T.astype(np.int64)).astype(np.float64) / 2.0**30
+
+
 @pytest.mark.parametrize("m", [2000, 57])
-def test_products_of_the_needed_rows_same_bits_as_one_call(m):
-    # row counts whose one call computes some rows apart (OpenBLAS's one-row edge kernel:
-    # 1300, 3900, 1301, 7) and some without (2600 s R with R = 50, 15600)
-    from relaff_jax.learn.halfrows import products
+def test_sums_are_the_exact_integer_products(m):
+    # the row counts that OpenBLAS splits with a one-row edge kernel (1300, 3900, 1301, 7) and
+    # ones it does not: the sums are exact whatever the split, so equal to integer arithmetic
+    from relaff_jax.learn.halfrows import SceneCounts, sums
 
     rng = np.random.default_rng(m)
-    w = rng.multinomial(m, np.full(m, 1 / m), size=1000) / m
-    for rows in (1300, 3900, 1301, 7, 7800, 15600):
+    counts = SceneCounts(rng.multinomial(m, np.full(m, 1 / m), size=1000))
+    assert (counts.f64.sum(1) == m).all()
+    for rows in (1300, 3900, 1301, 7, 7800):
         x = (rng.random((rows, m)) < 0.6).astype(float)
         x[rng.random(rows) < 0.1] = (rng.integers(0, 4, m) / 3).astype(np.float32)  # tied online mixes
-        needed = rng.random(rows) < 0.25
-        x[~needed] = 0.0
-        np.testing.assert_array_equal(products(x, w, needed), x @ w.T)
+        x[rng.random(rows) < 0.25] = 0.0  # rows that did not run
+        exact = _exact(x, counts.f64)
+        np.testing.assert_array_equal(sums(x, counts), exact)
+        np.testing.assert_array_equal(x @ counts.f64.T, exact)  # the reference's one call: exact too
 
 
-def test_products_of_rows_read_from_bits_same_bits():
-    # halfrows.Rows: the needed rows gathered from the bits (and the online rows) give the
-    # products of the float64 rows (rows_f64), also through the one-call fallback
-    from relaff_jax.learn.halfrows import Rows, products, rows_f64
+def test_sums_of_rows_read_from_bits_are_exact():
+    # halfrows.Rows: the conditions' rows from their bits (in float32) and the online rows (in
+    # float64, mixes of up to nine tied candidates) give the exact sums of the float64 rows
+    from relaff_jax.learn.halfrows import Rows, SceneCounts, rows_f64, sums
 
     rng = np.random.default_rng(1)
     m = 2000
-    w = rng.multinomial(m, np.full(m, 1 / m), size=1000) / m
+    counts = SceneCounts(rng.multinomial(m, np.full(m, 1 / m), size=1000))
     for c, s, r in ((50, 1, 26), (20, 3, 7)):
         bits = rng.random((c, s, r, m)) < 0.6
         bits[rng.random(c) < 0.2] = False  # conditions that did not run
         on = np.zeros((2, s, r, m))
-        on[0] = (rng.integers(0, 4, (s, r, m)) / 3).astype(np.float32)
+        on[0] = (rng.integers(0, 10, (s, r, m)) / 9).astype(np.float32)
         x = rows_f64(bits, on).reshape(-1, m)
-        needed = x.any(-1)
-        np.testing.assert_array_equal(products(Rows(bits, on), w, needed), x @ w.T)
+        np.testing.assert_array_equal(sums(Rows(bits, on), counts), _exact(x, counts.f64))
         np.testing.assert_array_equal(Rows(bits, on).whole(), x)
