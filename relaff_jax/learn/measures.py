@@ -107,6 +107,12 @@ def _mix(cells: np.ndarray, w: np.ndarray, reference: bool = False) -> np.ndarra
     return np.where(ok, out, np.nan)
 
 
+def compile_mix_kernel() -> None:
+    """Load ``_mix``'s compiled sum from numba's cache, or compile it into the cache (a new
+    install). ``reproduce`` runs it in a process beside the generate stage (``stages/audits.py``)."""
+    from relaff_jax.learn.mix_kernel import weighted_sums  # noqa: F401, PLC0415 (compiled on import)
+
+
 def _from_ten(cells_k: np.ndarray, chosen: np.ndarray, ran: np.ndarray, after: np.ndarray,
               reference: bool = False) -> np.ndarray:
     """A learner that chooses at n = select_size: before it, an equal share of every candidate

@@ -94,10 +94,11 @@ class Beside:
         without the background thread's second core."""
         if self.pool is None:
             return
-        from concurrent.futures import ProcessPoolExecutor
-        from multiprocessing import get_context
+        if self.process is None:  # one process for every such warm-up, run one after another
+            from concurrent.futures import ProcessPoolExecutor
+            from multiprocessing import get_context
 
-        self.process = ProcessPoolExecutor(1, mp_context=get_context("spawn"))
+            self.process = ProcessPoolExecutor(1, mp_context=get_context("spawn"))
         self.warming.append(self.process.submit(fn, *args))
 
     def submit(self, action: str) -> None:
@@ -131,7 +132,7 @@ class Beside:
         if exc[0] is not None and self.process is not None:
             # a stage that failed or was stopped does not wait for a compile it no longer needs
             # (numba writes each cache file whole)
-            for proc in list(getattr(self.process, "_processes", {}).values()):
+            for proc in list((getattr(self.process, "_processes", None) or {}).values()):  # None once shut down
                 proc.terminate()
         for pool in (self.pool, self.process):
             if pool is not None:

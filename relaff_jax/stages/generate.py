@@ -184,6 +184,10 @@ def run(run: Run, forced: bool) -> dict:
                 from relaff_jax.learn.forest.compiled.forest import warm
 
                 beside.warm_elsewhere(warm, cfg.experiment.forest)
+            if todo:  # the report's compiled mix of candidates, compiled or loaded in the same process
+                from relaff_jax.learn.measures import compile_mix_kernel
+
+                beside.warm_elsewhere(compile_mix_kernel)
             for action in todo:
                 run.progress.set(f"{action} ({acts.index(action) + 1}/{len(acts)})")
                 items[action] = _one(run, action, None, beside)

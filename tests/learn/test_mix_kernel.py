@@ -43,3 +43,22 @@ def test_order_matters_for_these_values():
     pairwise = _mix(cells[..., :1], w)  # S == 1: numpy's own path, pairwise over the 36
     finite = np.isfinite(one_by_one)
     assert finite.any() and not np.array_equal(one_by_one[finite], pairwise[finite])
+
+
+def test_compiled_beside_the_generate_stage_into_numbas_cache(tmp_path, monkeypatch):
+    # reproduce compiles the kernel in the generate stage's warm-up process (one process for
+    # every such warm-up): it leaves the kernel in numba's cache for the report to load
+    from relaff_jax.learn.measures import compile_mix_kernel
+    from relaff_jax.stages import audits
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))  # the spawned process inherits it
+    b = audits.Beside.__new__(audits.Beside)
+    b.pool, b.process, b.warming = object(), None, []  # as on two cores, without a run
+    b.warm_elsewhere(compile_mix_kernel)
+    first = b.process
+    b.warm_elsewhere(compile_mix_kernel)
+    try:
+        assert b.process is first and [f.result(120) for f in b.warming] == [None, None]
+    finally:
+        b.process.shutdown()
+    assert any("mix_kernel.weighted_sums" in p.name and p.suffix == ".nbi" for p in tmp_path.rglob("*"))
