@@ -70,7 +70,7 @@ class Rows:
 def resampled(bits: np.ndarray, on: np.ndarray, counts: "SceneCounts", v: np.ndarray,
               work: dict | None = None) -> np.ndarray:
     """``(B, C + 2, s)`` bootstrap means of the half: the resamples' scene counts ``counts``
-    (``scene_counts``), repetition weights ``v (B, R)``; every row's resampled accuracy is its
+    (``SceneCounts``), repetition weights ``v (B, R)``; every row's resampled accuracy is its
     exact count (``sums``, of the rows read from the bits, ``Rows``) over m, then the
     repetitions are weighted (einsum; ``work``: arrays reused across calls)."""
     c, (s, r, _) = bits.shape[0] + on.shape[0], bits.shape[1:]
@@ -80,8 +80,6 @@ def resampled(bits: np.ndarray, on: np.ndarray, counts: "SceneCounts", v: np.nda
 
 
 F32_EXACT = 2**24  # float32 holds every integer up to this: a 0/1 row's sum of counts is at most m
-ON_GRID = 2.0**-30  # a float32 value >= 2**-7 is a multiple of this
-ON_MIN = 2.0**-7
 
 
 class SceneCounts:

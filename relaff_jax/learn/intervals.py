@@ -107,7 +107,7 @@ def resampled_means(acc: np.ndarray, correct: np.ndarray, n_test: np.ndarray, re
                     continue
                 draws.append((h, idx, halfrows.SceneCounts(rng.multinomial(m, np.full(m, 1.0 / m), size=resamples))))
             if not reference and fast_outcomes(correct):
-                for sl in correct.size_blocks():  # the reference's blocks: the same matmul shapes
+                for sl in correct.size_blocks():  # the reference's blocks of sizes
                     parts = correct.half_parts(t, sl, [idx for _, idx, _ in draws])
                     for (h, _, w), (bits, on) in zip(draws, parts):
                         if means is not None or rep_means is not None:

@@ -95,7 +95,8 @@ def _mix(cells: np.ndarray, w: np.ndarray, reference: bool = False) -> np.ndarra
     cells, w = np.asarray(cells, dtype=float), np.asarray(w, dtype=float)
     ok = w.sum(-1)[..., None] > 0
     lead = cells.shape[:-2]
-    if not reference and cells.ndim >= 3 and cells.shape[-1] >= 2 and w.shape == cells.shape[:-1] and cells.shape[-2] >= 1:
+    compiled = cells.ndim >= 3 and cells.shape[-1] >= 2 and cells.shape[-2] >= 1 and w.shape == cells.shape[:-1]
+    if compiled and not reference:
         from relaff_jax.learn.mix_kernel import weighted_sums  # noqa: PLC0415 (numba, on first use)
 
         n = int(np.prod(lead[:-1]))  # the leading axes as one (an explicit count: -1 is ambiguous on empty arrays)

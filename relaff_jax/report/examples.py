@@ -102,8 +102,8 @@ def examples_beside(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_a
     from relaff_jax.plugins import loaded_files
 
     pool = ProcessPoolExecutor(1, mp_context=get_context("spawn"))
-    return Drawing(lambda: example_scenes(data_dirs, out, per_action), pool=pool, job=pool.submit(_in_child, loaded_files(), {a: str(d) for a, d in data_dirs.items()},
-                                              str(out), per_action))
+    job = pool.submit(_in_child, loaded_files(), {a: str(d) for a, d in data_dirs.items()}, str(out), per_action)
+    return Drawing(lambda: example_scenes(data_dirs, out, per_action), pool=pool, job=job)
 
 
 def _in_child(plugins, data_dirs: dict[str, str], out: str, per_action: int) -> list[tuple[str, str, str]]:
