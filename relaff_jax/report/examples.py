@@ -58,7 +58,8 @@ MIN_CORES = 2  # below this a second process would only take the report's core
 
 class Drawing:
     """Example scenes being drawn (``examples_beside``): call it for their list (it waits, and
-    raises the drawing's error); ``cancel()`` stops a drawing process."""
+    raises the drawing's error; if the drawing process died, it draws them here instead);
+    ``cancel()`` stops a drawing process."""
 
     def __init__(self, draw: Callable[[], list] | None = None, pool=None, job=None):
         self.draw, self.pool, self.job = draw, pool, job

@@ -96,27 +96,36 @@ def test_sums_are_the_exact_integer_products(m):
     counts = SceneCounts(rng.multinomial(m, np.full(m, 1 / m), size=1000))
     assert (counts.f64.sum(1) == m).all()
     for rows in (1300, 3900, 1301, 7, 7800):
-        x = (rng.random((rows, m)) < 0.6).astype(float)
-        x[rng.random(rows) < 0.1] = (rng.integers(0, 4, m) / 3).astype(np.float32)  # tied online mixes
-        x[rng.random(rows) < 0.25] = 0.0  # rows that did not run
+        bits = rng.random((rows, 1, 1, m)) < 0.6
+        bits[rng.random(rows) < 0.25] = False  # conditions that did not run
+        on = (rng.integers(0, 4, (2, 1, rows // 7 + 1, m)) / 3).astype(np.float32).astype(np.float64)  # tied mixes
+        on[0, 0, ::3] = 0.0  # an online learner whose family did not run
+        x = np.concatenate([bits.reshape(-1, m), on.reshape(-1, m)]).astype(np.float64)
         exact = _exact(x, counts.f64)
-        np.testing.assert_array_equal(sums(x, counts), exact)
+        np.testing.assert_array_equal(sums(bits, on, counts), exact)
         np.testing.assert_array_equal(x @ counts.f64.T, exact)  # the reference's one call: exact too
 
 
-def test_sums_of_rows_read_from_bits_are_exact():
-    # halfrows.Rows: the conditions' rows from their bits (in float32) and the online rows (in
-    # float64, mixes of up to nine tied candidates) give the exact sums of the float64 rows
-    from relaff_jax.learn.halfrows import Rows, SceneCounts, rows_f64, sums
+def test_sums_reuse_their_buffers_with_the_same_bits():
+    # halfrows.sums with ``work`` (buffers kept across blocks, as intervals.resampled_means
+    # passes them) on blocks of several shapes gives the exact sums of each
+    from relaff_jax.learn.halfrows import SceneCounts, sums
 
     rng = np.random.default_rng(1)
     m = 2000
     counts = SceneCounts(rng.multinomial(m, np.full(m, 1 / m), size=1000))
-    for c, s, r in ((50, 1, 26), (20, 3, 7)):
+    work: dict = {}
+    for c, s, r in ((50, 1, 26), (20, 3, 7), (50, 1, 26)):
         bits = rng.random((c, s, r, m)) < 0.6
         bits[rng.random(c) < 0.2] = False  # conditions that did not run
         on = np.zeros((2, s, r, m))
         on[0] = (rng.integers(0, 10, (s, r, m)) / 9).astype(np.float32)
-        x = rows_f64(bits, on).reshape(-1, m)
-        np.testing.assert_array_equal(sums(Rows(bits, on), counts), _exact(x, counts.f64))
-        np.testing.assert_array_equal(Rows(bits, on).whole(), x)
+        x = np.concatenate([bits, on]).reshape(-1, m).astype(np.float64)
+        np.testing.assert_array_equal(sums(bits, on, counts, work), _exact(x, counts.f64))
+
+
+def test_counts_beyond_exactness_are_refused():
+    from relaff_jax.learn.halfrows import M_EXACT, SceneCounts
+
+    with pytest.raises(ValueError, match="exact up to"):
+        SceneCounts(np.zeros((2, M_EXACT + 1), np.int64))
