@@ -112,15 +112,28 @@ def load_or_export(fn: Callable, name: str, key: Any, specs: tuple, where: Path)
 
     path = where / file_name(name, key, specs)
     try:
-        return export.deserialize(bytearray(path.read_bytes()))
+        exp = export.deserialize(bytearray(path.read_bytes()))
     except Exception:  # missing, damaged or written by another serialization: trace it again
         pass
+    else:
+        _lapack_ready()
+        return exp
     exp = export.export(jax.jit(fn))(*specs)
     try:
         _write(path, bytes(exp.serialize()))
     except (OSError, ImportError):  # a full or read-only cache (or no flatbuffers) only costs time
         pass
     return exp
+
+
+def _lapack_ready() -> None:
+    """Load jaxlib's LAPACK kernels before a program read from disk runs. JAX loads them when it
+    lowers a linear-algebra call; a program read from disk (the IK's SVD and LU solves) is not
+    lowered in this process, and run first its LAPACK call crashes the process (segmentation
+    fault, jaxlib 0.9.2)."""
+    from jaxlib import lapack
+
+    lapack.prepare_lapack_call("gesdd_ffi", np.dtype(np.float32))
 
 
 class _Stored:

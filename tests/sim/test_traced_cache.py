@@ -208,3 +208,30 @@ def test_ik_program_same_bits_stored(stored):
     ref = jax.jit(reach)(pair, qpos)
     assert _equal(tc.stored_jit(reach, "toy_reach-test", cfg)(pair, qpos), ref)
     assert _equal(tc.stored_jit(reach, "toy_reach-test", cfg)(pair, qpos), ref)  # read back from the file
+
+
+SVD_FIRST = """
+import sys
+from pathlib import Path
+import numpy as np
+import jax.numpy as jnp
+from relaff_jax import compile_cache
+from relaff_jax.sim import rollouts  # noqa: F401 (the config tree before traced_cache)
+from relaff_jax.sim import traced_cache as tc
+compile_cache._traces = Path(sys.argv[1])
+svd = tc.stored_jit(lambda x: jnp.linalg.svd(x, compute_uv=False), "svd_first")
+print(np.asarray(svd(np.diag(np.float32([3, 2, 1])))).tolist())
+"""
+
+
+def test_a_stored_linear_algebra_program_runs_first_in_a_new_process(tmp_path):
+    """A program read from disk is not lowered in the process that runs it, so nothing there has
+    loaded jaxlib's LAPACK kernels: run first, its SVD crashed the process (the planner's home
+    pose, read from disk before any other IK). The second process reads the first's trace."""
+    run = lambda: subprocess.run([sys.executable, "-c", SVD_FIRST, str(tmp_path)], capture_output=True, text=True)
+    first = run()
+    assert first.returncode == 0, first.stderr[-2000:]
+    assert [p.name.split("-")[0] for p in tmp_path.iterdir()] == ["svd_first"]  # stored by the first
+    second = run()
+    assert second.returncode == 0, f"exit {second.returncode}: {second.stderr[-2000:]}"
+    assert first.stdout.splitlines()[-1] == second.stdout.splitlines()[-1] == "[3.0, 2.0, 1.0]"
