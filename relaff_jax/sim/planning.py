@@ -28,6 +28,7 @@ from .actions.registry import registry
 from .actions.rules import plan_program
 from .branch import BASE_TURN_MAX, base_turn, one_branch
 from .straight import corrections, straight_rows
+from .traced_cache import stored_jit
 
 
 class Setup(NamedTuple):
@@ -44,11 +45,19 @@ def setup(cfg: ActionConfig = ActionConfig()) -> Setup:
     world = wd.build_world(cfg.phys, arm=True)
     arm = A.arm_from_model(world.mj_model)
     held = jnp.asarray(cfg.phys.held_rake_pos, jnp.float32)
-    home = jax.jit(functools.partial(A.solve_ik, arm, cfg.arm))(
-        A.tool_tcp_target(held, jnp.eye(3)), jnp.zeros(6))
-    if not bool(home.reachable):
+    # a stored trace (traced_cache.py): tracing this IK took ~1.5 s of every run's start
+    home = stored_jit(functools.partial(_home_ik, arm, cfg.arm), "home_ik", (cfg.phys, cfg.arm))
+    q, reachable = home(*A.tool_tcp_target(held, jnp.eye(3)), jnp.zeros(6))
+    if not bool(reachable):
         raise RuntimeError(f"the held rake pose {cfg.phys.held_rake_pos} is not reachable by the arm")
-    return Setup(world, arm, geometry(world), np.asarray(home.q))
+    return Setup(world, arm, geometry(world), np.asarray(q))
+
+
+def _home_ik(arm: A.Arm, arm_cfg: Any, *target_and_q0: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """``solve_ik``'s (q (6,), reachable ()) for the ``IKTarget``'s five arrays and q0 (6,)."""
+    *target, q0 = target_and_q0
+    res = A.solve_ik(arm, arm_cfg, A.IKTarget(*target), q0)
+    return res.q, res.reachable
 
 
 def home_grip(cfg: ActionConfig, arm: Any = None) -> np.ndarray:

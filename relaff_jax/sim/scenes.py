@@ -214,15 +214,20 @@ def sample_pairs(key: jax.Array, allowed: np.ndarray, world: wd.World, n: int) -
     return jnp.asarray(allowed)[jax.random.choice(key, len(allowed), (n,), p=jnp.asarray(w))]
 
 
+@functools.lru_cache(maxsize=8)
 def contact_masks(world: wd.World) -> tuple[np.ndarray, np.ndarray]:
     """Which MJX contact slots are toy-other and toy-table contacts.
 
     MJX has a fixed, static list of candidate geom pairs (one slot per potential contact)
-    whose geom ids the collision pass fills in; read it once from one forward pass.
+    whose geom ids the collision pass fills in; read it once per world from one forward pass,
+    run now even inside a trace (``ensure_compile_time_eval``), so the MJX settle can ask for
+    it when it is traced and a run that settles in MuJoCo C never pays for it (a trace and a
+    compile of ``mjx.forward``, ~5 s).
     Returns two (ncon,) bool arrays.
     """
-    m = mjx.put_model(world.mj_model)
-    con = contacts(jax.jit(mjx.forward)(m, mjx.make_data(world.mj_model)))
+    with jax.ensure_compile_time_eval():
+        m = mjx.put_model(world.mj_model)
+        con = jax.device_get(contacts(jax.jit(mjx.forward)(m, mjx.make_data(world.mj_model))))
     g = np.asarray(world.mj_model.geom_bodyid)
     b1, b2 = g[np.asarray(con.geom1)], g[np.asarray(con.geom2)]
     toy, obj = world.toy_body, world.obj_body
@@ -288,9 +293,9 @@ def make_settle_fn(world: wd.World, cfg: SceneConfig = SceneConfig()):
     d0 = mjx.make_data(world.mj_model)
     od = world.obj_dof
     td = world.toy_dof
-    masks = contact_masks(world)
 
     def settle_fn(pair: jax.Array, qpos0: jax.Array, intended: jax.Array) -> Scenes:
+        masks = contact_masks(world)  # here, not above: only a run that settles in MJX needs it
         models = wd.scene_models(world, pair)
         data = jax.vmap(lambda q: d0.replace(qpos=q))(qpos0)
         data = step_held(world, table, step, models, pair, data, cfg.settle_steps)
