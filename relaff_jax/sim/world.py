@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import threading
 from typing import Any
 
 import jax
@@ -146,6 +147,9 @@ def pair_xml(toy: str, other: str, phys: PhysicsConfig = PhysicsConfig(), arm: b
 </mujoco>"""
 
 
+_STACKING = threading.Lock()
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class World:
     """Static description of every pair's model; built once in plain Python.
@@ -156,6 +160,8 @@ class World:
       model: mjx.Model whose pair-dependent leaves have a leading (P,) axis.
       model_axes: tree like ``model``: 0 on those leaves, None elsewhere.
       batched_fields: names of the pair-dependent fields.
+      (These three are built from ``mj_models`` on first use: a run that simulates in MuJoCo C
+      reads none of them until its camera, and the build is ~2 s per world.)
       toy_qpos, obj_qpos: qpos addresses (7 each) of the two free joints.
       toy_dof, obj_dof: dof addresses (6 each).
       geom_seg: (G,) segment label per geom (SEG_*).
@@ -166,9 +172,6 @@ class World:
     arm: bool
     pairs: tuple[tuple[str, str, str], ...]
     mj_models: tuple[Any, ...]
-    model: Any
-    model_axes: Any
-    batched_fields: tuple[str, ...]
     toy_qpos: int
     obj_qpos: int
     toy_dof: int
@@ -178,6 +181,30 @@ class World:
     geom_seg: np.ndarray
     pair_index: dict
     objects: lib.ObjectSet = lib.BUILTIN_SET  # the set its pairs are made of
+
+    @property
+    def _stacked(self) -> tuple[Any, Any, tuple[str, ...]]:
+        got = self.__dict__.get("_stacked_models")
+        if got is None:
+            with _STACKING:  # built once when the camera's warm-up thread and the caller ask at once
+                got = self.__dict__.get("_stacked_models")
+                if got is None:
+                    # eager even when first asked inside a trace (the MJX settle's)
+                    with jax.ensure_compile_time_eval():
+                        got = self.__dict__["_stacked_models"] = _stack_models(self.mj_models)
+        return got
+
+    @property
+    def model(self) -> Any:
+        return self._stacked[0]
+
+    @property
+    def model_axes(self) -> Any:
+        return self._stacked[1]
+
+    @property
+    def batched_fields(self) -> tuple[str, ...]:
+        return self._stacked[2]
 
     @property
     def n_pairs(self) -> int:
@@ -211,6 +238,25 @@ def build_world(phys: PhysicsConfig = PhysicsConfig(), arm: bool = False) -> Wor
 def _build_world(phys: PhysicsConfig, arm: bool, objs: lib.ObjectSet) -> World:
     pairs = objs.pairs()
     mj_models = tuple(mujoco.MjModel.from_xml_string(pair_xml(t, o, phys, arm)) for t, o, _ in pairs)
+    m0 = mj_models[0]
+    jid = lambda n: mujoco.mj_name2id(m0, mujoco.mjtObj.mjOBJ_JOINT, n)
+    bid = lambda n: mujoco.mj_name2id(m0, mujoco.mjtObj.mjOBJ_BODY, n)
+    seg = np.full(m0.ngeom, SEG_BACKGROUND, np.int32)
+    seg[m0.geom_bodyid == bid("toy")] = SEG_TOY
+    seg[m0.geom_bodyid == bid("obj")] = SEG_OTHER
+    if arm:
+        seg[m0.geom_bodyid > bid("obj")] = SEG_HIDDEN  # the arm is not an object of the scene
+    return World(
+        phys=phys, arm=arm, pairs=pairs, mj_models=mj_models,
+        toy_qpos=int(m0.jnt_qposadr[jid("toy_free")]), obj_qpos=int(m0.jnt_qposadr[jid("obj_free")]),
+        toy_dof=int(m0.jnt_dofadr[jid("toy_free")]), obj_dof=int(m0.jnt_dofadr[jid("obj_free")]),
+        toy_body=bid("toy"), obj_body=bid("obj"), geom_seg=seg,
+        pair_index={(t, o): i for i, (t, o, _) in enumerate(pairs)}, objects=objs,
+    )
+
+
+def _stack_models(mj_models: tuple) -> tuple[Any, Any, tuple[str, ...]]:
+    """``(model, model_axes, batched_fields)`` of ``World`` from the pairs' native models."""
     mx = [mjx.put_model(m) for m in mj_models]
     flat0, treedef = _leaves_with_paths(mx[0])
     flats = [jax.tree_util.tree_leaves(m) for m in mx]
@@ -227,25 +273,8 @@ def _build_world(phys: PhysicsConfig, arm: bool, objs: lib.ObjectSet) -> World:
             leaves.append(jnp.stack([jnp.asarray(v) for v in vals]))
             axes.append(0)
             names.append(jax.tree_util.keystr(path))
-    model = jax.tree_util.tree_unflatten(treedef, leaves)
-    model_axes = jax.tree_util.tree_unflatten(treedef, axes)
-
-    m0 = mj_models[0]
-    jid = lambda n: mujoco.mj_name2id(m0, mujoco.mjtObj.mjOBJ_JOINT, n)
-    bid = lambda n: mujoco.mj_name2id(m0, mujoco.mjtObj.mjOBJ_BODY, n)
-    seg = np.full(m0.ngeom, SEG_BACKGROUND, np.int32)
-    seg[m0.geom_bodyid == bid("toy")] = SEG_TOY
-    seg[m0.geom_bodyid == bid("obj")] = SEG_OTHER
-    if arm:
-        seg[m0.geom_bodyid > bid("obj")] = SEG_HIDDEN  # the arm is not an object of the scene
-    return World(
-        phys=phys, arm=arm, pairs=pairs, mj_models=mj_models, model=model, model_axes=model_axes,
-        batched_fields=tuple(names),
-        toy_qpos=int(m0.jnt_qposadr[jid("toy_free")]), obj_qpos=int(m0.jnt_qposadr[jid("obj_free")]),
-        toy_dof=int(m0.jnt_dofadr[jid("toy_free")]), obj_dof=int(m0.jnt_dofadr[jid("obj_free")]),
-        toy_body=bid("toy"), obj_body=bid("obj"), geom_seg=seg,
-        pair_index={(t, o): i for i, (t, o, _) in enumerate(pairs)}, objects=objs,
-    )
+    return (jax.tree_util.tree_unflatten(treedef, leaves), jax.tree_util.tree_unflatten(treedef, axes),
+            tuple(names))
 
 
 def scene_models(world: World, pair: jax.Array):
