@@ -289,13 +289,15 @@ def make_settle_fn(world: wd.World, cfg: SceneConfig = SceneConfig()):
     holding a rake at its start pose, then labels the settled relation.
     """
     table = pair_table(world)
-    step = wd.batched_step(world)
     d0 = mjx.make_data(world.mj_model)
     od = world.obj_dof
     td = world.toy_dof
 
     def settle_fn(pair: jax.Array, qpos0: jax.Array, intended: jax.Array) -> Scenes:
-        masks = contact_masks(world)  # here, not above: only a run that settles in MJX needs it
+        # here, when traced, not above: only a run that settles in MJX needs the contact masks
+        # and the MJX model stack (``World.model``)
+        masks = contact_masks(world)
+        step = wd.batched_step(world)
         models = wd.scene_models(world, pair)
         data = jax.vmap(lambda q: d0.replace(qpos=q))(qpos0)
         data = step_held(world, table, step, models, pair, data, cfg.settle_steps)

@@ -177,7 +177,6 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     # v2 reads the objects' state at a step found after the run, so the trace keeps qpos too
     observe = (lambda d: (com_of(d), d.qpos[:nqo])) if v2 else com_of
     at_rest = jax.vmap(lambda c: read_at_rest(c, cfg.rest_window, cfg.scene.rest_speed, cfg.phys.timestep))
-    forward = jax.vmap(mjx.forward, in_axes=(world.model_axes, 0))
     reach = jax.vmap(lambda p, q: toy_reachable(arm, cfg, st.geo, p, q))
     wl = welds(world)
     specs = registry()
@@ -186,6 +185,8 @@ def make_simulate_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
 
     def simulate_fn(action_id, pair, qpos, qvel, plan, before):
         action_id = jnp.asarray(action_id, jnp.int32)
+        # the MJX model stack is read here, when traced: a run in MuJoCo C never builds it
+        forward = jax.vmap(mjx.forward, in_axes=(world.model_axes, 0))
         models = wd.scene_models(world, pair)
         data = jax.vmap(lambda q, v: initial_data(st, cfg, action_id, q, v))(qpos, qvel)
         data = forward(models, data)

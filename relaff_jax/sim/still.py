@@ -52,10 +52,10 @@ def make_still_fn(world: wd.World, steps: int = STILL_STEPS):
     arm-less world, a held rake pinned as ``scenes.make_settle_fn`` pins it; True where both
     objects stayed still (``stayed_still``)."""
     table = pair_table(world)
-    step = wd.batched_step(world)
     d0 = mjx.make_data(world.mj_model)
 
     def still_fn(pair: jax.Array, qpos: jax.Array, qvel: jax.Array) -> jax.Array:
+        step = wd.batched_step(world)
         models = wd.scene_models(world, pair)
         data = jax.vmap(lambda q, v: d0.replace(qpos=q, qvel=v))(qpos, qvel)
         data = step_held(world, table, step, models, pair, data, steps)
