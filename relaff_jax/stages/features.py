@@ -53,10 +53,7 @@ def feature_warmups(cfg: Any) -> list:
 
     use_scene(cfg.action.scene, cfg.action.grip_margin)
     world = build_world()
-    # last, the camera's MJX model stack (``World.model``, built on first use: ~2 s that a run
-    # simulating in MuJoCo C would otherwise spend at the features stage's start)
-    return [*culled.warmups(world.mj_model.geom_type, world.geom_seg, cfg.perception, from_sim.SUB_BATCH),
-            lambda: world.model]
+    return culled.warmups(world.mj_model.geom_type, world.geom_seg, cfg.perception, from_sim.SUB_BATCH)
 
 
 def feature_config(seed: int, config: Any = None) -> dict:
