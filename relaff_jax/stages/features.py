@@ -48,12 +48,23 @@ def feature_warmups(cfg: Any) -> list:
     for a ``RunConfig``'s perception, with its action's object set active, as
     ``default_feature_factory`` builds the chain: functions of no argument that the generate
     stage runs on its background thread (``stages/generate.py``)."""
+    import jax
+    import numpy as np
+
     from relaff_jax.perception import culled, from_sim
     from relaff_jax.sim.world import build_world
 
     use_scene(cfg.action.scene, cfg.action.grip_margin)
     world = build_world()
-    return culled.warmups(world.mj_model.geom_type, world.geom_seg, cfg.perception, from_sim.SUB_BATCH)
+    b = int(cfg.dataset.feature_batch)  # the stage's chunks are padded to this many scenes
+
+    def geoms() -> None:
+        """The scenes' geometry at the chunks' shape, on placeholder scenes: read from the trace
+        store, or (a new install, a changed package) its model stack built, traced and compiled."""
+        qpos = np.tile(np.asarray(world.mj_model.qpos0, np.float32), (b, 1))
+        jax.block_until_ready(from_sim.jitted_geoms(world)(np.zeros(b, np.int32), qpos))
+
+    return [*culled.warmups(world.mj_model.geom_type, world.geom_seg, cfg.perception, from_sim.SUB_BATCH), geoms]
 
 
 def feature_config(seed: int, config: Any = None) -> dict:

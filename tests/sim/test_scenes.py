@@ -186,3 +186,48 @@ def test_batch_1024_does_not_deadlock():
     r = subprocess.run([sys.executable, "-c", HANG_SCRIPT], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "ok (1024, 14)" in r.stdout
+
+
+def test_the_model_stack_is_built_on_first_use_and_eagerly_inside_a_trace():
+    """``World.model`` (the pairs' MJX leaves stacked) is not built with the world (MuJoCo C
+    needs only the native models) but when first read, here inside a jitted function being
+    traced: the stack is concrete arrays, equal to one built outside any trace."""
+    from relaff_jax.sim import world as wd
+
+    w = wd._build_world.__wrapped__(config.PhysicsConfig(), False, lib.active())  # a new world, not the cached one
+    assert "_stacked_models" not in w.__dict__
+    seen = {}
+
+    @jax.jit
+    def f(x):
+        seen["leaves"] = jax.tree_util.tree_leaves(w.model)
+        return x + 1
+
+    f(0.0)
+    assert not any(isinstance(x, jax.core.Tracer) for x in seen["leaves"])
+    model, axes, names = wd._stack_models(w.mj_models)
+    assert names == w.batched_fields and len(names) > 0
+    assert jax.tree_util.tree_structure(axes) == jax.tree_util.tree_structure(w.model_axes)
+    assert all(np.array_equal(np.asarray(a), np.asarray(b))
+               for a, b in zip(jax.tree_util.tree_leaves(model), seen["leaves"]))
+
+
+def test_contact_masks_asked_for_inside_a_trace():
+    """The MJX settle asks for its contact slots when it is traced (a run settling in MuJoCo C
+    never pays for them): computed there, they equal those computed outside any trace."""
+    from relaff_jax.sim import world as wd
+
+    w = wd.build_world()
+    sc.contact_masks.cache_clear()
+    seen = {}
+
+    @jax.jit
+    def f(x):
+        seen["masks"] = sc.contact_masks(w)
+        return x + 1
+
+    f(0.0)
+    sc.contact_masks.cache_clear()
+    outside = sc.contact_masks(w)
+    assert all(isinstance(m, np.ndarray) and m.dtype == bool for m in seen["masks"])
+    assert all(np.array_equal(a, b) for a, b in zip(seen["masks"], outside)) and outside[0].any()
