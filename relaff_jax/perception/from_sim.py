@@ -88,14 +88,8 @@ def show_key(rollout_id: int):
 
 @functools.lru_cache(maxsize=4)
 def jitted_geoms(world: wd.World):
-    """``scene_geoms`` of ``world`` jitted once per world (cached): ``(pair, qpos) -> (size, xpos, xmat)``.
-    Its trace is stored on disk (``sim.traced_cache``): read back, it holds the world's model
-    stack as constants, so a later run neither traces it nor builds the stack."""
-    from relaff_jax.sim.object_library import digest
-    from relaff_jax.sim.traced_cache import stored_jit
-
-    return stored_jit(lambda pair, qpos: scene_geoms(world, pair, qpos), "scene_geoms",
-                      (world.phys, world.arm, digest(world.objects.specs)))
+    """``scene_geoms`` of ``world`` jitted once per world (cached): ``(pair, qpos) -> (size, xpos, xmat)``."""
+    return jax.jit(lambda pair, qpos: scene_geoms(world, pair, qpos))
 
 
 # Scenes per perception call inside a feature chunk. The chain's per-scene cost grows with the

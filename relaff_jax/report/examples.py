@@ -102,20 +102,13 @@ def examples_beside(data_dirs: Mapping[str, str | os.PathLike], out: Path, per_a
 
     from relaff_jax.plugins import loaded_files
 
-    from relaff_jax.compile_cache import traces_dir
-
     pool = ProcessPoolExecutor(1, mp_context=get_context("spawn"))
-    job = pool.submit(_in_child, loaded_files(), traces_dir(), {a: str(d) for a, d in data_dirs.items()}, str(out),
-                      per_action)
+    job = pool.submit(_in_child, loaded_files(), {a: str(d) for a, d in data_dirs.items()}, str(out), per_action)
     return Drawing(lambda: example_scenes(data_dirs, out, per_action), pool=pool, job=job)
 
 
-def _in_child(plugins, traces: Path | None, data_dirs: dict[str, str], out: str,
-              per_action: int) -> list[tuple[str, str, str]]:
-    from relaff_jax import compile_cache
+def _in_child(plugins, data_dirs: dict[str, str], out: str, per_action: int) -> list[tuple[str, str, str]]:
     from relaff_jax.plugins import load_files
 
     load_files(plugins)  # (path, sha256) pairs: a file changed since the parent read it is refused
-    # the parent's store of traced programs, if the command turned it on (sim/traced_cache.py)
-    compile_cache.enable_traces(None if traces is None else traces.parent)
     return example_scenes({a: Path(d) for a, d in data_dirs.items()}, Path(out), per_action)

@@ -59,8 +59,8 @@ def feature_warmups(cfg: Any) -> list:
     b = int(cfg.dataset.feature_batch)  # the stage's chunks are padded to this many scenes
 
     def geoms() -> None:
-        """The scenes' geometry at the chunks' shape, on placeholder scenes: read from the trace
-        store, or (a new install, a changed package) its model stack built, traced and compiled."""
+        """The scenes' geometry at the chunks' shape, on placeholder scenes: the camera's MJX
+        model stack built (``World.model``, ~2 s) and the program traced and compiled here."""
         qpos = np.tile(np.asarray(world.mj_model.qpos0, np.float32), (b, 1))
         jax.block_until_ready(from_sim.jitted_geoms(world)(np.zeros(b, np.int32), qpos))
 
