@@ -104,7 +104,7 @@ def _plan(cfg: Any, action: str, pair: np.ndarray, qpos: np.ndarray, batch: int)
     for lo in range(0, len(pair), batch):
         rows = np.resize(np.arange(lo, min(lo + batch, len(pair))), batch)
         if cfg.arm.reach_screen:
-            plan, _ = prepare_screened(prepare_fn, cfg, aid, pair[rows], qpos[rows])
+            plan, _ = prepare_screened(cfg, aid, pair[rows], qpos[rows])
         else:
             plan, _ = jax.device_get(prepare_fn(aid, pair[rows], qpos[rows]))
         k = min(batch, len(pair) - lo)

@@ -27,7 +27,8 @@ target is (``programs.toy_reachable``); unobstruct's two are screened apart. The
 scenes' plans are what the plan function gives every infeasible scene (home waypoints,
 ``feasible`` False); only their ``ik_error``, never solved, is NaN. The other scenes are planned by the same jitted function in calls of
 ``PLAN_CHUNK`` rows; a scene's plan does not depend on the other rows of its call
-(``tests/sim/test_reach_screen.py`` checks the whole batch against the unscreened plan).
+(``tests/sim/test_reach_screen.py`` checks the whole batch against ``make_prepare_fn``
+compiled as one program, unscreened).
 """
 from __future__ import annotations
 
@@ -137,10 +138,11 @@ def jitted_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
 
 @per_action_list(maxsize=4)
 def jitted_parts(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
-    """The two halves of ``simulate.make_prepare_fn`` apart, jitted and cached:
-    ``plan_fn(action_id, pair (B,), qpos (B, 14)) -> Plan`` (``planning.make_plan_fn``) and
-    ``reach_fn(pair (B,), qpos (B, 14)) -> (B,) bool``, unobstruct's ``toy_reachable``. Only
-    unobstruct uses them: its program and its toy are screened apart."""
+    """The two halves of ``simulate.make_prepare_fn`` apart, jitted and cached, their traces
+    kept on disk (``traced_cache.stored_jit``): ``plan_fn(action_id, pair (B,), qpos (B, 14))
+    -> Plan`` (``planning.make_plan_fn``, every action's planner) and ``reach_fn(pair (B,),
+    qpos (B, 14)) -> (B,) bool``, unobstruct's ``toy_reachable``. Every plan of a run comes
+    from them (``prepare_screened``, ``rollouts.jitted_stage_fns``)."""
     st = setup(cfg)
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
     return stored_jit(make_plan_fn(cfg), "plan", cfg), stored_jit(reach, "toy_reach", cfg)
@@ -156,15 +158,15 @@ def _in_chunks(fn: Callable, rows: np.ndarray, chunk: int, *arrays: np.ndarray) 
         yield part, jax.device_get(fn(*(jnp.asarray(a[idx]) for a in arrays)))
 
 
-def prepare_screened(prepare_fn: Callable, cfg: ActionConfig, aid: int, pair: np.ndarray,
+def prepare_screened(cfg: ActionConfig, aid: int, pair: np.ndarray,
                      qpos: np.ndarray) -> tuple[Plan, np.ndarray]:
-    """``prepare_fn``'s ``(Plan, before)`` (``simulate.make_prepare_fn``, jitted) for B scenes,
-    solving the IK only of the scenes the screen cannot rule out, in calls of ``PLAN_CHUNK``
-    rows (the last padded with repeats; a batch up to ``PLAN_CHUNK`` is one call of its own
-    size). Unobstruct's program and toy are screened apart: a scene whose program is beyond
-    reach but whose toy may not be gets only the toy's IK (``jitted_parts``), and the other way
-    round. Host arrays: pair (B,), qpos (B, 14) float32. Returns numpy arrays: every field
-    equal to the unscreened call's except ``ik_error``, NaN where the program was screened."""
+    """``simulate.make_prepare_fn``'s ``(Plan, before)`` for B scenes, solving the IK only of
+    the scenes the screen cannot rule out: the program's plan (``jitted_parts``' plan) of
+    the scenes whose program may be reachable, and, for unobstruct, the toy's reach of the
+    scenes whose toy may be, each in calls of ``PLAN_CHUNK`` rows (the last padded with
+    repeats; a batch up to ``PLAN_CHUNK`` is one call of its own size). Host arrays: pair
+    (B,), qpos (B, 14) float32. Returns numpy arrays: every field equal to the unscreened
+    call's except ``ik_error``, NaN where the program was screened."""
     pair, qpos = np.asarray(pair), np.asarray(qpos, np.float32)
     n = len(pair)
     infeasible, unreachable, direction = jax.device_get(
@@ -178,25 +180,12 @@ def prepare_screened(prepare_fn: Callable, cfg: ActionConfig, aid: int, pair: np
     ik_error = np.full(n, np.nan, np.float32)
     direction = np.asarray(direction, np.float32).copy()
     chunk = min(n, PLAN_CHUNK)
-
-    def keep(rows, plan):
+    plan_fn, reach_fn = jitted_parts(cfg)
+    for rows, plan in _in_chunks(lambda p, q: plan_fn(aid, p, q), np.flatnonzero(~infeasible), chunk, pair, qpos):
         k = len(rows)
         q_way[rows], grip_way[rows], feasible[rows] = plan.q_way[:k], plan.grip_way[:k], plan.feasible[:k]
         direction[rows], ik_error[rows] = plan.direction[:k], plan.ik_error[:k]
-
-    if not tables(cfg).reach[aid]:  # reach_before is False: prepare_fn's own
-        both, plan_only, toy_only = np.flatnonzero(~infeasible), np.zeros(0, int), np.zeros(0, int)
-    else:
-        both = np.flatnonzero(~infeasible & ~unreachable)
-        plan_only = np.flatnonzero(~infeasible & unreachable)
-        toy_only = np.flatnonzero(infeasible & ~unreachable)
-    for rows, (plan, b) in _in_chunks(lambda p, q: prepare_fn(aid, p, q), both, chunk, pair, qpos):
-        keep(rows, plan)
-        before[rows] = b[:len(rows)]
-    if len(plan_only) or len(toy_only):
-        plan_fn, reach_fn = jitted_parts(cfg)
-        for rows, plan in _in_chunks(lambda p, q: plan_fn(aid, p, q), plan_only, chunk, pair, qpos):
-            keep(rows, plan)
-        for rows, b in _in_chunks(reach_fn, toy_only, chunk, pair, qpos):
+    if tables(cfg).reach[aid]:  # else reach_before is False, as make_prepare_fn's
+        for rows, b in _in_chunks(reach_fn, np.flatnonzero(~unreachable), chunk, pair, qpos):
             before[rows] = b[:len(rows)]
     return Plan(q_way, grip_way, seg, feasible, direction, ik_error), before

@@ -30,15 +30,15 @@ import numpy as np
 from . import scenes as sc
 from . import world as wd
 from .actions.registry import action_id, per_action_list, spec
+from .actions.tables import tables
 from .bodies import geometry
 from .native.batch import default_threads, execute_native
 from .native.settle import settle_batch, still_batch
 from .planning import Plan
-from .reach_screen import prepare_screened
+from .reach_screen import jitted_parts, prepare_screened
 from .simulate import make_prepare_fn, make_simulate_fn
 from .still import make_still_fn
 from .templates import ActionConfig, is_v4, stored_config  # noqa: F401 (stored_config: for reproduce)
-from .traced_cache import stored_jit
 
 from relaff_jax.constants import SIM_ENGINES
 from relaff_jax.errors import UserError
@@ -68,10 +68,26 @@ def make_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
 
 @per_action_list(maxsize=4)  # built for the run's action list
 def jitted_stage_fns(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
-    """The jitted ``make_prepare_fn(cfg)`` and ``make_simulate_fn(cfg)``, cached: each compiles
-    once per batch shape and serves all nine actions (the action index is traced). The
-    planner's trace is kept on disk with the compilation cache (``traced_cache.stored_jit``)."""
-    return stored_jit(make_prepare_fn(cfg), "prepare", cfg), jax.jit(make_simulate_fn(cfg))
+    """``make_prepare_fn(cfg)``'s results from compiled programs, and the jitted
+    ``make_simulate_fn(cfg)``, cached: each program compiles once per batch shape and serves
+    all nine actions (the action index is traced).
+
+    The prepare function calls the planner's two halves (``reach_screen.jitted_parts``: the
+    plan, and unobstruct's toy reach only for the actions that read it) instead of compiling
+    ``make_prepare_fn`` as one program: the screened generation calls those halves anyway, so
+    a run compiles the planner once, not twice (a new install's quick run traced and compiled
+    both, ~45 CPU s each). Its ``action_id`` must be concrete (a Python or numpy integer).
+    ``tests/sim/test_reach_screen.py`` compares its results with ``make_prepare_fn`` compiled
+    as one program, bit for bit."""
+    plan_fn, reach_fn = jitted_parts(cfg)
+    reads = tables(cfg).reach
+
+    def prepare_fn(action_id, pair, qpos):
+        """``(Plan, reach_before (B,) bool)`` of ``make_prepare_fn``."""
+        before = reach_fn(pair, qpos) if reads[int(action_id)] else jnp.zeros(np.shape(pair), bool)
+        return plan_fn(action_id, pair, qpos), before
+
+    return prepare_fn, jax.jit(make_simulate_fn(cfg))
 
 
 def jitted_action_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
@@ -221,7 +237,7 @@ def make_batch_prepare_fn(action: str, cfg: ActionConfig, settle: str = "mjx",
             scenes = settle_fn(pair, qpos0, intended)
         if cfg.arm.reach_screen:  # the IK only where the arm might reach (reach_screen.py)
             s = jax.device_get(scenes)
-            plan, before = prepare_screened(prepare_fn, cfg, aid, np.asarray(pair), s.qpos)
+            plan, before = prepare_screened(cfg, aid, np.asarray(pair), s.qpos)
         else:
             plan, before = prepare_fn(aid, pair, jnp.asarray(scenes.qpos))
             s, plan, before = jax.device_get((scenes, plan, before))

@@ -1,22 +1,19 @@
 """The planner's programs compiled ahead of the generation that needs them, on another thread.
 
 Takes an ``ActionConfig``, the rollout batch and the actions a run generates; gives
-``unobstruct_warmups(cfg, batch, actions)``: functions of no argument, each tracing (or reading
-from the traced store, ``traced_cache``) and compiling one of the planner's programs at the
-shape the generation calls it with, on placeholder scenes, and returning nothing: unobstruct's
-two halves screened apart (``reach_screen.jitted_parts``, its program's plan and its toy's
-reach), which only unobstruct needs, and it is generated last.
+``planner_warmups(cfg, batch, actions)``: functions of no argument, each tracing (or reading
+from the traced store, ``traced_cache``) and compiling one of the planner's two programs
+(``reach_screen.jitted_parts``: every action's plan, and unobstruct's toy reach when
+unobstruct is generated) at the shape the generation calls it with, on placeholder scenes,
+and returning nothing.
 
-The generate stage runs them on its background thread (``stages/audits.py``) from its start,
-while the first action compiles its own programs (XLA's compiles leave the GIL free): on a
-new install they are about 45 s of trace and compile that unobstruct no longer waits for (``docs/reproduce.md``, "The quick preset's defaults"). The
-planner shared by every action (``rollouts.jitted_stage_fns``) is not warmed: the first action
-needs it seconds after the stage starts, and tracing it beside that action's own traces only
-made them take turns (lift 103 s against 94 on a new install); the unobstruct warm-ups started
-after the first action instead slowed the next two (docs/journal/2026-12-07.md). A generation that reaches a program
-being warmed waits for it (``traced_cache._Stored``'s lock) instead of tracing it again. A compiled program depends on
-its arguments' shapes and dtypes, not their values, so the generation runs the programs it
-would have compiled itself: the same bits.
+The generate stage runs them on its background thread (``stages/audits.py``) from its start.
+The first action settles its first chunk in MuJoCo C and traces and compiles the reach screen
+meanwhile, so the plan's trace and compile (~45 CPU s on a new install) overlap them: XLA's
+compiles leave the GIL free; the traces take turns. A generation that reaches a program being
+warmed waits for it (``traced_cache._Stored``'s lock) instead of tracing it again. A compiled
+program depends on its arguments' shapes and dtypes, not their values, so the generation runs
+the programs it would have compiled itself: the same bits.
 
 The cached program objects are built here, in the caller's thread, with the run's object set
 active, before any function is returned: the threads then share them.
@@ -43,18 +40,22 @@ def placeholder_scenes(cfg: ActionConfig, rows: int) -> tuple[np.ndarray, np.nda
     return np.zeros(rows, np.int32), np.tile(np.asarray(m.qpos0, np.float32), (rows, 1))
 
 
-def unobstruct_warmups(cfg: ActionConfig, batch: int, actions: Sequence[str]) -> list[Callable[[], None]]:
-    """The warm-ups of unobstruct's screened halves for a generation of ``actions`` (in that
-    order) in batches of ``batch`` (module doc): none when unobstruct is not generated or is
-    generated first, or the reach screen is off (its plan is then the planner's)."""
-    if not cfg.arm.reach_screen or "unobstruct" not in actions[1:]:  # unscreened, absent or first: nothing ahead
+def planner_warmups(cfg: ActionConfig, batch: int, actions: Sequence[str]) -> list[Callable[[], None]]:
+    """The warm-ups of the planner's programs for a generation of ``actions`` in batches of
+    ``batch`` (module doc): the plan, then unobstruct's toy reach if unobstruct is among
+    ``actions``; none when no action is generated."""
+    if not actions:
         return []
     use_scene(cfg.scene, cfg.grip_margin)  # the run's objects, as the generation's factory selects them
-    # the screened halves run in calls of min(batch, PLAN_CHUNK) rows (reach_screen.prepare_screened)
-    pair, qpos = placeholder_scenes(cfg, min(int(batch), PLAN_CHUNK))
+    # screened, the halves run in calls of min(batch, PLAN_CHUNK) rows (reach_screen.prepare_screened);
+    # unscreened, in calls of the whole batch (rollouts.jitted_stage_fns)
+    rows = min(int(batch), PLAN_CHUNK) if cfg.arm.reach_screen else int(batch)
+    pair, qpos = placeholder_scenes(cfg, rows)
     plan_fn, reach_fn = jitted_parts(cfg)
-    return [functools.partial(_call, plan_fn, action_id("unobstruct"), pair, qpos),
-            functools.partial(_call, reach_fn, pair, qpos)]
+    out = [functools.partial(_call, plan_fn, action_id(actions[0]), pair, qpos)]
+    if "unobstruct" in actions:
+        out.append(functools.partial(_call, reach_fn, pair, qpos))
+    return out
 
 
 def _call(fn: Callable, *args) -> None:

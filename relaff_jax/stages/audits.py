@@ -1,7 +1,7 @@
 """The generate stage's physics audits, each beside the next action's generation.
 
-Takes the stage's ``Run``; gives ``Beside``: ``warm(fns)`` first compiles unobstruct's screened
-halves ahead of its generation (``sim/warm.py``) and ``submit(action)`` audits a finished
+Takes the stage's ``Run``; gives ``Beside``: ``warm(fns)`` first compiles the planner's programs
+ahead of the generation that calls them (``sim/warm.py``) and ``submit(action)`` audits a finished
 dataset (``data.audit.ensure_audit``, written atomically to its ``audit.json``), both on one
 background thread; ``warm_elsewhere`` runs work that holds the GIL (numba's compile of the
 forest kernels) in a spawned process; ``finish()`` waits for them all and returns the audits'
@@ -83,7 +83,7 @@ class Beside:
         self.done: dict[str, dict] = {}
 
     def warm(self, fns: list[Callable[[], None]]) -> None:
-        """Run ``fns`` (``sim.warm.unobstruct_warmups``) on the background thread, before the
+        """Run ``fns`` (``sim.warm.planner_warmups``) on the background thread, before the
         audits; nothing runs without the thread (one core: the generation compiles them itself)."""
         if self.pool is not None:
             self.warming += [self.pool.submit(f) for f in fns]

@@ -172,9 +172,9 @@ def run(run: Run, forced: bool) -> dict:
     if run.client is None or len(todo) < 2:
         with audits.Beside(run) as beside:  # each audit beside the next action's generation
             if todo and beside.pool is not None and getattr(run.rollout_factory, "func", None) is default_rollout_factory:
-                from relaff_jax.sim.warm import unobstruct_warmups  # the simulation loads when the stage runs
+                from relaff_jax.sim.warm import planner_warmups  # the simulation loads when the stage runs
 
-                beside.warm(unobstruct_warmups(cfg.action, cfg.dataset.rollout_batch, todo))
+                beside.warm(planner_warmups(cfg.action, cfg.dataset.rollout_batch, todo))
             from relaff_jax.stages.features import default_feature_factory, feature_warmups
 
             if todo and beside.pool is not None and getattr(run.feature_factory, "func", None) is default_feature_factory:

@@ -12,8 +12,9 @@ from relaff_jax.sim import rollouts, templates
 from relaff_jax.sim.native import settle as native_settle
 from relaff_jax.sim import scenes as sc
 from relaff_jax.sim import world as wd
-from relaff_jax.sim.planning import setup
+from relaff_jax.sim.planning import Plan, setup
 from relaff_jax.sim.reach_screen import beyond_reach, jitted_screen_fn, prepare_screened, reach_bound
+from relaff_jax.sim.simulate import make_prepare_fn
 
 CFG = templates.ActionConfig()
 B = 8  # scenes per batch: the tiny preset's, whose compiled programs the session shares
@@ -74,14 +75,17 @@ def test_no_reachable_pose_is_screened(arm):
 @pytest.mark.slow  # plans 9 x 64 scenes (the programs at batch 8 are the session's: generate's)
 def test_screened_plan_equals_plan():
     """Every action, 64 scenes in 8 batches of 8: the screened plan equals the unscreened plan
-    in every field but ``ik_error`` (NaN where screened); the screened scenes are infeasible in
-    the full plan. Unobstruct's scenes include all three of its calls: program and toy, program
-    only (toy beyond reach), toy only (program beyond reach). Batches of 8 (the tiny preset's,
-    tests/sim/test_actions.py's) reuse the session's compiled place, plan and screen programs
-    instead of compiling them for 64 scenes."""
+    of ``make_prepare_fn`` compiled as one program in every field but ``ik_error`` (NaN where
+    screened); the screened scenes are infeasible in the full plan. Unobstruct's scenes include
+    all three kinds: program and toy, program only (toy beyond reach), toy only (program beyond
+    reach). The generation's unscreened prepare (``jitted_stage_fns``: the plan and the toy's
+    reach as two programs) equals the one program in every field. Batches of 8 (the tiny
+    preset's, tests/sim/test_actions.py's) reuse the session's compiled place, plan and screen
+    programs instead of compiling them for 64 scenes."""
     sw = wd.build_world(CFG.phys)
     place_fn, _, _ = sc.jitted_scene_fns(sw, CFG.scene)
-    prep = rollouts.jitted_stage_fns(CFG)[0]
+    prep = jax.jit(make_prepare_fn(CFG))  # the reference: plan and toy reach in one program
+    parts = rollouts.jitted_stage_fns(CFG)[0]
     screened = 0
     for action in ACTIONS:
         aid = action_id(action)
@@ -93,7 +97,12 @@ def test_screened_plan_equals_plan():
             pair = np.asarray(pair)
             q = np.asarray(native_settle.settle_batch(sw, pair, qpos0, intended, CFG.scene, 2).qpos, np.float32)
             ref, ref_before = jax.device_get(prep(aid, jnp.asarray(pair), jnp.asarray(q)))
-            got, before = prepare_screened(prep, CFG, aid, pair, q)
+            got, before = prepare_screened(CFG, aid, pair, q)
+            whole, whole_before = jax.device_get(parts(aid, jnp.asarray(pair), jnp.asarray(q)))
+            for f in Plan._fields:
+                np.testing.assert_array_equal(np.asarray(getattr(whole, f)), np.asarray(getattr(ref, f)),
+                                              err_msg=f"{action} {f}, unscreened")
+            np.testing.assert_array_equal(whole_before, ref_before)
             skip = np.isnan(got.ik_error)
             for f in ("q_way", "grip_way", "seg_steps", "feasible", "direction"):
                 a, g = np.asarray(getattr(ref, f)), np.asarray(getattr(got, f))

@@ -81,7 +81,7 @@ def test_v4_prepare_refuses_the_programs_of_scenes_that_move(monkeypatch):
     minutes of CPU; the refusal is what is tested here)."""
     from relaff_jax.sim.planning import Plan
 
-    def every_other(prepare_fn, cfg, aid, pair, qpos):
+    def every_other(cfg, aid, pair, qpos):
         n = len(pair)
         z = np.zeros
         return Plan(z((n, 3, 6), np.float32), z((n, 3), np.float32), z(2, np.int32), np.arange(n) % 2 == 0,

@@ -1,5 +1,5 @@
-"""sim/warm.py: unobstruct's screened halves compiled ahead, at the shapes its generation calls
-them with (so the generation finds them compiled), and only when unobstruct comes later."""
+"""sim/warm.py: the planner's programs compiled ahead, at the shapes the generation calls them
+with (so the generation finds them compiled); unobstruct's toy reach only when it is generated."""
 import jax
 import numpy as np
 import pytest
@@ -8,16 +8,17 @@ from relaff_jax.sim import traced_cache as tc
 from relaff_jax.sim.reach_screen import PLAN_CHUNK, jitted_parts
 from relaff_jax.sim.rollouts import make_batch_prepare_fn
 from relaff_jax.sim.templates import ActionConfig
-from relaff_jax.sim.warm import placeholder_scenes, unobstruct_warmups
+from relaff_jax.sim.warm import placeholder_scenes, planner_warmups
 
 B = 8
 
 
-def test_nothing_ahead_when_unobstruct_is_absent_or_first():
+def test_the_plan_for_any_generation_and_the_toy_reach_for_unobstruct():
     cfg = ActionConfig()
-    assert unobstruct_warmups(cfg, 64, ["lift", "move"]) == []
-    assert unobstruct_warmups(cfg, 64, ["unobstruct", "lift"]) == []
-    assert unobstruct_warmups(cfg, 64, []) == []
+    assert planner_warmups(cfg, 64, []) == []
+    assert len(planner_warmups(cfg, 64, ["lift", "move"])) == 1
+    assert len(planner_warmups(cfg, 64, ["unobstruct"])) == 2
+    assert len(planner_warmups(cfg, 64, ["lift", "unobstruct"])) == 2
 
 
 def test_placeholder_scenes_have_the_settled_scenes_dtypes():
@@ -28,11 +29,11 @@ def test_placeholder_scenes_have_the_settled_scenes_dtypes():
 
 @pytest.mark.slow  # settles and plans unobstruct scenes (the planner's compile)
 def test_the_generation_calls_the_warmed_shapes(monkeypatch):
-    """Every call the generation makes of unobstruct's two halves has the shape and dtypes a
+    """Every call the generation makes of the planner's two programs has the shape and dtypes a
     warm-up compiled (batch 8, the programs lane A of the suite compiles): none compiles a
     program of its own."""
     cfg = ActionConfig()
-    warm = unobstruct_warmups(cfg, B, ["lift", "unobstruct"])
+    warm = planner_warmups(cfg, B, ["lift", "unobstruct"])
     assert len(warm) == 2
     seen: list = []
     call = tc._Stored.__call__
@@ -50,12 +51,14 @@ def test_the_generation_calls_the_warmed_shapes(monkeypatch):
     assert warmed == {("plan", (((), "int32"), ((rows,), "int32"), ((rows, 14), "float32"))),
                       ("toy_reach", (((rows,), "int32"), ((rows, 14), "float32")))}
     seen.clear()
+    make_batch_prepare_fn("lift", cfg, settle="native")(jax.random.PRNGKey(0), B)
+    assert {name for name, _ in seen} == {"plan"}, "lift's batch called no plan, or the toy's reach"
     prepare = make_batch_prepare_fn("unobstruct", cfg, settle="native")
-    for k in range(40):  # until a batch has scenes screened apart
+    for k in range(40):  # until a batch has a program and a toy the screen cannot rule out
         prepare(jax.random.PRNGKey(k), B)
-        if {name for name, _ in seen} == {"plan", "toy_reach"}:
+        if seen[-1][0] == "toy_reach":
             break
-    assert seen, "no batch called unobstruct's screened halves"
+    assert {name for name, _ in seen} == {"plan", "toy_reach"}, "no batch called unobstruct's toy reach"
     assert set(seen) <= warmed
     plan_fn, reach_fn = jitted_parts(cfg)
     assert len(plan_fn.calls) == 1 and len(reach_fn.calls) == 1  # one compiled shape each
