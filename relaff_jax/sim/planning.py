@@ -27,6 +27,7 @@ from .templates import N_TARGETS, ActionConfig, is_v3
 from .actions.registry import registry
 from .actions.rules import plan_program
 from .branch import BASE_TURN_MAX, base_turn, one_branch
+from .programs import Program
 from .straight import corrections, straight_rows
 from .traced_cache import stored_jit
 
@@ -85,21 +86,64 @@ class Plan(NamedTuple):
 # a Plan can leave a traced program stored on disk (relaff_jax/traced_cache.py)
 jax.export.register_namedtuple_serialization(Plan, serialized_name="relaff_jax.sim.planning.Plan")
 
+# the order of a Program's leaves (``make_plan_of_fn``'s arguments, the reach screen's outputs)
+PROGRAM_TREE = jax.tree_util.tree_structure(Program(A.IKTarget(*range(5)), 0, 0, 0, 0))
+
+
+def program_branches(cfg: ActionConfig) -> list[Callable]:
+    """The run's actions' target rules, ``branch(pair (), qpos (nq,)) -> Program`` (one scene;
+    ``actions.rules.plan_program``), in ``registry()`` order: the branches of the planner's
+    and the reach screen's ``lax.switch``."""
+    st = setup(cfg)
+    return [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
+
 
 def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     """``plan_fn(action_id (), pair (B,), qpos (B, nq)) -> Plan`` for any of the run's actions
     (``action_id`` indexes ``actions.names()``; traced, so one compile serves all; the target
     rules are the specs'). Pure; caller jits."""
+    branches = program_branches(cfg)
+    one = _plan_one(cfg)
+    tb = tables(cfg)
+
+    def plan_fn(action_id, pair, qpos):
+        action_id = jnp.asarray(action_id, jnp.int32)
+        q_way, grip_way, feasible, direction, err = jax.vmap(
+            lambda p, q: one(action_id, jax.lax.switch(action_id, branches, p, q)))(pair, qpos)
+        return Plan(q_way, grip_way, jnp.asarray(tb.steps)[action_id], feasible, direction, err)
+
+    return plan_fn
+
+
+def make_plan_of_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
+    """``plan_of(action_id (), *leaves) -> Plan``: ``make_plan_fn``'s plan of programs already
+    drawn (``leaves``: ``jax.tree_util.tree_leaves`` of a ``programs.Program`` whose leaves
+    have a leading (B,) axis, as the reach screen returns them), so a screened generation
+    computes each scene's targets once (in the screen) and its planner compiles no target
+    rule. Pure; caller jits."""
+    one = _plan_one(cfg)
+    tb = tables(cfg)
+
+    def plan_of(action_id, *leaves):
+        action_id = jnp.asarray(action_id, jnp.int32)
+        prog = jax.tree_util.tree_unflatten(PROGRAM_TREE, list(leaves))
+        q_way, grip_way, feasible, direction, err = jax.vmap(lambda p: one(action_id, p))(prog)
+        return Plan(q_way, grip_way, jnp.asarray(tb.steps)[action_id], feasible, direction, err)
+
+    return plan_of
+
+
+def _plan_one(cfg: ActionConfig) -> Callable:
+    """``one(action_id (), prog: Program) -> (q_way, grip_way, feasible, direction, ik_error)``
+    of one scene (the IK of its targets from the home pose, and the refusals)."""
     st = setup(cfg)
     tb = tables(cfg)
     q_home = jnp.asarray(st.q_home, jnp.float32)
     grip_home = jnp.asarray(home_grip(cfg, st.arm))
-    branches = [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
     straight = straight_rows(cfg, tb.target)
     v3 = is_v3(cfg)
 
-    def one(action_id, pair, qpos):
-        prog = jax.lax.switch(action_id, branches, pair, qpos)
+    def one(action_id, prog):
         # only the targets the template uses are solved and count (the padding repeats the
         # last one); one value for the whole batch, so the cond stays a branch under vmap
         n_used = jnp.max(jnp.asarray(tb.target)[action_id]) + 1
@@ -129,9 +173,4 @@ def make_plan_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         grip_way = jnp.where(feasible, grip_way, g0)
         return q_way, grip_way, feasible, prog.direction, jnp.maximum(jnp.max(jnp.where(used, res.pos_err, 0.0)), line_err)
 
-    def plan_fn(action_id, pair, qpos):
-        action_id = jnp.asarray(action_id, jnp.int32)
-        q_way, grip_way, feasible, direction, err = jax.vmap(one, in_axes=(None, 0, 0))(action_id, pair, qpos)
-        return Plan(q_way, grip_way, jnp.asarray(tb.steps)[action_id], feasible, direction, err)
-
-    return plan_fn
+    return one

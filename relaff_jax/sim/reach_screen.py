@@ -32,7 +32,6 @@ compiled as one program, unscreened).
 """
 from __future__ import annotations
 
-import functools
 from typing import Any, Callable, Iterator, NamedTuple
 
 import jax
@@ -41,9 +40,8 @@ import numpy as np
 
 from . import arm as A
 from relaff_jax.config.action import ArmConfig
-from .planning import Plan, home_grip, make_plan_fn, setup
-from .actions.registry import per_action_list, registry
-from .actions.rules import plan_program
+from .planning import Plan, home_grip, make_plan_of_fn, program_branches, setup
+from .actions.registry import per_action_list
 from .programs import toy_grasp_target, toy_reachable
 from .actions.tables import tables
 from .templates import N_TARGETS, ActionConfig
@@ -104,14 +102,16 @@ def beyond_reach(bound: ReachBound, target: A.IKTarget) -> jax.Array:
 
 def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
     """``screen_fn(action_id (), pair (B,), qpos (B, 14)) -> (infeasible (B,) bool, unreachable
-    (B,) bool, direction (B, 3))``: ``infeasible`` where the program is provably infeasible, so
-    its plan needs no IK; ``unreachable`` where unobstruct's toy is provably unreachable before
-    the action, so ``reach_before`` needs none (True for the other actions, whose
-    ``reach_before`` is False); ``direction`` is the program's (what the plan function
-    returns). Pure; the caller jits."""
+    (B,) bool, direction (B, 3), program)``: ``infeasible`` where the program is provably
+    infeasible, so its plan needs no IK; ``unreachable`` where unobstruct's toy is provably
+    unreachable before the action, so ``reach_before`` needs none (True for the other actions,
+    whose ``reach_before`` is False); ``direction`` is the program's (what the plan function
+    returns); ``program`` the tuple of the scenes' ``programs.Program`` leaves (each (B, ...),
+    ``planning.PROGRAM_TREE``'s order), which ``planning.make_plan_of_fn`` plans. Pure; the
+    caller jits."""
     st = setup(cfg)
     bound = reach_bound(st.arm, cfg.arm)
-    branches = [functools.partial(plan_program, s, st.arm, cfg, st.geo) for s in registry()]
+    branches = program_branches(cfg)
     reads = jnp.asarray(tables(cfg).reach)
     far = jax.vmap(lambda t: beyond_reach(bound, t))
 
@@ -121,7 +121,7 @@ def make_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
         infeasible = jnp.any(far(prog.targets) & used)
         grasp, _ = toy_grasp_target(st.arm, cfg, st.geo, pair, qpos)
         unreachable = jnp.where(reads[action_id], beyond_reach(bound, grasp), True)
-        return infeasible, unreachable, prog.direction
+        return infeasible, unreachable, prog.direction, tuple(jax.tree_util.tree_leaves(prog))
 
     def screen_fn(action_id, pair, qpos):
         return jax.vmap(one, in_axes=(None, 0, 0))(jnp.asarray(action_id, jnp.int32), pair, qpos)
@@ -139,13 +139,14 @@ def jitted_screen_fn(cfg: ActionConfig = ActionConfig()) -> Callable:
 @per_action_list(maxsize=4)
 def jitted_parts(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Callable]:
     """The two halves of ``simulate.make_prepare_fn`` apart, jitted and cached, their traces
-    kept on disk (``traced_cache.stored_jit``): ``plan_fn(action_id, pair (B,), qpos (B, 14))
-    -> Plan`` (``planning.make_plan_fn``, every action's planner) and ``reach_fn(pair (B,),
-    qpos (B, 14)) -> (B,) bool``, unobstruct's ``toy_reachable``. Every plan of a run comes
-    from them (``prepare_screened``, ``rollouts.jitted_stage_fns``)."""
+    kept on disk (``traced_cache.stored_jit``): ``plan_of(action_id, *program) -> Plan``
+    (``planning.make_plan_of_fn``, every action's planner, of the programs ``jitted_screen_fn``
+    returns) and ``reach_fn(pair (B,), qpos (B, 14)) -> (B,) bool``, unobstruct's
+    ``toy_reachable``. Every plan of a run comes from them (``prepare_screened``,
+    ``rollouts.jitted_stage_fns``)."""
     st = setup(cfg)
     reach = jax.vmap(lambda p, q: toy_reachable(st.arm, cfg, st.geo, p, q))
-    return stored_jit(make_plan_fn(cfg), "plan", cfg), stored_jit(reach, "toy_reach", cfg)
+    return stored_jit(make_plan_of_fn(cfg), "plan_of", cfg), stored_jit(reach, "toy_reach", cfg)
 
 
 def _in_chunks(fn: Callable, rows: np.ndarray, chunk: int, *arrays: np.ndarray) -> Iterator[tuple[np.ndarray, Any]]:
@@ -161,15 +162,15 @@ def _in_chunks(fn: Callable, rows: np.ndarray, chunk: int, *arrays: np.ndarray) 
 def prepare_screened(cfg: ActionConfig, aid: int, pair: np.ndarray,
                      qpos: np.ndarray) -> tuple[Plan, np.ndarray]:
     """``simulate.make_prepare_fn``'s ``(Plan, before)`` for B scenes, solving the IK only of
-    the scenes the screen cannot rule out: the program's plan (``jitted_parts``' plan) of
-    the scenes whose program may be reachable, and, for unobstruct, the toy's reach of the
+    the scenes the screen cannot rule out: the plan (``jitted_parts``' plan of the programs
+    the screen drew) of the scenes whose program may be reachable, and, for unobstruct, the toy's reach of the
     scenes whose toy may be, each in calls of ``PLAN_CHUNK`` rows (the last padded with
     repeats; a batch up to ``PLAN_CHUNK`` is one call of its own size). Host arrays: pair
     (B,), qpos (B, 14) float32. Returns numpy arrays: every field equal to the unscreened
     call's except ``ik_error``, NaN where the program was screened."""
     pair, qpos = np.asarray(pair), np.asarray(qpos, np.float32)
     n = len(pair)
-    infeasible, unreachable, direction = jax.device_get(
+    infeasible, unreachable, direction, program = jax.device_get(
         jitted_screen_fn(cfg)(aid, jnp.asarray(pair), jnp.asarray(qpos)))
     infeasible, unreachable = np.asarray(infeasible, bool), np.asarray(unreachable, bool)
     st = setup(cfg)
@@ -181,7 +182,7 @@ def prepare_screened(cfg: ActionConfig, aid: int, pair: np.ndarray,
     direction = np.asarray(direction, np.float32).copy()
     chunk = min(n, PLAN_CHUNK)
     plan_fn, reach_fn = jitted_parts(cfg)
-    for rows, plan in _in_chunks(lambda p, q: plan_fn(aid, p, q), np.flatnonzero(~infeasible), chunk, pair, qpos):
+    for rows, plan in _in_chunks(lambda *leaves: plan_fn(aid, *leaves), np.flatnonzero(~infeasible), chunk, *program):
         k = len(rows)
         q_way[rows], grip_way[rows], feasible[rows] = plan.q_way[:k], plan.grip_way[:k], plan.feasible[:k]
         direction[rows], ik_error[rows] = plan.direction[:k], plan.ik_error[:k]

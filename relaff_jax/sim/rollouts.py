@@ -35,7 +35,7 @@ from .bodies import geometry
 from .native.batch import default_threads, execute_native
 from .native.settle import settle_batch, still_batch
 from .planning import Plan
-from .reach_screen import jitted_parts, prepare_screened
+from .reach_screen import jitted_parts, jitted_screen_fn, prepare_screened
 from .simulate import make_prepare_fn, make_simulate_fn
 from .still import make_still_fn
 from .templates import ActionConfig, is_v4, stored_config  # noqa: F401 (stored_config: for reproduce)
@@ -72,20 +72,21 @@ def jitted_stage_fns(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Call
     ``make_simulate_fn(cfg)``, cached: each program compiles once per batch shape and serves
     all nine actions (the action index is traced).
 
-    The prepare function calls the planner's two halves (``reach_screen.jitted_parts``: the
+    The prepare function calls the programs the screened generation calls, on every scene
+    (``reach_screen.jitted_screen_fn`` for the scenes' programs, then ``jitted_parts``: their
     plan, and unobstruct's toy reach only for the actions that read it) instead of compiling
-    ``make_prepare_fn`` as one program: the screened generation calls those halves anyway, so
-    a run compiles the planner once, not twice (a new install's quick run traced and compiled
-    both, ~45 CPU s each). Its ``action_id`` must be concrete (a Python or numpy integer).
-    ``tests/sim/test_reach_screen.py`` compares its results with ``make_prepare_fn`` compiled
-    as one program, bit for bit."""
-    plan_fn, reach_fn = jitted_parts(cfg)
+    ``make_prepare_fn`` as one program: a run compiles the planner once, not twice (a new
+    install's quick run traced and compiled both, ~45 CPU s each). Its ``action_id`` must be
+    concrete (a Python or numpy integer). ``tests/sim/test_reach_screen.py`` compares its
+    results with ``make_prepare_fn`` compiled as one program, bit for bit."""
+    screen_fn = jitted_screen_fn(cfg)
+    plan_of, reach_fn = jitted_parts(cfg)
     reads = tables(cfg).reach
 
     def prepare_fn(action_id, pair, qpos):
         """``(Plan, reach_before (B,) bool)`` of ``make_prepare_fn``."""
         before = reach_fn(pair, qpos) if reads[int(action_id)] else jnp.zeros(np.shape(pair), bool)
-        return plan_fn(action_id, pair, qpos), before
+        return plan_of(action_id, *screen_fn(action_id, pair, qpos)[3]), before
 
     return prepare_fn, jax.jit(make_simulate_fn(cfg))
 

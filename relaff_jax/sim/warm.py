@@ -3,13 +3,13 @@
 Takes an ``ActionConfig``, the rollout batch and the actions a run generates; gives
 ``planner_warmups(cfg, batch, actions)``: functions of no argument, each tracing (or reading
 from the traced store, ``traced_cache``) and compiling one of the planner's two programs
-(``reach_screen.jitted_parts``: every action's plan, and unobstruct's toy reach when
-unobstruct is generated) at the shape the generation calls it with, on placeholder scenes,
-and returning nothing.
+(``reach_screen.jitted_parts``: every action's plan of the programs the reach screen
+draws, and unobstruct's toy reach when unobstruct is generated) at the shape the generation
+calls it with, on placeholder programs and scenes, and returning nothing.
 
 The generate stage runs them on its background thread (``stages/audits.py``) from its start.
 The first action settles its first chunk in MuJoCo C and traces and compiles the reach screen
-meanwhile, so the plan's trace and compile (~45 CPU s on a new install) overlap them: XLA's
+meanwhile, so the plan's trace and compile (~30 CPU s on a new install) overlap them: XLA's
 compiles leave the GIL free; the traces take turns. A generation that reaches a program being
 warmed waits for it (``traced_cache._Stored``'s lock) instead of tracing it again. A compiled
 program depends on its arguments' shapes and dtypes, not their values, so the generation runs
@@ -29,8 +29,10 @@ import numpy as np
 from relaff_jax.sim import world as wd
 from relaff_jax.sim.actions.registry import action_id
 from relaff_jax.sim.object_library import use_scene
+from relaff_jax.sim.kinematics import IKTarget
+from relaff_jax.sim.programs import Program
 from relaff_jax.sim.reach_screen import PLAN_CHUNK, jitted_parts
-from relaff_jax.sim.templates import ActionConfig
+from relaff_jax.sim.templates import N_TARGETS, ActionConfig
 
 
 def placeholder_scenes(cfg: ActionConfig, rows: int) -> tuple[np.ndarray, np.ndarray]:
@@ -38,6 +40,14 @@ def placeholder_scenes(cfg: ActionConfig, rows: int) -> tuple[np.ndarray, np.nda
     model's initial pose: the dtypes and shapes of the generation's settled scenes."""
     m = wd.build_world(cfg.phys).mj_models[0]
     return np.zeros(rows, np.int32), np.tile(np.asarray(m.qpos0, np.float32), (rows, 1))
+
+
+def placeholder_programs(rows: int) -> list[np.ndarray]:
+    """The leaves of ``rows`` scenes' ``programs.Program`` (``planning.PROGRAM_TREE``'s order),
+    zeros: the shapes and dtypes the reach screen returns (``reach_screen.make_screen_fn``)."""
+    f = lambda *shape: np.zeros((rows,) + shape, np.float32)
+    target = IKTarget(f(N_TARGETS, 3), f(N_TARGETS, 3), f(N_TARGETS, 3), f(N_TARGETS), f(N_TARGETS))
+    return jax.tree_util.tree_leaves(Program(target, f(), np.zeros(rows, bool), f(3), f()))
 
 
 def planner_warmups(cfg: ActionConfig, batch: int, actions: Sequence[str]) -> list[Callable[[], None]]:
@@ -51,8 +61,8 @@ def planner_warmups(cfg: ActionConfig, batch: int, actions: Sequence[str]) -> li
     # unscreened, in calls of the whole batch (rollouts.jitted_stage_fns)
     rows = min(int(batch), PLAN_CHUNK) if cfg.arm.reach_screen else int(batch)
     pair, qpos = placeholder_scenes(cfg, rows)
-    plan_fn, reach_fn = jitted_parts(cfg)
-    out = [functools.partial(_call, plan_fn, action_id(actions[0]), pair, qpos)]
+    plan_of, reach_fn = jitted_parts(cfg)
+    out = [functools.partial(_call, plan_of, action_id(actions[0]), *placeholder_programs(rows))]
     if "unobstruct" in actions:
         out.append(functools.partial(_call, reach_fn, pair, qpos))
     return out

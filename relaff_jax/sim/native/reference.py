@@ -23,7 +23,7 @@ from relaff_jax.sim.native.program import (RestReader, _padded, native_labels, p
                                            stop_descent, weld_relpose_np)
 from relaff_jax.sim.actions.registry import action_id
 from relaff_jax.sim.planning import setup
-from relaff_jax.sim.reach_screen import jitted_parts
+from relaff_jax.sim.reach_screen import jitted_screen_fn
 from relaff_jax.sim.simulate import welds
 from relaff_jax.sim.actions.tables import tables
 from relaff_jax.sim.templates import ActionConfig
@@ -143,10 +143,10 @@ def replay_native(action: str, cfg: ActionConfig, pair: np.ndarray, qpos: np.nda
     if "direction" in result:
         direction = np.asarray(result["direction"])
     else:
-        # the generation's plan function (the screened path's), rows padded to a power of two
-        # >= 8: the shapes a run compiles, not one per call size
-        plan_fn = jitted_parts(cfg)[0]
-        direction = _padded(lambda p, q: plan_fn(aid, p, q).direction, pair.astype(np.int32),
+        # the programs' direction, as the generation's reach screen draws them, rows padded to
+        # a power of two >= 8: the shapes a run compiles, not one per call size
+        screen_fn = jitted_screen_fn(cfg)
+        direction = _padded(lambda p, q: screen_fn(aid, p, q)[2], pair.astype(np.int32),
                             np.asarray(qpos, np.float32))
     before = reachable(cfg, pair, qpos) if tables(cfg).reach[aid] else np.zeros(len(pair), bool)
     inp = program_inputs(cfg, aid, qpos, qvel, result["q_way"], result["grip_way"])
