@@ -4,13 +4,14 @@ program), CPU seconds, same bits.
 
     python benchmarks/planner_trace.py [--batch 64] [--rounds 2] [--cache DIR]
 
-The planner (``simulate.make_prepare_fn``: all nine actions' programs and their IK in one
-``lax.switch``) is what the generate stage calls on each batch (``sim/reach_screen.py`` in calls
-of up to 128 scenes). One process first fills a new compilation cache (``--cache``, default a
-temporary folder) with both programs; then each round starts two new processes, one per path,
-each timing (CPU and wall) its first call on the same settled lift scenes, which traces (or
-reads), lowers and loads the compiled program from the cache, then a second call (the
-program's own run). Outputs are compared bit for bit between the paths (and with the first
+The planner, as the generate stage calls it on each batch: the reach screen
+(``reach_screen.make_screen_fn``, which draws all nine actions' programs in one ``lax.switch``),
+then the plan of the programs it drew (``planning.make_plan_of_fn``: their IK); in the run the
+plan is called in chunks of up to 128 scenes, here on the whole batch. One process first fills a
+new compilation cache (``--cache``, default a temporary folder) with both paths' programs; then
+each round starts two new processes, one per path, each timing (CPU and wall) its first call on
+the same settled lift scenes, which traces (or reads), lowers and loads the compiled programs
+from the cache, then a second call (the programs' own run). Outputs are compared bit for bit between the paths (and with the first
 process's). Prints a table and ends with ``planner_first_call_cpu_s=<jit> stored=<stored>``.
 """
 from __future__ import annotations
@@ -32,17 +33,22 @@ from relaff_jax import compile_cache
 compile_cache.enable_traces(compile_cache.configure())
 import jax, jax.numpy as jnp, numpy as np
 from relaff_jax.sim import templates
-from relaff_jax.sim.simulate import make_prepare_fn
+from relaff_jax.sim.planning import make_plan_of_fn
+from relaff_jax.sim.reach_screen import make_screen_fn
 from relaff_jax.sim.traced_cache import stored_jit
 mode, data, out = sys.argv[1], sys.argv[2], sys.argv[3]
 z = np.load(data)
 pair, qpos = z["pair"], z["qpos"]
 cfg = templates.ActionConfig()
-fn = make_prepare_fn(cfg)
+screen, plan_of = make_screen_fn(cfg), make_plan_of_fn(cfg)
 modes = ["jit", "stored"] if mode == "both" else [mode]
 res, times = {}, {"import_cpu": time.process_time() - c0, "import_wall": time.perf_counter() - w0}
 for m in modes:
-    f = jax.jit(fn) if m == "jit" else stored_jit(fn, "prepare", cfg)
+    if m == "jit":
+        s, p = jax.jit(screen), jax.jit(plan_of)
+    else:
+        s, p = stored_jit(screen, "screen", cfg), stored_jit(plan_of, "plan_of", cfg)
+    f = lambda a, pr, q, s=s, p=p: p(a, *s(a, pr, q)[3])
     c, w = time.process_time(), time.perf_counter()
     r = jax.device_get(f(0, pair, qpos))
     times[m + "_first_cpu"], times[m + "_first_wall"] = time.process_time() - c, time.perf_counter() - w

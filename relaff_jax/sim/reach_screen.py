@@ -163,9 +163,9 @@ def prepare_screened(cfg: ActionConfig, aid: int, pair: np.ndarray,
                      qpos: np.ndarray) -> tuple[Plan, np.ndarray]:
     """``simulate.make_prepare_fn``'s ``(Plan, before)`` for B scenes, solving the IK only of
     the scenes the screen cannot rule out: the plan (``jitted_parts``' plan of the programs
-    the screen drew) of the scenes whose program may be reachable, and, for unobstruct, the toy's reach of the
-    scenes whose toy may be, each in calls of ``PLAN_CHUNK`` rows (the last padded with
-    repeats; a batch up to ``PLAN_CHUNK`` is one call of its own size). Host arrays: pair
+    the screen drew) of the scenes whose program may be reachable and, for unobstruct, the
+    toy's reach of the scenes whose toy may be, each in calls of ``PLAN_CHUNK`` rows (the last
+    padded with repeats; a batch up to ``PLAN_CHUNK`` is one call of its own size). Host arrays: pair
     (B,), qpos (B, 14) float32. Returns numpy arrays: every field equal to the unscreened
     call's except ``ik_error``, NaN where the program was screened."""
     pair, qpos = np.asarray(pair), np.asarray(qpos, np.float32)

@@ -75,8 +75,8 @@ def jitted_stage_fns(cfg: ActionConfig = ActionConfig()) -> tuple[Callable, Call
     The prepare function calls the programs the screened generation calls, on every scene
     (``reach_screen.jitted_screen_fn`` for the scenes' programs, then ``jitted_parts``: their
     plan, and unobstruct's toy reach only for the actions that read it) instead of compiling
-    ``make_prepare_fn`` as one program: a run compiles the planner once, not twice (a new
-    install's quick run traced and compiled both, ~45 CPU s each). Its ``action_id`` must be
+    ``make_prepare_fn`` as one program: a run traces and compiles the actions' target rules
+    once and the planner once (docs/arm.md, "The reach screen"). Its ``action_id`` must be
     concrete (a Python or numpy integer). ``tests/sim/test_reach_screen.py`` compares its
     results with ``make_prepare_fn`` compiled as one program, bit for bit."""
     screen_fn = jitted_screen_fn(cfg)
