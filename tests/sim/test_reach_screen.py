@@ -78,8 +78,9 @@ def test_screened_plan_equals_plan():
     of ``make_prepare_fn`` compiled as one program in every field but ``ik_error`` (NaN where
     screened); the screened scenes are infeasible in the full plan. Unobstruct's scenes include
     all three kinds: program and toy, program only (toy beyond reach), toy only (program beyond
-    reach). The generation's unscreened prepare (``jitted_stage_fns``: the plan and the toy's
-    reach as two programs) equals the one program in every field. Batches of 8 (the tiny
+    reach). The generation's unscreened prepare (``jitted_stage_fns``: the screen's programs,
+    their plan and the toy's reach, each a program of its own) equals the one program in every
+    field. Batches of 8 (the tiny
     preset's, tests/sim/test_actions.py's) reuse the session's compiled place, plan and screen
     programs instead of compiling them for 64 scenes."""
     sw = wd.build_world(CFG.phys)
