@@ -9,8 +9,8 @@ programs, its marshalling included), ``rollouts.settle_batch`` (the C settle) an
 threads), wall seconds beside. "rest" = the whole call minus the three MuJoCo C parts; the
 last row sums the actions. ``--parts`` adds a second table: the CPU seconds of the planner's
 stored programs inside "rest" (the reach screen, the plan of its programs, unobstruct's toy
-reach; each call waited for, so the time of its asynchronous run is its own) and of the
-placement and settle's own JAX program.
+reach; each call waited for, so the time of its asynchronous run is its own) and the rest
+outside them (placement, the stage's Python).
 
     python benchmarks/generate_cpu.py [--actions lift take ...] [--batch 64] [--batches 2] [--parts]
 """
